@@ -1,0 +1,157 @@
+//! Benchmarks of the loops that decide mrbp's run time. Run with
+//! `cargo bench` (or `just bench`); the figures go into docs/performance.md.
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use mrbp::model::{Integrator, Params, Scheme};
+use mrbp::sampler::{LogDensity, Move, RunControl, Sampler, SamplerSettings};
+
+/// Best of `repeats` timings of `f`, in seconds.
+fn best_of(repeats: usize, mut f: impl FnMut()) -> f64 {
+    (0..repeats)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn crank_history(n: usize, rate_hz: f64, rpm: f64) -> (Vec<f64>, Vec<f64>) {
+    let crank = mrbp::synth::Crank::default();
+    let t: Vec<f64> = (0..n).map(|k| k as f64 / rate_hz).collect();
+    let g = t.iter().map(|&t| crank.displacement(rpm, t) / 1e-3).collect();
+    (t, g)
+}
+
+fn euler() {
+    println!("## Euler integrator (one thread)\n");
+    println!("| scheme | sample rate | sub-steps | ns per sample interval | M intervals/s |");
+    println!("|---|---|---|---|---|");
+    let p = Params::reference_1a();
+    for (rate, rpm) in [(5000.0, 100.0), (10000.0, 400.0)] {
+        let (t, g) = crank_history(6000, rate, rpm);
+        for scheme in [Scheme::Explicit, Scheme::LinearlyImplicit] {
+            for substeps in [1, 4] {
+                let integ = Integrator {
+                    scheme,
+                    substeps,
+                    ..Integrator::default()
+                };
+                let secs = best_of(20, || {
+                    let mut acc = 0.0;
+                    integ
+                        .run_with(&p, &t, &g, Default::default(), |_, s| acc += s.tau)
+                        .unwrap();
+                    black_box(acc);
+                });
+                let per = secs / (t.len() - 1) as f64;
+                println!(
+                    "| {scheme:?} | {rate} Hz, {rpm} rpm | {substeps} | {:.1} | {:.1} |",
+                    per * 1e9,
+                    1e-6 / per
+                );
+            }
+        }
+    }
+    println!();
+}
+
+struct Cheap;
+impl LogDensity for Cheap {
+    fn dim(&self) -> usize {
+        10
+    }
+    fn log_density(&self, x: &[f64]) -> f64 {
+        -0.5 * x.iter().map(|v| v * v).sum::<f64>()
+    }
+}
+
+fn sampler_overhead() {
+    println!("## Sampler overhead (cheap 10-D target, all threads)\n");
+    let init: Vec<Vec<f64>> = (0..128).map(|c| (0..10).map(|i| ((c * 10 + i) as f64).sin()).collect()).collect();
+    let steps = 2000;
+    let secs = best_of(3, || {
+        let mut s = Sampler::new(&Cheap, SamplerSettings::default(), &init).unwrap();
+        s.run(&RunControl::fixed(steps)).unwrap();
+        black_box(s.chains.positions.len());
+    });
+    let per = secs / (steps * 128) as f64;
+    println!("| moves | walker-steps | ns per walker-step |");
+    println!("|---|---|---|");
+    println!("| stretch | {} | {:.0} |", steps * 128, per * 1e9);
+    let settings = SamplerSettings {
+        moves: vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)],
+        ..SamplerSettings::default()
+    };
+    let secs = best_of(3, || {
+        let mut s = Sampler::new(&Cheap, settings.clone(), &init).unwrap();
+        s.run(&RunControl::fixed(steps)).unwrap();
+        black_box(s.chains.positions.len());
+    });
+    println!("| DE 0.8 + snooker 0.2 | {} | {:.0} |", steps * 128, secs / (steps * 128) as f64 * 1e9);
+    let secs = best_of(3, || {
+        let mut s = Sampler::new(&Cheap, SamplerSettings::default(), &init).unwrap();
+        s.run(&RunControl::fixed(steps)).unwrap();
+        black_box(s.diagnostics());
+    });
+    println!("\nDiagnostics of 128 chains × {steps} steps × 10 coordinates (with sampling): {:.2} s\n", secs);
+}
+
+/// Max |τ − τ_ref| of the integrators against a reference 256 times finer,
+/// on one crank revolution at 100 rpm sampled at 5 kHz (the bundled runs),
+/// with the 1 A parameters and with a stiff set (G ten times larger, n = 3).
+fn convergence() {
+    println!("## Convergence against a fine-step reference\n");
+    let (t, g) = crank_history(3001, 5000.0, 100.0);
+    let mut stiff = Params::reference_1a();
+    stiff.g *= 10.0;
+    stiff.n = 3.0;
+    for (name, p) in [("1 A reference", Params::reference_1a()), ("stiff: 10 G, n = 3", stiff)] {
+        let run = |scheme, substeps| {
+            Integrator {
+                scheme,
+                substeps,
+                max_substeps: 100_000,
+                ..Integrator::default()
+            }
+            .run(&p, &t, &g)
+            .unwrap()
+            .tau
+        };
+        let reference = run(Scheme::Explicit, 256);
+        let peak = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        println!("{name}: peak τ = {:.0} Pa\n", peak);
+        println!("| sub-steps per sample | explicit: max error (Pa) | ratio | linearly implicit: max error (Pa) | ratio |");
+        println!("|---|---|---|---|---|");
+        let mut last = (f64::NAN, f64::NAN);
+        for m in [1, 2, 4, 8, 16] {
+            let err = |scheme| {
+                run(scheme, m)
+                    .iter()
+                    .zip(&reference)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max)
+            };
+            let (e, li) = (err(Scheme::Explicit), err(Scheme::LinearlyImplicit));
+            println!("| {m} | {e:.2} | {:.2} | {li:.2} | {:.2} |", last.0 / e, last.1 / li);
+            last = (e, li);
+        }
+        println!();
+    }
+}
+
+fn main() {
+    let only = std::env::args().nth(1).filter(|a| !a.starts_with('-'));
+    let want = |name: &str| only.as_deref().map_or(true, |o| name.contains(o));
+    if want("euler") {
+        euler();
+    }
+    if want("convergence") {
+        convergence();
+    }
+    if want("sampler") {
+        sampler_overhead();
+    }
+}

@@ -1,0 +1,245 @@
+//! The command line (contract.md): parsing, and one function per command.
+
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Parser, Subcommand};
+
+use crate::data::Campaign;
+use crate::error::{Error, Result};
+use crate::synth::{self, SynthSettings};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "mrbp",
+    version,
+    about = "Bayesian calibration of the Bodner-Partom model of MR fluid in MR dampers",
+    long_about = "Bayesian calibration of the Bodner-Partom model of MR fluid in MR dampers.\n\n\
+                  Without a command, runs the whole pipeline on the bundled campaign in data/ \
+                  and writes the results into reports/."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// The whole pipeline: identify, sample, predict, report
+    Run(RunArgs),
+    /// Validate a campaign and print one line per run
+    Check {
+        /// The campaign manifest (TOML)
+        manifest: PathBuf,
+    },
+    /// Virtual experiments: stand records from the B-P model, in the campaign format
+    Synth(SynthArgs),
+    /// The paper's deterministic identification
+    Identify(StageArgs),
+    /// Posterior sampling from all runs, started from the identification
+    Sample(StageArgs),
+    /// Posterior propagation through the Euler integrator: credible bands
+    Predict(DirArgs),
+    /// Plots and the HTML report from what is in DIR
+    Report(DirArgs),
+    /// One report comparing calibrations, e.g. of different current levels
+    Compare {
+        /// Calibration folders to compare
+        dirs: Vec<PathBuf>,
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+}
+
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// The campaign manifest (TOML)
+    pub manifest: PathBuf,
+    #[arg(long)]
+    pub out: PathBuf,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+#[derive(Args, Debug)]
+pub struct StageArgs {
+    /// The campaign manifest (TOML)
+    pub manifest: PathBuf,
+    /// Output folder
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct DirArgs {
+    /// Output folder of an earlier stage
+    pub dir: PathBuf,
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+#[derive(Args, Debug)]
+pub struct SynthArgs {
+    /// Output folder for the manifest and the records
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Settings file (TOML, the format of the synth.toml that synth writes);
+    /// the options below override it
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Coil currents (A), comma separated
+    #[arg(long, value_delimiter = ',')]
+    pub currents: Option<Vec<f64>>,
+    /// Crank speeds (rpm), comma separated
+    #[arg(long, value_delimiter = ',')]
+    pub rpm: Option<Vec<f64>>,
+    /// Crank revolutions per record
+    #[arg(long)]
+    pub cycles: Option<f64>,
+    /// Sampling rate (Hz)
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Force sensor noise, standard deviation (N)
+    #[arg(long)]
+    pub noise_force: Option<f64>,
+    /// Displacement sensor noise, standard deviation (m)
+    #[arg(long)]
+    pub noise_displacement: Option<f64>,
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+/// Runs the command line and returns the process exit status.
+pub fn main() -> i32 {
+    let cli = Cli::parse();
+    match dispatch(cli) {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("mrbp: error: {e}");
+            e.exit_code()
+        }
+    }
+}
+
+fn dispatch(cli: Cli) -> Result<()> {
+    match cli.command {
+        None => default_job(),
+        Some(Command::Check { manifest }) => check(&manifest).map(|_| ()),
+        Some(Command::Synth(args)) => synth_cmd(args),
+        Some(Command::Run(args)) => run_pipeline(&args.manifest, &args.out, args.seed),
+        Some(Command::Identify(_)) => not_built("identify"),
+        Some(Command::Sample(_)) => not_built("sample"),
+        Some(Command::Predict(_)) => not_built("predict"),
+        Some(Command::Report(_)) => not_built("report"),
+        Some(Command::Compare { .. }) => not_built("compare"),
+    }
+}
+
+fn not_built(command: &str) -> Result<()> {
+    Err(Error::Compute(format!(
+        "'mrbp {command}' is not built yet in this version (see the README's status section)"
+    )))
+}
+
+/// The bundled campaign: `data/campaign.toml` of the working directory, or
+/// of the source tree this binary was built from.
+pub fn bundled_manifest() -> PathBuf {
+    let local = Path::new("data/campaign.toml");
+    if local.exists() {
+        return local.to_path_buf();
+    }
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data/campaign.toml")
+}
+
+fn default_job() -> Result<()> {
+    let manifest = bundled_manifest();
+    let out = manifest
+        .parent()
+        .and_then(Path::parent)
+        .unwrap_or(Path::new("."))
+        .join("reports");
+    run_pipeline(&manifest, &out, 1)
+}
+
+/// The whole pipeline on one campaign: every stage built so far.
+fn run_pipeline(manifest: &Path, out: &Path, _seed: u64) -> Result<()> {
+    let campaign = check(manifest)?;
+    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+    println!(
+        "\n{} runs at {} current levels validated; results go to {}",
+        campaign.runs.len(),
+        campaign.currents().len(),
+        out.display()
+    );
+    Ok(())
+}
+
+/// `mrbp check`: loads and validates a campaign, prints one line per run.
+pub fn check(manifest: &Path) -> Result<Campaign> {
+    let campaign = Campaign::load(manifest)?;
+    println!(
+        "campaign '{}' ({}): {} runs",
+        campaign.name,
+        manifest.display(),
+        campaign.runs.len()
+    );
+    println!(
+        "{:<16} {:>8} {:>11} {:>13} {:>10} {:>9}",
+        "run", "samples", "duration_s", "peak_force_n", "current_a", "branches"
+    );
+    for run in &campaign.runs {
+        let rec = &run.record;
+        let peak = rec.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+        println!(
+            "{:<16} {:>8} {:>11.3} {:>13.1} {:>10.2} {:>9}",
+            run.id(),
+            rec.len(),
+            rec.time[rec.len() - 1] - rec.time[0],
+            peak,
+            run.spec.current_a,
+            run.branches.len()
+        );
+    }
+    Ok(campaign)
+}
+
+fn synth_cmd(args: SynthArgs) -> Result<()> {
+    let mut s = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
+            toml::from_str::<SynthSettings>(&text)
+                .map_err(|e| Error::input(path, format!("invalid synth settings: {}", e.message())))?
+        }
+        None => SynthSettings::default(),
+    };
+    if let Some(v) = args.currents {
+        s.currents_a = v;
+    }
+    if let Some(v) = args.rpm {
+        s.rpms = v;
+    }
+    if let Some(v) = args.cycles {
+        s.cycles = v;
+    }
+    if let Some(v) = args.rate {
+        s.rate_hz = v;
+    }
+    if let Some(v) = args.noise_force {
+        s.noise_force_n = v;
+    }
+    if let Some(v) = args.noise_displacement {
+        s.noise_displacement_m = v;
+    }
+    if let Some(v) = args.seed {
+        s.seed = v;
+    }
+    let manifest = synth::write_campaign(&s, &args.out)?;
+    println!(
+        "wrote {} virtual runs and campaign.toml to {}",
+        manifest.runs.len(),
+        args.out.display()
+    );
+    Ok(())
+}

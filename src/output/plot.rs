@@ -1,0 +1,365 @@
+//! Figures: a small description of charts (lines, points, bands, bars)
+//! rendered by plotters to SVG and PNG.
+//!
+//! Text is drawn with the DejaVu Sans font compiled into the binary, so
+//! figures render the same on a machine without any font configuration.
+
+use std::path::Path;
+use std::sync::Once;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::{FontStyle, RGBColor};
+
+use super::atomic_write;
+use crate::error::{Error, Result};
+
+/// Colours that stay distinct for the colour-blind (Okabe & Ito).
+pub const PALETTE: [RGBColor; 8] = [
+    RGBColor(0, 114, 178),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+    RGBColor(240, 228, 66),
+    RGBColor(0, 0, 0),
+];
+pub const GREY: RGBColor = RGBColor(120, 120, 120);
+pub const BLACK_: RGBColor = RGBColor(0, 0, 0);
+
+const FONT: &str = "sans-serif";
+
+fn init_fonts() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // the embedded fonts are valid TrueType; failure here is a build error
+        plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular())
+            .unwrap_or_else(|_| panic!("embedded DejaVu Sans is not a valid font"));
+        plotters::style::register_font(FONT, FontStyle::Bold, dejavu::sans::bold())
+            .unwrap_or_else(|_| panic!("embedded DejaVu Sans Bold is not a valid font"));
+    });
+}
+
+/// How a series is drawn.
+#[derive(Clone, Debug)]
+pub enum Mark {
+    Line { width: u32 },
+    Dashed { width: u32 },
+    Points { size: u32 },
+    /// Filled band between `y` (lower) and `y2` (upper), with opacity.
+    Band { opacity: f64 },
+    /// Histogram bars: `x` holds bin edges (one more than `y`).
+    Bars { opacity: f64 },
+    /// A vertical line at each `x`.
+    VLines { width: u32 },
+}
+
+#[derive(Clone, Debug)]
+pub struct Series {
+    pub label: Option<String>,
+    pub color: RGBColor,
+    pub mark: Mark,
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+    pub y2: Vec<f64>,
+}
+
+impl Series {
+    pub fn line(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, y: Vec<f64>) -> Self {
+        Series { label: label.into(), color, mark: Mark::Line { width: 2 }, x, y, y2: vec![] }
+    }
+    pub fn dashed(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, y: Vec<f64>) -> Self {
+        Series { label: label.into(), color, mark: Mark::Dashed { width: 2 }, x, y, y2: vec![] }
+    }
+    pub fn points(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, y: Vec<f64>) -> Self {
+        Series { label: label.into(), color, mark: Mark::Points { size: 2 }, x, y, y2: vec![] }
+    }
+    pub fn band(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, lo: Vec<f64>, hi: Vec<f64>) -> Self {
+        Series { label: label.into(), color, mark: Mark::Band { opacity: 0.25 }, x, y: lo, y2: hi }
+    }
+    pub fn bars(label: impl Into<Option<String>>, color: RGBColor, edges: Vec<f64>, heights: Vec<f64>) -> Self {
+        Series { label: label.into(), color, mark: Mark::Bars { opacity: 0.5 }, x: edges, y: heights, y2: vec![] }
+    }
+    pub fn vlines(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>) -> Self {
+        Series { label: label.into(), color, mark: Mark::VLines { width: 2 }, x, y: vec![], y2: vec![] }
+    }
+    pub fn with_width(mut self, w: u32) -> Self {
+        match &mut self.mark {
+            Mark::Line { width } | Mark::Dashed { width } | Mark::VLines { width } => *width = w,
+            Mark::Points { size } => *size = w,
+            _ => {}
+        }
+        self
+    }
+    pub fn with_opacity(mut self, o: f64) -> Self {
+        if let Mark::Band { opacity } | Mark::Bars { opacity } = &mut self.mark {
+            *opacity = o;
+        }
+        self
+    }
+}
+
+/// One panel: axes with labels (units belong in the labels) and series.
+#[derive(Clone, Debug, Default)]
+pub struct Chart {
+    pub title: String,
+    pub x_label: String,
+    pub y_label: String,
+    pub series: Vec<Series>,
+    /// Plot x on a log₁₀ axis (ticks still show the values).
+    pub log_x: bool,
+    pub x_range: Option<(f64, f64)>,
+    pub y_range: Option<(f64, f64)>,
+    pub legend: bool,
+    /// Where the legend goes; upper left unless the data live there.
+    pub legend_at: LegendAt,
+}
+
+/// Legend placement.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum LegendAt {
+    #[default]
+    UpperLeft,
+    UpperRight,
+    LowerRight,
+    /// The middle: the empty inside of a hysteresis loop.
+    Middle,
+}
+
+impl Chart {
+    pub fn new(title: impl Into<String>, x_label: impl Into<String>, y_label: impl Into<String>) -> Self {
+        Chart {
+            title: title.into(),
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            legend: true,
+            ..Chart::default()
+        }
+    }
+    pub fn with(mut self, s: Series) -> Self {
+        self.series.push(s);
+        self
+    }
+}
+
+/// Panels on a grid, `columns` wide; each panel `panel_size` pixels.
+#[derive(Clone, Debug)]
+pub struct Figure {
+    pub panels: Vec<Chart>,
+    pub columns: usize,
+    pub panel_size: (u32, u32),
+}
+
+impl Figure {
+    pub fn single(chart: Chart) -> Self {
+        Figure { panels: vec![chart], columns: 1, panel_size: (800, 560) }
+    }
+    pub fn grid(panels: Vec<Chart>, columns: usize) -> Self {
+        Figure { panels, columns: columns.max(1), panel_size: (560, 420) }
+    }
+    fn size(&self) -> (u32, u32) {
+        let rows = self.panels.len().div_ceil(self.columns).max(1) as u32;
+        let cols = self.columns.min(self.panels.len().max(1)) as u32;
+        (self.panel_size.0 * cols, self.panel_size.1 * rows)
+    }
+}
+
+/// Writes `<stem>.svg` and `<stem>.png`, each atomically.
+pub fn save(figure: &Figure, stem: &Path) -> Result<()> {
+    init_fonts();
+    let (w, h) = figure.size();
+    let svg_path = stem.with_extension("svg");
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
+        render(figure, &root).map_err(|e| Error::output(&svg_path, e))?;
+        root.present().map_err(|e| Error::output(&svg_path, e))?;
+    }
+    atomic_write(&svg_path, svg.as_bytes())?;
+
+    let png_path = stem.with_extension("png");
+    let mut pixels = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
+        render(figure, &root).map_err(|e| Error::output(&png_path, e))?;
+        root.present().map_err(|e| Error::output(&png_path, e))?;
+    }
+    let img = image::RgbImage::from_raw(w, h, pixels).ok_or_else(|| Error::output(&png_path, "bad image buffer"))?;
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png).map_err(|e| Error::output(&png_path, e))?;
+    atomic_write(&png_path, png.get_ref())
+}
+
+type DrawResult<DB> = std::result::Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
+
+fn render<DB: DrawingBackend>(figure: &Figure, root: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
+    root.fill(&WHITE)?;
+    let rows = figure.panels.len().div_ceil(figure.columns).max(1);
+    let areas = root.split_evenly((rows, figure.columns.min(figure.panels.len().max(1))));
+    for (chart, area) in figure.panels.iter().zip(areas) {
+        draw_chart(chart, &area)?;
+    }
+    Ok(())
+}
+
+/// Tick labels that stay short: plain decimals in [1e-3, 1e5), else 1.2e6.
+pub fn tick(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        "0".into()
+    } else if !(1e-3..1e5).contains(&a) {
+        let s = format!("{v:.1e}");
+        s.replace(".0e", "e")
+    } else {
+        let digits = (3 - a.log10().floor() as i32).clamp(0, 4) as usize;
+        let s = format!("{v:.digits$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    }
+}
+
+fn finite_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(v), h.max(v)));
+    (lo <= hi).then_some((lo, hi))
+}
+
+fn padded((lo, hi): (f64, f64), share: f64) -> (f64, f64) {
+    let span = if hi > lo { hi - lo } else { lo.abs().max(1.0) };
+    (lo - share * span, hi + share * span)
+}
+
+fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
+    let tx = |x: f64| if chart.log_x { x.log10() } else { x };
+    let xr = chart
+        .x_range
+        .map(|(a, b)| (tx(a), tx(b)))
+        .or_else(|| finite_range(chart.series.iter().flat_map(|s| s.x.iter().map(|x| tx(*x)))))
+        .map(|r| if chart.x_range.is_some() { r } else { padded(r, 0.02) })
+        .unwrap_or((0.0, 1.0));
+    let yr = chart
+        .y_range
+        .or_else(|| {
+            finite_range(
+                chart
+                    .series
+                    .iter()
+                    .flat_map(|s| s.y.iter().chain(&s.y2).copied().chain(matches!(s.mark, Mark::Bars { .. }).then_some(0.0))),
+            )
+            .map(|r| padded(r, 0.05))
+        })
+        .unwrap_or((0.0, 1.0));
+    let mut c = ChartBuilder::on(area)
+        .caption(&chart.title, (FONT, 18).into_font().style(FontStyle::Bold))
+        .margin(12)
+        .x_label_area_size(44)
+        .y_label_area_size(70)
+        .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)?;
+    let log_x = chart.log_x;
+    let x_fmt = move |v: &f64| if log_x { tick(10f64.powf(*v)) } else { tick(*v) };
+    let y_fmt = |v: &f64| tick(*v);
+    c.configure_mesh()
+        .x_desc(&chart.x_label)
+        .y_desc(&chart.y_label)
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 15))
+        .x_labels(7)
+        .y_labels(7)
+        .x_label_formatter(&x_fmt)
+        .y_label_formatter(&y_fmt)
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .draw()?;
+    let mut labelled = false;
+    for s in &chart.series {
+        let color = s.color;
+        let xs: Vec<f64> = s.x.iter().map(|x| tx(*x)).collect();
+        let anno = match &s.mark {
+            Mark::Line { width } => c.draw_series(LineSeries::new(
+                xs.iter().zip(&s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)),
+                color.stroke_width(*width),
+            ))?,
+            Mark::Dashed { width } => c.draw_series(DashedLineSeries::new(
+                xs.iter().zip(&s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)),
+                8,
+                5,
+                color.stroke_width(*width),
+            ))?,
+            Mark::Points { size } => c.draw_series(
+                xs.iter()
+                    .zip(&s.y)
+                    .filter(|(x, y)| x.is_finite() && y.is_finite())
+                    .map(|(x, y)| Circle::new((*x, *y), *size, color.filled())),
+            )?,
+            Mark::Band { opacity } => {
+                let mut poly: Vec<(f64, f64)> = xs.iter().zip(&s.y2).map(|(x, y)| (*x, *y)).collect();
+                poly.extend(xs.iter().zip(&s.y).rev().map(|(x, y)| (*x, *y)));
+                poly.retain(|(x, y)| x.is_finite() && y.is_finite());
+                c.draw_series(std::iter::once(Polygon::new(poly, color.mix(*opacity).filled())))?
+            }
+            Mark::Bars { opacity } => c.draw_series(xs.windows(2).zip(&s.y).map(|(e, h)| {
+                Rectangle::new([(e[0], 0.0), (e[1], *h)], color.mix(*opacity).filled())
+            }))?,
+            Mark::VLines { width } => c.draw_series(
+                xs.iter().map(|x| PathElement::new(vec![(*x, yr.0), (*x, yr.1)], color.stroke_width(*width))),
+            )?,
+        };
+        if let Some(label) = &s.label {
+            labelled = true;
+            let mark = s.mark.clone();
+            anno.label(label).legend(move |(x, y)| match mark {
+                Mark::Points { .. } => Circle::new((x + 10, y), 4, color.filled()).into_dyn(),
+                Mark::Band { opacity } | Mark::Bars { opacity } => {
+                    Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(opacity.max(0.3)).filled()).into_dyn()
+                }
+                _ => PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3)).into_dyn(),
+            });
+        }
+    }
+    if labelled && chart.legend {
+        c.configure_series_labels()
+            .label_font((FONT, 13))
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(160, 160, 160))
+            .position(match chart.legend_at {
+                LegendAt::UpperLeft => SeriesLabelPosition::UpperLeft,
+                LegendAt::UpperRight => SeriesLabelPosition::UpperRight,
+                LegendAt::LowerRight => SeriesLabelPosition::LowerRight,
+                LegendAt::Middle => SeriesLabelPosition::MiddleMiddle,
+            })
+            .draw()?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_are_short() {
+        assert_eq!(tick(0.0), "0");
+        assert_eq!(tick(2500.0), "2500");
+        assert_eq!(tick(0.25), "0.25");
+        assert_eq!(tick(150000.0), "1.5e5");
+        assert_eq!(tick(-3.0e-5), "-3e-5");
+    }
+
+    #[test]
+    fn figure_renders_to_svg_and_png() {
+        let dir = tempfile::tempdir().unwrap();
+        let chart = Chart::new("t", "x (m)", "y (N)")
+            .with(Series::line(Some("line".into()), PALETTE[0], vec![0.0, 1.0], vec![0.0, 2.0]))
+            .with(Series::band(Some("band".into()), PALETTE[1], vec![0.0, 1.0], vec![-1.0, 0.0], vec![1.0, 3.0]));
+        save(&Figure::single(chart), &dir.path().join("f")).unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("f.svg")).unwrap();
+        assert!(svg.contains("<svg") && svg.contains("x (m)"));
+        let png = std::fs::read(dir.path().join("f.png")).unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+    }
+}

@@ -1,0 +1,42 @@
+//! An affine-invariant ensemble MCMC sampler (Goodman & Weare 2010), generic
+//! over any log-density.
+//!
+//! * [`LogDensity`]: what a target implements (one point, or a batch);
+//! * [`moves`]: the stretch, differential-evolution and snooker moves;
+//! * [`ensemble`]: several independent ensembles stepped with the parallel
+//!   red-blue update, run control and checkpoints;
+//! * [`diagnostics`]: autocorrelation time, R̂, ESS, MCSE, acceptance.
+//!
+//! Randomness is counter-based ([`crate::rng::stream`]): the draws of walker
+//! w of ensemble e at step s depend on (seed, e, s, w) only, so the chains are
+//! the same bit for bit whatever the number of threads, and a resumed run
+//! equals an uninterrupted one.
+
+pub mod diagnostics;
+pub mod ensemble;
+pub mod moves;
+
+pub use diagnostics::{Diagnostics, ParameterDiagnostics};
+pub use ensemble::{Chains, RunControl, Sampler, SamplerSettings};
+pub use moves::Move;
+
+/// An unnormalised log-density over unconstrained real vectors.
+///
+/// Return `f64::NEG_INFINITY` outside the support or wherever the density
+/// cannot be computed; a NaN is treated the same way.
+pub trait LogDensity: Sync {
+    /// Number of coordinates of a point.
+    fn dim(&self) -> usize;
+
+    /// The log-density at `x` (`x.len() == dim()`).
+    fn log_density(&self, x: &[f64]) -> f64;
+
+    /// The log-density at `out.len()` points stored one after another in
+    /// `xs`. Override it to evaluate several points together (structure of
+    /// arrays, SIMD); the sampler always calls this one.
+    fn log_density_batch(&self, xs: &[f64], out: &mut [f64]) {
+        for (x, o) in xs.chunks_exact(self.dim()).zip(out.iter_mut()) {
+            *o = self.log_density(x);
+        }
+    }
+}

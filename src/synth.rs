@@ -1,0 +1,296 @@
+//! Virtual experiments: stand records produced by the B-P model.
+//!
+//! The stand drives the damper by a crank-slider from rest; the model is
+//! integrated along the exact displacement with a fine step, and sensor noise
+//! is added to force and displacement. The bundled campaign in `data/` is
+//! made this way ([`SynthSettings::default`]); `mrbp synth --out data`
+//! regenerates it bit for bit.
+
+use std::f64::consts::PI;
+use std::path::Path;
+
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+
+use crate::data::{Columns, Geometry, Manifest, Record, RunSpec};
+use crate::error::{Error, Result};
+use crate::model::{Integrator, Params};
+use crate::output::atomic_write;
+use crate::output::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
+
+/// Crank-slider kinematics of the test stand.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Crank {
+    /// Crank radius r (m): the stroke is 2r.
+    pub radius_m: f64,
+    /// Connecting-rod length L (m).
+    pub rod_m: f64,
+}
+
+impl Default for Crank {
+    /// r = 6.75 mm gives the paper's nominal shear rates (mean |γ̇| = 4 r f / h
+    /// = 45, 90, 180 1/s at 100, 200, 400 rpm with h = 1 mm).
+    fn default() -> Self {
+        Crank {
+            radius_m: 6.75e-3,
+            rod_m: 0.15,
+        }
+    }
+}
+
+impl Crank {
+    /// Piston displacement (m) at time `t` with the crank at `rpm`, starting
+    /// from bottom dead centre (x = 0, at rest):
+    /// x = r(1 − cos θ) + L − √(L² − r² sin² θ), θ = 2π rpm t / 60.
+    pub fn displacement(&self, rpm: f64, t: f64) -> f64 {
+        let theta = 2.0 * PI * rpm / 60.0 * t;
+        let (r, l) = (self.radius_m, self.rod_m);
+        r * (1.0 - theta.cos()) + l - (l * l - (r * theta.sin()).powi(2)).sqrt()
+    }
+
+    /// Mean |γ̇| over a cycle (1/s): the nominal shear rate of the paper.
+    pub fn nominal_shear_rate(&self, rpm: f64, gap_m: f64) -> f64 {
+        4.0 * self.radius_m * rpm / 60.0 / gap_m
+    }
+}
+
+/// How the B-P parameters vary with coil current in the virtual campaign.
+///
+/// Field-induced quantities follow the magnetisation of the particles, which
+/// saturates: with s(I) = tanh(I/I_s) / tanh(1 A/I_s) (s(1 A) = 1),
+/// R0, R1, D1 scale with s(I), the pre-yield modulus G with (1 + s(I))/2 (the
+/// carrier fluid and the particle chains both carry shear), and the rate
+/// parameters m1, m2, n do not depend on the field.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CurrentLaw {
+    pub at_1a: Params,
+    /// Saturation current I_s (A).
+    pub saturation_a: f64,
+}
+
+impl Default for CurrentLaw {
+    fn default() -> Self {
+        CurrentLaw {
+            at_1a: Params::reference_1a(),
+            saturation_a: 1.0,
+        }
+    }
+}
+
+impl CurrentLaw {
+    pub fn scale(&self, current_a: f64) -> f64 {
+        (current_a / self.saturation_a).tanh() / (1.0 / self.saturation_a).tanh()
+    }
+
+    pub fn params_at(&self, current_a: f64) -> Params {
+        let s = self.scale(current_a);
+        let p = self.at_1a;
+        Params {
+            g: p.g * 0.5 * (1.0 + s),
+            r0: p.r0 * s,
+            r1: p.r1 * s,
+            d1: p.d1 * s,
+            ..p
+        }
+    }
+}
+
+/// Everything that defines a virtual campaign.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SynthSettings {
+    pub name: String,
+    pub geometry: Geometry,
+    pub crank: Crank,
+    pub law: CurrentLaw,
+    pub currents_a: Vec<f64>,
+    pub rpms: Vec<f64>,
+    /// Crank revolutions recorded per run.
+    pub cycles: f64,
+    /// Sampling rate (Hz).
+    pub rate_hz: f64,
+    /// Standard deviation of the force sensor noise (N).
+    pub noise_force_n: f64,
+    /// Standard deviation of the displacement sensor noise (m).
+    pub noise_displacement_m: f64,
+    pub seed: u64,
+}
+
+impl Default for SynthSettings {
+    fn default() -> Self {
+        SynthSettings {
+            name: "rd1005-3-virtual".into(),
+            geometry: Geometry {
+                area_m2: 0.05,
+                gap_m: 1.0e-3,
+            },
+            crank: Crank::default(),
+            law: CurrentLaw::default(),
+            currents_a: vec![0.5, 1.0, 1.5],
+            rpms: vec![100.0, 200.0, 400.0],
+            cycles: 2.0,
+            rate_hz: 5000.0,
+            noise_force_n: 15.0,
+            noise_displacement_m: 2.0e-6,
+            seed: 20_261_122,
+        }
+    }
+}
+
+/// Sub-steps per sample for the "true" response: fine enough that the
+/// discretisation error is far below the sensor noise.
+const TRUTH_SUBSTEPS: u32 = 16;
+
+/// One virtual record: `cycles` crank revolutions at `rpm` with parameters
+/// `p`, noise from the stream `(seed, stream)`.
+pub fn virtual_record(
+    settings: &SynthSettings,
+    p: &Params,
+    rpm: f64,
+    current_a: f64,
+    stream: u64,
+) -> Result<Record> {
+    let duration = settings.cycles * 60.0 / rpm;
+    let n = (duration * settings.rate_hz).round() as usize;
+    let time: Vec<f64> = (0..=n).map(|k| k as f64 / settings.rate_hz).collect();
+    let x: Vec<f64> = time
+        .iter()
+        .map(|&t| settings.crank.displacement(rpm, t))
+        .collect();
+    let gamma: Vec<f64> = x.iter().map(|x| x / settings.geometry.gap_m).collect();
+    let truth = Integrator {
+        substeps: TRUTH_SUBSTEPS,
+        max_substeps: 1_000_000,
+        ..Integrator::default()
+    }
+    .run(p, &time, &gamma)
+    .map_err(|e| Error::Compute(format!("virtual experiment at {rpm} rpm: {e}")))?;
+
+    let mut rng = crate::rng::stream(settings.seed, &[stream]);
+    let noise = |sd: f64| Normal::new(0.0, sd).map_err(|e| Error::Usage(format!("noise level {sd}: {e}")));
+    let force_noise = noise(settings.noise_force_n)?;
+    let disp_noise = noise(settings.noise_displacement_m)?;
+    let mut force = Vec::with_capacity(time.len());
+    let mut displacement = Vec::with_capacity(time.len());
+    for (tau, x) in truth.tau.iter().zip(&x) {
+        force.push(tau * settings.geometry.area_m2 + force_noise.sample(&mut rng));
+        displacement.push(x + disp_noise.sample(&mut rng));
+    }
+    Ok(Record {
+        current: Some(vec![current_a; time.len()]),
+        time,
+        displacement,
+        force,
+    })
+}
+
+/// Run id used in the manifest, e.g. `I1.0_100rpm`.
+pub fn run_id(current_a: f64, rpm: f64) -> String {
+    format!("I{current_a:.1}_{rpm:.0}rpm")
+}
+
+/// Writes a whole virtual campaign into `dir`: the manifest, one CSV per
+/// run, the settings used (`synth.toml`) and a figure of the force-
+/// displacement loops (`records.svg`, `records.png`).
+pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> {
+    if settings.rate_hz <= 0.0 || settings.cycles <= 0.0 || settings.rpms.iter().any(|r| *r <= 0.0) {
+        return Err(Error::Usage("rate, cycles and rpm must be positive".into()));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    let mut runs = Vec::new();
+    let mut panels = Vec::new();
+    let mut stream = 0u64;
+    for &current in &settings.currents_a {
+        let p = settings.law.params_at(current);
+        p.validate()
+            .map_err(|e| Error::Usage(format!("at {current} A: {e}")))?;
+        let mut chart = Chart::new(
+            format!("virtual records at {current} A"),
+            "piston displacement x (mm)",
+            "damper force F (kN)",
+        );
+        chart.legend_at = LegendAt::Middle;
+        for (i, &rpm) in settings.rpms.iter().enumerate() {
+            let id = run_id(current, rpm);
+            let file = format!("{id}.csv");
+            let rec = virtual_record(settings, &p, rpm, current, stream)?;
+            stream += 1;
+            chart.series.push(Series::line(
+                Some(format!("{rpm} rpm")),
+                PALETTE[i % PALETTE.len()],
+                rec.displacement.iter().map(|x| x * 1e3).collect(),
+                rec.force.iter().map(|f| f * 1e-3).collect(),
+            ).with_width(1));
+            atomic_write(&dir.join(&file), csv_text(&rec).as_bytes())?;
+            runs.push(RunSpec {
+                id,
+                file: file.into(),
+                current_a: current,
+                shear_rate: Some((settings.crank.nominal_shear_rate(rpm, settings.geometry.gap_m) * 10.0).round() / 10.0),
+                initial_stress_pa: None,
+            });
+        }
+        panels.push(chart);
+    }
+    plot::save(&Figure::grid(panels, 3), &dir.join("records"))?;
+    let manifest = Manifest {
+        name: settings.name.clone(),
+        geometry: settings.geometry,
+        columns: Columns::default(),
+        runs,
+    };
+    let header = "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
+                  # Synthetic data: B-P model + sensor noise, not measurements.\n";
+    let body = toml::to_string(&manifest).map_err(|e| Error::Compute(e.to_string()))?;
+    atomic_write(&dir.join("campaign.toml"), format!("{header}{body}").as_bytes())?;
+    let settings_text = toml::to_string(settings).map_err(|e| Error::Compute(e.to_string()))?;
+    atomic_write(
+        &dir.join("synth.toml"),
+        format!("# Settings of `mrbp synth` that made this campaign.\n{settings_text}").as_bytes(),
+    )?;
+    Ok(manifest)
+}
+
+/// The record as CSV with the default column names; numbers in Rust's
+/// shortest round-trip form, so the file is the same on every machine.
+pub fn csv_text(rec: &Record) -> String {
+    let mut s = String::with_capacity(rec.len() * 64);
+    s.push_str("time_s,displacement_m,force_n,current_a\n");
+    for k in 0..rec.len() {
+        let current = rec.current.as_ref().map(|c| c[k]).unwrap_or(f64::NAN);
+        s.push_str(&format!(
+            "{},{},{},{}\n",
+            rec.time[k], rec.displacement[k], rec.force[k], current
+        ));
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crank_starts_at_rest_and_strokes_2r() {
+        let c = Crank::default();
+        assert_eq!(c.displacement(100.0, 0.0), 0.0);
+        // velocity at t = 0 is zero: displacement is second order in t
+        let x1 = c.displacement(100.0, 1e-5);
+        assert!(x1 < 1e-8, "{x1}");
+        let top = c.displacement(100.0, 0.3); // half a revolution
+        assert!((top - 2.0 * c.radius_m).abs() < 1e-12);
+        assert!((c.nominal_shear_rate(100.0, 1e-3) - 45.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn current_law_is_one_at_1a_and_saturates() {
+        let law = CurrentLaw::default();
+        assert!((law.scale(1.0) - 1.0).abs() < 1e-15);
+        assert_eq!(law.params_at(1.0), law.at_1a);
+        let (a, b, c) = (law.scale(0.5), law.scale(1.0), law.scale(1.5));
+        assert!(a < b && b < c);
+        assert!(c - b < b - a, "saturating");
+    }
+}
