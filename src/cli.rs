@@ -6,6 +6,8 @@ use clap::{Args, Parser, Subcommand};
 
 use crate::data::Campaign;
 use crate::error::{Error, Result};
+use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings};
+use crate::output;
 use crate::synth::{self, SynthSettings};
 
 #[derive(Parser, Debug)]
@@ -67,6 +69,32 @@ pub struct StageArgs {
     /// Output folder
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub identify: IdentifyArgs,
+}
+
+/// Options of the deterministic identification.
+#[derive(Args, Debug, Clone)]
+pub struct IdentifyArgs {
+    /// Loading branch of each record to identify from (0: the first, from rest)
+    #[arg(long, default_value_t = 0)]
+    pub branch: usize,
+    /// Half-width (ms) of the smoothing of τ, γ and their derivatives
+    #[arg(long, default_value_t = 0.5)]
+    pub smooth_ms: f64,
+}
+
+impl IdentifyArgs {
+    pub fn settings(&self) -> Result<IdentifySettings> {
+        if !(self.smooth_ms > 0.0) {
+            return Err(Error::Usage(format!("--smooth-ms must be positive, got {}", self.smooth_ms)));
+        }
+        Ok(IdentifySettings {
+            branch: self.branch,
+            smooth_ms: self.smooth_ms,
+            ..IdentifySettings::default()
+        })
+    }
 }
 
 #[derive(Args, Debug)]
@@ -128,7 +156,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Check { manifest }) => check(&manifest).map(|_| ()),
         Some(Command::Synth(args)) => synth_cmd(args),
         Some(Command::Run(args)) => run_pipeline(&args.manifest, &args.out, args.seed),
-        Some(Command::Identify(_)) => not_built("identify"),
+        Some(Command::Identify(args)) => identify_cmd(&args.manifest, &args.out, &args.identify).map(|_| ()),
         Some(Command::Sample(_)) => not_built("sample"),
         Some(Command::Predict(_)) => not_built("predict"),
         Some(Command::Report(_)) => not_built("report"),
@@ -173,6 +201,20 @@ fn run_pipeline(manifest: &Path, out: &Path, _seed: u64) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+/// `mrbp identify`: the paper's identification for every current level.
+pub fn identify_cmd(manifest: &Path, out: &Path, args: &IdentifyArgs) -> Result<Vec<CurrentIdentification>> {
+    let settings = args.settings()?;
+    let campaign = Campaign::load(manifest)?;
+    let results = identify_campaign(&campaign, &settings);
+    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+    output::identification::write_table(&out.join("identification.parquet"), &results)?;
+    output::identification::write_figures(out, &campaign, &results)?;
+    output::identification::print_table(&results);
+    println!("
+wrote identification.parquet and figures fig1–fig5 to {}", out.display());
+    Ok(results)
 }
 
 /// `mrbp check`: loads and validates a campaign, prints one line per run.

@@ -13,6 +13,8 @@
 pub mod cli;
 pub mod data;
 pub mod error;
+pub mod fit;
+pub mod identify;
 pub mod model;
 pub mod output;
 pub mod rng;

@@ -16,11 +16,17 @@ pub struct Shear {
     pub initial_tau: f64,
 }
 
-/// γᴵ = γ − τ/G and γ̇ᴵ = γ̇ − τ̇/G (eq. 2 with dτ/dγ · γ̇ = τ̇), from smoothed
-/// derivatives.
+/// γᴵ = γ − τ/G and γ̇ᴵ = γ̇ − τ̇/G (eq. 2 with dτ/dγ · γ̇ = τ̇), from locally
+/// fitted straight lines (smoothed values and derivatives).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Inelastic {
+    /// γᴵ from the raw samples.
     pub strain: Vec<f64>,
+    /// γᴵ from the smoothed τ and γ.
+    pub strain_smooth: Vec<f64>,
+    /// Smoothed τ (Pa).
+    pub tau_smooth: Vec<f64>,
+    /// γ̇ᴵ (1/s).
     pub rate: Vec<f64>,
 }
 
@@ -47,12 +53,14 @@ impl Shear {
         self.time.is_empty()
     }
 
-    /// γᴵ and γ̇ᴵ for shear modulus `g`, with derivatives smoothed over
-    /// `half_window` samples on each side (see [`smoothed_derivative`]).
+    /// γᴵ and γ̇ᴵ for shear modulus `g`, from local cubic fits over
+    /// `half_window` samples on each side (see [`local_polynomial`]).
     pub fn inelastic(&self, g: f64, half_window: usize) -> Inelastic {
-        let gamma_rate = smoothed_derivative(&self.time, &self.gamma, half_window);
-        let tau_rate = smoothed_derivative(&self.time, &self.tau, half_window);
+        let (gamma_s, gamma_rate) = local_polynomial(&self.time, &self.gamma, half_window, 3);
+        let (tau_s, tau_rate) = local_polynomial(&self.time, &self.tau, half_window, 3);
         Inelastic {
+            strain_smooth: gamma_s.iter().zip(&tau_s).map(|(gm, t)| gm - t / g).collect(),
+            tau_smooth: tau_s,
             strain: self
                 .gamma
                 .iter()
@@ -73,28 +81,61 @@ impl Shear {
 /// ends). Unlike a plain difference it does not amplify sensor noise by
 /// 1/Δt; it is exact for linear data and works on uneven time grids.
 pub fn smoothed_derivative(t: &[f64], y: &[f64], half_window: usize) -> Vec<f64> {
+    local_linear(t, y, half_window).1
+}
+
+/// The same local straight-line fits as [`smoothed_derivative`], returning
+/// both the fitted value and the slope at every sample.
+pub fn local_linear(t: &[f64], y: &[f64], half_window: usize) -> (Vec<f64>, Vec<f64>) {
+    local_polynomial(t, y, half_window, 1)
+}
+
+/// Local least-squares polynomials of `degree` (a Savitzky-Golay filter that
+/// also works on uneven grids): at every sample, the value and the slope of
+/// the polynomial fitted to the samples within `half_window` on each side.
+/// A cubic keeps the bias of value and slope at a sharp bend (the yield
+/// knee) an order smaller than a straight line over the same window, at the
+/// price of more noise.
+pub fn local_polynomial(t: &[f64], y: &[f64], half_window: usize, degree: usize) -> (Vec<f64>, Vec<f64>) {
+    use nalgebra::{DMatrix, DVector};
     let n = t.len();
     let h = half_window.max(1);
-    (0..n)
-        .map(|k| {
-            let lo = k.saturating_sub(h);
-            let hi = (k + h + 1).min(n);
-            let m = (hi - lo) as f64;
-            let tm = t[lo..hi].iter().sum::<f64>() / m;
-            let ym = y[lo..hi].iter().sum::<f64>() / m;
-            let (mut sty, mut stt) = (0.0, 0.0);
-            for i in lo..hi {
-                let dt = t[i] - tm;
-                sty += dt * (y[i] - ym);
-                stt += dt * dt;
+    let mut values = Vec::with_capacity(n);
+    let mut slopes = Vec::with_capacity(n);
+    for k in 0..n {
+        let lo = k.saturating_sub(h);
+        let hi = (k + h + 1).min(n);
+        let deg = degree.min(hi - lo - 1);
+        // centred and scaled abscissa for a well-conditioned system
+        let scale = (t[hi - 1] - t[k]).abs().max((t[k] - t[lo]).abs()).max(f64::MIN_POSITIVE);
+        let m = deg + 1;
+        let mut ata = DMatrix::<f64>::zeros(m, m);
+        let mut aty = DVector::<f64>::zeros(m);
+        for i in lo..hi {
+            let u = (t[i] - t[k]) / scale;
+            let mut powers = [1.0; 8];
+            for p in 1..m {
+                powers[p] = powers[p - 1] * u;
             }
-            if stt > 0.0 {
-                sty / stt
-            } else {
-                0.0
+            for r in 0..m {
+                aty[r] += powers[r] * y[i];
+                for c in 0..m {
+                    ata[(r, c)] += powers[r] * powers[c];
+                }
             }
-        })
-        .collect()
+        }
+        match ata.lu().solve(&aty) {
+            Some(coef) if coef.iter().all(|c| c.is_finite()) => {
+                values.push(coef[0]);
+                slopes.push(if m > 1 { coef[1] / scale } else { 0.0 });
+            }
+            _ => {
+                values.push(y[k]);
+                slopes.push(0.0);
+            }
+        }
+    }
+    (values, slopes)
 }
 
 #[cfg(test)]
@@ -118,6 +159,18 @@ mod tests {
     }
 
     #[test]
+    fn cubic_fits_are_exact_on_cubics() {
+        let t: Vec<f64> = (0..50).map(|k| 0.01 * k as f64 + 1e-4 * ((k * 7) % 3) as f64).collect();
+        let y: Vec<f64> = t.iter().map(|t| 2.0 - t + 3.0 * t * t - 5.0 * t * t * t).collect();
+        let (v, d) = local_polynomial(&t, &y, 4, 3);
+        for k in 0..50 {
+            let tk = t[k];
+            assert!((v[k] - y[k]).abs() < 1e-9);
+            assert!((d[k] - (-1.0 + 6.0 * tk - 15.0 * tk * tk)).abs() < 1e-7, "{k}");
+        }
+    }
+
+    #[test]
     fn shear_from_record_uses_geometry() {
         let rec = Record {
             time: vec![0.0, 0.1, 0.2],
@@ -133,7 +186,7 @@ mod tests {
         assert_eq!(s.tau, vec![0.0, 1000.0, 2000.0]);
         assert!((s.gamma[2] - 3.0).abs() < 1e-12);
         assert_eq!(s.gamma[0], 0.0);
-        let ie = s.inelastic(1.0e6, 1);
+        let ie = s.inelastic(1.0e6, 2);
         assert!((ie.strain[2] - (3.0 - 2000.0 / 1.0e6)).abs() < 1e-12);
     }
 }

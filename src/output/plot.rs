@@ -9,7 +9,8 @@ use std::sync::Once;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use plotters::style::{FontStyle, RGBColor};
+use plotters::style::FontStyle;
+pub use plotters::style::RGBColor;
 
 use super::atomic_write;
 use crate::error::{Error, Result};
@@ -169,7 +170,13 @@ impl Figure {
 pub fn save(figure: &Figure, stem: &Path) -> Result<()> {
     init_fonts();
     let (w, h) = figure.size();
-    let svg_path = stem.with_extension("svg");
+    // appended, not `with_extension`: stems like `fig1_I0.5A` contain dots
+    let with_ext = |ext: &str| {
+        let mut name = stem.file_name().unwrap_or_default().to_os_string();
+        name.push(ext);
+        stem.with_file_name(name)
+    };
+    let svg_path = with_ext(".svg");
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
@@ -178,7 +185,7 @@ pub fn save(figure: &Figure, stem: &Path) -> Result<()> {
     }
     atomic_write(&svg_path, svg.as_bytes())?;
 
-    let png_path = stem.with_extension("png");
+    let png_path = with_ext(".png");
     let mut pixels = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
@@ -222,6 +229,16 @@ pub fn tick(v: f64) -> String {
     }
 }
 
+/// `v` rounded to `digits` significant digits (for ticks of a log axis,
+/// whose positions are not round numbers).
+pub fn significant(v: f64, digits: i32) -> f64 {
+    if v == 0.0 || !v.is_finite() {
+        return v;
+    }
+    let scale = 10f64.powi(digits - 1 - v.abs().log10().floor() as i32);
+    (v * scale).round() / scale
+}
+
 fn finite_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
     let (lo, hi) = values
         .filter(|v| v.is_finite())
@@ -261,7 +278,7 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
         .y_label_area_size(70)
         .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)?;
     let log_x = chart.log_x;
-    let x_fmt = move |v: &f64| if log_x { tick(10f64.powf(*v)) } else { tick(*v) };
+    let x_fmt = move |v: &f64| if log_x { tick(significant(10f64.powf(*v), 2)) } else { tick(*v) };
     let y_fmt = |v: &f64| tick(*v);
     c.configure_mesh()
         .x_desc(&chart.x_label)
@@ -348,6 +365,9 @@ mod tests {
         assert_eq!(tick(0.25), "0.25");
         assert_eq!(tick(150000.0), "1.5e5");
         assert_eq!(tick(-3.0e-5), "-3e-5");
+        assert_eq!(tick(significant(3.981, 2)), "4");
+        assert_eq!(tick(significant(15.85, 2)), "16");
+        assert_eq!(tick(significant(0.006310, 2)), "0.0063");
     }
 
     #[test]

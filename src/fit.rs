@@ -1,0 +1,113 @@
+//! Nonlinear least squares by Levenberg-Marquardt (the `levenberg-marquardt`
+//! crate), for problems given as closures.
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
+
+/// The outcome of a fit.
+#[derive(Clone, Debug)]
+pub struct Fit {
+    pub params: Vec<f64>,
+    /// ½ Σ r² at `params`.
+    pub cost: f64,
+    /// Whether the solver reported success (not a numerical failure or the
+    /// evaluation budget).
+    pub converged: bool,
+    pub message: String,
+}
+
+type Residuals<'a> = dyn Fn(&[f64]) -> Option<Vec<f64>> + 'a;
+type Jacobian<'a> = dyn Fn(&[f64]) -> Option<DMatrix<f64>> + 'a;
+
+struct ClosureProblem<'a> {
+    p: DVector<f64>,
+    residuals: &'a Residuals<'a>,
+    jacobian: Option<&'a Jacobian<'a>>,
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for ClosureProblem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, p: &DVector<f64>) {
+        self.p.copy_from(p);
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.p.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        let r = (self.residuals)(self.p.as_slice())?;
+        r.iter().all(|v| v.is_finite()).then(|| DVector::from_vec(r))
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        match self.jacobian {
+            Some(j) => j(self.p.as_slice()).filter(|m| m.iter().all(|v| v.is_finite())),
+            None => forward_difference(self.residuals, self.p.as_slice()),
+        }
+    }
+}
+
+/// Jacobian by forward differences with step √ε·(1 + |p|) per parameter.
+fn forward_difference(residuals: &Residuals, p: &[f64]) -> Option<DMatrix<f64>> {
+    let r0 = residuals(p)?;
+    let mut jac = DMatrix::zeros(r0.len(), p.len());
+    let mut q = p.to_vec();
+    for j in 0..p.len() {
+        let h = 1.5e-8 * (1.0 + p[j].abs());
+        q[j] = p[j] + h;
+        let r1 = residuals(&q)?;
+        q[j] = p[j];
+        for i in 0..r0.len() {
+            jac[(i, j)] = (r1[i] - r0[i]) / h;
+        }
+    }
+    Some(jac)
+}
+
+/// Minimises ½ Σ rᵢ(p)² from `start`. `jacobian` may be `None` for forward
+/// differences. A residual function that returns `None` or a non-finite
+/// value marks the point as infeasible; the solver then backs off.
+pub fn least_squares(start: &[f64], residuals: &Residuals, jacobian: Option<&Jacobian>) -> Fit {
+    let problem = ClosureProblem {
+        p: DVector::from_column_slice(start),
+        residuals,
+        jacobian,
+    };
+    let (problem, report) = LevenbergMarquardt::new().with_patience(200).minimize(problem);
+    Fit {
+        params: problem.p.as_slice().to_vec(),
+        cost: report.objective_function,
+        converged: report.termination.was_successful(),
+        message: format!("{:?}", report.termination),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fits_an_exponential_with_and_without_jacobian() {
+        // y = 3 exp(−0.5 x) exactly: the fit must recover (3, −0.5)
+        let x: Vec<f64> = (0..20).map(|i| i as f64 * 0.3).collect();
+        let y: Vec<f64> = x.iter().map(|x| 3.0 * (-0.5 * x).exp()).collect();
+        let res = |p: &[f64]| Some(x.iter().zip(&y).map(|(x, y)| p[0] * (p[1] * x).exp() - y).collect());
+        let jac = |p: &[f64]| {
+            Some(DMatrix::from_fn(x.len(), 2, |i, j| {
+                if j == 0 {
+                    (p[1] * x[i]).exp()
+                } else {
+                    p[0] * x[i] * (p[1] * x[i]).exp()
+                }
+            }))
+        };
+        for fit in [least_squares(&[1.0, -0.1], &res, Some(&jac)), least_squares(&[1.0, -0.1], &res, None)] {
+            assert!(fit.converged, "{}", fit.message);
+            assert!((fit.params[0] - 3.0).abs() < 1e-6 && (fit.params[1] + 0.5).abs() < 1e-6, "{:?}", fit.params);
+        }
+    }
+}

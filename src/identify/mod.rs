@@ -1,0 +1,320 @@
+//! The paper's deterministic identification (§3), with the slips of its
+//! printed equations corrected (see the design notes in the README):
+//!
+//! 1. per run: τ, γ (eq. 1), G from the initial elastic slope ([`elastic`]),
+//!    γᴵ and γ̇ᴵ (eqs. 1–2);
+//! 2. τ02 at γᴵ = 0.2 % with γ̇ᴵ there, and n, R0 from eq. 6 over the runs
+//!    of one current ([`yield_stress`]);
+//! 3. eq. 7 fitted to τ(γᴵ), ψ(τ) from eqs. 8–9, its end slopes → m2, m1,
+//!    its intercepts → R1, D1 ([`hardening`]);
+//! 4. per-run values and one combined estimate per current, clamped into
+//!    the physical range with a warning where needed;
+//! 5. an Euler solution with the combined parameters against every record.
+//!
+//! The result is a starting point for the sampler, not an answer.
+
+pub mod elastic;
+pub mod hardening;
+pub mod yield_stress;
+
+use serde::{Deserialize, Serialize};
+
+use crate::data::{Campaign, Run};
+use crate::model::{Integrator, Params, PARAM_NAMES};
+use hardening::{Asymptote, CurveFit, Eq7};
+use yield_stress::YieldFit;
+
+/// Choices of the identification; the defaults are the documented rules.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IdentifySettings {
+    /// Which loading branch of each record (0: the first, from rest).
+    pub branch: usize,
+    /// Half-width (ms) of the local line fits that smooth τ, γ and give
+    /// their derivatives.
+    pub smooth_ms: f64,
+    /// G is fitted while τ has covered less than this share of its rise.
+    pub elastic_share: f64,
+    /// The offset inelastic strain of the yield point (0.2 %).
+    pub offset_strain: f64,
+    /// Share of the τ span of ψ(τ) that counts as each end.
+    pub end_share: f64,
+    /// Points of τ(γᴵ) used for the eq. 7 fit, log-spaced in γᴵ.
+    pub curve_points: usize,
+}
+
+impl Default for IdentifySettings {
+    fn default() -> Self {
+        IdentifySettings {
+            branch: 0,
+            smooth_ms: 0.5,
+            elastic_share: 0.4,
+            offset_strain: 0.002,
+            end_share: 0.15,
+            curve_points: 200,
+        }
+    }
+}
+
+/// What the identification found for one run.
+#[derive(Clone, Debug)]
+pub struct RunIdentification {
+    pub run: String,
+    pub current_a: f64,
+    pub branch: std::ops::Range<usize>,
+    pub g: f64,
+    pub elastic_points: usize,
+    /// τ02 (Pa) and γ̇ᴵ there (1/s); `None` if γᴵ never reached the offset.
+    pub yield_point: Option<(f64, f64)>,
+    /// τ(γᴵ) samples used for eq. 7 (γᴵ from the branch start, τ).
+    pub curve_data: (Vec<f64>, Vec<f64>),
+    pub curve: Option<CurveFit>,
+    /// ψ(τ) along the fitted curve.
+    pub psi: (Vec<f64>, Vec<f64>),
+    /// (small-strain end → m2, large-strain end → m1)
+    pub ends: Option<(Asymptote, Asymptote)>,
+    /// m1, m2, R1, D1 of this run, before clamping (NaN where not found).
+    pub m1: f64,
+    pub m2: f64,
+    pub r1: f64,
+    pub d1: f64,
+    pub warnings: Vec<String>,
+}
+
+/// The identification of one current level.
+#[derive(Clone, Debug)]
+pub struct CurrentIdentification {
+    pub current_a: f64,
+    pub runs: Vec<RunIdentification>,
+    pub yield_fit: YieldFit,
+    /// The combined estimate as computed, before clamping.
+    pub raw: [f64; 7],
+    /// The combined estimate inside the physical range: the sampler's start.
+    pub params: Params,
+    /// RMS of τ_Euler − τ_data per run over the whole record (Pa), with the
+    /// combined parameters; NaN where the integration failed.
+    pub euler_rms: Vec<f64>,
+    /// τ of the Euler solution per run (empty where it failed).
+    pub euler_tau: Vec<Vec<f64>>,
+    pub warnings: Vec<String>,
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut s: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if s.is_empty() {
+        return f64::NAN;
+    }
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}
+
+/// Steps 1–3 for one run, except R1 and D1, which need R0 of the current.
+fn identify_run(run: &Run, s: &IdentifySettings) -> RunIdentification {
+    let mut warnings = Vec::new();
+    let branch = run
+        .branches
+        .get(s.branch)
+        .cloned()
+        .unwrap_or_else(|| {
+            warnings.push(format!("run has {} branches; using the first", run.branches.len()));
+            run.branches[0].clone()
+        });
+    let sh = &run.shear;
+    let dt = (sh.time[sh.len() - 1] - sh.time[0]) / (sh.len() - 1) as f64;
+    let half_window = ((s.smooth_ms * 1e-3 / dt).round() as usize).max(1);
+    // smoothing of the whole record, so that branch ends see both sides
+    let provisional = sh.inelastic(1.0, half_window);
+    let b = branch.clone();
+    let (g, elastic_points) = elastic::elastic_modulus(
+        &sh.gamma[b.clone()],
+        &sh.tau[b.clone()],
+        &provisional.tau_smooth[b.clone()],
+        s.elastic_share,
+    );
+    let mut out = RunIdentification {
+        run: run.id().to_string(),
+        current_a: run.spec.current_a,
+        branch: branch.clone(),
+        g,
+        elastic_points,
+        yield_point: None,
+        curve_data: (vec![], vec![]),
+        curve: None,
+        psi: (vec![], vec![]),
+        ends: None,
+        m1: f64::NAN,
+        m2: f64::NAN,
+        r1: f64::NAN,
+        d1: f64::NAN,
+        warnings,
+    };
+    if elastic_points < 5 {
+        out.warnings.push(format!("only {elastic_points} samples in the elastic part: G is rough"));
+    }
+    if !(g > 0.0) {
+        out.warnings.push(format!("elastic slope {g:.3e} Pa is not positive"));
+        return out;
+    }
+    let ie = sh.inelastic(g, half_window);
+    // the loading direction of the branch, and γᴵ, τ, γ̇ᴵ in it from its start
+    let sign = if ie.tau_smooth[b.end - 1] >= ie.tau_smooth[b.start] { 1.0 } else { -1.0 };
+    // γᴵ at the start of the branch: its mean over the elastic samples, where
+    // it is constant but for noise (a single sample would shift the offset
+    // by the noise, which is as large as the 0.2 % offset itself)
+    let x0 = ie.strain[b.start..b.start + elastic_points].iter().sum::<f64>() / elastic_points as f64;
+    let strain: Vec<f64> = ie.strain_smooth[b.clone()].iter().map(|v| sign * (v - x0)).collect();
+    let tau: Vec<f64> = ie.tau_smooth[b.clone()].iter().map(|v| sign * v).collect();
+    let rate: Vec<f64> = ie.rate[b.clone()].iter().map(|v| sign * v).collect();
+    let Some((tau02, rate02, k02)) = yield_stress::offset_yield(&strain, &tau, &rate, s.offset_strain) else {
+        out.warnings.push(format!("inelastic strain never reaches {} %", s.offset_strain * 100.0));
+        return out;
+    };
+    if !(rate02 > 0.0) {
+        out.warnings.push(format!("inelastic rate at yield is {rate02:.3e} 1/s, not positive"));
+        return out;
+    }
+    out.yield_point = Some((tau02, rate02));
+
+    // eq. 7 on τ(γᴵ) from the yield point up to the peak of τ: beyond the peak
+    // the falling crank speed, not hardening, shapes the curve
+    let peak = (k02..tau.len()).max_by(|&i, &j| tau[i].total_cmp(&tau[j])).unwrap_or(k02);
+    let (xs, ys) = resample_log(&strain[k02..=peak], &tau[k02..=peak], s.offset_strain, s.curve_points);
+    if xs.len() < 8 {
+        out.warnings.push(format!("only {} points past yield for eq. 7", xs.len()));
+        out.curve_data = (xs, ys);
+        return out;
+    }
+    let fit = hardening::fit_eq7(&xs, &ys);
+    if !fit.converged {
+        out.warnings.push("eq. 7 fit did not converge".into());
+    }
+    let f: Eq7 = fit.eq7;
+    let psi_tau: Vec<f64> = xs.iter().map(|x| f.value(*x)).collect();
+    let psi: Vec<f64> = xs.iter().map(|x| f.psi(*x)).collect();
+    out.ends = hardening::asymptotes(&psi_tau, &psi, s.end_share);
+    match out.ends {
+        Some((small, large)) => {
+            out.m2 = small.m;
+            out.m1 = large.m;
+            if !(small.m > 0.0) {
+                out.warnings.push(format!("small-strain slope gives m2 = {:.3e} ≤ 0", small.m));
+            }
+            if !(large.m > 0.0) {
+                out.warnings.push(format!("large-strain slope gives m1 = {:.3e} ≤ 0", large.m));
+            }
+        }
+        None => out.warnings.push("ψ(τ) has no usable ends".into()),
+    }
+    out.curve = Some(fit);
+    out.curve_data = (xs, ys);
+    out.psi = (psi_tau, psi);
+    out
+}
+
+/// `n` points of the curve y(x) at x log-spaced from `from` to the largest x,
+/// by linear interpolation on the running maximum of x (so a noisy,
+/// non-monotone x cannot make the interpolation ambiguous).
+fn resample_log(x: &[f64], y: &[f64], from: f64, n: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut xm = Vec::with_capacity(x.len());
+    let mut run = f64::NEG_INFINITY;
+    for v in x {
+        run = run.max(*v);
+        xm.push(run);
+    }
+    let top = run;
+    if !(top > from) || n < 2 {
+        return (vec![], vec![]);
+    }
+    let (la, lb) = (from.ln(), top.ln());
+    let mut xs = Vec::with_capacity(n);
+    let mut ys = Vec::with_capacity(n);
+    for i in 0..n {
+        let target = (la + (lb - la) * i as f64 / (n - 1) as f64).exp().min(top);
+        let k = xm.partition_point(|v| *v < target);
+        let y = if k == 0 {
+            y[0]
+        } else if k >= xm.len() {
+            y[y.len() - 1]
+        } else if xm[k] == xm[k - 1] {
+            y[k]
+        } else {
+            let w = (target - xm[k - 1]) / (xm[k] - xm[k - 1]);
+            y[k - 1] + w * (y[k] - y[k - 1])
+        };
+        xs.push(target);
+        ys.push(y);
+    }
+    (xs, ys)
+}
+
+/// The whole identification of the runs of one current level.
+pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySettings) -> CurrentIdentification {
+    let group = campaign.at_current(current_a);
+    let mut runs: Vec<RunIdentification> = group.runs.iter().map(|r| identify_run(r, s)).collect();
+    let mut warnings = Vec::new();
+
+    let points: Vec<(f64, f64)> = runs.iter().filter_map(|r| r.yield_point.map(|(t, g)| (g, t))).collect();
+    let yield_fit = yield_stress::fit_eq6(&points);
+    if let Some(note) = &yield_fit.note {
+        warnings.push(note.clone());
+    }
+    for r in runs.iter_mut() {
+        if let (Some((tau02, _)), Some((small, large))) = (r.yield_point, r.ends) {
+            let kappa = tau02 / yield_fit.r0;
+            let (r1, d1) = hardening::solve_r1_d1(large.intercept, small.intercept, large.m, small.m, yield_fit.r0, kappa);
+            r.r1 = r1;
+            r.d1 = d1;
+        }
+    }
+    let col = |f: &dyn Fn(&RunIdentification) -> f64| runs.iter().map(f).collect::<Vec<f64>>();
+    let g: Vec<f64> = col(&|r| r.g).into_iter().filter(|v| *v > 0.0).collect();
+    let raw = [
+        g.iter().sum::<f64>() / g.len().max(1) as f64,
+        yield_fit.r0,
+        median(&col(&|r| r.r1)),
+        median(&col(&|r| r.d1)),
+        median(&col(&|r| r.m1)),
+        median(&col(&|r| r.m2)),
+        yield_fit.n,
+    ];
+    let (params, moved) = Params::from_array(raw).clamped();
+    for name in moved {
+        let i = PARAM_NAMES.iter().position(|n| *n == name).unwrap_or(0);
+        warnings.push(format!(
+            "{name} = {:.3e} is outside the physical range: clamped to {:.3e}",
+            raw[i],
+            params.to_array()[i]
+        ));
+    }
+    let mut euler_rms = Vec::new();
+    let mut euler_tau = Vec::new();
+    for run in &group.runs {
+        let sh = &run.shear;
+        let integ = Integrator { max_substeps: 100_000, ..Integrator::default() };
+        let mut tau = vec![0.0; sh.len()];
+        let init = crate::model::State { tau: sh.initial_tau, w: 0.0 };
+        match integ.run_with(&params, &sh.time, &sh.gamma, init, |k, st| tau[k] = st.tau) {
+            Ok(_) => {
+                let ss: f64 = tau.iter().zip(&sh.tau).map(|(m, o)| (m - o).powi(2)).sum();
+                euler_rms.push((ss / sh.len() as f64).sqrt());
+                euler_tau.push(tau);
+            }
+            Err(e) => {
+                warnings.push(format!("Euler solution of run {} failed: {e}", run.id()));
+                euler_rms.push(f64::NAN);
+                euler_tau.push(vec![]);
+            }
+        }
+    }
+    CurrentIdentification { current_a, runs, yield_fit, raw, params, euler_rms, euler_tau, warnings }
+}
+
+/// One identification per current level of the campaign, ascending current.
+pub fn identify_campaign(campaign: &Campaign, s: &IdentifySettings) -> Vec<CurrentIdentification> {
+    campaign.currents().into_iter().map(|c| identify_current(campaign, c, s)).collect()
+}
