@@ -37,12 +37,13 @@ mod tests {
 
     #[test]
     fn slope_of_the_initial_straight_part() {
-        // elastic up to τ = 30 (G = 10), then flat: the share 0.4 of the
-        // rise to 50 stops the fit at τ = 20, inside the straight part
+        // elastic up to τ = 30 (G = 10), then a slope of 2 up to τ = 43.8:
+        // the share 0.4 of that rise stops the fit below τ = 17.52, i.e. after
+        // the 18 samples τ = 0…17, inside the straight part
         let gamma: Vec<f64> = (0..100).map(|i| i as f64 * 0.1).collect();
         let tau: Vec<f64> = gamma.iter().map(|g| (10.0 * g).min(30.0 + (g - 3.0).max(0.0) * 2.0)).collect();
         let (g, used) = elastic_modulus(&gamma, &tau, &tau, 0.4);
         assert!((g - 10.0).abs() < 1e-9, "{g}");
-        assert_eq!(used, 21);
+        assert_eq!(used, 18);
     }
 }
