@@ -27,16 +27,17 @@ fn crank_history(n: usize, rate_hz: f64, rpm: f64) -> (Vec<f64>, Vec<f64>) {
 
 fn euler() {
     println!("## Euler integrator (one thread)\n");
-    println!("| scheme | sample rate | sub-steps | ns per sample interval | M intervals/s |");
+    println!("| scheme | sample rate | sub-steps | ns per sample interval | M Euler steps/s |");
     println!("|---|---|---|---|---|");
     let p = Params::reference_1a();
     for (rate, rpm) in [(5000.0, 100.0), (10000.0, 400.0)] {
         let (t, g) = crank_history(6000, rate, rpm);
-        for scheme in [Scheme::Explicit, Scheme::LinearlyImplicit] {
+        for (scheme, extrapolate) in [(Scheme::Explicit, false), (Scheme::LinearlyImplicit, false), (Scheme::Explicit, true)] {
             for substeps in [1, 4] {
                 let integ = Integrator {
                     scheme,
                     substeps,
+                    extrapolate,
                     ..Integrator::default()
                 };
                 let secs = best_of(20, || {
@@ -47,10 +48,12 @@ fn euler() {
                     black_box(acc);
                 });
                 let per = secs / (t.len() - 1) as f64;
+                let euler_steps = if extrapolate { 3 * substeps } else { substeps } as f64;
                 println!(
-                    "| {scheme:?} | {rate} Hz, {rpm} rpm | {substeps} | {:.1} | {:.1} |",
+                    "| {scheme:?}{} | {rate} Hz, {rpm} rpm | {substeps} | {:.1} | {:.1} |",
+                    if extrapolate { " + Richardson" } else { "" },
                     per * 1e9,
-                    1e-6 / per
+                    euler_steps * 1e-6 / per
                 );
             }
         }
@@ -142,6 +145,52 @@ fn convergence() {
     }
 }
 
+/// The B-P log-density over the bundled 1 A runs, evaluated as the sampler
+/// does (batches of 8 walkers, all threads).
+fn likelihood() {
+    use mrbp::posterior::{CalibrationSettings, Posterior};
+    use rayon::prelude::*;
+    println!("## Log-density of the bundled 1 A runs (3 runs, 10 500 sample intervals)\n");
+    let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let campaign = mrbp::data::Campaign::load(&repo.join("data/campaign.toml")).unwrap().at_current(1.0);
+    let settings = CalibrationSettings::default();
+    let intervals: usize = campaign.runs.iter().map(|r| r.shear.len() - 1).sum();
+    println!("| integrator | threads | walkers per batch | log-densities/s | M walker-steps/s |");
+    println!("|---|---|---|---|---|");
+    for (extrapolate, substeps) in [(false, 1), (true, 1), (true, 2)] {
+        let integ = Integrator { extrapolate, substeps, ..Integrator::default() };
+        let post = Posterior::new(&campaign, &settings, integ);
+        let d = post.dim();
+        let p = Params::reference_1a().to_array();
+        let points: Vec<f64> = (0..96)
+            .flat_map(|w| {
+                let mut x: Vec<f64> = p.iter().map(|v| v.ln()).collect();
+                x[0] += 1e-3 * (w as f64).sin();
+                x.extend([6.0; 3]);
+                x
+            })
+            .collect();
+        for (threads, batch) in [(1, 1), (1, 8), (2, 8)] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let secs = best_of(3, || {
+                pool.install(|| {
+                    let mut out = vec![0.0; 96];
+                    points.par_chunks(d * batch).zip(out.par_chunks_mut(batch)).for_each(|(x, o)| post.log_density_batch(x, o));
+                    black_box(out);
+                })
+            });
+            let evals = 96.0 / secs;
+            let steps_per_eval = intervals as f64 * substeps as f64 * if extrapolate { 3.0 } else { 1.0 };
+            println!(
+                "| Euler{} × {substeps} | {threads} | {batch} | {evals:.0} | {:.1} |",
+                if extrapolate { " + Richardson" } else { "" },
+                evals * steps_per_eval * 1e-6
+            );
+        }
+    }
+    println!();
+}
+
 fn main() {
     let only = std::env::args().nth(1).filter(|a| !a.starts_with('-'));
     let want = |name: &str| only.as_deref().map_or(true, |o| name.contains(o));
@@ -150,6 +199,9 @@ fn main() {
     }
     if want("convergence") {
         convergence();
+    }
+    if want("likelihood") {
+        likelihood();
     }
     if want("sampler") {
         sampler_overhead();

@@ -4,9 +4,11 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, Parser, Subcommand};
 
-use crate::data::Campaign;
+use crate::data::{Campaign, Manifest};
 use crate::error::{Error, Result};
+use crate::calibrate::calibrate;
 use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings};
+use crate::posterior::CalibrationSettings;
 use crate::output;
 use crate::synth::{self, SynthSettings};
 
@@ -22,6 +24,10 @@ use crate::synth::{self, SynthSettings};
 pub struct Cli {
     #[command(subcommand)]
     pub command: Option<Command>,
+    /// Worker threads (default: RAYON_NUM_THREADS, else all cores); results
+    /// do not depend on it
+    #[arg(long, global = true)]
+    pub threads: Option<usize>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -38,7 +44,7 @@ pub enum Command {
     /// The paper's deterministic identification
     Identify(StageArgs),
     /// Posterior sampling from all runs, started from the identification
-    Sample(StageArgs),
+    Sample(SampleArgs),
     /// Posterior propagation through the Euler integrator: credible bands
     Predict(DirArgs),
     /// Plots and the HTML report from what is in DIR
@@ -56,10 +62,11 @@ pub enum Command {
 pub struct RunArgs {
     /// The campaign manifest (TOML)
     pub manifest: PathBuf,
+    /// Output folder: one calibration folder per current level inside
     #[arg(long)]
     pub out: PathBuf,
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub options: SampleOptions,
 }
 
 #[derive(Args, Debug)]
@@ -95,6 +102,81 @@ impl IdentifyArgs {
             ..IdentifySettings::default()
         })
     }
+}
+
+/// Options of `mrbp sample` (and `mrbp run`), in emcee's words where they exist.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SampleOptions {
+    /// Settings file (TOML): priors, likelihood, integrator, sampler; the
+    /// options below override it
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Calibrate only the runs at this coil current (A)
+    #[arg(long)]
+    pub current: Option<f64>,
+    /// Walkers per ensemble (default: max(24, 2 × dimension))
+    #[arg(long)]
+    pub walkers: Option<usize>,
+    /// Independent ensembles (default 4)
+    #[arg(long)]
+    pub ensembles: Option<usize>,
+    /// A fixed number of steps (default: until converged, R̂ < 1.01, ESS ≥ 400)
+    #[arg(long)]
+    pub steps: Option<usize>,
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Residual model: gaussian (default), student-t, ar1
+    #[arg(long, value_parser = ["gaussian", "student-t", "ar1"])]
+    pub noise: Option<String>,
+    /// Samples in the likelihood: whole-record (default), all-branches, first-branch
+    #[arg(long, value_parser = ["whole-record", "all-branches", "first-branch"])]
+    pub part: Option<String>,
+    /// Integrator sub-steps per sample (default: chosen by the step rule)
+    #[arg(long)]
+    pub substeps: Option<u32>,
+}
+
+impl SampleOptions {
+    pub fn settings(&self) -> Result<CalibrationSettings> {
+        let mut s = match &self.config {
+            Some(path) => CalibrationSettings::read(path)?,
+            None => CalibrationSettings::default(),
+        };
+        if let Some(v) = self.walkers {
+            s.sampler.walkers = v;
+        }
+        if let Some(v) = self.ensembles {
+            s.sampler.ensembles = v;
+        }
+        if let Some(v) = self.steps {
+            s.sampler.steps = v;
+        }
+        if let Some(v) = self.seed {
+            s.sampler.seed = v;
+        }
+        if let Some(v) = &self.noise {
+            s.likelihood.noise = toml::Value::String(v.clone()).try_into().map_err(|e| Error::Usage(format!("--noise: {e}")))?;
+        }
+        if let Some(v) = &self.part {
+            s.likelihood.part = toml::Value::String(v.clone()).try_into().map_err(|e| Error::Usage(format!("--part: {e}")))?;
+        }
+        if let Some(v) = self.substeps {
+            s.integrator.substeps = v;
+        }
+        s.check().map_err(Error::Usage)?;
+        Ok(s)
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct SampleArgs {
+    /// The campaign manifest (TOML)
+    pub manifest: PathBuf,
+    /// Output folder (one sub-folder per current if the campaign has several)
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub options: SampleOptions,
 }
 
 #[derive(Args, Debug)]
@@ -151,13 +233,22 @@ pub fn main() -> i32 {
 }
 
 fn dispatch(cli: Cli) -> Result<()> {
+    if let Some(n) = cli.threads {
+        if n == 0 {
+            return Err(Error::Usage("--threads must be at least 1".into()));
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| Error::Usage(format!("--threads: {e}")))?;
+    }
     match cli.command {
         None => default_job(),
         Some(Command::Check { manifest }) => check(&manifest).map(|_| ()),
         Some(Command::Synth(args)) => synth_cmd(args),
-        Some(Command::Run(args)) => run_pipeline(&args.manifest, &args.out, args.seed),
+        Some(Command::Run(args)) => run_pipeline(&args.manifest, &args.out, &args.options),
         Some(Command::Identify(args)) => identify_cmd(&args.manifest, &args.out, &args.identify).map(|_| ()),
-        Some(Command::Sample(_)) => not_built("sample"),
+        Some(Command::Sample(args)) => sample_cmd(&args.manifest, &args.out, &args.options).map(|_| ()),
         Some(Command::Predict(_)) => not_built("predict"),
         Some(Command::Report(_)) => not_built("report"),
         Some(Command::Compare { .. }) => not_built("compare"),
@@ -182,24 +273,33 @@ pub fn bundled_manifest() -> PathBuf {
 
 fn default_job() -> Result<()> {
     let manifest = bundled_manifest();
-    let out = manifest
+    let reports = manifest
         .parent()
         .and_then(Path::parent)
         .unwrap_or(Path::new("."))
         .join("reports");
-    run_pipeline(&manifest, &out, 1)
+    let name = Manifest::read(&manifest)?.name;
+    run_pipeline(&manifest, &reports.join(name), &SampleOptions::default())
 }
 
-/// The whole pipeline on one campaign: every stage built so far.
-fn run_pipeline(manifest: &Path, out: &Path, _seed: u64) -> Result<()> {
+/// The whole pipeline on one campaign, one calibration per current level in
+/// `out/I<current>A/`: check, identify, sample (predict and report follow
+/// once they are built).
+fn run_pipeline(manifest: &Path, out: &Path, options: &SampleOptions) -> Result<()> {
+    let clock = std::time::Instant::now();
     let campaign = check(manifest)?;
-    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
-    println!(
-        "\n{} runs at {} current levels validated; results go to {}",
-        campaign.runs.len(),
-        campaign.currents().len(),
-        out.display()
-    );
+    let currents = campaign.currents();
+    // always one folder per current, even for a single one
+    let mut dirs = Vec::new();
+    for c in currents {
+        let opts = SampleOptions { current: Some(c), ..options.clone() };
+        dirs.extend(sample_cmd(manifest, &out.join(output::identification::current_tag(c)), &opts)?);
+    }
+    println!("\ncalibrations written to:");
+    for d in &dirs {
+        println!("  {}", d.display());
+    }
+    println!("whole job: {:.0} s", clock.elapsed().as_secs_f64());
     Ok(())
 }
 
@@ -215,6 +315,36 @@ pub fn identify_cmd(manifest: &Path, out: &Path, args: &IdentifyArgs) -> Result<
     println!("
 wrote identification.parquet and figures fig1–fig5 to {}", out.display());
     Ok(results)
+}
+
+/// `mrbp sample`: one calibration per current level of the campaign (or
+/// the one chosen), into `out` (or `out/I<current>A/` when there are several).
+pub fn sample_cmd(manifest: &Path, out: &Path, options: &SampleOptions) -> Result<Vec<PathBuf>> {
+    let settings = options.settings()?;
+    let campaign = Campaign::load(manifest)?;
+    let mut currents = campaign.currents();
+    if let Some(c) = options.current {
+        if !currents.iter().any(|x| (x - c).abs() < 1e-3) {
+            return Err(Error::Usage(format!("no run at {c} A in {} (currents: {currents:?})", manifest.display())));
+        }
+        currents = vec![c];
+    }
+    let mut dirs = Vec::new();
+    for &c in &currents {
+        let dir = if currents.len() > 1 { out.join(output::identification::current_tag(c)) } else { out.to_path_buf() };
+        let group = campaign.at_current(c);
+        println!("\ncalibrating {} run(s) at {c} A into {}", group.runs.len(), dir.display());
+        let cal = calibrate(&group, &settings, true)?;
+        std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
+        output::identification::write_table(&dir.join("identification.parquet"), std::slice::from_ref(&cal.identification))?;
+        output::identification::write_figures(&dir, &group, std::slice::from_ref(&cal.identification))?;
+        output::calibration::write_chains(&dir.join("chains.parquet"), &cal)?;
+        output::calibration::write_summary(&dir.join("summary.parquet"), &cal)?;
+        output::calibration::write_records(&dir, &cal)?;
+        output::calibration::print_summary(&cal);
+        dirs.push(dir);
+    }
+    Ok(dirs)
 }
 
 /// `mrbp check`: loads and validates a campaign, prints one line per run.

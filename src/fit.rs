@@ -23,6 +23,10 @@ struct ClosureProblem<'a> {
     p: DVector<f64>,
     residuals: &'a Residuals<'a>,
     jacobian: Option<&'a Jacobian<'a>>,
+    /// Length and largest |r| of the last feasible residual vector: an
+    /// infeasible point gets residuals far larger, so the solver rejects the
+    /// step and shrinks its trust region instead of stopping.
+    last: std::cell::Cell<(usize, f64)>,
 }
 
 impl LeastSquaresProblem<f64, Dyn, Dyn> for ClosureProblem<'_> {
@@ -39,8 +43,17 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for ClosureProblem<'_> {
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
-        let r = (self.residuals)(self.p.as_slice())?;
-        r.iter().all(|v| v.is_finite()).then(|| DVector::from_vec(r))
+        match (self.residuals)(self.p.as_slice()) {
+            Some(r) if r.iter().all(|v| v.is_finite()) => {
+                let big = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                self.last.set((r.len(), big));
+                Some(DVector::from_vec(r))
+            }
+            _ => {
+                let (len, big) = self.last.get();
+                (len > 0).then(|| DVector::from_element(len, 1e6 * (big + 1.0)))
+            }
+        }
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
@@ -76,6 +89,7 @@ pub fn least_squares(start: &[f64], residuals: &Residuals, jacobian: Option<&Jac
         p: DVector::from_column_slice(start),
         residuals,
         jacobian,
+        last: std::cell::Cell::new((0, 0.0)),
     };
     let (problem, report) = LevenbergMarquardt::new().with_patience(200).minimize(problem);
     Fit {

@@ -10,6 +10,7 @@
 //! * [`output`]: atomic file writing and Parquet tables;
 //! * [`cli`]: the command line.
 
+pub mod calibrate;
 pub mod cli;
 pub mod data;
 pub mod error;
@@ -17,6 +18,7 @@ pub mod fit;
 pub mod identify;
 pub mod model;
 pub mod output;
+pub mod posterior;
 pub mod rng;
 pub mod sampler;
 pub mod synth;

@@ -12,11 +12,21 @@
 //!   order, τ ← τ + hG(γ̇ − γ̇ᴵ)/(1 + hλ), stable for any h at the price of one
 //!   division.
 //!
-//! Both are first order. The integrator never returns a silently wrong curve:
-//! non-finite values or a step count past [`Integrator::max_substeps`] are an
-//! [`IntegrationError`], which a posterior turns into log-density −∞.
+//! Both are first order; [`Integrator::extrapolate`] combines two Euler
+//! solutions into a second-order one. The integrator never returns a
+//! silently wrong curve: non-finite values or a step count past
+//! [`Integrator::max_substeps`] are an [`IntegrationError`], which a
+//! posterior turns into log-density −∞.
+//!
+//! The loop runs [`LANES`] parameter sets at once, one per SIMD lane
+//! ([`super::lanes`]): a likelihood integrates several walkers together,
+//! and a single integration uses one lane. Lanes never interact, so a
+//! parameter set gives the same bits whichever lane it runs in and whatever
+//! runs beside it.
 
-use super::law::{Flow, Law};
+use wide::{f64x4, CmpGt};
+
+use super::lanes::{LaneLaw, LANES};
 use super::params::Params;
 
 /// Largest change of τ in one sub-step, as a share of (R + D)/√3.
@@ -45,6 +55,12 @@ pub struct Integrator {
     pub stability: f64,
     /// Most sub-steps allowed in one sample interval before giving up.
     pub max_substeps: u32,
+    /// Richardson extrapolation: run Euler twice, with `substeps` and with
+    /// twice as many, and report 2 x_{h/2} − x_h at every sample. Both runs
+    /// are plain Euler with every control above; their combination cancels
+    /// the O(h) error term, so the result is second order at three Euler
+    /// steps per `substeps`.
+    pub extrapolate: bool,
 }
 
 impl Default for Integrator {
@@ -54,6 +70,7 @@ impl Default for Integrator {
             substeps: 1,
             stability: 1.0,
             max_substeps: 1000,
+            extrapolate: false,
         }
     }
 }
@@ -85,11 +102,102 @@ pub struct Trajectory {
     pub w: Vec<f64>,
 }
 
+/// The states of all lanes at one sample time.
+#[derive(Clone, Copy, Debug)]
+pub struct LaneStates {
+    pub tau: [f64; LANES],
+    pub w: [f64; LANES],
+}
+
+/// One Euler track of every lane: the state with the flow rule and
+/// hardening at it, carried from step to step so that each accepted
+/// sub-step evaluates the law once.
+#[derive(Clone, Copy)]
+struct Track {
+    tau: f64x4,
+    w: f64x4,
+    /// γ̇ᴵ and ∂γ̇ᴵ/∂τ at (τ, Wᴵ)
+    rate: f64x4,
+    slope: f64x4,
+    /// R + D at Wᴵ
+    z: f64x4,
+}
+
+impl Track {
+    fn new(law: &LaneLaw, tau: f64x4, w: f64x4) -> Self {
+        let z = law.hardening_sum(w);
+        let (rate, slope) = law.flow(tau, z);
+        Track { tau, w, rate, slope, z }
+    }
+}
+
+fn mask_to_bools(m: f64x4) -> [bool; LANES] {
+    m.to_array().map(|v| v.to_bits() != 0)
+}
+
 impl Integrator {
-    /// Integrates from `initial` at `t[0]` and calls `visit(k, state)` at every
-    /// sample time `t[k]`, `k = 0..t.len()`. Allocates nothing; the visitor
-    /// decides what to keep (a likelihood keeps only a sum of squares).
-    #[inline]
+    /// Integrates every lane's parameter set from stress `initial_tau` (and
+    /// Wᴵ = 0) at `t[0]`, calling `visit(k, states)` at every sample time
+    /// `t[k]`. Allocates nothing; the visitor decides what to keep (a
+    /// likelihood keeps only sums of residuals). Returns each lane's outcome;
+    /// the states a failed lane reports after its failure mean nothing.
+    pub fn run_lanes(
+        &self,
+        params: &[Params; LANES],
+        t: &[f64],
+        gamma: &[f64],
+        initial_tau: f64,
+        mut visit: impl FnMut(usize, &LaneStates),
+    ) -> [Result<(), IntegrationError>; LANES] {
+        let mut outcome: [Result<(), IntegrationError>; LANES] = std::array::from_fn(|_| Ok(()));
+        if t.len() != gamma.len() {
+            let e = IntegrationError::InvalidHistory(format!("{} times but {} strains", t.len(), gamma.len()));
+            return std::array::from_fn(|_| Err(e.clone()));
+        }
+        // a lane with invalid parameters runs a valid set and is reported failed
+        let mut usable = *params;
+        for (lane, p) in params.iter().enumerate() {
+            if let Err(e) = p.validate() {
+                outcome[lane] = Err(IntegrationError::InvalidParams(e));
+                usable[lane] = Params::reference_1a();
+            }
+        }
+        if t.is_empty() {
+            return outcome;
+        }
+        let law = LaneLaw::new(&usable);
+        let tau0 = f64x4::splat(initial_tau);
+        let mut coarse = Track::new(&law, tau0, f64x4::ZERO);
+        let mut finer = coarse;
+        let fine = Integrator { substeps: 2 * self.substeps, ..*self };
+        let mut states = LaneStates { tau: [initial_tau; LANES], w: [0.0; LANES] };
+        visit(0, &states);
+        for k in 0..t.len() - 1 {
+            let dt = t[k + 1] - t[k];
+            if !(dt > 0.0) {
+                let e = IntegrationError::InvalidHistory(format!("time does not increase at sample {}", k + 1));
+                return std::array::from_fn(|_| Err(e.clone()));
+            }
+            let strain_rate = (gamma[k + 1] - gamma[k]) / dt;
+            self.advance(&law, &mut coarse, strain_rate, dt, t[k], &mut outcome);
+            let (tau, w) = if self.extrapolate {
+                // independent of the coarse track: the CPU overlaps the two
+                fine.advance(&law, &mut finer, strain_rate, dt, t[k], &mut outcome);
+                let two = f64x4::splat(2.0);
+                (two * finer.tau - coarse.tau, two * finer.w - coarse.w)
+            } else {
+                (coarse.tau, coarse.w)
+            };
+            states.tau = tau.to_array();
+            states.w = w.to_array();
+            visit(k + 1, &states);
+        }
+        outcome
+    }
+
+    /// Integrates one parameter set from `initial` at `t[0]` and calls
+    /// `visit(k, state)` at every sample time `t[k]` (lane 0 of
+    /// [`Integrator::run_lanes`]).
     pub fn run_with(
         &self,
         p: &Params,
@@ -98,34 +206,15 @@ impl Integrator {
         initial: State,
         mut visit: impl FnMut(usize, State),
     ) -> Result<State, IntegrationError> {
-        p.validate().map_err(IntegrationError::InvalidParams)?;
-        if t.len() != gamma.len() {
-            return Err(IntegrationError::InvalidHistory(format!(
-                "{} times but {} strains",
-                t.len(),
-                gamma.len()
-            )));
+        if initial.w != 0.0 {
+            return Err(IntegrationError::InvalidHistory("a run starts with Wᴵ = 0".into()));
         }
-        if t.is_empty() {
-            return Ok(initial);
-        }
-        let law = Law::new(p);
-        let mut s = initial;
-        let mut z = law.hardening_sum(s.w);
-        let mut flow = law.flow(s.tau, z);
-        visit(0, s);
-        for k in 0..t.len() - 1 {
-            let dt = t[k + 1] - t[k];
-            if !(dt > 0.0) {
-                return Err(IntegrationError::InvalidHistory(format!(
-                    "time does not increase at sample {}",
-                    k + 1
-                )));
-            }
-            self.advance(&law, &mut s, &mut flow, &mut z, (gamma[k + 1] - gamma[k]) / dt, dt, t[k])?;
-            visit(k + 1, s);
-        }
-        Ok(s)
+        let mut last = initial;
+        let [first, ..] = self.run_lanes(&[*p; LANES], t, gamma, initial.tau, |k, s| {
+            last = State { tau: s.tau[0], w: s.w[0] };
+            visit(k, last);
+        });
+        first.map(|_| last)
     }
 
     /// τ and Wᴵ at every sample time, from the virgin state τ = 0, Wᴵ = 0.
@@ -141,92 +230,101 @@ impl Integrator {
         Ok(out)
     }
 
-    /// Advances the state over one sample interval of length `dt` at constant
-    /// total strain rate `strain_rate`. This is the hot loop of every
-    /// likelihood evaluation. `flow` and `z` = R + D belong to `s` and are
-    /// carried from step to step, so each accepted sub-step evaluates the law
-    /// once.
+    /// Advances every lane over one sample interval of length `dt` at
+    /// constant total strain rate `strain_rate`. This is the hot loop of
+    /// every likelihood evaluation.
     ///
-    /// Step control: a sub-step is at most `dt / substeps`, moves τ by at
-    /// most a quarter of (R + D)/√3, and, if explicit, keeps λh ≤ `stability`
-    /// with λ at its start. A sub-step is
-    /// rejected and halved when it ends where the stiffness says it was too
-    /// long: λh > 2 at its end (explicit), or λ grew by more than 1/h over it
-    /// (linearly implicit, whose linearisation at the start then no longer
-    /// holds). This catches the elastic predictor that jumps far past yield
-    /// in one step, which the stiffness at the start cannot see.
+    /// Step control, lane by lane: a sub-step is at most `dt / substeps`,
+    /// moves τ by at most a quarter of (R + D)/√3 (beyond that the flow rate
+    /// saturates at 2D₀ and λ no longer measures how fast the state can
+    /// change), and, if explicit, keeps λh ≤ `stability` with λ at its start.
+    /// A sub-step is rejected and halved when it ends where the stiffness
+    /// says it was too long: λh > 2 at its end (explicit), or λ grew by more
+    /// than 1/h over it (linearly implicit, whose linearisation at the start
+    /// then no longer holds). This catches the elastic predictor that jumps
+    /// far past yield in one step, which the stiffness at the start cannot
+    /// see. A lane that has reached the sample time waits for the others.
     #[inline(always)]
     fn advance(
         &self,
-        law: &Law,
-        s: &mut State,
-        flow: &mut Flow,
-        z: &mut f64,
+        law: &LaneLaw,
+        tr: &mut Track,
         strain_rate: f64,
         dt: f64,
         t0: f64,
-    ) -> Result<(), IntegrationError> {
-        let g = law.p.g;
-        let h_max = dt / self.substeps as f64;
+        outcome: &mut [Result<(), IntegrationError>; LANES],
+    ) {
         let explicit = self.scheme == Scheme::Explicit;
-        let mut left = dt;
-        let mut attempts = 0u32;
+        let zero = f64x4::ZERO;
+        let g = law.g;
+        let gd = f64x4::splat(strain_rate);
+        let h_max = f64x4::splat(dt / self.substeps as f64);
+        let stability = f64x4::splat(self.stability);
+        let done_below = f64x4::splat(1e-12 * dt);
+        let shortest = f64x4::splat(1e-9 * dt);
+        // lanes that already failed do not step
+        let failed = f64x4::from(outcome.each_ref().map(|o| if o.is_err() { 1.0 } else { 0.0 })).cmp_gt(zero);
+        let mut left = failed.blend(zero, f64x4::splat(dt));
         let mut h_cap = h_max;
-        // the last sub-step ends exactly at the sample time, up to round-off
-        while left > 1e-12 * dt {
+        let mut attempts = 0u32;
+        loop {
+            let running = left.cmp_gt(done_below);
+            if running.none() {
+                break;
+            }
             attempts += 1;
             if attempts > self.max_substeps {
-                return Err(IntegrationError::TooStiff {
-                    time: t0,
-                    substeps: self.max_substeps,
-                });
+                for (lane, r) in mask_to_bools(running).into_iter().enumerate() {
+                    if r && outcome[lane].is_ok() {
+                        outcome[lane] = Err(IntegrationError::TooStiff { time: t0, substeps: self.max_substeps });
+                    }
+                }
+                break;
             }
-            let lambda = g * flow.slope;
-            let stress_rate = g * (strain_rate - flow.rate);
+            let lambda = g * tr.slope;
+            let stress_rate = g * (gd - tr.rate);
             let mut h = left.min(h_cap);
-            if explicit && lambda * h > self.stability {
+            if explicit {
                 // equal sub-steps over what is left, each within the stability limit
-                h = left / (left * lambda / self.stability).ceil();
+                let unstable = (lambda * h).cmp_gt(stability);
+                h = unstable.blend(left / (left * lambda / stability).ceil(), h);
             }
-            // no sub-step may move τ by more than a share of the stress scale
-            // of eq. 3, (R + D)/√3: beyond it the flow rate saturates at 2D₀
-            // and λ no longer measures how fast the state can change
-            let max_dtau = MAX_STRESS_STEP * *z * INV_SQRT_3;
-            if stress_rate.abs() * h > max_dtau {
-                h = max_dtau / stress_rate.abs();
-            }
+            let max_dtau = f64x4::splat(MAX_STRESS_STEP * INV_SQRT_3) * tr.z;
+            let big = (stress_rate.abs() * h).cmp_gt(max_dtau);
+            h = big.blend(max_dtau / stress_rate.abs(), h);
             let dtau = stress_rate * h;
-            let tau = s.tau
-                + if explicit {
-                    dtau
-                } else {
-                    dtau / (1.0 + h * lambda)
-                };
+            let dtau = if explicit { dtau } else { dtau / (f64x4::ONE + h * lambda) };
+            let tau = tr.tau + dtau;
             // τ γ̇ᴵ ≥ 0 because γ̇ᴵ has the sign of τ: Wᴵ never decreases
-            let w = s.w + h * s.tau * flow.rate;
-            let end_z = law.hardening_sum(w);
-            let end = law.flow(tau, end_z);
-            let end_lambda = g * end.slope;
+            let w = tr.w + h * tr.tau * tr.rate;
+            let z = law.hardening_sum(w);
+            let (rate, slope) = law.flow(tau, z);
+            let end_lambda = g * slope;
             let too_long = if explicit {
-                end_lambda * h > 2.0
+                (end_lambda * h).cmp_gt(f64x4::splat(2.0))
             } else {
-                (end_lambda - lambda) * h > 1.0
+                ((end_lambda - lambda) * h).cmp_gt(f64x4::ONE)
             };
-            if too_long && h > 1e-9 * dt {
-                h_cap = 0.5 * h;
-                continue;
+            let reject = running & too_long & h.cmp_gt(shortest);
+            let accept = running & !reject;
+            h_cap = reject.blend(h * f64x4::splat(0.5), accept.blend((h + h).min(h_max), h_cap));
+            tr.tau = accept.blend(tau, tr.tau);
+            tr.w = accept.blend(w, tr.w);
+            tr.rate = accept.blend(rate, tr.rate);
+            tr.slope = accept.blend(slope, tr.slope);
+            tr.z = accept.blend(z, tr.z);
+            left = accept.blend(left - h, left);
+        }
+        let finite = tr.tau.is_finite() & tr.w.is_finite();
+        if !finite.all() {
+            for (lane, ok) in mask_to_bools(finite).into_iter().enumerate() {
+                if !ok && outcome[lane].is_ok() {
+                    outcome[lane] = Err(IntegrationError::NonFinite { time: t0 + dt });
+                }
             }
-            s.tau = tau;
-            s.w = w;
-            *flow = end;
-            *z = end_z;
-            left -= h;
-            h_cap = (2.0 * h).min(h_max);
+            // keep the failed lanes finite so they cannot disturb the loop
+            *tr = Track::new(law, finite.blend(tr.tau, zero), finite.blend(tr.w, zero));
         }
-        if !(s.tau.is_finite() && s.w.is_finite()) {
-            return Err(IntegrationError::NonFinite { time: t0 + dt });
-        }
-        Ok(())
     }
 }
 
@@ -238,6 +336,7 @@ pub fn integrate(p: &Params, t: &[f64], gamma: &[f64]) -> Result<Trajectory, Int
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::lanes::LaneLaw;
     use crate::model::law::{flow_stress, hardening};
 
     fn ramp(rate: f64, duration: f64, n: usize) -> (Vec<f64>, Vec<f64>) {
@@ -354,6 +453,26 @@ mod tests {
     }
 
     #[test]
+    fn richardson_extrapolation_is_second_order() {
+        let mut p = Params::reference_1a();
+        p.g = 5.0e4;
+        p.n = 0.8;
+        let (t, g) = crank(1000);
+        let run = |substeps, extrapolate| {
+            Integrator { substeps, extrapolate, max_substeps: 100_000, ..Integrator::default() }.run(&p, &t, &g).unwrap().tau
+        };
+        // reference: extrapolated with 256 sub-steps, itself second order
+        let reference = run(256, true);
+        let err = |m| run(m, true).iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let (e1, e2, e4) = (err(1), err(2), err(4));
+        // second order: halving the step divides the error by about 4; and
+        // far below plain Euler at the same step
+        assert!(e1 / e2 > 3.0 && e2 / e4 > 3.0, "{e1} {e2} {e4}");
+        let plain = run(1, false).iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(e1 < 0.1 * plain, "{e1} vs {plain}");
+    }
+
+    #[test]
     fn explicit_stays_stable_where_plain_euler_would_explode() {
         // stiff corner of the parameter space: λΔt ≫ 2 at the record's step
         let mut p = Params::reference_1a();
@@ -375,6 +494,52 @@ mod tests {
         .run(&p, &t, &g)
         .unwrap();
         assert!(li.tau.iter().all(|x| x.abs() < bound));
+    }
+
+    #[test]
+    fn lanes_are_independent_of_their_neighbours() {
+        // the same parameter set gives the same bits in any lane, beside any
+        // other sets, failing ones included
+        let p = Params::reference_1a();
+        let mut stiff = p;
+        stiff.g = 5.0e7;
+        stiff.n = 3.0;
+        let mut bad = p;
+        bad.n = -1.0;
+        let (t, g) = crank(300);
+        let integ = Integrator { max_substeps: 50, ..Integrator::default() };
+        let alone = integ.run(&p, &t, &g).unwrap().tau;
+        let mut mixed = vec![[0.0; LANES]; t.len()];
+        let outcome = integ.run_lanes(&[stiff, bad, p, p], &t, &g, 0.0, |k, s| mixed[k] = s.tau);
+        assert!(matches!(outcome[0], Err(IntegrationError::TooStiff { .. })));
+        assert!(matches!(outcome[1], Err(IntegrationError::InvalidParams(_))));
+        assert!(outcome[2].is_ok() && outcome[3].is_ok());
+        for (k, a) in alone.iter().enumerate() {
+            assert_eq!(a.to_bits(), mixed[k][2].to_bits());
+            assert_eq!(a.to_bits(), mixed[k][3].to_bits());
+        }
+    }
+
+    #[test]
+    fn lanes_follow_the_scalar_law() {
+        // one explicit step from rest, by hand with the scalar law: the
+        // elastic predictor τ = G γ̇ h, Wᴵ = 0
+        let p = Params::reference_1a();
+        let t = [0.0, 1e-4];
+        let g = [0.0, 1e-3];
+        let tr = integrate(&p, &t, &g).unwrap();
+        assert!((tr.tau[1] - p.g * 1e-3).abs() < 1e-9 * p.g * 1e-3);
+        // the lane flow rule agrees with the scalar one of law.rs
+        let law = LaneLaw::new(&[p; LANES]);
+        let z = crate::model::law::Law::new(&p).hardening_sum(1.0e4);
+        let (rate, slope) = law.flow(f64x4::from([3.0e4, -3.2e4, 0.0, 2.0e3]), f64x4::splat(z));
+        let scalar = crate::model::law::Law::new(&p);
+        for (i, tau) in [3.0e4, -3.2e4, 0.0, 2.0e3].iter().enumerate() {
+            let f = scalar.flow(*tau, z);
+            assert!((rate.to_array()[i] - f.rate).abs() <= 1e-11 * f.rate.abs() + 1e-300, "{tau}");
+            assert!((slope.to_array()[i] - f.slope).abs() <= 1e-11 * f.slope.abs() + 1e-300, "{tau}");
+        }
+        assert!((law.hardening_sum(f64x4::splat(1.0e4)).to_array()[0] - z).abs() < 1e-9 * z);
     }
 
     #[test]

@@ -4,8 +4,10 @@
 //! it maps a parameter set and a prescribed strain history to a stress history.
 
 pub mod integrate;
+pub mod lanes;
 pub mod law;
 pub mod params;
 
-pub use integrate::{integrate, IntegrationError, Integrator, Scheme, State, Trajectory};
+pub use integrate::{integrate, IntegrationError, Integrator, LaneStates, Scheme, State, Trajectory};
+pub use lanes::LANES;
 pub use params::{Params, D0, PARAM_NAMES, PHYSICAL_RANGE};

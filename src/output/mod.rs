@@ -2,6 +2,7 @@
 //! and is renamed into place, so a crash or an error never leaves a partial
 //! output behind.
 
+pub mod calibration;
 pub mod identification;
 pub mod plot;
 pub mod table;

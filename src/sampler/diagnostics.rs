@@ -418,6 +418,11 @@ impl Diagnostics {
         }
     }
 
+    /// The smallest bulk or tail ESS over coordinates.
+    pub fn min_ess(&self) -> f64 {
+        self.coordinates.iter().map(|c| c.ess_bulk.min(c.ess_tail)).fold(f64::INFINITY, f64::min)
+    }
+
     /// Long enough (≥ 50 τ after burn-in) and every R̂ below 1.01.
     pub fn converged(&self) -> bool {
         let kept = (self.steps + 1).saturating_sub(self.burn_in) as f64;

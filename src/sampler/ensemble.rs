@@ -16,6 +16,9 @@ use crate::error::{Error, Result};
 /// batching never depends on the number of threads.
 const BATCH: usize = 8;
 
+/// Relative change of τ_max between convergence checks counted as stable.
+const TAU_STABLE: f64 = 0.05;
+
 /// Index of the stream that picks the move of an ensemble's step.
 const MOVE_STREAM: u64 = u64::MAX;
 
@@ -77,6 +80,8 @@ pub struct RunControl {
     /// every `check_every` steps. `false`: exactly `max_steps`.
     pub until_converged: bool,
     pub check_every: usize,
+    /// Convergence also needs this bulk and tail ESS for every coordinate.
+    pub min_ess: f64,
     /// Save the state here every `checkpoint_every` steps.
     pub checkpoint: Option<(PathBuf, usize)>,
     /// Show a progress bar on a terminal.
@@ -89,6 +94,7 @@ impl RunControl {
             max_steps: steps,
             until_converged: false,
             check_every: 500,
+            min_ess: 0.0,
             checkpoint: None,
             progress: false,
         }
@@ -275,12 +281,26 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 }
             }
             if control.until_converged && done % control.check_every.max(1) == 0 {
-                // converged: long enough, R̂ fine, and τ stable within 1 %
-                // since the last check
+                // converged: long enough, R̂ fine, enough ESS, and τ stable
+                // within 5 % since the last check (τ estimates of short chains
+                // drift upwards; emcee's 1 % rarely settles with a few checks)
                 let diag = self.diagnostics();
-                let stable = (diag.tau_max - last_tau).abs() < 0.01 * diag.tau_max;
+                let stable = (diag.tau_max - last_tau).abs() < TAU_STABLE * diag.tau_max;
                 last_tau = diag.tau_max;
-                if stable && diag.converged() {
+                if let Some(bar) = &bar {
+                    let worst_rhat = diag.coordinates.iter().map(|c| c.r_hat).fold(0.0, f64::max);
+                    let line = format!(
+                        "  step {done}: τ_max {:.1}, largest R̂ {worst_rhat:.4}, smallest ESS {:.0}",
+                        diag.tau_max,
+                        diag.min_ess()
+                    );
+                    if bar.is_hidden() {
+                        eprintln!("{line}");
+                    } else {
+                        bar.println(line);
+                    }
+                }
+                if stable && diag.converged() && diag.min_ess() >= control.min_ess {
                     break;
                 }
             }

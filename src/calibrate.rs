@@ -1,0 +1,137 @@
+//! One calibration: the runs of one current level, from the identification
+//! through the MAP start and the step rule to the posterior sample.
+
+use std::time::Instant;
+
+use crate::data::Campaign;
+use crate::error::{Error, Result};
+use crate::identify::{identify_current, CurrentIdentification};
+use crate::model::{Integrator, Params};
+use crate::posterior::map::{self, MapEstimate, StepCheck};
+use crate::posterior::{CalibrationSettings, Posterior};
+use crate::sampler::{Chains, Diagnostics, ParameterDiagnostics, RunControl, Sampler, SamplerSettings};
+
+/// Everything a calibration produced.
+pub struct Calibration {
+    pub campaign: Campaign,
+    pub current_a: f64,
+    /// The settings actually used (walkers and sub-steps filled in).
+    pub settings: CalibrationSettings,
+    pub identification: CurrentIdentification,
+    pub map: MapEstimate,
+    pub step_study: Vec<StepCheck>,
+    pub posterior: Posterior,
+    pub names: Vec<String>,
+    pub chains: Chains,
+    /// Diagnostics in SI units, after burn-in.
+    pub diagnostics: Diagnostics,
+    pub seconds: CalibrationTimes,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CalibrationTimes {
+    pub start: f64,
+    pub sampling: f64,
+}
+
+/// Calibrates the runs of `campaign`, which must all have one coil current.
+pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings, progress: bool) -> Result<Calibration> {
+    let currents = campaign.currents();
+    let [current_a] = currents[..] else {
+        return Err(Error::Usage(format!("a calibration takes runs of one current; got {currents:?} A")));
+    };
+    let clock = Instant::now();
+    let mut settings = settings.clone();
+    let identification = identify_current(campaign, current_a, &settings.identify);
+
+    let integ = &settings.integrator;
+    let base = Integrator {
+        scheme: integ.scheme,
+        extrapolate: integ.extrapolate,
+        substeps: integ.substeps.max(1),
+        max_substeps: integ.max_substeps,
+        ..Integrator::default()
+    };
+    let posterior = Posterior::new(campaign, &settings, base);
+    // the identification may be far off (docs/identification.md): also start
+    // from the prior medians and keep the better optimum
+    let medians = Params::from_array(std::array::from_fn(|i| {
+        posterior.priors[i].centre().map(|(c, _)| c.exp()).unwrap_or(identification.params.to_array()[i])
+    }));
+    let map = map::best_map(&posterior, &[identification.params, medians])
+        .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
+    if progress {
+        eprintln!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64());
+    }
+    let (substeps, map, step_study) = if integ.substeps == 0 {
+        map::choose_substeps(&posterior, &map, base, integ.max_rule_substeps)
+    } else {
+        (integ.substeps, map, vec![])
+    };
+    settings.integrator.substeps = substeps;
+    if progress {
+        for s in &step_study {
+            let (i, v) = s.worst();
+            eprintln!("  step rule: {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, crate::model::PARAM_NAMES[i]);
+        }
+    }
+    let posterior = posterior.with_integrator(Integrator { substeps, ..base });
+    let names = posterior.names();
+    let dim = names.len();
+    if settings.sampler.walkers == 0 {
+        settings.sampler.walkers = (2 * dim).max(24).div_ceil(2) * 2;
+    }
+    let s = &settings.sampler;
+    let sampler_settings = SamplerSettings {
+        walkers: s.walkers,
+        ensembles: s.ensembles,
+        moves: s.moves.clone(),
+        seed: s.seed,
+    };
+    let init = map::initial_walkers(&posterior, &map, s.walkers * s.ensembles, s.seed);
+    let start_seconds = clock.elapsed().as_secs_f64();
+
+    let clock = Instant::now();
+    let mut sampler = Sampler::new(&posterior, sampler_settings, &init)?;
+    let control = RunControl {
+        max_steps: if s.steps > 0 { s.steps } else { s.max_steps },
+        until_converged: s.steps == 0,
+        check_every: s.check_every,
+        min_ess: s.min_ess,
+        checkpoint: None,
+        progress,
+    };
+    sampler.run(&control)?;
+    let chains = sampler.chains.clone();
+    let sampling_seconds = clock.elapsed().as_secs_f64();
+
+    let diagnostics = si_diagnostics(&posterior, &chains, (s.burn_in > 0).then_some(s.burn_in));
+    Ok(Calibration {
+        campaign: campaign.clone(),
+        current_a,
+        settings,
+        identification,
+        map,
+        step_study,
+        posterior,
+        names,
+        chains,
+        diagnostics,
+        seconds: CalibrationTimes { start: start_seconds, sampling: sampling_seconds },
+    })
+}
+
+/// Diagnostics of the draws in SI units (θ, σ, ρ rather than their
+/// logarithms), with the burn-in of the log-scale diagnostics unless given.
+pub fn si_diagnostics(post: &Posterior, chains: &Chains, burn_in: Option<usize>) -> Diagnostics {
+    let raw = Diagnostics::compute(chains, burn_in);
+    let burn = raw.burn_in;
+    let nr = post.runs.len();
+    let coords: Vec<ParameterDiagnostics> = (0..chains.dim)
+        .map(|i| {
+            let traces = chains.traces_of(burn, |x| if i < 7 + nr { x[i].exp() } else { x[i].tanh() });
+            ParameterDiagnostics::of(&traces, chains.ensembles)
+        })
+        .collect();
+    Diagnostics::assemble(chains, burn, coords)
+}

@@ -1,0 +1,104 @@
+//! Priors of the B-P parameters, on the log scale.
+
+use serde::{Deserialize, Serialize};
+
+use crate::model::{PARAM_NAMES, PHYSICAL_RANGE};
+
+/// A prior for one positive parameter θ, as a density of ln θ.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Prior {
+    /// ln θ ~ Normal(ln median, sd_log²), truncated to [lower, upper].
+    LogNormal { median: f64, sd_log: f64, lower: f64, upper: f64 },
+    /// ln θ uniform on [ln lower, ln upper] (θ log-uniform).
+    LogUniform { lower: f64, upper: f64 },
+}
+
+impl Prior {
+    /// Log-density of ln θ = `log_value` (unnormalised); −∞ outside.
+    pub fn log_density(&self, log_value: f64) -> f64 {
+        let (lower, upper) = self.bounds();
+        if !(log_value >= lower.ln() && log_value <= upper.ln()) {
+            return f64::NEG_INFINITY;
+        }
+        match *self {
+            Prior::LogNormal { median, sd_log, .. } => -0.5 * ((log_value - median.ln()) / sd_log).powi(2),
+            Prior::LogUniform { .. } => 0.0,
+        }
+    }
+
+    pub fn bounds(&self) -> (f64, f64) {
+        match *self {
+            Prior::LogNormal { lower, upper, .. } | Prior::LogUniform { lower, upper } => (lower, upper),
+        }
+    }
+
+    /// A log-normal whose ±1 sd spans the plausible range [a, b], truncated
+    /// to the physical range of parameter `index`.
+    fn plausible(index: usize, a: f64, b: f64) -> Self {
+        let (lower, upper) = PHYSICAL_RANGE[index];
+        Prior::LogNormal { median: (a * b).sqrt(), sd_log: 0.5 * (b / a).ln(), lower, upper }
+    }
+
+    /// The centre and the scale of ln θ (for pseudo-residuals of the MAP
+    /// search); a log-uniform prior has none.
+    pub fn centre(&self) -> Option<(f64, f64)> {
+        match *self {
+            Prior::LogNormal { median, sd_log, .. } => Some((median.ln(), sd_log)),
+            Prior::LogUniform { .. } => None,
+        }
+    }
+
+    pub fn check(&self, name: &str) -> Result<(), String> {
+        let (lo, hi) = self.bounds();
+        if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+            return Err(format!("prior of {name}: need 0 < lower < upper < ∞, got [{lo}, {hi}]"));
+        }
+        if let Prior::LogNormal { median, sd_log, .. } = *self {
+            if !(median > 0.0 && sd_log > 0.0 && median.is_finite() && sd_log.is_finite()) {
+                return Err(format!("prior of {name}: median and sd_log must be positive"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The default, weakly informative priors: for each parameter a log-normal
+/// whose ±1 sd spans the plausible values of an RD-1005-3-class damper
+/// (design notes), truncated to the physical range:
+///
+/// | θ | plausible (±1 sd) |
+/// |---|---|
+/// | G | 1e4 – 1e6 Pa |
+/// | R0 | 5e4 – 3e5 Pa |
+/// | R1 | 5e4 – 5e5 Pa |
+/// | D1 | 1e4 – 1e5 Pa |
+/// | m1 | 1e-6 – 1e-4 1/Pa |
+/// | m2 | 1e-4 – 1e-2 1/Pa |
+/// | n | 0.5 – 3 |
+pub fn default_priors() -> [Prior; 7] {
+    let plausible = [(1e4, 1e6), (5e4, 3e5), (5e4, 5e5), (1e4, 1e5), (1e-6, 1e-4), (1e-4, 1e-2), (0.5, 3.0)];
+    std::array::from_fn(|i| Prior::plausible(i, plausible[i].0, plausible[i].1))
+}
+
+/// Names of the prior table in the settings file, in parameter order.
+pub fn prior_names() -> [&'static str; 7] {
+    PARAM_NAMES
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_normal_is_centred_and_truncated() {
+        let p = default_priors()[0];
+        assert_eq!(p.log_density((1e5f64).ln()), 0.0);
+        // one sd away: ln(1e6) − ln(1e5) = sd_log
+        assert!((p.log_density((1e6f64).ln()) + 0.5).abs() < 1e-12);
+        assert_eq!(p.log_density((1e9f64).ln()), f64::NEG_INFINITY);
+        for (i, p) in default_priors().iter().enumerate() {
+            assert!(p.check(PARAM_NAMES[i]).is_ok());
+        }
+    }
+}

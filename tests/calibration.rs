@@ -1,0 +1,133 @@
+//! Bayesian calibration end to end on small virtual campaigns with known
+//! parameters: recovery, the output tables, and reproducibility.
+
+use mrbp::calibrate::calibrate;
+use mrbp::data::Campaign;
+use mrbp::model::Params;
+use mrbp::output::read_parquet;
+use mrbp::posterior::CalibrationSettings;
+use mrbp::synth::{write_campaign, SynthSettings};
+
+/// One crank revolution per run at 2 kHz, 1 A: small enough for a test.
+/// Force noise as in the bundled records (15 N); `displacement_noise` in m.
+fn campaign_with(seed: u64, displacement_noise: f64) -> (tempfile::TempDir, Campaign) {
+    let dir = tempfile::tempdir().unwrap();
+    let settings = SynthSettings {
+        currents_a: vec![1.0],
+        cycles: 1.0,
+        rate_hz: 2000.0,
+        noise_displacement_m: displacement_noise,
+        seed,
+        ..SynthSettings::default()
+    };
+    write_campaign(&settings, dir.path()).unwrap();
+    let c = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
+    (dir, c)
+}
+
+fn small_campaign(seed: u64) -> (tempfile::TempDir, Campaign) {
+    campaign_with(seed, 2.0e-6)
+}
+
+fn quick_settings() -> CalibrationSettings {
+    let mut s = CalibrationSettings::default();
+    s.sampler.max_steps = 3000;
+    s
+}
+
+/// The likelihood takes the measured displacement as exact, so the test's
+/// records have force noise only: then the model is the one that made the
+/// data and the posterior must cover the truth. (With displacement noise the
+/// posterior of G is overconfident: see docs/calibration.md.)
+#[test]
+fn posterior_recovers_known_parameters() {
+    let (_dir, campaign) = campaign_with(7, 0.0);
+    let cal = calibrate(&campaign, &quick_settings(), false).unwrap();
+    let truth = Params::reference_1a().to_array();
+    for (i, name) in ["G", "R0", "R1", "D1", "m1", "m2", "n"].iter().enumerate() {
+        let p = &cal.diagnostics.coordinates[i];
+        let z = (p.mean - truth[i]).abs() / p.sd;
+        // the criterion; a correct posterior exceeds 3.5 sd with
+        // probability ~5e-4 per parameter
+        assert!(z < 3.5, "{name}: mean {:.4e} sd {:.3e} truth {:.4e} ({z:.2} sd)", p.mean, p.sd, truth[i]);
+        assert!(p.r_hat < 1.01, "{name}: R̂ {}", p.r_hat);
+    }
+}
+
+#[test]
+fn same_seed_same_chains_whatever_the_thread_count() {
+    let (_dir, campaign) = small_campaign(3);
+    let mut s = quick_settings();
+    s.sampler.steps = 30;
+    s.integrator.substeps = 1;
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| calibrate(&campaign, &s, false).unwrap().chains)
+    };
+    assert_eq!(run(1), run(2));
+}
+
+#[test]
+fn sample_command_writes_the_contract_tables() {
+    let (dir, _) = small_campaign(5);
+    let out = tempfile::tempdir().unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mrbp"))
+        .args([
+            "sample",
+            dir.path().join("campaign.toml").to_str().unwrap(),
+            "--out",
+            out.path().to_str().unwrap(),
+            "--steps",
+            "40",
+            "--substeps",
+            "1",
+            "--walkers",
+            "20",
+            "--ensembles",
+            "2",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("wall time"), "{stdout}");
+
+    let chains = read_parquet(&out.path().join("chains.parquet")).unwrap();
+    let names: Vec<String> = chains.get_column_names().iter().map(|s| s.to_string()).collect();
+    let mut expected: Vec<String> = ["ensemble", "chain", "draw", "G", "R0", "R1", "D1", "m1", "m2", "n"].map(String::from).to_vec();
+    expected.extend(["I1.0_100rpm", "I1.0_200rpm", "I1.0_400rpm"].iter().map(|r| format!("sigma_{r}")));
+    expected.extend(["log_prob", "accepted"].map(String::from));
+    assert_eq!(names, expected);
+    assert_eq!(chains.height(), 40 * 41, "2 ensembles × 20 walkers × (40 steps + start)");
+    let g = chains.column("G").unwrap().f64().unwrap().clone();
+    assert!((0..g.len()).all(|i| g.get(i).is_some_and(|v| v > 1e3)), "G in Pa, not its logarithm");
+
+    let summary = read_parquet(&out.path().join("summary.parquet")).unwrap();
+    let names: Vec<String> = summary.get_column_names().iter().map(|s| s.to_string()).collect();
+    for c in ["parameter", "mean", "sd", "q05", "q50", "q95", "ess_bulk", "ess_tail", "r_hat", "tau_int"] {
+        assert!(names.contains(&c.to_string()), "summary lacks {c}: {names:?}");
+    }
+    assert_eq!(summary.height(), 10);
+    for f in ["config.toml", "calibration.toml", "identification.parquet"] {
+        assert!(out.path().join(f).exists(), "{f}");
+    }
+    // the written settings read back as settings
+    CalibrationSettings::read(&out.path().join("config.toml")).unwrap();
+}
+
+#[test]
+fn bad_settings_file_is_a_clear_error() {
+    let (dir, _) = small_campaign(5);
+    let cfg = dir.path().join("bad.toml");
+    std::fs::write(&cfg, "[prior.G]\nkind = \"log-normal\"\nmedian = -1.0\nsd_log = 1.0\nlower = 1.0\nupper = 10.0\n").unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mrbp"))
+        .args(["sample", dir.path().join("campaign.toml").to_str().unwrap(), "--out", "/nonexistent/x", "--config", cfg.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("bad.toml") && err.contains("prior of G"), "{err}");
+}
