@@ -34,8 +34,29 @@ pub struct CalibrationTimes {
     pub sampling: f64,
 }
 
+/// Where a calibration keeps its sampler state, and whether to resume it.
+#[derive(Clone, Debug, Default)]
+pub struct Checkpointing {
+    /// Save the sampler state here every `every` steps (atomically).
+    pub path: Option<std::path::PathBuf>,
+    pub every: usize,
+    /// Continue from the state saved at `path` instead of starting anew:
+    /// the chains then equal those of an uninterrupted run.
+    pub resume: bool,
+}
+
 /// Calibrates the runs of `campaign`, which must all have one coil current.
 pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings, progress: bool) -> Result<Calibration> {
+    calibrate_with(campaign, settings, progress, &Checkpointing::default())
+}
+
+/// [`calibrate`] with a checkpoint of the sampler's state.
+pub fn calibrate_with(
+    campaign: &Campaign,
+    settings: &CalibrationSettings,
+    progress: bool,
+    checkpointing: &Checkpointing,
+) -> Result<Calibration> {
     let currents = campaign.currents();
     let [current_a] = currents[..] else {
         return Err(Error::Usage(format!("a calibration takes runs of one current; got {currents:?} A")));
@@ -92,13 +113,25 @@ pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings, progress: 
     let start_seconds = clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();
-    let mut sampler = Sampler::new(&posterior, sampler_settings, &init)?;
+    let mut sampler = match &checkpointing.path {
+        Some(path) if checkpointing.resume => {
+            let resumed = Sampler::resume(&posterior, path)?;
+            if resumed.settings != sampler_settings {
+                return Err(Error::input(path, "checkpoint of a sampler with other settings (walkers, ensembles, moves or seed)"));
+            }
+            if progress {
+                eprintln!("  resuming from {} at step {}", path.display(), resumed.chains.steps() - 1);
+            }
+            resumed
+        }
+        _ => Sampler::new(&posterior, sampler_settings, &init)?,
+    };
     let control = RunControl {
         max_steps: if s.steps > 0 { s.steps } else { s.max_steps },
         until_converged: s.steps == 0,
         check_every: s.check_every,
         min_ess: s.min_ess,
-        checkpoint: None,
+        checkpoint: checkpointing.path.clone().map(|p| (p, checkpointing.every.max(1))),
         progress,
     };
     sampler.run(&control)?;

@@ -119,6 +119,26 @@ fn sample_command_writes_the_contract_tables() {
 }
 
 #[test]
+fn interrupted_sample_resumes_to_the_same_chains() {
+    use mrbp::calibrate::{calibrate_with, Checkpointing};
+    let (_dir, campaign) = small_campaign(11);
+    let cp = tempfile::tempdir().unwrap();
+    let path = cp.path().join("sampler.checkpoint");
+    let mut s = quick_settings();
+    s.integrator.substeps = 1;
+    s.sampler.steps = 60;
+    let whole = calibrate_with(&campaign, &s, false, &Checkpointing::default()).unwrap().chains;
+    // "killed" after 30 steps: only the checkpoint survives
+    let mut first = s.clone();
+    first.sampler.steps = 30;
+    let saving = Checkpointing { path: Some(path.clone()), every: 10, resume: false };
+    calibrate_with(&campaign, &first, false, &saving).unwrap();
+    let resuming = Checkpointing { resume: true, ..saving };
+    let resumed = calibrate_with(&campaign, &s, false, &resuming).unwrap().chains;
+    assert_eq!(resumed, whole);
+}
+
+#[test]
 fn bad_settings_file_is_a_clear_error() {
     let (dir, _) = small_campaign(5);
     let cfg = dir.path().join("bad.toml");
