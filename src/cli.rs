@@ -349,6 +349,8 @@ pub fn sample_cmd(manifest: &Path, out: &Path, options: &SampleOptions) -> Resul
         output::calibration::write_chains(&dir.join("chains.parquet"), &cal)?;
         output::calibration::write_summary(&dir.join("summary.parquet"), &cal)?;
         output::calibration::write_records(&dir, &cal)?;
+        // the chains are complete in chains.parquet: the checkpoint has done its job
+        let _ = std::fs::remove_file(dir.join("sampler.checkpoint"));
         output::calibration::print_summary(&cal);
         dirs.push(dir);
     }
