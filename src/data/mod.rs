@@ -8,5 +8,5 @@ pub mod table;
 
 pub use branches::loading_branches;
 pub use campaign::{Campaign, Columns, Geometry, Manifest, Run, RunSpec};
-pub use shear::{local_linear, local_polynomial, smoothed_derivative, Inelastic, Shear};
+pub use shear::{local_polynomial, Inelastic, Shear};
 pub use table::Record;

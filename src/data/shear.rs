@@ -17,7 +17,7 @@ pub struct Shear {
 }
 
 /// γᴵ = γ − τ/G and γ̇ᴵ = γ̇ − τ̇/G (eq. 2 with dτ/dγ · γ̇ = τ̇), from locally
-/// fitted straight lines (smoothed values and derivatives).
+/// fitted cubics (smoothed values and derivatives).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Inelastic {
     /// γᴵ from the raw samples.
@@ -76,23 +76,11 @@ impl Shear {
     }
 }
 
-/// dy/dt at every sample as the slope of a straight line fitted by least
-/// squares to the samples within `half_window` on each side (fewer at the
-/// ends). Unlike a plain difference it does not amplify sensor noise by
-/// 1/Δt; it is exact for linear data and works on uneven time grids.
-pub fn smoothed_derivative(t: &[f64], y: &[f64], half_window: usize) -> Vec<f64> {
-    local_linear(t, y, half_window).1
-}
-
-/// The same local straight-line fits as [`smoothed_derivative`], returning
-/// both the fitted value and the slope at every sample.
-pub fn local_linear(t: &[f64], y: &[f64], half_window: usize) -> (Vec<f64>, Vec<f64>) {
-    local_polynomial(t, y, half_window, 1)
-}
-
 /// Local least-squares polynomials of `degree` (a Savitzky-Golay filter that
 /// also works on uneven grids): at every sample, the value and the slope of
-/// the polynomial fitted to the samples within `half_window` on each side.
+/// the polynomial fitted to the samples within `half_window` on each side
+/// (fewer at the ends). Unlike a plain difference, the slope does not
+/// amplify sensor noise by 1/Δt.
 /// A cubic keeps the bias of value and slope at a sharp bend (the yield
 /// knee) an order smaller than a straight line over the same window, at the
 /// price of more noise.
@@ -146,12 +134,12 @@ mod tests {
     fn derivative_is_exact_on_lines_and_close_on_smooth_curves() {
         let t: Vec<f64> = (0..200).map(|k| 0.001 * k as f64 + 0.3 * (k as f64).sqrt() * 1e-4).collect();
         let y: Vec<f64> = t.iter().map(|t| 3.0 * t - 1.0).collect();
-        for d in smoothed_derivative(&t, &y, 5) {
+        for d in local_polynomial(&t, &y, 5, 1).1 {
             assert!((d - 3.0).abs() < 1e-9);
         }
         // sin: the symmetric window's bias is O(h²); h = 5 ms, ω = 2π
         let y: Vec<f64> = t.iter().map(|t| (std::f64::consts::TAU * t).sin()).collect();
-        let d = smoothed_derivative(&t, &y, 5);
+        let d = local_polynomial(&t, &y, 5, 1).1;
         for k in 5..195 {
             let exact = std::f64::consts::TAU * (std::f64::consts::TAU * t[k]).cos();
             assert!((d[k] - exact).abs() < 2e-3 * std::f64::consts::TAU, "{k}");
