@@ -157,8 +157,7 @@ pub fn calibrate_with(
 /// Diagnostics of the draws in SI units (θ, σ, ρ rather than their
 /// logarithms), with the burn-in of the log-scale diagnostics unless given.
 pub fn si_diagnostics(post: &Posterior, chains: &Chains, burn_in: Option<usize>) -> Diagnostics {
-    let raw = Diagnostics::compute(chains, burn_in);
-    let burn = raw.burn_in;
+    let burn = burn_in.unwrap_or_else(|| Diagnostics::burn_in_rule(chains));
     let nr = post.runs.len();
     let coords: Vec<ParameterDiagnostics> = (0..chains.dim)
         .map(|i| {

@@ -359,18 +359,22 @@ impl Diagnostics {
     /// τ is estimated on the second half of the chains and the burn-in is
     /// 3 τ_max, at most half the chain.
     pub fn compute(chains: &Chains, burn_in: Option<usize>) -> Diagnostics {
-        let total = chains.steps();
-        let burn_in = burn_in.unwrap_or_else(|| {
-            let tau = (0..chains.dim)
-                .map(|i| integrated_time(&chains.traces(i, total / 2)))
-                .fold(1.0, f64::max);
-            ((BURN_IN_TAUS * tau).ceil() as usize).min(total / 2)
-        });
+        let burn_in = burn_in.unwrap_or_else(|| Self::burn_in_rule(chains));
         let coordinates: Vec<ParameterDiagnostics> = (0..chains.dim)
             .into_par_iter()
             .map(|i| ParameterDiagnostics::of(&chains.traces(i, burn_in), chains.ensembles))
             .collect();
         Diagnostics::assemble(chains, burn_in, coordinates)
+    }
+
+    /// The default burn-in: 3 τ_max with τ estimated on the second half of
+    /// the chains, at most half the chain.
+    pub fn burn_in_rule(chains: &Chains) -> usize {
+        let total = chains.steps();
+        let tau = (0..chains.dim)
+            .map(|i| integrated_time(&chains.traces(i, total / 2)))
+            .fold(1.0, f64::max);
+        ((BURN_IN_TAUS * tau).ceil() as usize).min(total / 2)
     }
 
     /// Builds the run's diagnostics from per-coordinate ones (a caller may
