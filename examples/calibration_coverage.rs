@@ -42,7 +42,7 @@ fn main() -> mrbp::Result<()> {
             worst_z[i] = worst_z[i].max(z.abs());
             zs.push(format!("{z:+.2}"));
         }
-        let rhat = d.coordinates.iter().map(|c| c.r_hat).fold(0.0, f64::max);
+        let rhat = d.max_rhat();
         println!("| {seed} | {} | {} | {rhat:.4} | {:.0} |", zs.join(" | "), d.steps, d.min_ess());
     }
     let total: usize = inside.iter().sum();

@@ -406,6 +406,10 @@ mod tests {
         }
     }
 
+    fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    }
+
     /// Maximum |τ − τ_ref| over the record, with the reference on a grid 64
     /// times finer than the coarsest tested.
     fn errors(scheme: Scheme, p: &Params) -> Vec<f64> {
@@ -423,13 +427,7 @@ mod tests {
         let reference = run(512);
         [1, 2, 4, 8]
             .iter()
-            .map(|&m| {
-                run(m)
-                    .iter()
-                    .zip(&reference)
-                    .map(|(a, b)| (a - b).abs())
-                    .fold(0.0, f64::max)
-            })
+            .map(|&m| max_diff(&run(m), &reference))
             .collect()
     }
 
@@ -463,12 +461,12 @@ mod tests {
         };
         // reference: extrapolated with 256 sub-steps, itself second order
         let reference = run(256, true);
-        let err = |m| run(m, true).iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let err = |m| max_diff(&run(m, true), &reference);
         let (e1, e2, e4) = (err(1), err(2), err(4));
         // second order: halving the step divides the error by about 4; and
         // far below plain Euler at the same step
         assert!(e1 / e2 > 3.0 && e2 / e4 > 3.0, "{e1} {e2} {e4}");
-        let plain = run(1, false).iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let plain = max_diff(&run(1, false), &reference);
         assert!(e1 < 0.1 * plain, "{e1} vs {plain}");
     }
 

@@ -137,15 +137,6 @@ impl Posterior {
             .collect()
     }
 
-    /// Unconstrained coordinates from a point in SI units.
-    pub fn from_si(&self, si: &[f64]) -> Vec<f64> {
-        let nr = self.runs.len();
-        si.iter()
-            .enumerate()
-            .map(|(i, v)| if i < 7 + nr { v.ln() } else { v.atanh() })
-            .collect()
-    }
-
     pub fn params(x: &[f64]) -> Params {
         Params::from_array(std::array::from_fn(|i| x[i].exp()))
     }

@@ -336,6 +336,10 @@ impl ParameterDiagnostics {
     }
 }
 
+fn max_rhat(coordinates: &[ParameterDiagnostics]) -> f64 {
+    coordinates.iter().map(|c| c.r_hat).fold(0.0, f64::max)
+}
+
 /// Diagnostics of a whole run.
 #[derive(Clone, Debug)]
 pub struct Diagnostics {
@@ -400,7 +404,7 @@ impl Diagnostics {
                 MIN_TAU_MULTIPLE * tau_max
             ));
         }
-        let worst_rhat = coordinates.iter().map(|c| c.r_hat).fold(0.0, f64::max);
+        let worst_rhat = max_rhat(&coordinates);
         if !(worst_rhat < RHAT_THRESHOLD) {
             warnings.push(format!("largest R̂ is {worst_rhat:.3} ≥ {RHAT_THRESHOLD}: chains disagree"));
         }
@@ -420,6 +424,11 @@ impl Diagnostics {
             stuck,
             warnings,
         }
+    }
+
+    /// The largest R̂ over coordinates.
+    pub fn max_rhat(&self) -> f64 {
+        max_rhat(&self.coordinates)
     }
 
     /// The smallest bulk or tail ESS over coordinates.

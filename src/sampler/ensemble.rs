@@ -288,10 +288,10 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 let stable = (diag.tau_max - last_tau).abs() < TAU_STABLE * diag.tau_max;
                 last_tau = diag.tau_max;
                 if let Some(bar) = &bar {
-                    let worst_rhat = diag.coordinates.iter().map(|c| c.r_hat).fold(0.0, f64::max);
                     let line = format!(
-                        "  step {done}: τ_max {:.1}, largest R̂ {worst_rhat:.4}, smallest ESS {:.0}",
+                        "  step {done}: τ_max {:.1}, largest R̂ {:.4}, smallest ESS {:.0}",
                         diag.tau_max,
+                        diag.max_rhat(),
                         diag.min_ess()
                     );
                     if bar.is_hidden() {
