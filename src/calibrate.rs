@@ -6,9 +6,9 @@ use std::time::Instant;
 use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::{identify_current, CurrentIdentification};
-use crate::model::{Integrator, Params};
+use crate::model::Integrator;
 use crate::posterior::map::{self, MapEstimate, StepCheck};
-use crate::posterior::{CalibrationSettings, Posterior};
+use crate::posterior::{CalibrationSettings, ModelKind, Posterior};
 use crate::sampler::{Chains, Diagnostics, ParameterDiagnostics, RunControl, Sampler, SamplerSettings};
 
 /// Everything a calibration produced.
@@ -58,8 +58,21 @@ pub fn calibrate_with(
     checkpointing: &Checkpointing,
 ) -> Result<Calibration> {
     let currents = campaign.currents();
-    let [current_a] = currents[..] else {
-        return Err(Error::Usage(format!("a calibration takes runs of one current; got {currents:?} A")));
+    let current_a = match settings.model {
+        ModelKind::PerCurrent => {
+            let [c] = currents[..] else {
+                return Err(Error::Usage(format!("a calibration takes runs of one current; got {currents:?} A")));
+            };
+            c
+        }
+        ModelKind::CurrentLaw => {
+            if currents.len() < 2 {
+                return Err(Error::Usage(format!("the current law needs runs at two or more currents; got {currents:?} A")));
+            }
+            // identify at the current nearest the law's reference
+            let r = settings.reference_current_a;
+            currents.iter().copied().min_by(|a, b| (a - r).abs().total_cmp(&(b - r).abs())).unwrap_or(r)
+        }
     };
     let clock = Instant::now();
     let mut settings = settings.clone();
@@ -76,10 +89,20 @@ pub fn calibrate_with(
     let posterior = Posterior::new(campaign, &settings, base);
     // the identification may be far off (docs/identification.md): also start
     // from the prior medians and keep the better optimum
-    let medians = Params::from_array(std::array::from_fn(|i| {
-        posterior.priors[i].centre().map(|(c, _)| c.exp()).unwrap_or(identification.params.to_array()[i])
-    }));
-    let map = map::best_map(&posterior, &[identification.params, medians])
+    let from_identification: Vec<f64> = match &posterior.law {
+        None => identification.params.to_array().to_vec(),
+        Some(law) => law.start_from(&identification.params, current_a).to_vec(),
+    }
+    .iter()
+    .map(|v| v.ln())
+    .collect();
+    let medians: Vec<f64> = posterior
+        .priors
+        .iter()
+        .zip(&from_identification)
+        .map(|(p, v)| p.centre().map(|(c, _)| c).unwrap_or(*v))
+        .collect();
+    let map = map::best_map(&posterior, &[from_identification, medians])
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
     if progress {
         eprintln!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64());
@@ -93,7 +116,7 @@ pub fn calibrate_with(
     if progress {
         for s in &step_study {
             let (i, v) = s.worst();
-            eprintln!("  step rule: {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, crate::model::PARAM_NAMES[i]);
+            eprintln!("  step rule: {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, posterior.names()[i]);
         }
     }
     let posterior = posterior.with_integrator(Integrator { substeps, ..base });
@@ -158,10 +181,10 @@ pub fn calibrate_with(
 /// logarithms), with the burn-in of the log-scale diagnostics unless given.
 pub fn si_diagnostics(post: &Posterior, chains: &Chains, burn_in: Option<usize>) -> Diagnostics {
     let burn = burn_in.unwrap_or_else(|| Diagnostics::burn_in_rule(chains));
-    let nr = post.runs.len();
+    let positive = post.theta_len() + post.runs.len();
     let coords: Vec<ParameterDiagnostics> = (0..chains.dim)
         .map(|i| {
-            let traces = chains.traces_of(burn, |x| if i < 7 + nr { x[i].exp() } else { x[i].tanh() });
+            let traces = chains.traces_of(burn, |x| if i < positive { x[i].exp() } else { x[i].tanh() });
             ParameterDiagnostics::of(&traces, chains.ensembles)
         })
         .collect();

@@ -10,6 +10,12 @@ use crate::calibrate::{calibrate_with, Checkpointing};
 use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings};
 use crate::posterior::CalibrationSettings;
 use crate::output;
+use crate::output::prediction::{CoverageRow, PredictionRecord, RunPrediction};
+use crate::posterior::{RecordPart, RunData};
+use crate::predict::{self, PredictSettings};
+use crate::report;
+use crate::validate::{self, LooSettings};
+use crate::stored::StoredCalibration;
 use crate::synth::{self, SynthSettings};
 
 #[derive(Parser, Debug)]
@@ -46,9 +52,9 @@ pub enum Command {
     /// Posterior sampling from all runs, started from the identification
     Sample(SampleArgs),
     /// Posterior propagation through the Euler integrator: credible bands
-    Predict(DirArgs),
+    Predict(PredictArgs),
     /// Plots and the HTML report from what is in DIR
-    Report(DirArgs),
+    Report(ReportArgs),
     /// One report comparing calibrations, e.g. of different current levels
     Compare {
         /// Calibration folders to compare
@@ -67,6 +73,38 @@ pub struct RunArgs {
     pub out: PathBuf,
     #[command(flatten)]
     pub options: SampleOptions,
+    #[command(flatten)]
+    pub predict: PredictOptions,
+    #[command(flatten)]
+    pub validation: ValidationOptions,
+}
+
+/// Options of the leave-one-out validation.
+#[derive(Args, Debug, Clone, Copy)]
+pub struct ValidationOptions {
+    /// Also calibrate without each run in turn and predict it (warm-started
+    /// from the full calibration)
+    #[arg(long)]
+    pub leave_one_out: bool,
+    /// Sampler steps of each leave-one-out calibration
+    #[arg(long, default_value_t = 600)]
+    pub loo_steps: usize,
+}
+
+impl Default for ValidationOptions {
+    fn default() -> Self {
+        ValidationOptions { leave_one_out: false, loo_steps: 600 }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct ReportArgs {
+    /// A calibration folder (of `mrbp sample` or `mrbp run`)
+    pub dir: PathBuf,
+    #[command(flatten)]
+    pub predict: PredictOptions,
+    #[command(flatten)]
+    pub validation: ValidationOptions,
 }
 
 #[derive(Args, Debug)]
@@ -183,14 +221,36 @@ pub struct SampleArgs {
     pub options: SampleOptions,
 }
 
+
+/// Options of `mrbp predict`.
+#[derive(Args, Debug, Clone)]
+pub struct PredictOptions {
+    /// Posterior draws to propagate (after burn-in, thinned by τ, spread evenly)
+    #[arg(long, default_value_t = 400)]
+    pub draws: usize,
+    /// Noise replicates per draw in the predictive band
+    #[arg(long, default_value_t = 10)]
+    pub replicates: usize,
+    /// Seed of the noise replicates
+    #[arg(id = "predict_seed", long = "predict-seed", default_value_t = 1)]
+    pub seed: u64,
+}
+
+impl Default for PredictOptions {
+    fn default() -> Self {
+        PredictOptions { draws: 400, replicates: 10, seed: 1 }
+    }
+}
+
 #[derive(Args, Debug)]
-pub struct DirArgs {
-    /// Output folder of an earlier stage
+pub struct PredictArgs {
+    /// A calibration folder (of `mrbp sample` or `mrbp run`)
     pub dir: PathBuf,
+    /// Where to write the bands (default: DIR)
     #[arg(long)]
     pub out: Option<PathBuf>,
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub options: PredictOptions,
 }
 
 #[derive(Args, Debug)]
@@ -250,11 +310,13 @@ fn dispatch(cli: Cli) -> Result<()> {
         None => default_job(),
         Some(Command::Check { manifest }) => check(&manifest).map(|_| ()),
         Some(Command::Synth(args)) => synth_cmd(args),
-        Some(Command::Run(args)) => run_pipeline(&args.manifest, &args.out, &args.options),
+        Some(Command::Run(args)) => run_pipeline(&args.manifest, &args.out, &args.options, &args.predict, &args.validation),
         Some(Command::Identify(args)) => identify_cmd(&args.manifest, &args.out, &args.identify).map(|_| ()),
         Some(Command::Sample(args)) => sample_cmd(&args.manifest, &args.out, &args.options).map(|_| ()),
-        Some(Command::Predict(_)) => not_built("predict"),
-        Some(Command::Report(_)) => not_built("report"),
+        Some(Command::Predict(args)) => {
+            predict_cmd(&args.dir, args.out.as_deref().unwrap_or(&args.dir), &args.options, true).map(|_| ())
+        }
+        Some(Command::Report(args)) => report_cmd(&args.dir, &args.predict, &args.validation).map(|_| ()),
         Some(Command::Compare { .. }) => not_built("compare"),
     }
 }
@@ -283,25 +345,38 @@ fn default_job() -> Result<()> {
         .unwrap_or(Path::new("."))
         .join("reports");
     let name = Manifest::read(&manifest)?.name;
-    run_pipeline(&manifest, &reports.join(name), &SampleOptions::default())
+    let validation = ValidationOptions { leave_one_out: true, ..ValidationOptions::default() };
+    run_pipeline(&manifest, &reports.join(name), &SampleOptions::default(), &PredictOptions::default(), &validation)
 }
 
 /// The whole pipeline on one campaign, one calibration per current level in
-/// `out/I<current>A/`: check, identify, sample (predict and report follow
-/// once they are built).
-fn run_pipeline(manifest: &Path, out: &Path, options: &SampleOptions) -> Result<()> {
+/// `out/I<current>A/`: check, identify, sample, predict, (leave-one-out),
+/// report.
+fn run_pipeline(
+    manifest: &Path,
+    out: &Path,
+    options: &SampleOptions,
+    predict: &PredictOptions,
+    validation: &ValidationOptions,
+) -> Result<()> {
     let clock = std::time::Instant::now();
     let campaign = check(manifest)?;
-    let currents = campaign.currents();
+    let currents = match options.current {
+        Some(c) => vec![c],
+        None => campaign.currents(),
+    };
     // always one folder per current, even for a single one
-    let mut dirs = Vec::new();
+    let mut reports = Vec::new();
     for c in currents {
         let opts = SampleOptions { current: Some(c), ..options.clone() };
-        dirs.extend(sample_cmd(manifest, &out.join(output::identification::current_tag(c)), &opts)?);
+        for dir in sample_cmd(manifest, &out.join(output::identification::current_tag(c)), &opts)? {
+            predict_cmd(&dir, &dir, predict, true)?;
+            reports.push(report_cmd(&dir, predict, validation)?);
+        }
     }
-    println!("\ncalibrations written to:");
-    for d in &dirs {
-        println!("  {}", d.display());
+    println!("\nreports:");
+    for r in &reports {
+        println!("  {}", r.display());
     }
     println!("whole job: {:.0} s", clock.elapsed().as_secs_f64());
     Ok(())
@@ -355,6 +430,129 @@ pub fn sample_cmd(manifest: &Path, out: &Path, options: &SampleOptions) -> Resul
         dirs.push(dir);
     }
     Ok(dirs)
+}
+
+/// `mrbp predict`: posterior draws of a calibration folder through the
+/// integrator on every run; bands and coverage into `out`.
+pub fn predict_cmd(dir: &Path, out: &Path, options: &PredictOptions, progress: bool) -> Result<Vec<CoverageRow>> {
+    if options.draws == 0 || options.replicates == 0 {
+        return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
+    }
+    let clock = std::time::Instant::now();
+    let stored = StoredCalibration::open(dir)?;
+    // a current law predicts every run of the campaign, seen or not
+    let campaign = if stored.record.is_current_law() { stored.full_campaign()? } else { stored.campaign()? };
+    let positions = stored.draw_positions(options.draws);
+    let integrator = stored.integrator();
+    let lik = &stored.settings.likelihood;
+    let settings = PredictSettings {
+        noise: lik.noise,
+        student_nu: lik.student_nu,
+        replicates: options.replicates,
+        seed: options.seed,
+    };
+    let bar = if progress {
+        let bar = indicatif::ProgressBar::new((positions.len() * campaign.runs.len()) as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("predicting {bar:30} {pos}/{len} run draws  ETA {eta}").expect("valid template"),
+        );
+        bar
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let data: Vec<RunData> =
+        campaign.runs.iter().map(|r| RunData::from_run(r, RecordPart::WholeRecord, lik.smooth_strain_ms)).collect();
+    let mut predictions = Vec::new();
+    for (j, (run, data)) in campaign.runs.iter().zip(&data).enumerate() {
+        let draws = positions
+            .iter()
+            .map(|&(s, c)| stored.draw_for_run(s, c, run))
+            .collect::<Result<Vec<_>>>()?;
+        let bands = predict::bands(data, j, &draws, &integrator, &settings, &|| bar.inc(1))?;
+        let coverage = bands.coverage(&data.tau);
+        predictions.push(RunPrediction { run, data, bands, coverage });
+    }
+    bar.finish_and_clear();
+    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+    let rows: Vec<CoverageRow> = predictions
+        .iter()
+        .map(|p| CoverageRow { calibrated: stored.record.runs.iter().any(|r| r == p.run.id()), ..CoverageRow::of(p) })
+        .collect();
+    output::prediction::write_bands(&out.join("bands.parquet"), &predictions)?;
+    output::prediction::write_coverage(&out.join("coverage.parquet"), &rows)?;
+    let record = PredictionRecord {
+        mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
+        command: output::calibration::command_line(),
+        draws: positions.len(),
+        burn_in: stored.burn_in(),
+        thin: stored.tau_max().ceil() as usize,
+        noise_replicates: options.replicates,
+        seed: options.seed,
+        substeps: integrator.substeps,
+        seconds: clock.elapsed().as_secs_f64(),
+        coverage: rows.clone(),
+    };
+    output::prediction::write_record(&out.join("prediction.toml"), &record)?;
+    println!(
+        "\n{} posterior draws (after a burn-in of {} steps, thinned by {} steps) through {} run(s) in {:.1} s",
+        record.draws, record.burn_in, record.thin, rows.len(), record.seconds
+    );
+    println!("{:<16} {:>8} {:>12} {:>12} {:>12} {:>10}", "run", "samples", "in_p95_%", "in_q95_%", "rmse_q50_pa", "");
+    for r in &rows {
+        println!(
+            "{:<16} {:>8} {:>12.1} {:>12.1} {:>12.1} {:>10}",
+            r.run,
+            r.samples,
+            100.0 * r.inside_p95,
+            100.0 * r.inside_q95,
+            r.rmse_q50_pa,
+            if r.calibrated { "" } else { "held out" }
+        );
+    }
+    println!("wrote bands.parquet, coverage.parquet and prediction.toml to {}", out.display());
+    Ok(rows)
+}
+
+/// `mrbp report`: figures and report.html of a calibration folder (the
+/// bands are computed first if the folder has none).
+pub fn report_cmd(dir: &Path, options: &PredictOptions, validation: &ValidationOptions) -> Result<PathBuf> {
+    if !dir.join("bands.parquet").exists() || !dir.join("coverage.parquet").exists() {
+        println!("no bands in {} yet: predicting first", dir.display());
+        predict_cmd(dir, dir, options, true)?;
+    }
+    if validation.leave_one_out {
+        loo_cmd(dir, options, validation)?;
+    }
+    let path = report::write(dir)?;
+    println!("wrote {}", path.display());
+    Ok(path)
+}
+
+/// The leave-one-out study of a calibration folder: `loo.parquet` (coverage
+/// of each held-out run) and `loo_bands.parquet`.
+pub fn loo_cmd(dir: &Path, options: &PredictOptions, validation: &ValidationOptions) -> Result<Vec<CoverageRow>> {
+    if validation.loo_steps < 10 {
+        return Err(Error::Usage("--loo-steps must be at least 10".into()));
+    }
+    let clock = std::time::Instant::now();
+    let stored = StoredCalibration::open(dir)?;
+    let campaign = stored.campaign()?;
+    let settings = LooSettings { steps: validation.loo_steps, draws: options.draws, replicates: options.replicates, seed: options.seed };
+    let held = validate::leave_one_out(&stored, &campaign, &settings, true)?;
+    let predictions: Vec<RunPrediction> = held
+        .iter()
+        .zip(&campaign.runs)
+        .map(|(h, run)| RunPrediction { run, data: &h.data, coverage: h.bands.coverage(&h.data.tau), bands: h.bands.clone() })
+        .collect();
+    let rows: Vec<CoverageRow> = predictions.iter().map(CoverageRow::of).collect();
+    output::prediction::write_bands(&dir.join("loo_bands.parquet"), &predictions)?;
+    output::prediction::write_coverage(&dir.join("loo.parquet"), &rows)?;
+    println!("\nleave-one-out ({} steps per held-out calibration, {:.0} s):", validation.loo_steps, clock.elapsed().as_secs_f64());
+    println!("{:<16} {:>12} {:>12} {:>8}", "held out", "in_p95_%", "rmse_q50_pa", "max_R̂");
+    for (r, h) in rows.iter().zip(&held) {
+        println!("{:<16} {:>12.1} {:>12.1} {:>8.4}", r.run, 100.0 * r.inside_p95, r.rmse_q50_pa, h.max_rhat);
+    }
+    Ok(rows)
 }
 
 /// `mrbp check`: loads and validates a campaign, prints one line per run.
@@ -424,4 +622,16 @@ fn synth_cmd(args: SynthArgs) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// Every option of every command has a distinct id and a valid shape.
+    #[test]
+    fn command_line_is_well_formed() {
+        Cli::command().debug_assert();
+    }
 }

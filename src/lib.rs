@@ -12,6 +12,7 @@
 
 pub mod calibrate;
 pub mod cli;
+pub mod compare;
 pub mod data;
 pub mod error;
 pub mod fit;
@@ -19,8 +20,12 @@ pub mod identify;
 pub mod model;
 pub mod output;
 pub mod posterior;
+pub mod predict;
+pub mod report;
 pub mod rng;
 pub mod sampler;
+pub mod stored;
 pub mod synth;
+pub mod validate;
 
 pub use error::{Error, Result};

@@ -4,7 +4,9 @@
 
 use std::path::Path;
 
-use serde::Serialize;
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
 
 use super::{atomic_write, write_parquet, Table};
 use crate::calibrate::Calibration;
@@ -68,61 +70,114 @@ pub fn write_summary(path: &Path, cal: &Calibration) -> Result<()> {
     )
 }
 
-#[derive(Serialize)]
-struct StepRow {
-    substeps: u32,
-    largest_shift_sd: f64,
-    parameter: String,
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StepRow {
+    pub substeps: u32,
+    pub largest_shift_sd: f64,
+    pub parameter: String,
 }
 
-#[derive(Serialize)]
-struct Record<'a> {
-    mrbp_version: &'a str,
-    campaign: &'a str,
-    manifest: String,
-    current_a: f64,
-    runs: Vec<String>,
-    noise: String,
-    part: String,
-    substeps: u32,
-    step_study: Vec<StepRow>,
-    identification: std::collections::BTreeMap<String, f64>,
-    map: std::collections::BTreeMap<String, f64>,
-    map_log_density: f64,
-    laplace_sd_log: std::collections::BTreeMap<String, f64>,
-    walkers: usize,
-    ensembles: usize,
-    steps: usize,
-    burn_in: usize,
-    seconds_start: f64,
-    seconds_sampling: f64,
-    warnings: Vec<String>,
+/// `calibration.toml`: what a calibration did, read back by `predict`,
+/// `report` and `compare`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CalibrationRecord {
+    pub mrbp_version: String,
+    /// The command line that made it.
+    #[serde(default)]
+    pub command: String,
+    pub campaign: String,
+    /// `per-current` (seven parameters for the runs of one current) or
+    /// `current-law` (posterior::current_law, runs of several currents).
+    #[serde(default = "per_current")]
+    pub model: String,
+    #[serde(default = "one_ampere")]
+    pub reference_current_a: f64,
+    /// The coil currents of the runs calibrated on.
+    #[serde(default)]
+    pub currents: Vec<f64>,
+    /// The manifest, as an absolute path where it could be resolved.
+    pub manifest: String,
+    pub current_a: f64,
+    pub runs: Vec<String>,
+    pub noise: String,
+    pub part: String,
+    pub substeps: u32,
+    #[serde(default)]
+    pub seed: u64,
+    pub step_study: Vec<StepRow>,
+    pub identification: BTreeMap<String, f64>,
+    pub map: BTreeMap<String, f64>,
+    pub map_log_density: f64,
+    pub laplace_sd_log: BTreeMap<String, f64>,
+    pub walkers: usize,
+    pub ensembles: usize,
+    pub steps: usize,
+    pub burn_in: usize,
+    pub seconds_start: f64,
+    pub seconds_sampling: f64,
+    pub warnings: Vec<String>,
+}
+
+fn per_current() -> String {
+    "per-current".into()
+}
+
+fn one_ampere() -> f64 {
+    1.0
+}
+
+impl CalibrationRecord {
+    pub fn is_current_law(&self) -> bool {
+        self.model == "current-law"
+    }
+
+    pub fn read(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
+        toml::from_str(&text).map_err(|e| Error::input(path, format!("not a calibration record: {}", e.message())))
+    }
+}
+
+/// The command line of this process, for the record.
+pub fn command_line() -> String {
+    let mut args = std::env::args();
+    let program = args.next().map(|p| Path::new(&p).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or(p));
+    program.into_iter().chain(args).collect::<Vec<_>>().join(" ")
 }
 
 /// `config.toml` and `calibration.toml`.
 pub fn write_records(dir: &Path, cal: &Calibration) -> Result<()> {
     let header = "# Settings actually used by this calibration; pass back with --config to repeat it.\n";
     atomic_write(&dir.join("config.toml"), format!("{header}{}", cal.settings.to_toml()?).as_bytes())?;
-    let named = |v: &[f64]| PARAM_NAMES.iter().zip(v).map(|(n, v)| (n.to_string(), *v)).collect();
+    let named = |v: &[f64]| cal.names.iter().zip(v).map(|(n, v)| (n.clone(), *v)).collect();
+    let identified = PARAM_NAMES.iter().zip(cal.identification.params.to_array()).map(|(n, v)| (n.to_string(), v)).collect();
     let map_si = cal.posterior.to_si(&cal.map.x);
-    let rec = Record {
-        mrbp_version: env!("CARGO_PKG_VERSION"),
-        campaign: &cal.campaign.name,
-        manifest: cal.campaign.manifest_path.display().to_string(),
+    let manifest = std::fs::canonicalize(&cal.campaign.manifest_path).unwrap_or(cal.campaign.manifest_path.clone());
+    let rec = CalibrationRecord {
+        mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
+        command: command_line(),
+        campaign: cal.campaign.name.clone(),
+        model: match cal.settings.model {
+            crate::posterior::ModelKind::PerCurrent => per_current(),
+            crate::posterior::ModelKind::CurrentLaw => "current-law".into(),
+        },
+        reference_current_a: cal.settings.reference_current_a,
+        currents: cal.campaign.currents(),
+        manifest: manifest.display().to_string(),
         current_a: cal.current_a,
         runs: cal.campaign.runs.iter().map(|r| r.id().to_string()).collect(),
         noise: format!("{:?}", cal.settings.likelihood.noise),
         part: format!("{:?}", cal.settings.likelihood.part),
         substeps: cal.settings.integrator.substeps,
+        seed: cal.settings.sampler.seed,
         step_study: cal
             .step_study
             .iter()
             .map(|s| {
                 let (i, v) = s.worst();
-                StepRow { substeps: s.substeps, largest_shift_sd: v, parameter: PARAM_NAMES[i].into() }
+                StepRow { substeps: s.substeps, largest_shift_sd: v, parameter: cal.names[i].clone() }
             })
             .collect(),
-        identification: named(&cal.identification.params.to_array()),
+        identification: identified,
         map: cal.names.iter().zip(&map_si).map(|(n, v)| (n.clone(), *v)).collect(),
         map_log_density: cal.map.log_density,
         laplace_sd_log: named(&cal.map.sd()),

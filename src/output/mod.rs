@@ -5,6 +5,7 @@
 pub mod calibration;
 pub mod identification;
 pub mod plot;
+pub mod prediction;
 pub mod table;
 
 use std::io::Write;
@@ -12,7 +13,7 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 
-pub use table::{read_parquet, write_parquet, Table};
+pub use table::{column_names, f64_column, read_parquet, str_column, write_parquet, Table};
 
 /// Writes `bytes` to `path` atomically (temporary file + rename).
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {

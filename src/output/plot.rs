@@ -115,6 +115,10 @@ pub struct Chart {
     pub legend: bool,
     /// Where the legend goes; upper left unless the data live there.
     pub legend_at: LegendAt,
+    /// Small panels of a matrix (corner plot): fewer ticks, smaller text.
+    pub compact: bool,
+    /// Leave the panel blank (the upper triangle of a corner plot).
+    pub blank: bool,
 }
 
 /// Legend placement.
@@ -137,6 +141,9 @@ impl Chart {
             legend: true,
             ..Chart::default()
         }
+    }
+    pub fn blank() -> Self {
+        Chart { blank: true, ..Chart::default() }
     }
     pub fn with(mut self, s: Series) -> Self {
         self.series.push(s);
@@ -229,6 +236,39 @@ pub fn tick(v: f64) -> String {
     }
 }
 
+/// A tick label on an axis spanning `span`: as [`tick`], with enough
+/// significant digits that neighbouring ticks on a narrow axis differ
+/// (1.995e5, 2.005e5 rather than 2e5, 2e5).
+pub fn tick_in(v: f64, span: f64) -> String {
+    let a = v.abs();
+    if a < span * 1e-9 {
+        return "0".into(); // rounding residue of a tick at zero
+    }
+    if !(span > 0.0) {
+        return tick(v);
+    }
+    // about seven ticks: the digit of the tick step must show
+    let exp = a.log10().floor() as i32;
+    let digits = (exp - (span / 7.0).log10().floor() as i32 + 1).clamp(1, 7);
+    if digits <= 2 {
+        return tick(v);
+    }
+    if !(-3..5).contains(&exp) {
+        let s = format!("{:.*e}", (digits - 1) as usize, v);
+        let (m, e) = s.split_once('e').unwrap_or((&s, "0"));
+        let m = if m.contains('.') { m.trim_end_matches('0').trim_end_matches('.') } else { m };
+        format!("{m}e{e}")
+    } else {
+        let decimals = (digits - 1 - exp).max(0) as usize;
+        let s = format!("{v:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    }
+}
+
 /// `v` rounded to `digits` significant digits (for ticks of a log axis,
 /// whose positions are not round numbers).
 pub fn significant(v: f64, digits: i32) -> f64 {
@@ -252,6 +292,11 @@ fn padded((lo, hi): (f64, f64), share: f64) -> (f64, f64) {
 }
 
 fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
+    if chart.blank {
+        return Ok(());
+    }
+    let (caption, labels, descs, ticks, y_area, x_area, margin) =
+        if chart.compact { (13, 11, 13, 3, 56, 40, 6) } else { (18, 13, 15, 7, 70, 44, 12) };
     let tx = |x: f64| if chart.log_x { x.log10() } else { x };
     let xr = chart
         .x_range
@@ -272,21 +317,22 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
         })
         .unwrap_or((0.0, 1.0));
     let mut c = ChartBuilder::on(area)
-        .caption(&chart.title, (FONT, 18).into_font().style(FontStyle::Bold))
-        .margin(12)
-        .x_label_area_size(44)
-        .y_label_area_size(70)
+        .caption(&chart.title, (FONT, caption).into_font().style(FontStyle::Bold))
+        .margin(margin)
+        .x_label_area_size(x_area)
+        .y_label_area_size(y_area)
         .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)?;
     let log_x = chart.log_x;
-    let x_fmt = move |v: &f64| if log_x { tick(significant(10f64.powf(*v), 2)) } else { tick(*v) };
-    let y_fmt = |v: &f64| tick(*v);
+    let (x_span, y_span) = (xr.1 - xr.0, yr.1 - yr.0);
+    let x_fmt = move |v: &f64| if log_x { tick(significant(10f64.powf(*v), 2)) } else { tick_in(*v, x_span) };
+    let y_fmt = move |v: &f64| tick_in(*v, y_span);
     c.configure_mesh()
         .x_desc(&chart.x_label)
         .y_desc(&chart.y_label)
-        .label_style((FONT, 13))
-        .axis_desc_style((FONT, 15))
-        .x_labels(7)
-        .y_labels(7)
+        .label_style((FONT, labels))
+        .axis_desc_style((FONT, descs))
+        .x_labels(ticks)
+        .y_labels(ticks)
         .x_label_formatter(&x_fmt)
         .y_label_formatter(&y_fmt)
         .light_line_style(RGBColor(235, 235, 235))
@@ -368,6 +414,11 @@ mod tests {
         assert_eq!(tick(significant(3.981, 2)), "4");
         assert_eq!(tick(significant(15.85, 2)), "16");
         assert_eq!(tick(significant(0.006310, 2)), "0.0063");
+        // narrow axes keep neighbouring ticks apart
+        assert_eq!(tick_in(199_500.0, 2000.0), "1.995e5");
+        assert_eq!(tick_in(1.198, 0.01), "1.198");
+        assert_eq!(tick_in(0.00021, 2e-5), "2.1e-4");
+        assert_eq!(tick_in(2500.0, 5000.0), "2500");
     }
 
     #[test]

@@ -62,3 +62,23 @@ pub fn read_parquet(path: &Path) -> Result<DataFrame> {
         .finish()
         .map_err(|e| Error::input(path, format!("not a readable Parquet file: {e}")))
 }
+
+/// A float column of a table read back, with a clear error naming `path`.
+pub fn f64_column(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<f64>> {
+    let col = df.column(name).map_err(|_| Error::input(path, format!("no column '{name}'")))?;
+    let col = col.cast(&DataType::Float64).map_err(|e| Error::input(path, format!("column '{name}': {e}")))?;
+    let ca = col.f64().map_err(|e| Error::input(path, format!("column '{name}': {e}")))?;
+    Ok((0..ca.len()).map(|i| ca.get(i).unwrap_or(f64::NAN)).collect())
+}
+
+/// A string column of a table read back.
+pub fn str_column(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<String>> {
+    let col = df.column(name).map_err(|_| Error::input(path, format!("no column '{name}'")))?;
+    let ca = col.str().map_err(|e| Error::input(path, format!("column '{name}': {e}")))?;
+    Ok((0..ca.len()).map(|i| ca.get(i).unwrap_or("").to_string()).collect())
+}
+
+/// The column names of a table read back.
+pub fn column_names(df: &DataFrame) -> Vec<String> {
+    df.get_column_names().iter().map(|s| s.to_string()).collect()
+}

@@ -7,7 +7,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::{NoiseModel, Posterior};
 use crate::fit::least_squares;
-use crate::model::{Integrator, Params};
+use crate::model::Integrator;
 use crate::sampler::LogDensity;
 
 /// The MAP point and the Laplace approximation of θ around it.
@@ -15,7 +15,7 @@ use crate::sampler::LogDensity;
 pub struct MapEstimate {
     /// Every coordinate (θ in logs, ln σ, atanh ρ).
     pub x: Vec<f64>,
-    /// Covariance of the seven ln θ (Laplace, Gaussian surrogate).
+    /// Covariance of the ln θ coordinates (Laplace, Gaussian surrogate).
     pub cov: DMatrix<f64>,
     pub log_density: f64,
     pub converged: bool,
@@ -24,16 +24,17 @@ pub struct MapEstimate {
 impl MapEstimate {
     /// Posterior sd of each ln θ from the Laplace approximation.
     pub fn sd(&self) -> Vec<f64> {
-        (0..7).map(|i| self.cov[(i, i)].max(0.0).sqrt()).collect()
+        (0..self.cov.nrows()).map(|i| self.cov[(i, i)].max(0.0).sqrt()).collect()
     }
 }
 
-/// Residuals τ_obs − τ_model of every run at θ (None where the integration
-/// fails), run by run.
-fn residuals(post: &Posterior, p: &Params) -> Option<Vec<Vec<f64>>> {
+/// Residuals τ_obs − τ_model of every run at the θ coordinates `x` (None
+/// where the integration fails), run by run.
+fn residuals(post: &Posterior, x: &[f64]) -> Option<Vec<Vec<f64>>> {
     post.runs
         .iter()
         .map(|r| {
+            let p = &post.params_at_current(x, r.current_a);
             let mut out = Vec::with_capacity(r.compared());
             let init = crate::model::State { tau: r.initial_tau, w: 0.0 };
             post.integrator
@@ -59,8 +60,7 @@ fn whitened(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<Vec<f64>> {
     if post.priors.iter().zip(x).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
         return None;
     }
-    let p = Posterior::params(x);
-    let res = residuals(post, &p)?;
+    let res = residuals(post, x)?;
     let mut out: Vec<f64> = res.iter().zip(sigmas).flat_map(|(r, s)| r.iter().map(move |v| v / s)).collect();
     for (prior, v) in post.priors.iter().zip(x) {
         if let Some((c, s)) = prior.centre() {
@@ -76,9 +76,10 @@ fn whitened(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<Vec<f64>> {
 /// coordinates from the residuals at the optimum: σ = RMS (AR(1): ρ = lag-one
 /// correlation, σ the innovation sd) and computes the Laplace covariance
 /// (JᵀJ)⁻¹ of ln θ.
-pub fn refine(post: &Posterior, start: &Params) -> Option<MapEstimate> {
-    let mut x: Vec<f64> = start.to_array().iter().map(|v| v.ln()).collect();
-    let mut sigmas: Vec<f64> = residuals(post, start)?.iter().map(|r| rms(r).max(1e-9)).collect();
+pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
+    let nt = post.theta_len();
+    let mut x: Vec<f64> = start[..nt].to_vec();
+    let mut sigmas: Vec<f64> = residuals(post, &x)?.iter().map(|r| rms(r).max(1e-9)).collect();
     let mut converged = false;
     for _ in 0..4 {
         let f = |p: &[f64]| whitened(post, &sigmas, p);
@@ -86,7 +87,7 @@ pub fn refine(post: &Posterior, start: &Params) -> Option<MapEstimate> {
         let moved = fit.params.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         x = fit.params;
         converged = fit.converged;
-        let new_sigmas: Vec<f64> = residuals(post, &Posterior::params(&x))?.iter().map(|r| rms(r).max(1e-9)).collect();
+        let new_sigmas: Vec<f64> = residuals(post, &x)?.iter().map(|r| rms(r).max(1e-9)).collect();
         let sigma_change = new_sigmas.iter().zip(&sigmas).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
         sigmas = new_sigmas;
         if moved < 1e-6 && sigma_change < 1e-3 {
@@ -96,8 +97,8 @@ pub fn refine(post: &Posterior, start: &Params) -> Option<MapEstimate> {
     // Laplace covariance from the Jacobian of the whitened residuals
     let f = |p: &[f64]| whitened(post, &sigmas, p);
     let r0 = f(&x)?;
-    let mut jac = DMatrix::zeros(r0.len(), 7);
-    for j in 0..7 {
+    let mut jac = DMatrix::zeros(r0.len(), nt);
+    for j in 0..nt {
         let h = 1e-6;
         let mut q = x.clone();
         q[j] += h;
@@ -108,7 +109,7 @@ pub fn refine(post: &Posterior, start: &Params) -> Option<MapEstimate> {
     }
     let cov = (jac.transpose() * &jac).try_inverse()?;
 
-    let res = residuals(post, &Posterior::params(&x))?;
+    let res = residuals(post, &x)?;
     let mut full = x.clone();
     let mut rhos = Vec::new();
     for r in &res {
@@ -131,8 +132,8 @@ pub fn refine(post: &Posterior, start: &Params) -> Option<MapEstimate> {
     Some(MapEstimate { x: full, cov, log_density, converged })
 }
 
-/// The best MAP from several starts (by log-density).
-pub fn best_map(post: &Posterior, starts: &[Params]) -> Option<MapEstimate> {
+/// The best MAP from several starts (θ coordinates), by log-density.
+pub fn best_map(post: &Posterior, starts: &[Vec<f64>]) -> Option<MapEstimate> {
     starts
         .iter()
         .filter_map(|s| refine(post, s))
@@ -179,11 +180,11 @@ pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, 
     let mut study = Vec::new();
     loop {
         let finer = post.with_integrator(Integrator { substeps: 2 * m, ..base });
-        let Some(next) = refine(&finer, &Posterior::params(&current.x)) else {
+        let Some(next) = refine(&finer, &current.x) else {
             return (m, current, study);
         };
         let sd = current.sd();
-        let shifts: Vec<f64> = (0..7).map(|i| (current.x[i] - next.x[i]).abs() / sd[i].max(1e-300)).collect();
+        let shifts: Vec<f64> = (0..post.theta_len()).map(|i| (current.x[i] - next.x[i]).abs() / sd[i].max(1e-300)).collect();
         let check = StepCheck { substeps: m, shifts };
         let ok = check.worst().1 < step_shift_limit(base.extrapolate);
         study.push(check);
@@ -199,7 +200,7 @@ pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, 
 /// the noise coordinates in a small ball, every one with a finite
 /// log-density (redrawn up to 100 times, then a tiny ball around the MAP).
 pub fn initial_walkers(post: &Posterior, map: &MapEstimate, count: usize, seed: u64) -> Vec<Vec<f64>> {
-    let d = post.dim();
+    let (d, nt) = (post.dim(), post.theta_len());
     let chol = map.cov.clone().cholesky();
     (0..count)
         .map(|c| {
@@ -208,13 +209,13 @@ pub fn initial_walkers(post: &Posterior, map: &MapEstimate, count: usize, seed: 
                 let z: Vec<f64> = (0..d).map(|_| StandardNormal.sample(&mut rng)).collect();
                 let mut x = map.x.clone();
                 let theta = match &chol {
-                    Some(ch) if attempt < 90 => ch.l() * DVector::from_column_slice(&z[..7]),
-                    _ => DVector::from_column_slice(&z[..7]) * 1e-4,
+                    Some(ch) if attempt < 90 => ch.l() * DVector::from_column_slice(&z[..nt]),
+                    _ => DVector::from_column_slice(&z[..nt]) * 1e-4,
                 };
-                for i in 0..7 {
+                for i in 0..nt {
                     x[i] += theta[i];
                 }
-                for i in 7..d {
+                for i in nt..d {
                     x[i] += 0.01 * z[i];
                 }
                 if post.log_density(&x).is_finite() {

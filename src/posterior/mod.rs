@@ -6,6 +6,7 @@
 //! The model side knows nothing of MCMC: the likelihood integrates the B-P
 //! law along each run's measured strain history and compares stresses.
 
+pub mod current_law;
 pub mod map;
 pub mod prior;
 pub mod settings;
@@ -15,8 +16,9 @@ use statrs::function::gamma::ln_gamma;
 use crate::data::{local_polynomial, Campaign, Run};
 use crate::model::{Integrator, Params, LANES, PARAM_NAMES};
 use crate::sampler::LogDensity;
+pub use current_law::CurrentLaw;
 pub use prior::Prior;
-pub use settings::{CalibrationSettings, NoiseModel, RecordPart};
+pub use settings::{CalibrationSettings, ModelKind, NoiseModel, RecordPart};
 
 /// One run as the likelihood sees it.
 #[derive(Clone, Debug)]
@@ -26,6 +28,7 @@ pub struct RunData {
     pub gamma: Vec<f64>,
     pub tau: Vec<f64>,
     pub initial_tau: f64,
+    pub current_a: f64,
 }
 
 impl RunData {
@@ -57,6 +60,7 @@ impl RunData {
             gamma: gamma[..end].to_vec(),
             tau: run.shear.tau[..end].to_vec(),
             initial_tau: run.shear.initial_tau,
+            current_a: run.spec.current_a,
         }
     }
 
@@ -84,7 +88,11 @@ pub struct ResidualStats {
 /// The posterior density.
 pub struct Posterior {
     pub runs: Vec<RunData>,
-    pub priors: [Prior; 7],
+    /// Priors of the θ coordinates: the seven B-P parameters, or the
+    /// current law's nine.
+    pub priors: Vec<Prior>,
+    /// The B-P parameters as functions of the current (None: one set for all runs).
+    pub law: Option<CurrentLaw>,
     pub noise: NoiseModel,
     pub student_nu: f64,
     pub sigma_bounds: (f64, f64),
@@ -99,7 +107,11 @@ impl Posterior {
                 .iter()
                 .map(|r| RunData::from_run(r, settings.likelihood.part, settings.likelihood.smooth_strain_ms))
                 .collect(),
-            priors: settings.priors(),
+            priors: match settings.model {
+                ModelKind::PerCurrent => settings.priors().to_vec(),
+                ModelKind::CurrentLaw => settings.law().priors(&settings.priors()),
+            },
+            law: (settings.model == ModelKind::CurrentLaw).then(|| settings.law()),
             noise: settings.likelihood.noise,
             student_nu: settings.likelihood.student_nu,
             sigma_bounds: settings.sigma_bounds_pa,
@@ -110,7 +122,8 @@ impl Posterior {
     pub fn with_integrator(&self, integrator: Integrator) -> Posterior {
         Posterior {
             runs: self.runs.clone(),
-            priors: self.priors,
+            priors: self.priors.clone(),
+            law: self.law,
             noise: self.noise,
             student_nu: self.student_nu,
             sigma_bounds: self.sigma_bounds,
@@ -118,9 +131,15 @@ impl Posterior {
         }
     }
 
-    /// Names of the coordinates in SI (`G` … `n`, `sigma_<run>`, `rho_<run>`).
+    /// Number of θ coordinates (before the noise ones).
+    pub fn theta_len(&self) -> usize {
+        self.priors.len()
+    }
+
+    /// Names of the coordinates in SI (`G` … `n` or the law's, `sigma_<run>`, `rho_<run>`).
     pub fn names(&self) -> Vec<String> {
-        let mut names: Vec<String> = PARAM_NAMES.iter().map(|s| s.to_string()).collect();
+        let theta: &[&str] = if self.law.is_some() { &current_law::LAW_NAMES } else { &PARAM_NAMES };
+        let mut names: Vec<String> = theta.iter().map(|s| s.to_string()).collect();
         names.extend(self.runs.iter().map(|r| format!("sigma_{}", r.id)));
         if self.noise == NoiseModel::Ar1 {
             names.extend(self.runs.iter().map(|r| format!("rho_{}", r.id)));
@@ -133,26 +152,38 @@ impl Posterior {
         let nr = self.runs.len();
         x.iter()
             .enumerate()
-            .map(|(i, v)| if i < 7 + nr { v.exp() } else { v.tanh() })
+            .map(|(i, v)| if i < self.theta_len() + nr { v.exp() } else { v.tanh() })
             .collect()
     }
 
+    /// The B-P parameters of the seven-parameter model at ln θ = `x[..7]`.
     pub fn params(x: &[f64]) -> Params {
         Params::from_array(std::array::from_fn(|i| x[i].exp()))
     }
 
+    /// The B-P parameters at a coil current, from the θ coordinates `x`.
+    pub fn params_at_current(&self, x: &[f64], current_a: f64) -> Params {
+        match &self.law {
+            Some(law) => {
+                let theta: Vec<f64> = x[..self.theta_len()].iter().map(|v| v.exp()).collect();
+                law.params(&theta, current_a)
+            }
+            None => Self::params(x),
+        }
+    }
+
     /// Log-prior of the coordinates (with the Jacobian of ρ = tanh z).
     pub fn log_prior(&self, x: &[f64]) -> f64 {
-        let nr = self.runs.len();
+        let (nr, nt) = (self.runs.len(), self.theta_len());
         let mut lp: f64 = self.priors.iter().zip(x).map(|(p, v)| p.log_density(*v)).sum();
         let (lo, hi) = (self.sigma_bounds.0.ln(), self.sigma_bounds.1.ln());
-        for v in &x[7..7 + nr] {
+        for v in &x[nt..nt + nr] {
             if !(*v >= lo && *v <= hi) {
                 return f64::NEG_INFINITY;
             }
         }
         if self.noise == NoiseModel::Ar1 {
-            for z in &x[7 + nr..] {
+            for z in &x[nt + nr..] {
                 let rho = z.tanh();
                 // uniform ρ on (−1, 1); |ρ| < 0.999 keeps the AR(1) stationary
                 if !(rho.abs() < 0.999) {
@@ -201,21 +232,22 @@ impl Posterior {
     /// Log-densities of up to [`LANES`] points integrated together.
     fn log_density_lanes(&self, xs: &[f64], out: &mut [f64]) {
         let d = self.dim();
-        let nr = self.runs.len();
+        let (nr, nt) = (self.runs.len(), self.theta_len());
         let count = out.len();
         let mut params = [Params::reference_1a(); LANES];
         for lane in 0..count {
-            let x = &xs[lane * d..(lane + 1) * d];
-            out[lane] = self.log_prior(x);
-            if out[lane] > f64::NEG_INFINITY {
-                params[lane] = Self::params(x);
-            }
+            out[lane] = self.log_prior(&xs[lane * d..(lane + 1) * d]);
         }
         if out.iter().all(|v| *v == f64::NEG_INFINITY) {
             return;
         }
         for (i, r) in self.runs.iter().enumerate() {
-            let scales = std::array::from_fn(|lane| if lane < count { xs[lane * d + 7 + i].exp() } else { 1.0 });
+            for lane in 0..count {
+                if out[lane] > f64::NEG_INFINITY {
+                    params[lane] = self.params_at_current(&xs[lane * d..(lane + 1) * d], r.current_a);
+                }
+            }
+            let scales = std::array::from_fn(|lane| if lane < count { xs[lane * d + nt + i].exp() } else { 1.0 });
             let stats = self.residual_stats(&params, r, scales);
             for lane in 0..count {
                 if out[lane] == f64::NEG_INFINITY {
@@ -224,8 +256,8 @@ impl Posterior {
                 let x = &xs[lane * d..(lane + 1) * d];
                 out[lane] = match &stats[lane] {
                     Some(st) => {
-                        let rho = if self.noise == NoiseModel::Ar1 { x[7 + nr + i].tanh() } else { 0.0 };
-                        out[lane] + self.log_likelihood_run(st, x[7 + i], rho)
+                        let rho = if self.noise == NoiseModel::Ar1 { x[nt + nr + i].tanh() } else { 0.0 };
+                        out[lane] + self.log_likelihood_run(st, x[nt + i], rho)
                     }
                     None => f64::NEG_INFINITY,
                 };
@@ -262,7 +294,7 @@ impl Posterior {
 
 impl LogDensity for Posterior {
     fn dim(&self) -> usize {
-        7 + self.runs.len() * if self.noise == NoiseModel::Ar1 { 2 } else { 1 }
+        self.theta_len() + self.runs.len() * if self.noise == NoiseModel::Ar1 { 2 } else { 1 }
     }
 
     fn log_density(&self, x: &[f64]) -> f64 {

@@ -119,10 +119,24 @@ impl Default for SamplingSettings {
     }
 }
 
+/// How the B-P parameters relate to the runs of a calibration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelKind {
+    /// One parameter set for the runs of one coil current.
+    PerCurrent,
+    /// The parameters as functions of the current (posterior::current_law),
+    /// one posterior for the runs of every current.
+    CurrentLaw,
+}
+
 /// Everything that defines a calibration besides the data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CalibrationSettings {
+    pub model: ModelKind,
+    /// Reference current of the current law (A): R0, R1, D1 are its values there.
+    pub reference_current_a: f64,
     pub likelihood: LikelihoodSettings,
     pub integrator: IntegratorSettings,
     pub sampler: SamplingSettings,
@@ -136,6 +150,8 @@ pub struct CalibrationSettings {
 impl Default for CalibrationSettings {
     fn default() -> Self {
         CalibrationSettings {
+            model: ModelKind::PerCurrent,
+            reference_current_a: 1.0,
             likelihood: LikelihoodSettings::default(),
             integrator: IntegratorSettings::default(),
             sampler: SamplingSettings::default(),
@@ -179,6 +195,9 @@ impl CalibrationSettings {
         if self.likelihood.noise == NoiseModel::StudentT && !(self.likelihood.student_nu > 0.0) {
             return Err("student_nu must be positive".into());
         }
+        if !(self.reference_current_a > 0.0) {
+            return Err("reference_current_a must be positive".into());
+        }
         if self.sampler.ensembles == 0 {
             return Err("at least one ensemble".into());
         }
@@ -188,6 +207,11 @@ impl CalibrationSettings {
     /// The priors in parameter order.
     pub fn priors(&self) -> [Prior; 7] {
         std::array::from_fn(|i| self.prior[PARAM_NAMES[i]])
+    }
+
+    /// The current law of a `current-law` model.
+    pub fn law(&self) -> super::CurrentLaw {
+        super::CurrentLaw { reference_a: self.reference_current_a }
     }
 
     pub fn to_toml(&self) -> Result<String> {

@@ -16,7 +16,7 @@ pub mod diagnostics;
 pub mod ensemble;
 pub mod moves;
 
-pub use diagnostics::{Diagnostics, ParameterDiagnostics};
+pub use diagnostics::{quantile, quantile_sorted, Diagnostics, ParameterDiagnostics};
 pub use ensemble::{Chains, RunControl, Sampler, SamplerSettings};
 pub use moves::Move;
 

@@ -1,0 +1,275 @@
+//! The uncertainty report of one calibration folder: figures (SVG + PNG)
+//! beside the data, and `report.html`, one self-contained file with every
+//! table and figure inline, to be mailed as it is.
+
+pub mod figures;
+pub mod html;
+
+use std::path::{Path, PathBuf};
+
+use crate::error::Result;
+use crate::model::PARAM_NAMES;
+use crate::output::atomic_write;
+use crate::output::prediction::{read_bands, read_coverage, read_record, CoverageRow};
+use crate::stored::StoredCalibration;
+use html::{esc, num, Mark, Page};
+
+/// Figures written so far: file stem and caption, in report order.
+#[derive(Default)]
+pub struct Figures {
+    pub items: Vec<(String, String)>,
+}
+
+impl Figures {
+    pub fn push(&mut self, stem: &str, caption: &str) {
+        self.items.push((stem.to_string(), caption.to_string()));
+    }
+}
+
+/// The share of observations a 95 % predictive band should hold for the
+/// report to call it calibrated (the acceptance range).
+pub const COVERAGE_OK: (f64, f64) = (0.90, 0.99);
+
+/// Draws shown in the corner and marginal plots.
+const PLOT_DRAWS: usize = 2000;
+
+/// Writes the figures and `report.html` of the calibration in `dir`; the
+/// bands must exist (`mrbp predict`). Returns the report's path.
+pub fn write(dir: &Path) -> Result<PathBuf> {
+    let cal = StoredCalibration::open(dir)?;
+    let campaign = cal.campaign()?;
+    let rec = &cal.record;
+    let bands = read_bands(&dir.join("bands.parquet"))?;
+    let coverage = read_coverage(&dir.join("coverage.parquet"))?;
+    let prediction = read_record(&dir.join("prediction.toml"))?;
+    let loo = dir.join("loo.parquet").exists().then(|| read_coverage(&dir.join("loo.parquet"))).transpose()?;
+    let loo_bands = dir.join("loo_bands.parquet").exists().then(|| read_bands(&dir.join("loo_bands.parquet"))).transpose()?;
+
+    let mut figs = Figures::default();
+    let geometry = campaign.geometry;
+    figures::bands(dir, &bands, geometry.area_m2, geometry.gap_m, &mut figs)?;
+    figures::residuals(dir, &bands, &mut figs)?;
+    let positions = cal.draw_positions(PLOT_DRAWS);
+    let named = |m: &std::collections::BTreeMap<String, f64>| PARAM_NAMES.map(|n| m.get(n).copied().unwrap_or(f64::NAN));
+    figures::corner(dir, &cal.chains, &positions, &named(&rec.identification), &named(&rec.map), &mut figs)?;
+    figures::marginals(dir, &cal.chains, &positions, &cal.settings.priors(), &mut figs)?;
+    figures::traces(dir, &cal.chains, cal.burn_in(), &mut figs)?;
+    let mut loo_figs = Figures::default();
+    if let Some(b) = &loo_bands {
+        let loo_dir = dir.join("loo");
+        std::fs::create_dir_all(&loo_dir).map_err(|e| crate::Error::output(&loo_dir, e))?;
+        figures::bands(&loo_dir, b, geometry.area_m2, geometry.gap_m, &mut loo_figs)?;
+    }
+
+    let title = format!("mrbp report: {} at {} A", rec.campaign, rec.current_a);
+    let mut page = Page::new(&title);
+    let checks = verdicts(&cal, &coverage);
+    let warned = checks.iter().filter(|c| c.1 == Mark::Warn).count();
+    page.raw(&format!(
+        "<p>B-P parameters of MR fluid calibrated on {} run(s) at {} A by ensemble MCMC. {}</p>",
+        rec.runs.len(),
+        rec.current_a,
+        if warned == 0 {
+            "<span class=\"pass\">Every check passes.</span>".to_string()
+        } else {
+            format!("<span class=\"warn\">{warned} check(s) warn: see Diagnostics.</span>")
+        }
+    ));
+
+    page.section("campaign", "Campaign and settings");
+    let rows: Vec<Vec<String>> = campaign
+        .runs
+        .iter()
+        .map(|r| {
+            let t = &r.record.time;
+            vec![
+                esc(r.id()),
+                r.record.len().to_string(),
+                num(t[t.len() - 1] - t[0], 3),
+                num(r.spec.current_a, 2),
+                num(r.record.force.iter().fold(0.0f64, |m, f| m.max(f.abs())), 4),
+                r.branches.len().to_string(),
+            ]
+        })
+        .collect();
+    page.table(&["run", "samples", "duration (s)", "current (A)", "peak force (N)", "loading branches"], &rows);
+    page.table(
+        &["setting", "value"],
+        &[
+            vec!["manifest".into(), esc(&rec.manifest)],
+            vec!["geometry".into(), format!("A = {} m², h = {} m", geometry.area_m2, geometry.gap_m)],
+            vec!["noise model".into(), esc(&rec.noise)],
+            vec!["samples in the likelihood".into(), esc(&rec.part)],
+            vec!["integrator".into(), format!("{:?}, {} sub-step(s) per sample{}", cal.settings.integrator.scheme, rec.substeps, if cal.settings.integrator.extrapolate { ", Richardson-extrapolated" } else { "" })],
+            vec!["sampler".into(), format!("{} ensembles × {} walkers, {} steps, burn-in {}", rec.ensembles, rec.walkers, rec.steps, rec.burn_in)],
+            vec!["seed".into(), rec.seed.to_string()],
+        ],
+    );
+
+    page.section("identification", "Identification and posterior");
+    let summary_of = |name: &str| cal.summary.iter().find(|r| r.parameter == name);
+    let rows: Vec<Vec<String>> = PARAM_NAMES
+        .iter()
+        .map(|n| {
+            let s = summary_of(n);
+            vec![
+                esc(n),
+                num(rec.identification.get(*n).copied().unwrap_or(f64::NAN), 3),
+                num(rec.map.get(*n).copied().unwrap_or(f64::NAN), 3),
+                s.map_or("–".into(), |s| num(s.q50, 3)),
+                s.map_or("–".into(), |s| format!("{} – {}", num(s.q05, 3), num(s.q95, 3))),
+            ]
+        })
+        .collect();
+    page.para("The paper's step-by-step identification, the posterior mode (MAP) and the posterior median with its 90 % credible interval, in SI units (Pa, 1/Pa, –).");
+    page.table(&["parameter", "identification", "MAP", "posterior median", "90 % credible interval"], &rows);
+
+    page.section("posterior", "Posterior summary");
+    let rows: Vec<Vec<String>> = cal
+        .summary
+        .iter()
+        .map(|s| {
+            let ok = s.r_hat < 1.01 && s.ess_bulk >= cal.settings.sampler.min_ess && s.ess_tail >= cal.settings.sampler.min_ess;
+            vec![
+                esc(&s.parameter),
+                num(s.mean, 4),
+                num(s.sd, 3),
+                num(s.q05, 4),
+                num(s.q50, 4),
+                num(s.q95, 4),
+                format!("{:.0}", s.ess_bulk),
+                format!("{:.0}", s.ess_tail),
+                format!("{:.4}", s.r_hat),
+                format!("{:.1}", s.tau_int),
+                Mark::of(ok).html().into(),
+            ]
+        })
+        .collect();
+    page.table(&["parameter", "mean", "sd", "q05", "q50", "q95", "ESS bulk", "ESS tail", "R̂", "τ (steps)", ""], &rows);
+
+    page.section("diagnostics", "Diagnostics");
+    let rows: Vec<Vec<String>> = checks.iter().map(|(what, mark, detail)| vec![esc(what), mark.html().into(), esc(detail)]).collect();
+    page.table(&["check", "", "measured"], &rows);
+    for w in &rec.warnings {
+        page.note(w);
+    }
+
+    page.section("coverage", "Predictive coverage");
+    page.para(&format!(
+        "{} posterior draws (after the burn-in, thinned by {} steps) integrated along each whole record, with {} noise replicates per draw. A calibrated model holds about 95 % of the observations in its 95 % predictive band; the report passes {}–{} %.",
+        prediction.draws,
+        prediction.thin,
+        prediction.noise_replicates,
+        100.0 * COVERAGE_OK.0,
+        100.0 * COVERAGE_OK.1
+    ));
+    coverage_table(&mut page, &coverage);
+
+    page.section("validation", "Leave-one-out validation");
+    match &loo {
+        Some(rows) => {
+            page.para("Each run predicted by a calibration on the other runs of this current only (its noise level taken as the root-mean-square σ of those runs): the honest test of the bands on data the fit has not seen.");
+            coverage_table(&mut page, rows);
+            for (stem, caption) in &loo_figs.items {
+                page.figure(&dir.join("loo").join(format!("{stem}.png")), &format!("Held out: {caption}"))?;
+            }
+        }
+        None => page.para("Not run for this calibration: `mrbp run MANIFEST --out DIR --leave-one-out` runs it (the bundled job does)."),
+    }
+
+    page.section("figures", "Figures");
+    for (stem, caption) in &figs.items {
+        page.figure(&dir.join(format!("{stem}.png")), caption)?;
+    }
+    let tag = crate::output::identification::current_tag(rec.current_a);
+    let ident = [
+        ("fig1_tau_gamma", "Identification, Fig. 1: the loading branches used by the identification."),
+        ("fig2_yield_rate", "Identification, Fig. 2: yield stress against inelastic strain rate (eq. 6)."),
+        ("fig3_tau_gamma_i", "Identification, Fig. 3: stress against inelastic strain with eq. 7."),
+        ("fig4_euler", "Identification, Fig. 4: Euler solution of the identified model against the records."),
+        ("fig5_psi", "Identification, Fig. 5: the hardening function ψ."),
+    ];
+    for (stem, caption) in ident {
+        let png = dir.join(format!("{stem}_{tag}.png"));
+        if png.exists() {
+            page.figure(&png, caption)?;
+        }
+    }
+
+    page.section("reproduce", "Reproduce");
+    page.table(
+        &["", ""],
+        &[
+            vec!["mrbp version".into(), esc(&rec.mrbp_version)],
+            vec!["calibration command".into(), format!("<code>{}</code>", esc(&rec.command))],
+            vec!["prediction command".into(), format!("<code>{}</code>", esc(&prediction.command))],
+            vec!["sampler seed".into(), rec.seed.to_string()],
+            vec!["prediction seed".into(), prediction.seed.to_string()],
+            vec!["wall time".into(), format!("{:.1} s calibration ({:.1} s sampling), {:.1} s prediction", rec.seconds_start + rec.seconds_sampling, rec.seconds_sampling, prediction.seconds)],
+        ],
+    );
+    page.para("The settings below (config.toml in the folder) repeat the calibration with `mrbp sample MANIFEST --config config.toml --out DIR`; the same seed gives the same chains bit for bit, on any number of threads.");
+    let config = std::fs::read_to_string(dir.join("config.toml")).unwrap_or_default();
+    page.pre(&config);
+
+    let path = dir.join("report.html");
+    atomic_write(&path, page.finish().as_bytes())?;
+    Ok(path)
+}
+
+fn coverage_table(page: &mut Page, rows: &[CoverageRow]) {
+    let rows: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            let ok = r.inside_p95 >= COVERAGE_OK.0 && r.inside_p95 <= COVERAGE_OK.1;
+            vec![
+                esc(&r.run),
+                num(r.current_a, 2),
+                r.samples.to_string(),
+                format!("{:.1}", 100.0 * r.inside_p95),
+                format!("{:.1}", 100.0 * r.inside_q95),
+                num(r.rmse_q50_pa, 3),
+                r.draws.to_string(),
+                Mark::of(ok).html().into(),
+            ]
+        })
+        .collect();
+    page.table(
+        &["run", "current (A)", "samples", "inside 95 % predictive (%)", "inside 95 % model (%)", "RMS residual to median (Pa)", "draws", ""],
+        &rows,
+    );
+}
+
+/// The report's checks: what, verdict, what was measured.
+fn verdicts(cal: &StoredCalibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, String)> {
+    let s = &cal.summary;
+    let max_rhat = s.iter().map(|r| r.r_hat).fold(f64::NAN, f64::max);
+    let min_bulk = s.iter().map(|r| r.ess_bulk).fold(f64::NAN, f64::min);
+    let min_tail = s.iter().map(|r| r.ess_tail).fold(f64::NAN, f64::min);
+    let tau = cal.tau_max();
+    let kept = cal.record.steps.saturating_sub(cal.record.burn_in) as f64;
+    let min_ess = cal.settings.sampler.min_ess;
+    let mut v = vec![
+        ("R̂ (rank-normalised split, across ensembles) < 1.01".to_string(), Mark::of(max_rhat < 1.01), format!("largest {max_rhat:.4}")),
+        (format!("bulk and tail ESS ≥ {min_ess:.0}"), Mark::of(min_bulk >= min_ess && min_tail >= min_ess), format!("smallest bulk {min_bulk:.0}, tail {min_tail:.0}")),
+        ("chains longer than 50 τ after burn-in".to_string(), Mark::of(kept >= 50.0 * tau), format!("{kept:.0} steps, τ_max {tau:.1} ({:.0} τ)", kept / tau)),
+        ("no sampler warnings (stuck walkers …)".to_string(), Mark::of(cal.record.warnings.is_empty()), format!("{} warning(s)", cal.record.warnings.len())),
+    ];
+    if let Some(last) = cal.record.step_study.last() {
+        let limit = crate::posterior::map::step_shift_limit(cal.settings.integrator.extrapolate);
+        v.push((
+            "integrator step: halving it moves no MAP parameter by the limit".to_string(),
+            Mark::of(last.largest_shift_sd < limit),
+            format!("{} sub-step(s): {:.3} sd ({}), limit {limit}", last.substeps, last.largest_shift_sd, last.parameter),
+        ));
+    }
+    for r in coverage {
+        let ok = r.inside_p95 >= COVERAGE_OK.0 && r.inside_p95 <= COVERAGE_OK.1 && r.failed_draws == 0;
+        v.push((
+            format!("{}: 95 % predictive band holds {:.0}–{:.0} % of the record", r.run, 100.0 * COVERAGE_OK.0, 100.0 * COVERAGE_OK.1),
+            Mark::of(ok),
+            format!("{:.1} %, {} failed draw(s)", 100.0 * r.inside_p95, r.failed_draws),
+        ));
+    }
+    v
+}

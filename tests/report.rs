@@ -1,0 +1,143 @@
+//! The whole job on a small virtual campaign, as a user runs it: `mrbp run`
+//! with leave-one-out, then what it wrote (bands, coverage, the report) and
+//! the report in a real browser.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use mrbp::output::{column_names, f64_column, read_parquet, str_column};
+use mrbp::synth::{write_campaign, SynthSettings};
+
+fn mrbp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).output().expect("run mrbp")
+}
+
+fn text(o: &Output) -> String {
+    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+/// The three bundled crank speeds at 1 A, one revolution at 2 kHz, with the
+/// bundled noise levels (15 N force, 2 µm displacement): records from known
+/// parameters.
+fn virtual_campaign(dir: &Path) -> PathBuf {
+    let settings = SynthSettings { currents_a: vec![1.0], cycles: 1.0, rate_hz: 2000.0, ..SynthSettings::default() };
+    write_campaign(&settings, dir).unwrap();
+    dir.join("campaign.toml")
+}
+
+const SECTIONS: [&str; 8] = ["campaign", "identification", "posterior", "diagnostics", "coverage", "validation", "figures", "reproduce"];
+
+#[test]
+fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
+    let data = tempfile::tempdir().unwrap();
+    let manifest = virtual_campaign(data.path());
+    let out = tempfile::tempdir().unwrap();
+    let o = mrbp(&[
+        "run",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+        "--steps",
+        "500",
+        "--substeps",
+        "2",
+        "--leave-one-out",
+        "--loo-steps",
+        "200",
+        "--draws",
+        "200",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let dir = out.path().join("I1.0A");
+
+    // bands.parquet: the contract's columns, ordered quantiles, one row per sample
+    let path = dir.join("bands.parquet");
+    let bands = read_parquet(&path).unwrap();
+    let names = column_names(&bands);
+    for c in ["run", "time_s", "gamma", "tau_obs", "q025", "q25", "q50", "q75", "q975", "p025", "p975"] {
+        assert!(names.contains(&c.to_string()), "bands.parquet lacks {c}: {names:?}");
+    }
+    let runs = str_column(&bands, "run", &path).unwrap();
+    // 1 revolution at 100/200/400 rpm and 2 kHz: 1200 + 600 + 300 samples (+1 each)
+    assert!((2100..=2104).contains(&runs.len()), "{} rows", runs.len());
+    let q: Vec<Vec<f64>> = ["p025", "q025", "q25", "q50", "q75", "q975", "p975"].iter().map(|c| f64_column(&bands, c, &path).unwrap()).collect();
+    for k in 0..runs.len() {
+        for w in q[1..6].windows(2) {
+            assert!(w[0][k] <= w[1][k], "model quantiles out of order at row {k}");
+        }
+        assert!(q[0][k] <= q[3][k] && q[3][k] <= q[6][k], "predictive band misses the median at row {k}");
+    }
+
+    // the acceptance: 90–99 % of each run inside its 95 % predictive band
+    let path = dir.join("coverage.parquet");
+    let cov = read_parquet(&path).unwrap();
+    let inside = f64_column(&cov, "inside_p95", &path).unwrap();
+    assert_eq!(inside.len(), 3);
+    for (run, share) in str_column(&cov, "run", &path).unwrap().iter().zip(&inside) {
+        assert!((0.90..=0.99).contains(share), "{run}: {:.1} % inside the 95 % band", 100.0 * share);
+    }
+
+    // leave-one-out: one row per held-out run, predicted without it
+    let path = dir.join("loo.parquet");
+    let loo = read_parquet(&path).unwrap();
+    let loo_inside = f64_column(&loo, "inside_p95", &path).unwrap();
+    assert_eq!(loo_inside.len(), 3);
+    assert!(loo_inside.iter().all(|v| (0.0..=1.0).contains(v)));
+
+    // the report: every section, figures inline, no links to local files
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    for s in SECTIONS {
+        assert!(html.contains(&format!("id=\"{s}\"")), "report lacks section {s}");
+    }
+    assert!(html.matches("data:image/png;base64,").count() >= 10, "figures inline");
+    assert!(!html.contains("src=\"file:") && !html.contains(".png\""), "no external images");
+    for f in ["corner.png", "traces.png", "marginals.png", "residuals.png", "bands_I1.0_100rpm.svg"] {
+        assert!(dir.join(f).exists(), "{f}");
+    }
+    browser_check(&dir.join("report.html"));
+
+    // predicting again with the same seed gives the same bands, bit for bit
+    let copy = tempfile::tempdir().unwrap();
+    let o = mrbp(&["predict", dir.to_str().unwrap(), "--out", copy.path().to_str().unwrap(), "--draws", "200", "--threads", "1"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let again = read_parquet(&copy.path().join("bands.parquet")).unwrap();
+    let first = read_parquet(&dir.join("bands.parquet")).unwrap();
+    assert!(again.equals(&first), "same seed, one thread: same bands");
+}
+
+/// Opens the report in headless Chromium (scripts/browser_check.mjs). CI
+/// installs Chromium and sets MRBP_BROWSER_CHECK=1, which makes a missing
+/// browser a failure; elsewhere the check runs where Chromium and Node are.
+fn browser_check(report: &Path) {
+    let required = std::env::var("MRBP_BROWSER_CHECK").is_ok_and(|v| v == "1");
+    let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
+    let node = Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !(Path::new(&chromium).exists() && node) {
+        assert!(!required, "MRBP_BROWSER_CHECK=1 but no {chromium} or no node");
+        eprintln!("browser check skipped: no Chromium or Node on this machine");
+        return;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/browser_check.mjs");
+    let o = Command::new("node")
+        .arg("--experimental-websocket")
+        .arg(&script)
+        .arg(report)
+        .args(SECTIONS)
+        .output()
+        .expect("run node");
+    assert!(o.status.success(), "browser check failed:\n{}", text(&o));
+}
+
+#[test]
+fn later_stages_reject_a_folder_that_is_not_a_calibration() {
+    let empty = tempfile::tempdir().unwrap();
+    for cmd in ["predict", "report"] {
+        let o = mrbp(&[cmd, empty.path().to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{cmd}: {err}");
+        assert!(err.contains("config.toml") && err.contains("not a calibration folder"), "{cmd}: {err}");
+    }
+    let o = mrbp(&["predict", "/no/such/folder"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not a folder"));
+}
