@@ -11,7 +11,7 @@ use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings
 use crate::posterior::CalibrationSettings;
 use crate::output;
 use crate::output::prediction::{CoverageRow, PredictionRecord, RunPrediction};
-use crate::posterior::{RecordPart, RunData};
+use crate::posterior::{ModelKind, RecordPart, RunData};
 use crate::predict::{self, PredictSettings};
 use crate::report;
 use crate::validate::{self, LooSettings};
@@ -57,10 +57,14 @@ pub enum Command {
     Report(ReportArgs),
     /// One report comparing calibrations, e.g. of different current levels
     Compare {
-        /// Calibration folders to compare
+        /// Calibration folders to compare (two or more)
         dirs: Vec<PathBuf>,
+        /// Output folder (default: ./comparison)
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Crank speed (rpm) whose predictive bands are overlaid (default: the median)
+        #[arg(long)]
+        rpm: Option<f64>,
     },
 }
 
@@ -89,11 +93,15 @@ pub struct ValidationOptions {
     /// Sampler steps of each leave-one-out calibration
     #[arg(long, default_value_t = 600)]
     pub loo_steps: usize,
+    /// With several currents: also calibrate the current law, holding out
+    /// the middle current when there are three or more, and predict it
+    #[arg(long)]
+    pub current_law: bool,
 }
 
 impl Default for ValidationOptions {
     fn default() -> Self {
-        ValidationOptions { leave_one_out: false, loo_steps: 600 }
+        ValidationOptions { leave_one_out: false, loo_steps: 600, current_law: false }
     }
 }
 
@@ -152,6 +160,15 @@ pub struct SampleOptions {
     /// Calibrate only the runs at this coil current (A)
     #[arg(long)]
     pub current: Option<f64>,
+    /// per-current: seven B-P parameters per current level (default);
+    /// current-law: R0, R1, D1 and G as saturating functions of the current,
+    /// one posterior from the runs of every current
+    #[arg(long, value_parser = ["per-current", "current-law"])]
+    pub model: Option<String>,
+    /// Leave the runs at these currents (A, comma separated) out of a
+    /// current-law calibration, to predict them
+    #[arg(long, value_delimiter = ',')]
+    pub hold_out_current: Vec<f64>,
     /// Walkers per ensemble (default: max(24, 2 × dimension))
     #[arg(long)]
     pub walkers: Option<usize>,
@@ -204,6 +221,12 @@ impl SampleOptions {
         }
         if let Some(v) = self.substeps {
             s.integrator.substeps = v;
+        }
+        if let Some(v) = &self.model {
+            s.model = toml::Value::String(v.clone()).try_into().map_err(|e| Error::Usage(format!("--model: {e}")))?;
+        }
+        if !self.hold_out_current.is_empty() && s.model != ModelKind::CurrentLaw {
+            return Err(Error::Usage("--hold-out-current needs --model current-law".into()));
         }
         s.check().map_err(Error::Usage)?;
         Ok(s)
@@ -317,14 +340,10 @@ fn dispatch(cli: Cli) -> Result<()> {
             predict_cmd(&args.dir, args.out.as_deref().unwrap_or(&args.dir), &args.options, true).map(|_| ())
         }
         Some(Command::Report(args)) => report_cmd(&args.dir, &args.predict, &args.validation).map(|_| ()),
-        Some(Command::Compare { .. }) => not_built("compare"),
+        Some(Command::Compare { dirs, out, rpm }) => {
+            compare_cmd(&dirs, out.as_deref().unwrap_or(Path::new("comparison")), rpm).map(|_| ())
+        }
     }
-}
-
-fn not_built(command: &str) -> Result<()> {
-    Err(Error::Compute(format!(
-        "'mrbp {command}' is not built yet in this version (see the README's status section)"
-    )))
 }
 
 /// The bundled campaign: `data/campaign.toml` of the working directory, or
@@ -345,13 +364,14 @@ fn default_job() -> Result<()> {
         .unwrap_or(Path::new("."))
         .join("reports");
     let name = Manifest::read(&manifest)?.name;
-    let validation = ValidationOptions { leave_one_out: true, ..ValidationOptions::default() };
+    let validation = ValidationOptions { leave_one_out: true, current_law: true, ..ValidationOptions::default() };
     run_pipeline(&manifest, &reports.join(name), &SampleOptions::default(), &PredictOptions::default(), &validation)
 }
 
 /// The whole pipeline on one campaign, one calibration per current level in
 /// `out/I<current>A/`: check, identify, sample, predict, (leave-one-out),
-/// report.
+/// report; then, with several currents, (the current law in
+/// `out/current-law…/`) and the comparison in `out/comparison/`.
 fn run_pipeline(
     manifest: &Path,
     out: &Path,
@@ -367,12 +387,32 @@ fn run_pipeline(
     };
     // always one folder per current, even for a single one
     let mut reports = Vec::new();
+    let mut dirs = Vec::new();
     for c in currents {
         let opts = SampleOptions { current: Some(c), ..options.clone() };
         for dir in sample_cmd(manifest, &out.join(output::identification::current_tag(c)), &opts)? {
             predict_cmd(&dir, &dir, predict, true)?;
             reports.push(report_cmd(&dir, predict, validation)?);
+            dirs.push(dir);
         }
+    }
+    let all = campaign.currents();
+    if options.current.is_none() && all.len() >= 2 {
+        if validation.current_law {
+            // hold out the middle current: the law must predict it
+            let held: Vec<f64> = if all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };
+            let name = match held.first() {
+                Some(h) => format!("current-law-without-{}", output::identification::current_tag(*h)),
+                None => "current-law".to_string(),
+            };
+            let opts = SampleOptions { model: Some("current-law".into()), hold_out_current: held, ..options.clone() };
+            for dir in sample_cmd(manifest, &out.join(name), &opts)? {
+                predict_cmd(&dir, &dir, predict, true)?;
+                reports.push(report_cmd(&dir, predict, &ValidationOptions { leave_one_out: false, ..*validation })?);
+                dirs.push(dir);
+            }
+        }
+        reports.push(compare_cmd(&dirs, &out.join("comparison"), None)?);
     }
     println!("\nreports:");
     for r in &reports {
@@ -401,6 +441,9 @@ wrote identification.parquet and figures fig1–fig5 to {}", out.display());
 pub fn sample_cmd(manifest: &Path, out: &Path, options: &SampleOptions) -> Result<Vec<PathBuf>> {
     let settings = options.settings()?;
     let campaign = Campaign::load(manifest)?;
+    if settings.model == ModelKind::CurrentLaw {
+        return Ok(vec![sample_law(&campaign, out, &settings, options)?]);
+    }
     let mut currents = campaign.currents();
     if let Some(c) = options.current {
         if !currents.iter().any(|x| (x - c).abs() < 1e-3) {
@@ -413,20 +456,7 @@ pub fn sample_cmd(manifest: &Path, out: &Path, options: &SampleOptions) -> Resul
         let dir = if currents.len() > 1 { out.join(output::identification::current_tag(c)) } else { out.to_path_buf() };
         let group = campaign.at_current(c);
         println!("\ncalibrating {} run(s) at {c} A into {}", group.runs.len(), dir.display());
-        std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
-        let checkpointing = Checkpointing { path: Some(dir.join("sampler.checkpoint")), every: 100, resume: options.resume };
-        if options.resume && !dir.join("sampler.checkpoint").exists() {
-            return Err(Error::Usage(format!("--resume: no sampler.checkpoint in {}", dir.display())));
-        }
-        let cal = calibrate_with(&group, &settings, true, &checkpointing)?;
-        output::identification::write_table(&dir.join("identification.parquet"), std::slice::from_ref(&cal.identification))?;
-        output::identification::write_figures(&dir, &group, std::slice::from_ref(&cal.identification))?;
-        output::calibration::write_chains(&dir.join("chains.parquet"), &cal)?;
-        output::calibration::write_summary(&dir.join("summary.parquet"), &cal)?;
-        output::calibration::write_records(&dir, &cal)?;
-        // the chains are complete in chains.parquet: the checkpoint has done its job
-        let _ = std::fs::remove_file(dir.join("sampler.checkpoint"));
-        output::calibration::print_summary(&cal);
+        write_calibration(&group, &dir, &settings, options.resume)?;
         dirs.push(dir);
     }
     Ok(dirs)
@@ -553,6 +583,53 @@ pub fn loo_cmd(dir: &Path, options: &PredictOptions, validation: &ValidationOpti
         println!("{:<16} {:>12.1} {:>12.1} {:>8.4}", r.run, 100.0 * r.inside_p95, r.rmse_q50_pa, h.max_rhat);
     }
     Ok(rows)
+}
+
+/// A current-law calibration of every run of the campaign but those at the
+/// held-out currents, into `out`.
+fn sample_law(campaign: &Campaign, out: &Path, settings: &CalibrationSettings, options: &SampleOptions) -> Result<PathBuf> {
+    let held = &options.hold_out_current;
+    for h in held {
+        if !campaign.currents().iter().any(|c| (c - h).abs() < 1e-3) {
+            return Err(Error::Usage(format!("--hold-out-current {h}: no run at {h} A (currents: {:?})", campaign.currents())));
+        }
+    }
+    let used = campaign.filtered(|r| !held.iter().any(|h| (r.spec.current_a - h).abs() < 1e-3));
+    println!(
+        "\ncalibrating the current law on {} run(s) at {:?} A{} into {}",
+        used.runs.len(),
+        used.currents(),
+        if held.is_empty() { String::new() } else { format!(" (holding out {held:?} A)") },
+        out.display()
+    );
+    write_calibration(&used, out, settings, options.resume)
+}
+
+/// Calibrates `campaign` into `dir`: identification, chains, summary, records.
+fn write_calibration(campaign: &Campaign, dir: &Path, settings: &CalibrationSettings, resume: bool) -> Result<PathBuf> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    let checkpointing = Checkpointing { path: Some(dir.join("sampler.checkpoint")), every: 100, resume };
+    if resume && !dir.join("sampler.checkpoint").exists() {
+        return Err(Error::Usage(format!("--resume: no sampler.checkpoint in {}", dir.display())));
+    }
+    let cal = calibrate_with(campaign, settings, true, &checkpointing)?;
+    let group = campaign.at_current(cal.current_a);
+    output::identification::write_table(&dir.join("identification.parquet"), std::slice::from_ref(&cal.identification))?;
+    output::identification::write_figures(dir, &group, std::slice::from_ref(&cal.identification))?;
+    output::calibration::write_chains(&dir.join("chains.parquet"), &cal)?;
+    output::calibration::write_summary(&dir.join("summary.parquet"), &cal)?;
+    output::calibration::write_records(dir, &cal)?;
+    // the chains are complete in chains.parquet: the checkpoint has done its job
+    let _ = std::fs::remove_file(dir.join("sampler.checkpoint"));
+    output::calibration::print_summary(&cal);
+    Ok(dir.to_path_buf())
+}
+
+/// `mrbp compare`: comparison tables, figures and report of calibrations.
+pub fn compare_cmd(dirs: &[PathBuf], out: &Path, rpm: Option<f64>) -> Result<PathBuf> {
+    let path = report::comparison::write(dirs, out, rpm)?;
+    println!("wrote comparison.parquet, differences.parquet, figures and {}", path.display());
+    Ok(path)
 }
 
 /// `mrbp check`: loads and validates a campaign, prints one line per run.

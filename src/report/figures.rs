@@ -6,7 +6,6 @@ use std::path::Path;
 
 use super::Figures;
 use crate::error::Result;
-use crate::model::PARAM_NAMES;
 use crate::output::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
 use crate::output::prediction::StoredBands;
 use crate::posterior::Prior;
@@ -24,7 +23,7 @@ fn every(n: usize, max: usize) -> usize {
 /// Splits a band over a hysteresis loop into pieces along which `x` is
 /// monotone, so each piece is a simple polygon (a loop drawn as one polygon
 /// would fill its inside).
-fn loop_band(label: &str, color: plot::RGBColor, x: &[f64], lo: &[f64], hi: &[f64], opacity: f64) -> Vec<Series> {
+pub(crate) fn loop_band(label: &str, color: plot::RGBColor, x: &[f64], lo: &[f64], hi: &[f64], opacity: f64) -> Vec<Series> {
     let mut out = Vec::new();
     let mut start = 0;
     let dir = |k: usize| (x[k + 1] - x[k]).signum();
@@ -154,12 +153,13 @@ pub fn traces(dir: &Path, chains: &StoredChains, burn_in: usize, figs: &mut Figu
     Ok(())
 }
 
-/// The corner plot of the seven B-P parameters: marginal histograms on the
+/// The corner plot of the θ parameters (the seven B-P ones or a current law's): marginal histograms on the
 /// diagonal, pairs below it; the identification and the MAP marked where
 /// they fall inside the plotted range.
-pub fn corner(dir: &Path, chains: &StoredChains, positions: &[(usize, usize)], identification: &[f64; 7], map: &[f64; 7], figs: &mut Figures) -> Result<()> {
-    let idx: Vec<usize> = PARAM_NAMES.iter().filter_map(|n| chains.index(n)).collect();
-    if idx.len() != 7 {
+pub fn corner(dir: &Path, chains: &StoredChains, positions: &[(usize, usize)], names: &[String], identification: &[f64], map: &[f64], figs: &mut Figures) -> Result<()> {
+    let idx: Vec<usize> = names.iter().filter_map(|n| chains.index(n)).collect();
+    let k = idx.len();
+    if k != names.len() || k == 0 {
         return Ok(());
     }
     let draws: Vec<Vec<f64>> = idx.iter().map(|&i| positions.iter().map(|&(s, c)| chains.at(i, s, c)).collect()).collect();
@@ -173,13 +173,13 @@ pub fn corner(dir: &Path, chains: &StoredChains, positions: &[(usize, usize)], i
         .collect();
     let inside = |v: f64, r: (f64, f64)| v >= r.0 && v <= r.1;
     let mut panels = Vec::new();
-    for row in 0..7 {
-        for col in 0..7 {
+    for row in 0..k {
+        for col in 0..k {
             if col > row {
                 panels.push(Chart::blank());
                 continue;
             }
-            let x_label = if row == 6 { PARAM_NAMES[col].to_string() } else { String::new() };
+            let x_label = if row == k - 1 { names[col].clone() } else { String::new() };
             let mut c = Chart::new("", x_label, "");
             c.compact = true;
             c.legend = false;
@@ -194,7 +194,7 @@ pub fn corner(dir: &Path, chains: &StoredChains, positions: &[(usize, usize)], i
                 }
             } else {
                 if col == 0 {
-                    c.y_label = PARAM_NAMES[row].to_string();
+                    c.y_label = names[row].clone();
                 }
                 c.y_range = Some(ranges[row]);
                 c.series.push(Series::points(None, PALETTE[0].mix_rgb(), draws[col].clone(), draws[row].clone()).with_width(1));
@@ -207,7 +207,7 @@ pub fn corner(dir: &Path, chains: &StoredChains, positions: &[(usize, usize)], i
             panels.push(c);
         }
     }
-    let mut fig = Figure::grid(panels, 7);
+    let mut fig = Figure::grid(panels, k);
     fig.panel_size = (200, 180);
     plot::save(&fig, &dir.join("corner"))?;
     figs.push(
@@ -251,9 +251,9 @@ fn histogram(v: &[f64], range: (f64, f64), bins: usize) -> (Vec<f64>, Vec<f64>) 
 /// prior's range: the prior density (scaled to peak 1), the posterior's 90 %
 /// credible interval shaded and its median; the title gives how much the
 /// records narrowed the prior (posterior sd / prior sd of ln θ).
-pub fn marginals(dir: &Path, chains: &StoredChains, positions: &[(usize, usize)], priors: &[Prior; 7], figs: &mut Figures) -> Result<()> {
+pub fn marginals(dir: &Path, chains: &StoredChains, positions: &[(usize, usize)], names: &[String], priors: &[Prior], figs: &mut Figures) -> Result<()> {
     let mut panels = Vec::new();
-    for (k, name) in PARAM_NAMES.iter().enumerate() {
+    for (k, name) in names.iter().enumerate() {
         let Some(i) = chains.index(name) else { continue };
         let logs: Vec<f64> = positions.iter().map(|&(s, c)| chains.at(i, s, c).ln()).collect();
         let (q05, q50, q95) = (quantile(&logs, 0.05), quantile(&logs, 0.5), quantile(&logs, 0.95));

@@ -2,6 +2,7 @@
 //! beside the data, and `report.html`, one self-contained file with every
 //! table and figure inline, to be mailed as it is.
 
+pub mod comparison;
 pub mod figures;
 pub mod html;
 
@@ -30,6 +31,10 @@ impl Figures {
 /// report to call it calibrated (the acceptance range).
 pub const COVERAGE_OK: (f64, f64) = (0.90, 0.99);
 
+/// The share a 95 % band must hold of a run the calibration never saw
+/// (another current, for a current law): the bar.
+pub const HELD_OUT_OK: f64 = 0.80;
+
 /// Draws shown in the corner and marginal plots.
 const PLOT_DRAWS: usize = 2000;
 
@@ -50,9 +55,12 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
     figures::bands(dir, &bands, geometry.area_m2, geometry.gap_m, &mut figs)?;
     figures::residuals(dir, &bands, &mut figs)?;
     let positions = cal.draw_positions(PLOT_DRAWS);
-    let named = |m: &std::collections::BTreeMap<String, f64>| PARAM_NAMES.map(|n| m.get(n).copied().unwrap_or(f64::NAN));
-    figures::corner(dir, &cal.chains, &positions, &named(&rec.identification), &named(&rec.map), &mut figs)?;
-    figures::marginals(dir, &cal.chains, &positions, &cal.settings.priors(), &mut figs)?;
+    let theta = cal.theta_names();
+    let named = |m: &std::collections::BTreeMap<String, f64>| -> Vec<f64> { theta.iter().map(|n| m.get(n).copied().unwrap_or(f64::NAN)).collect() };
+    // a current law's coordinates are not the identification's parameters
+    let identified = if rec.is_current_law() { vec![f64::NAN; theta.len()] } else { named(&rec.identification) };
+    figures::corner(dir, &cal.chains, &positions, &theta, &identified, &named(&rec.map), &mut figs)?;
+    figures::marginals(dir, &cal.chains, &positions, &theta, &cal.theta_priors(), &mut figs)?;
     figures::traces(dir, &cal.chains, cal.burn_in(), &mut figs)?;
     let mut loo_figs = Figures::default();
     if let Some(b) = &loo_bands {
@@ -61,14 +69,22 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
         figures::bands(&loo_dir, b, geometry.area_m2, geometry.gap_m, &mut loo_figs)?;
     }
 
-    let title = format!("mrbp report: {} at {} A", rec.campaign, rec.current_a);
+    let title = if rec.is_current_law() {
+        format!("mrbp report: {}, current law from {:?} A", rec.campaign, rec.currents)
+    } else {
+        format!("mrbp report: {} at {} A", rec.campaign, rec.current_a)
+    };
     let mut page = Page::new(&title);
     let checks = verdicts(&cal, &coverage);
     let warned = checks.iter().filter(|c| c.1 == Mark::Warn).count();
     page.raw(&format!(
-        "<p>B-P parameters of MR fluid calibrated on {} run(s) at {} A by ensemble MCMC. {}</p>",
+        "<p>B-P parameters of MR fluid calibrated on {} run(s) at {} by ensemble MCMC. {}</p>",
         rec.runs.len(),
-        rec.current_a,
+        if rec.is_current_law() {
+            format!("{:?} A as functions of the coil current (reference {} A)", rec.currents, rec.reference_current_a)
+        } else {
+            format!("{} A", rec.current_a)
+        },
         if warned == 0 {
             "<span class=\"pass\">Every check passes.</span>".to_string()
         } else {
@@ -221,9 +237,9 @@ fn coverage_table(page: &mut Page, rows: &[CoverageRow]) {
     let rows: Vec<Vec<String>> = rows
         .iter()
         .map(|r| {
-            let ok = r.inside_p95 >= COVERAGE_OK.0 && r.inside_p95 <= COVERAGE_OK.1;
+            let ok = if r.calibrated { r.inside_p95 >= COVERAGE_OK.0 && r.inside_p95 <= COVERAGE_OK.1 } else { r.inside_p95 >= HELD_OUT_OK };
             vec![
-                esc(&r.run),
+                if r.calibrated { esc(&r.run) } else { format!("{} <b>(held out)</b>", esc(&r.run)) },
                 num(r.current_a, 2),
                 r.samples.to_string(),
                 format!("{:.1}", 100.0 * r.inside_p95),
@@ -263,7 +279,14 @@ fn verdicts(cal: &StoredCalibration, coverage: &[CoverageRow]) -> Vec<(String, M
             format!("{} sub-step(s): {:.3} sd ({}), limit {limit}", last.substeps, last.largest_shift_sd, last.parameter),
         ));
     }
-    for r in coverage {
+    for r in coverage.iter().filter(|r| !r.calibrated) {
+        v.push((
+            format!("{} (held out): 95 % predictive band holds ≥ {:.0} % of the record", r.run, 100.0 * HELD_OUT_OK),
+            Mark::of(r.inside_p95 >= HELD_OUT_OK && r.failed_draws == 0),
+            format!("{:.1} %, {} failed draw(s)", 100.0 * r.inside_p95, r.failed_draws),
+        ));
+    }
+    for r in coverage.iter().filter(|r| r.calibrated) {
         let ok = r.inside_p95 >= COVERAGE_OK.0 && r.inside_p95 <= COVERAGE_OK.1 && r.failed_draws == 0;
         v.push((
             format!("{}: 95 % predictive band holds {:.0}–{:.0} % of the record", r.run, 100.0 * COVERAGE_OK.0, 100.0 * COVERAGE_OK.1),

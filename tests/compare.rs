@@ -1,0 +1,119 @@
+//! Comparing current levels on virtual campaigns with known parameters:
+//! `mrbp compare` over per-current calibrations, and the current law
+//! predicting a current it never saw.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use mrbp::output::{column_names, f64_column, read_parquet, str_column};
+use mrbp::synth::{write_campaign, SynthSettings};
+
+fn mrbp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).output().expect("run mrbp")
+}
+
+fn ok(o: Output) {
+    assert!(o.status.success(), "{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+}
+
+/// One revolution at 2 kHz per run, the bundled noise levels.
+fn campaign(dir: &Path, currents: Vec<f64>, rpms: Vec<f64>) -> String {
+    let s = SynthSettings { currents_a: currents, rpms, cycles: 1.0, rate_hz: 2000.0, ..SynthSettings::default() };
+    write_campaign(&s, dir).unwrap();
+    dir.join("campaign.toml").to_str().unwrap().to_string()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// R0, R1 and D1 at 1.0 A are 1/0.60 times those at 0.5 A on the virtual
+/// stand (tanh law, I_s = 1 A), far beyond the posterior sd (under 1 %):
+/// P(R0 at 1 A > R0 at 0.5 A) must be above 0.99, and the ratio's interval
+/// must hold the true ratio tanh(1)/tanh(0.5) = 1.6499 (5 % tolerance: the
+/// short chains' intervals are narrow and the displacement noise biases
+/// both calibrations alike).
+#[test]
+fn compare_tells_current_levels_apart() {
+    let data = tempfile::tempdir().unwrap();
+    let manifest = campaign(data.path(), vec![0.5, 1.0], vec![100.0, 400.0]);
+    let out = tempfile::tempdir().unwrap();
+    ok(mrbp(&["sample", &manifest, "--out", s(out.path()), "--steps", "300", "--substeps", "2"]));
+    let (lo, hi) = (out.path().join("I0.5A"), out.path().join("I1.0A"));
+    for d in [&lo, &hi] {
+        ok(mrbp(&["predict", s(d), "--draws", "100"]));
+    }
+    let cmp = out.path().join("cmp");
+    ok(mrbp(&["compare", s(&hi), s(&lo), "--out", s(&cmp)]));
+
+    let path = cmp.join("comparison.parquet");
+    let t = read_parquet(&path).unwrap();
+    assert_eq!(column_names(&t), ["calibration", "current_a", "parameter", "mean", "sd", "q05", "q50", "q95"]);
+    // 7 B-P parameters + 2 noise scales per calibration
+    assert_eq!(t.height(), 2 * 9);
+
+    let path = cmp.join("differences.parquet");
+    let d = read_parquet(&path).unwrap();
+    let cols = ["calibration_a", "calibration_b", "parameter", "diff_q05", "diff_q50", "diff_q95", "ratio_q05", "ratio_q50", "ratio_q95", "p_greater"];
+    assert_eq!(column_names(&d), cols);
+    let params = str_column(&d, "parameter", &path).unwrap();
+    let a = str_column(&d, "calibration_a", &path).unwrap();
+    let p = f64_column(&d, "p_greater", &path).unwrap();
+    let (r05, r95) = (f64_column(&d, "ratio_q05", &path).unwrap(), f64_column(&d, "ratio_q95", &path).unwrap());
+    assert_eq!(params.len(), 7, "one pair, the seven B-P parameters");
+    let truth = 1.0f64.tanh() / 0.5f64.tanh();
+    for name in ["R0", "R1", "D1"] {
+        let i = params.iter().position(|x| x == name).unwrap();
+        assert_eq!(a[i], "I1.0A");
+        assert!(p[i] > 0.99, "{name}: P(1.0 A > 0.5 A) = {}", p[i]);
+        assert!(r05[i] < truth * 1.05 && r95[i] > truth * 0.95, "{name}: ratio [{}, {}] vs {truth}", r05[i], r95[i]);
+    }
+    let html = std::fs::read_to_string(cmp.join("report.html")).unwrap();
+    for id in ["calibrations", "parameters", "differences", "current-law", "figures", "reproduce"] {
+        assert!(html.contains(&format!("id=\"{id}\"")), "{id}");
+    }
+    assert!(html.contains("<b>1.000</b>"), "a certain difference is marked");
+    for f in ["forest.png", "against_current.png", "overlay.png"] {
+        assert!(cmp.join(f).exists(), "{f}");
+    }
+}
+
+/// The current law calibrated at 0.5 and 1.5 A predicts the runs at 1.0 A:
+/// the bar is 80 % of the held-out observations inside the 95 %
+/// predictive band (the virtual stand follows the law's family, so a
+/// well-calibrated law should reach about 95 %).
+#[test]
+fn current_law_predicts_a_held_out_current() {
+    let data = tempfile::tempdir().unwrap();
+    let manifest = campaign(data.path(), vec![0.5, 1.0, 1.5], vec![200.0]);
+    let out = tempfile::tempdir().unwrap();
+    let law = out.path().join("law");
+    ok(mrbp(&["sample", &manifest, "--out", s(&law), "--model", "current-law", "--hold-out-current", "1.0", "--steps", "400", "--substeps", "2"]));
+    ok(mrbp(&["predict", s(&law), "--draws", "200"]));
+    let path = law.join("coverage.parquet");
+    let cov = read_parquet(&path).unwrap();
+    let runs = str_column(&cov, "run", &path).unwrap();
+    let inside = f64_column(&cov, "inside_p95", &path).unwrap();
+    let calibrated = f64_column(&cov, "calibrated", &path).unwrap();
+    assert_eq!(runs.len(), 3, "every run of the campaign is predicted");
+    let held = runs.iter().position(|r| r == "I1.0_200rpm").unwrap();
+    assert_eq!(calibrated[held], 0.0);
+    assert!(inside[held] >= 0.80, "held-out 1.0 A run: {:.1} % inside", 100.0 * inside[held]);
+
+    // the law's folder compares with a per-current one, and the report says what was held out
+    let per = out.path().join("per");
+    ok(mrbp(&["sample", &manifest, "--out", s(&per), "--current", "1.0", "--steps", "200", "--substeps", "2"]));
+    ok(mrbp(&["predict", s(&per), "--draws", "100"]));
+    let cmp = out.path().join("cmp");
+    ok(mrbp(&["compare", s(&per), s(&law), "--out", s(&cmp)]));
+    let html = std::fs::read_to_string(cmp.join("report.html")).unwrap();
+    assert!(html.contains("<b>held out</b>") && html.contains("held_out_law"), "held-out rows and figure");
+
+    // bad use is a usage error, not a crash
+    let o = mrbp(&["sample", &manifest, "--out", s(&per), "--hold-out-current", "1.0"]);
+    assert_eq!(o.status.code(), Some(2));
+    let o = mrbp(&["sample", &manifest, "--out", s(&law), "--model", "current-law", "--hold-out-current", "0.7"]);
+    assert_eq!(o.status.code(), Some(2));
+    let o = mrbp(&["compare", s(&per)]);
+    assert_eq!(o.status.code(), Some(2));
+}
