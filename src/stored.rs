@@ -12,20 +12,21 @@ use crate::output::{column_names, f64_column, read_parquet, str_column};
 use crate::posterior::current_law::LAW_NAMES;
 use crate::posterior::{CalibrationSettings, NoiseModel, Prior};
 use crate::predict::Draw;
+use crate::sampler::ParameterDiagnostics;
 
-/// One row of `summary.parquet`.
+/// One row of `summary.parquet`: a parameter's name and its statistics
+/// (read as fields of the row).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SummaryRow {
     pub parameter: String,
-    pub mean: f64,
-    pub sd: f64,
-    pub q05: f64,
-    pub q50: f64,
-    pub q95: f64,
-    pub ess_bulk: f64,
-    pub ess_tail: f64,
-    pub r_hat: f64,
-    pub tau_int: f64,
+    pub stats: ParameterDiagnostics,
+}
+
+impl std::ops::Deref for SummaryRow {
+    type Target = ParameterDiagnostics;
+    fn deref(&self) -> &ParameterDiagnostics {
+        &self.stats
+    }
 }
 
 /// The chains of `chains.parquet` in SI units, chain-major: the trace of
@@ -227,19 +228,22 @@ fn read_summary(path: &Path) -> Result<Vec<SummaryRow>> {
     let names = str_column(&df, "parameter", path)?;
     let col = |n: &str| f64_column(&df, n, path);
     let (mean, sd, q05, q50, q95) = (col("mean")?, col("sd")?, col("q05")?, col("q50")?, col("q95")?);
-    let (eb, et, rh, tau) = (col("ess_bulk")?, col("ess_tail")?, col("r_hat")?, col("tau_int")?);
+    let (eb, et, rh, tau, mcse) = (col("ess_bulk")?, col("ess_tail")?, col("r_hat")?, col("tau_int")?, col("mcse_mean")?);
     Ok((0..names.len())
         .map(|i| SummaryRow {
             parameter: names[i].clone(),
-            mean: mean[i],
-            sd: sd[i],
-            q05: q05[i],
-            q50: q50[i],
-            q95: q95[i],
-            ess_bulk: eb[i],
-            ess_tail: et[i],
-            r_hat: rh[i],
-            tau_int: tau[i],
+            stats: ParameterDiagnostics {
+                mean: mean[i],
+                sd: sd[i],
+                q05: q05[i],
+                q50: q50[i],
+                q95: q95[i],
+                ess_bulk: eb[i],
+                ess_tail: et[i],
+                r_hat: rh[i],
+                tau_int: tau[i],
+                mcse_mean: mcse[i],
+            },
         })
         .collect())
 }

@@ -163,7 +163,8 @@ pub fn write_records(dir: &Path, cal: &Calibration) -> Result<()> {
         reference_current_a: cal.settings.reference_current_a,
         currents: cal.campaign.currents(),
         manifest: manifest.display().to_string(),
-        current_a: cal.current_a,
+        // a current law's parameters are those of its reference current
+        current_a: if cal.posterior.law.is_some() { cal.settings.reference_current_a } else { cal.current_a },
         runs: cal.campaign.runs.iter().map(|r| r.id().to_string()).collect(),
         noise: format!("{:?}", cal.settings.likelihood.noise),
         part: format!("{:?}", cal.settings.likelihood.part),
@@ -196,9 +197,12 @@ pub fn write_records(dir: &Path, cal: &Calibration) -> Result<()> {
 /// The posterior summary table and the diagnostics' verdict.
 pub fn print_summary(cal: &Calibration) {
     let dg = &cal.diagnostics;
+    let at = match &cal.posterior.law {
+        Some(law) => format!("current law (reference {} A) from {:?} A", law.reference_a, cal.campaign.currents()),
+        None => format!("posterior at {} A", cal.current_a),
+    };
     println!(
-        "\nposterior at {} A: {} walkers × {} steps, burn-in {} (τ_max {:.1}), {:?} noise, {} sub-step(s) per sample",
-        cal.current_a,
+        "\n{at}: {} walkers × {} steps, burn-in {} (τ_max {:.1}), {:?} noise, {} sub-step(s) per sample",
         cal.chains.chains(),
         dg.steps,
         dg.burn_in,

@@ -133,7 +133,7 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
                 num(rec.identification.get(*n).copied().unwrap_or(f64::NAN), 3),
                 num(rec.map.get(*n).copied().unwrap_or(f64::NAN), 3),
                 s.map_or("–".into(), |s| num(s.q50, 3)),
-                s.map_or("–".into(), |s| format!("{} – {}", num(s.q05, 3), num(s.q95, 3))),
+                s.map_or("–".into(), |s| format!("{} – {}", num(s.q05, 4), num(s.q95, 4))),
             ]
         })
         .collect();
@@ -276,7 +276,7 @@ fn verdicts(cal: &StoredCalibration, coverage: &[CoverageRow]) -> Vec<(String, M
         v.push((
             "integrator step: halving it moves no MAP parameter by the limit".to_string(),
             Mark::of(last.largest_shift_sd < limit),
-            format!("{} sub-step(s): {:.3} sd ({}), limit {limit}", last.substeps, last.largest_shift_sd, last.parameter),
+            format!("{} sub-step(s): {:.3} sd ({}), limit {limit:.3}", last.substeps, last.largest_shift_sd, last.parameter),
         ));
     }
     for r in coverage.iter().filter(|r| !r.calibrated) {
