@@ -568,6 +568,10 @@ pub fn loo_cmd(dir: &Path, options: &PredictOptions, validation: &ValidationOpti
     let clock = std::time::Instant::now();
     let stored = StoredCalibration::open(dir)?;
     let campaign = stored.campaign()?;
+    if campaign.runs.len() < 2 {
+        println!("leave-one-out skipped: the calibration in {} has a single run", dir.display());
+        return Ok(vec![]);
+    }
     let settings = LooSettings { steps: validation.loo_steps, draws: options.draws, replicates: options.replicates, seed: options.seed };
     let held = validate::leave_one_out(&stored, &campaign, &settings, true)?;
     let predictions: Vec<RunPrediction> = held
