@@ -181,10 +181,9 @@ pub fn calibrate_with(
 /// logarithms), with the burn-in of the log-scale diagnostics unless given.
 pub fn si_diagnostics(post: &Posterior, chains: &Chains, burn_in: Option<usize>) -> Diagnostics {
     let burn = burn_in.unwrap_or_else(|| Diagnostics::burn_in_rule(chains));
-    let positive = post.theta_len() + post.runs.len();
     let coords: Vec<ParameterDiagnostics> = (0..chains.dim)
         .map(|i| {
-            let traces = chains.traces_of(burn, |x| if i < positive { x[i].exp() } else { x[i].tanh() });
+            let traces = chains.traces_of(burn, |x| post.coordinate_to_si(i, x[i]));
             ParameterDiagnostics::of(&traces, chains.ensembles)
         })
         .collect();

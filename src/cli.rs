@@ -11,8 +11,8 @@ use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings
 use crate::posterior::CalibrationSettings;
 use crate::output;
 use crate::output::prediction::{CoverageRow, PredictionRecord, RunPrediction};
-use crate::posterior::{ModelKind, RecordPart, RunData};
-use crate::predict::{self, PredictSettings};
+use crate::posterior::{ModelKind, RunData};
+use crate::predict;
 use crate::report;
 use crate::validate::{self, LooSettings};
 use crate::stored::StoredCalibration;
@@ -472,16 +472,10 @@ pub fn predict_cmd(dir: &Path, out: &Path, options: &PredictOptions, progress: b
     let clock = std::time::Instant::now();
     let stored = StoredCalibration::open(dir)?;
     // a current law predicts every run of the campaign, seen or not
-    let campaign = if stored.record.is_current_law() { stored.full_campaign()? } else { stored.campaign()? };
+    let campaign = if stored.is_current_law() { stored.full_campaign()? } else { stored.campaign()? };
     let positions = stored.draw_positions(options.draws);
     let integrator = stored.integrator();
-    let lik = &stored.settings.likelihood;
-    let settings = PredictSettings {
-        noise: lik.noise,
-        student_nu: lik.student_nu,
-        replicates: options.replicates,
-        seed: options.seed,
-    };
+    let settings = stored.predict_settings(options.replicates, options.seed);
     let bar = if progress {
         let bar = indicatif::ProgressBar::new((positions.len() * campaign.runs.len()) as u64);
         bar.set_style(
@@ -491,8 +485,7 @@ pub fn predict_cmd(dir: &Path, out: &Path, options: &PredictOptions, progress: b
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let data: Vec<RunData> =
-        campaign.runs.iter().map(|r| RunData::from_run(r, RecordPart::WholeRecord, lik.smooth_strain_ms)).collect();
+    let data: Vec<RunData> = campaign.runs.iter().map(|r| stored.prediction_data(r)).collect();
     let mut predictions = Vec::new();
     for (j, (run, data)) in campaign.runs.iter().zip(&data).enumerate() {
         let draws = positions

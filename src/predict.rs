@@ -26,6 +26,16 @@ pub struct Draw {
     pub rho: f64,
 }
 
+impl Draw {
+    /// The draw for a run the posterior did not see, whose own noise is
+    /// unknown: the root-mean-square σ (and mean ρ) of the runs it saw.
+    pub fn for_unseen_run(params: Params, sigmas: &[f64], rhos: &[f64]) -> Draw {
+        let mean = |v: &[f64]| if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 };
+        let squares: Vec<f64> = sigmas.iter().map(|s| s * s).collect();
+        Draw { params, sigma: mean(&squares).sqrt(), rho: mean(rhos) }
+    }
+}
+
 /// How the bands are computed.
 #[derive(Clone, Copy, Debug)]
 pub struct PredictSettings {

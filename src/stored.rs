@@ -6,12 +6,11 @@ use std::path::{Path, PathBuf};
 
 use crate::data::{Campaign, Run};
 use crate::error::{Error, Result};
-use crate::model::{Integrator, Params, PARAM_NAMES};
+use crate::model::{Integrator, Params};
 use crate::output::calibration::CalibrationRecord;
 use crate::output::{column_names, f64_column, read_parquet, str_column};
-use crate::posterior::current_law::LAW_NAMES;
-use crate::posterior::{CalibrationSettings, NoiseModel, Prior};
-use crate::predict::Draw;
+use crate::posterior::{CalibrationSettings, ModelKind, NoiseModel, RecordPart, RunData};
+use crate::predict::{Draw, PredictSettings};
 use crate::sampler::ParameterDiagnostics;
 
 /// One row of `summary.parquet`: a parameter's name and its statistics
@@ -127,20 +126,34 @@ impl StoredCalibration {
         Campaign::load(&manifest)
     }
 
-    /// Names of the θ coordinates: the seven B-P parameters or the law's.
-    pub fn theta_names(&self) -> Vec<String> {
-        let names: &[&str] = if self.record.is_current_law() { &LAW_NAMES } else { &PARAM_NAMES };
-        names.iter().map(|s| s.to_string()).collect()
+    pub fn is_current_law(&self) -> bool {
+        self.settings.model == ModelKind::CurrentLaw
     }
 
-    /// Priors of the θ coordinates, in the order of [`Self::theta_names`].
-    pub fn theta_priors(&self) -> Vec<Prior> {
-        let bp = self.settings.priors();
-        if self.record.is_current_law() {
-            self.settings.law().priors(&bp)
-        } else {
-            bp.to_vec()
-        }
+    /// Names of the θ coordinates: the seven B-P parameters or the law's.
+    pub fn theta_names(&self) -> Vec<String> {
+        self.settings.model.theta_names().iter().map(|s| s.to_string()).collect()
+    }
+
+    /// The largest R̂ and the smallest bulk or tail ESS of the summary.
+    pub fn max_rhat(&self) -> f64 {
+        self.summary.iter().map(|r| r.r_hat).fold(f64::NAN, f64::max)
+    }
+
+    pub fn min_ess(&self) -> f64 {
+        self.summary.iter().map(|r| r.ess_bulk.min(r.ess_tail)).fold(f64::NAN, f64::min)
+    }
+
+    /// A run as a prediction sees it: the whole record, its strain smoothed
+    /// as in the likelihood.
+    pub fn prediction_data(&self, run: &Run) -> RunData {
+        RunData::from_run(run, RecordPart::WholeRecord, self.settings.likelihood.smooth_strain_ms)
+    }
+
+    /// Band settings with this calibration's noise model.
+    pub fn predict_settings(&self, replicates: usize, seed: u64) -> PredictSettings {
+        let lik = &self.settings.likelihood;
+        PredictSettings { noise: lik.noise, student_nu: lik.student_nu, replicates, seed }
     }
 
     /// The integrator the likelihood used.
@@ -182,7 +195,7 @@ impl StoredCalibration {
                 Ok(self.chains.at(i, step, chain))
             })
             .collect::<Result<Vec<f64>>>()?;
-        Ok(if self.record.is_current_law() {
+        Ok(if self.is_current_law() {
             self.settings.law().params(&theta, current_a)
         } else {
             Params::from_array(std::array::from_fn(|k| theta[k]))
@@ -190,36 +203,26 @@ impl StoredCalibration {
     }
 
     /// The draw as `run` sees it; a run the calibration did not see gets
-    /// the root-mean-square σ (and mean ρ) of the runs it did see.
+    /// the noise of [`Draw::for_unseen_run`].
     pub fn draw_for_run(&self, step: usize, chain: usize, run: &Run) -> Result<Draw> {
         let params = self.params_at(step, chain, run.spec.current_a)?;
         let run = run.id();
+        // the run's own column, or every run's
         let get = |prefix: &str| -> Vec<f64> {
             let own = format!("{prefix}_{run}");
-            match self.chains.index(&own) {
-                Some(i) => vec![self.chains.at(i, step, chain)],
-                None => self
-                    .chains
-                    .names
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, n)| n.starts_with(&format!("{prefix}_")))
-                    .map(|(i, _)| self.chains.at(i, step, chain))
-                    .collect(),
-            }
+            let any = format!("{prefix}_");
+            let columns: Vec<usize> = match self.chains.index(&own) {
+                Some(i) => vec![i],
+                None => (0..self.chains.names.len()).filter(|&i| self.chains.names[i].starts_with(&any)).collect(),
+            };
+            columns.into_iter().map(|i| self.chains.at(i, step, chain)).collect()
         };
         let sigmas = get("sigma");
         if sigmas.is_empty() {
             return Err(Error::input(self.dir.join("chains.parquet"), "no sigma_<run> column"));
         }
-        let sigma = (sigmas.iter().map(|s| s * s).sum::<f64>() / sigmas.len() as f64).sqrt();
-        let rhos = get("rho");
-        let rho = if self.settings.likelihood.noise == NoiseModel::Ar1 && !rhos.is_empty() {
-            rhos.iter().sum::<f64>() / rhos.len() as f64
-        } else {
-            0.0
-        };
-        Ok(Draw { params, sigma, rho })
+        let rhos = if self.settings.likelihood.noise == NoiseModel::Ar1 { get("rho") } else { vec![] };
+        Ok(Draw::for_unseen_run(params, &sigmas, &rhos))
     }
 }
 

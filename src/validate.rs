@@ -11,8 +11,8 @@
 use crate::calibrate::si_diagnostics;
 use crate::data::{Campaign, Run};
 use crate::error::{Error, Result};
-use crate::posterior::{NoiseModel, Posterior, RecordPart, RunData};
-use crate::predict::{self, Bands, Draw, PredictSettings};
+use crate::posterior::{Posterior, RunData};
+use crate::predict::{self, Bands, Draw};
 use crate::sampler::{LogDensity, RunControl, Sampler, SamplerSettings};
 use crate::stored::StoredCalibration;
 
@@ -67,22 +67,8 @@ fn hold_out(stored: &StoredCalibration, campaign: &Campaign, j: usize, left_out:
         .iter()
         .map(|n| ch.index(n).ok_or_else(|| Error::input(stored.dir.join("chains.parquet"), format!("no column '{n}'"))))
         .collect::<Result<_>>()?;
-    let nr = kept.runs.len();
     let init: Vec<Vec<f64>> = (0..ch.chains)
-        .map(|c| {
-            columns
-                .iter()
-                .enumerate()
-                .map(|(k, &i)| {
-                    let v = ch.at(i, last, c);
-                    if k < posterior.theta_len() + nr {
-                        v.ln()
-                    } else {
-                        v.atanh()
-                    }
-                })
-                .collect()
-        })
+        .map(|c| posterior.from_si(&columns.iter().map(|&i| ch.at(i, last, c)).collect::<Vec<f64>>()))
         .collect();
     let s = &stored.settings.sampler;
     let sampler_settings = SamplerSettings {
@@ -98,21 +84,18 @@ fn hold_out(stored: &StoredCalibration, campaign: &Campaign, j: usize, left_out:
     let diagnostics = si_diagnostics(&posterior, chains, None);
     let burn = diagnostics.burn_in;
     let pairs: Vec<(usize, usize)> = (burn..chains.steps()).flat_map(|st| (0..chains.chains()).map(move |c| (st, c))).collect();
-    let d = posterior.dim();
+    let (d, nt, nr) = (posterior.dim(), posterior.theta_len(), kept.runs.len());
     let draws: Vec<Draw> = predict::evenly_spaced(pairs.len(), settings.draws)
         .into_iter()
         .map(|i| {
             let (st, c) = pairs[i];
             let x: Vec<f64> = (0..d).map(|k| chains.at(st, c, k)).collect();
-            let nt = posterior.theta_len();
-            let sigma = (x[nt..nt + nr].iter().map(|l| (2.0 * l).exp()).sum::<f64>() / nr as f64).sqrt();
-            let rho = if posterior.noise == NoiseModel::Ar1 { x[nt + nr..].iter().map(|z| z.tanh()).sum::<f64>() / nr as f64 } else { 0.0 };
-            Draw { params: posterior.params_at_current(&x, left_out.spec.current_a), sigma, rho }
+            let si = posterior.to_si(&x);
+            Draw::for_unseen_run(posterior.params_at_current(&x, left_out.spec.current_a), &si[nt..nt + nr], &si[nt + nr..])
         })
         .collect();
-    let lik = &stored.settings.likelihood;
-    let data = RunData::from_run(left_out, RecordPart::WholeRecord, lik.smooth_strain_ms);
-    let predict_settings = PredictSettings { noise: lik.noise, student_nu: lik.student_nu, replicates: settings.replicates, seed: settings.seed };
+    let data = stored.prediction_data(left_out);
+    let predict_settings = stored.predict_settings(settings.replicates, settings.seed);
     let bands = predict::bands(&data, j, &draws, &stored.integrator(), &predict_settings, &|| {})?;
     Ok(HeldOut { run: left_out.id().to_string(), data, bands, max_rhat: diagnostics.max_rhat(), burn_in: burn })
 }

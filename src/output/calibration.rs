@@ -86,12 +86,6 @@ pub struct CalibrationRecord {
     #[serde(default)]
     pub command: String,
     pub campaign: String,
-    /// `per-current` (seven parameters for the runs of one current) or
-    /// `current-law` (posterior::current_law, runs of several currents).
-    #[serde(default = "per_current")]
-    pub model: String,
-    #[serde(default = "one_ampere")]
-    pub reference_current_a: f64,
     /// The coil currents of the runs calibrated on.
     #[serde(default)]
     pub currents: Vec<f64>,
@@ -118,19 +112,7 @@ pub struct CalibrationRecord {
     pub warnings: Vec<String>,
 }
 
-fn per_current() -> String {
-    "per-current".into()
-}
-
-fn one_ampere() -> f64 {
-    1.0
-}
-
 impl CalibrationRecord {
-    pub fn is_current_law(&self) -> bool {
-        self.model == "current-law"
-    }
-
     pub fn read(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
         toml::from_str(&text).map_err(|e| Error::input(path, format!("not a calibration record: {}", e.message())))
@@ -156,11 +138,6 @@ pub fn write_records(dir: &Path, cal: &Calibration) -> Result<()> {
         mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
         command: command_line(),
         campaign: cal.campaign.name.clone(),
-        model: match cal.settings.model {
-            crate::posterior::ModelKind::PerCurrent => per_current(),
-            crate::posterior::ModelKind::CurrentLaw => "current-law".into(),
-        },
-        reference_current_a: cal.settings.reference_current_a,
         currents: cal.campaign.currents(),
         manifest: manifest.display().to_string(),
         // a current law's parameters are those of its reference current

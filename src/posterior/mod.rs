@@ -14,7 +14,7 @@ pub mod settings;
 use statrs::function::gamma::ln_gamma;
 
 use crate::data::{local_polynomial, Campaign, Run};
-use crate::model::{Integrator, Params, LANES, PARAM_NAMES};
+use crate::model::{Integrator, Params, LANES};
 use crate::sampler::LogDensity;
 pub use current_law::CurrentLaw;
 pub use prior::Prior;
@@ -107,10 +107,7 @@ impl Posterior {
                 .iter()
                 .map(|r| RunData::from_run(r, settings.likelihood.part, settings.likelihood.smooth_strain_ms))
                 .collect(),
-            priors: match settings.model {
-                ModelKind::PerCurrent => settings.priors().to_vec(),
-                ModelKind::CurrentLaw => settings.law().priors(&settings.priors()),
-            },
+            priors: settings.theta_priors(),
             law: (settings.model == ModelKind::CurrentLaw).then(|| settings.law()),
             noise: settings.likelihood.noise,
             student_nu: settings.likelihood.student_nu,
@@ -138,8 +135,8 @@ impl Posterior {
 
     /// Names of the coordinates in SI (`G` … `n` or the law's, `sigma_<run>`, `rho_<run>`).
     pub fn names(&self) -> Vec<String> {
-        let theta: &[&str] = if self.law.is_some() { &current_law::LAW_NAMES } else { &PARAM_NAMES };
-        let mut names: Vec<String> = theta.iter().map(|s| s.to_string()).collect();
+        let kind = if self.law.is_some() { ModelKind::CurrentLaw } else { ModelKind::PerCurrent };
+        let mut names: Vec<String> = kind.theta_names().iter().map(|s| s.to_string()).collect();
         names.extend(self.runs.iter().map(|r| format!("sigma_{}", r.id)));
         if self.noise == NoiseModel::Ar1 {
             names.extend(self.runs.iter().map(|r| format!("rho_{}", r.id)));
@@ -147,13 +144,24 @@ impl Posterior {
         names
     }
 
+    /// Coordinate `i` in SI units: θ and σ are logarithms, ρ is atanh ρ.
+    pub fn coordinate_to_si(&self, i: usize, v: f64) -> f64 {
+        if i < self.theta_len() + self.runs.len() {
+            v.exp()
+        } else {
+            v.tanh()
+        }
+    }
+
     /// A point in SI units (θ, σ, ρ) from unconstrained coordinates.
     pub fn to_si(&self, x: &[f64]) -> Vec<f64> {
-        let nr = self.runs.len();
-        x.iter()
-            .enumerate()
-            .map(|(i, v)| if i < self.theta_len() + nr { v.exp() } else { v.tanh() })
-            .collect()
+        x.iter().enumerate().map(|(i, v)| self.coordinate_to_si(i, *v)).collect()
+    }
+
+    /// The unconstrained coordinates of a point in SI units (inverse of [`Self::to_si`]).
+    pub fn from_si(&self, si: &[f64]) -> Vec<f64> {
+        let positive = self.theta_len() + self.runs.len();
+        si.iter().enumerate().map(|(i, v)| if i < positive { v.ln() } else { v.atanh() }).collect()
     }
 
     /// The B-P parameters of the seven-parameter model at ln θ = `x[..7]`.
@@ -165,7 +173,7 @@ impl Posterior {
     pub fn params_at_current(&self, x: &[f64], current_a: f64) -> Params {
         match &self.law {
             Some(law) => {
-                let theta: Vec<f64> = x[..self.theta_len()].iter().map(|v| v.exp()).collect();
+                let theta: [f64; current_law::LAW_NAMES.len()] = std::array::from_fn(|i| x[i].exp());
                 law.params(&theta, current_a)
             }
             None => Self::params(x),
@@ -236,14 +244,18 @@ impl Posterior {
         let count = out.len();
         let mut params = [Params::reference_1a(); LANES];
         for lane in 0..count {
-            out[lane] = self.log_prior(&xs[lane * d..(lane + 1) * d]);
+            let x = &xs[lane * d..(lane + 1) * d];
+            out[lane] = self.log_prior(x);
+            if out[lane] > f64::NEG_INFINITY && self.law.is_none() {
+                params[lane] = Self::params(x); // the same for every run
+            }
         }
         if out.iter().all(|v| *v == f64::NEG_INFINITY) {
             return;
         }
         for (i, r) in self.runs.iter().enumerate() {
-            for lane in 0..count {
-                if out[lane] > f64::NEG_INFINITY {
+            if self.law.is_some() {
+                for lane in (0..count).filter(|&l| out[l] > f64::NEG_INFINITY) {
                     params[lane] = self.params_at_current(&xs[lane * d..(lane + 1) * d], r.current_a);
                 }
             }

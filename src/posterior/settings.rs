@@ -130,6 +130,16 @@ pub enum ModelKind {
     CurrentLaw,
 }
 
+impl ModelKind {
+    /// Names of the θ coordinates (before the noise ones), SI in outputs.
+    pub fn theta_names(self) -> &'static [&'static str] {
+        match self {
+            ModelKind::PerCurrent => &PARAM_NAMES,
+            ModelKind::CurrentLaw => &super::current_law::LAW_NAMES,
+        }
+    }
+}
+
 /// Everything that defines a calibration besides the data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -207,6 +217,14 @@ impl CalibrationSettings {
     /// The priors in parameter order.
     pub fn priors(&self) -> [Prior; 7] {
         std::array::from_fn(|i| self.prior[PARAM_NAMES[i]])
+    }
+
+    /// Priors of the θ coordinates, in the order of [`ModelKind::theta_names`].
+    pub fn theta_priors(&self) -> Vec<Prior> {
+        match self.model {
+            ModelKind::PerCurrent => self.priors().to_vec(),
+            ModelKind::CurrentLaw => self.law().priors(&self.priors()),
+        }
     }
 
     /// The current law of a `current-law` model.

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use super::html::{esc, num, Mark, Page};
+use super::Figures;
 use crate::compare::difference;
 use crate::data::loading_branches;
 use crate::error::{Error, Result};
@@ -33,7 +34,7 @@ impl Entry {
     }
 
     fn is_law(&self) -> bool {
-        self.cal.record.is_current_law()
+        self.cal.is_current_law()
     }
 }
 
@@ -120,7 +121,7 @@ pub fn write(dirs: &[PathBuf], out: &Path, rpm: Option<f64>) -> Result<PathBuf> 
             .f64("p_greater", col(&|d| d.p_greater)),
     )?;
 
-    let mut figs: Vec<(String, String)> = Vec::new();
+    let mut figs = Figures::default();
     forest(out, &entries, &mut figs)?;
     against_current(out, &entries, &mut figs)?;
     overlay(out, &entries, rpm, &mut figs)?;
@@ -132,12 +133,10 @@ pub fn write(dirs: &[PathBuf], out: &Path, rpm: Option<f64>) -> Result<PathBuf> 
     let rows_html: Vec<Vec<String>> = entries
         .iter()
         .map(|e| {
-            let s = &e.cal.summary;
-            let rhat = s.iter().map(|r| r.r_hat).fold(f64::NAN, f64::max);
-            let ess = s.iter().map(|r| r.ess_bulk.min(r.ess_tail)).fold(f64::NAN, f64::min);
+            let (rhat, ess) = (e.cal.max_rhat(), e.cal.min_ess());
             vec![
                 esc(&e.label),
-                esc(&e.cal.record.model),
+                if e.is_law() { "current law".into() } else { "per current".into() },
                 if e.is_law() { format!("{:?}", e.cal.record.currents) } else { num(e.cal.record.current_a, 2) },
                 esc(&e.cal.record.runs.join(", ")),
                 format!("{rhat:.4}"),
@@ -199,12 +198,12 @@ pub fn write(dirs: &[PathBuf], out: &Path, rpm: Option<f64>) -> Result<PathBuf> 
 
     page.section("current-law", "Current law and held-out currents");
     law_section(&mut page, &entries);
-    for (stem, caption) in figs.iter().filter(|f| f.0.starts_with("held_out")) {
+    for (stem, caption) in figs.items.iter().filter(|f| f.0.starts_with("held_out")) {
         page.figure(&out.join(format!("{stem}.png")), caption)?;
     }
 
     page.section("figures", "Figures");
-    for (stem, caption) in figs.iter().filter(|f| !f.0.starts_with("held_out")) {
+    for (stem, caption) in figs.items.iter().filter(|f| !f.0.starts_with("held_out")) {
         page.figure(&out.join(format!("{stem}.png")), caption)?;
     }
 
@@ -265,7 +264,7 @@ fn law_section(page: &mut Page, entries: &[Entry]) {
 
 /// A forest plot per B-P parameter: each calibration's median and 90 %
 /// interval.
-fn forest(out: &Path, entries: &[Entry], figs: &mut Vec<(String, String)>) -> Result<()> {
+fn forest(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
     let mut panels = Vec::new();
     for name in PARAM_NAMES {
         let mut c = Chart::new(name, format!("{name} (SI)"), "calibration");
@@ -283,30 +282,37 @@ fn forest(out: &Path, entries: &[Entry], figs: &mut Vec<(String, String)>) -> Re
         panels.push(c);
     }
     plot::save(&Figure::grid(panels, 4), &out.join("forest"))?;
-    figs.push(("forest".into(), "Forest plot: median (dot) and 90 % credible interval (bar) of each parameter in each calibration, top to bottom in the order given.".into()));
+    figs.push("forest", "Forest plot: median (dot) and 90 % credible interval (bar) of each parameter in each calibration, top to bottom in the order given.");
     Ok(())
 }
 
 /// Each B-P parameter against the coil current: per-current calibrations as
 /// medians with 90 % bars, current laws as a 90 % band over the current.
-fn against_current(out: &Path, entries: &[Entry], figs: &mut Vec<(String, String)>) -> Result<()> {
+fn against_current(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
     let per_current: Vec<&Entry> = entries.iter().filter(|e| !e.is_law()).collect();
     let top = entries.iter().flat_map(|e| e.cal.record.currents.iter().copied().chain([e.cal.record.current_a])).fold(0.0f64, f64::max);
     if top <= 0.0 {
         return Ok(());
     }
     let grid: Vec<f64> = (1..=60).map(|i| 1.15 * top * i as f64 / 60.0).collect();
+    let laws: Vec<&Entry> = entries.iter().filter(|e| e.is_law()).collect();
+    // each law's B-P parameters at each current of the grid, over 400 of its draws
+    let law_params: Vec<Vec<Vec<[f64; 7]>>> = laws
+        .iter()
+        .map(|law| {
+            let take: Vec<(usize, usize)> = law.positions.iter().step_by((law.positions.len() / 400).max(1)).copied().collect();
+            grid.iter()
+                .map(|&i| take.iter().filter_map(|&(s, ch)| law.cal.params_at(s, ch, i).ok()).map(|p| p.to_array()).collect())
+                .collect()
+        })
+        .collect();
     let mut panels = Vec::new();
     for (k, name) in PARAM_NAMES.iter().enumerate() {
         let mut c = Chart::new(*name, "coil current I (A)", format!("{name} (SI)"));
-        for (j, law) in entries.iter().filter(|e| e.is_law()).enumerate() {
-            // the law's parameter at each current, over its draws
-            let take: Vec<(usize, usize)> = law.positions.iter().step_by((law.positions.len() / 400).max(1)).copied().collect();
-            let mut lo = Vec::new();
-            let mut mid = Vec::new();
-            let mut hi = Vec::new();
-            for &i in &grid {
-                let v: Vec<f64> = take.iter().filter_map(|&(s, ch)| law.cal.params_at(s, ch, i).ok()).map(|p| p.to_array()[k]).collect();
+        for (j, (law, at_grid)) in laws.iter().zip(&law_params).enumerate() {
+            let (mut lo, mut mid, mut hi) = (Vec::new(), Vec::new(), Vec::new());
+            for draws in at_grid {
+                let v: Vec<f64> = draws.iter().map(|p| p[k]).collect();
                 lo.push(quantile(&v, 0.05));
                 mid.push(quantile(&v, 0.5));
                 hi.push(quantile(&v, 0.95));
@@ -330,37 +336,31 @@ fn against_current(out: &Path, entries: &[Entry], figs: &mut Vec<(String, String
         panels.push(c);
     }
     plot::save(&Figure::grid(panels, 4), &out.join("against_current"))?;
-    figs.push(("against_current".into(), "Each B-P parameter against the coil current: per-current calibrations (median and 90 % interval) and, where given, the current law's 90 % band.".into()));
+    figs.push("against_current", "Each B-P parameter against the coil current: per-current calibrations (median and 90 % interval) and, where given, the current law's 90 % band.");
     Ok(())
 }
 
 /// The predictive bands of every per-current calibration at one crank
 /// speed, over one another (τ against time over the first revolution).
-fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Vec<(String, String)>) -> Result<()> {
-    let mut chosen: Vec<(&Entry, &StoredBands, f64)> = Vec::new();
-    let mut speeds = Vec::new();
-    for e in entries.iter().filter(|e| !e.is_law()) {
-        if let Some(bands) = &e.bands {
-            for b in bands {
-                speeds.push(rpm_of(&b.time, &b.displacement));
-            }
-        }
-    }
-    speeds.retain(|v| v.is_finite());
+fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Figures) -> Result<()> {
+    // every record of the per-current calibrations with its crank speed
+    let records: Vec<(&Entry, Vec<(&StoredBands, f64)>)> = entries
+        .iter()
+        .filter(|e| !e.is_law())
+        .filter_map(|e| e.bands.as_ref().map(|bands| (e, bands.iter().map(|b| (b, rpm_of(&b.time, &b.displacement))).collect())))
+        .collect();
+    let mut speeds: Vec<f64> = records.iter().flat_map(|(_, r)| r.iter().map(|(_, v)| *v)).filter(|v| v.is_finite()).collect();
     if speeds.is_empty() {
         return Ok(());
     }
     speeds.sort_by(f64::total_cmp);
     let target = rpm.unwrap_or(speeds[speeds.len() / 2]);
-    for e in entries.iter().filter(|e| !e.is_law()) {
-        if let Some(bands) = &e.bands {
-            if let Some(b) = bands.iter().min_by(|a, b| {
-                (rpm_of(&a.time, &a.displacement) - target).abs().total_cmp(&(rpm_of(&b.time, &b.displacement) - target).abs())
-            }) {
-                chosen.push((e, b, rpm_of(&b.time, &b.displacement)));
-            }
-        }
-    }
+    let chosen: Vec<(&Entry, &StoredBands, f64)> = records
+        .iter()
+        .filter_map(|(e, r)| {
+            r.iter().min_by(|a, b| (a.1 - target).abs().total_cmp(&(b.1 - target).abs())).map(|&(b, v)| (*e, b, v))
+        })
+        .collect();
     let mut c = Chart::new(format!("stress at about {target:.0} rpm"), "shear strain γ (-)", "shear stress τ (kPa)");
     for (k, (e, b, _)) in chosen.iter().enumerate() {
         let color = PALETTE[k % 8];
@@ -371,12 +371,12 @@ fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Vec<(Stri
     c.legend_at = LegendAt::Middle;
     plot::save(&Figure::single(c), &out.join("overlay"))?;
     let which: Vec<String> = chosen.iter().map(|(e, b, r)| format!("{} {} ({r:.0} rpm)", e.label, b.run)).collect();
-    figs.push(("overlay".into(), format!("Predictive bands of the calibrations over one another at about {target:.0} rpm: {}.", which.join(", "))));
+    figs.push("overlay", &format!("Predictive bands of the calibrations over one another at about {target:.0} rpm: {}.", which.join(", ")));
     Ok(())
 }
 
 /// The held-out runs of every current law, with their bands.
-fn held_out_figures(out: &Path, entries: &[Entry], figs: &mut Vec<(String, String)>) -> Result<()> {
+fn held_out_figures(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
     for law in entries.iter().filter(|e| e.is_law()) {
         let (Some(bands), Some(cov)) = (&law.bands, &law.coverage) else { continue };
         let held: Vec<&StoredBands> = bands.iter().filter(|b| cov.iter().any(|r| r.run == b.run && !r.calibrated)).collect();
@@ -398,7 +398,7 @@ fn held_out_figures(out: &Path, entries: &[Entry], figs: &mut Vec<(String, Strin
             .collect();
         let stem = format!("held_out_{}", law.label);
         plot::save(&Figure::grid(panels, 3), &out.join(&stem))?;
-        figs.push((stem, format!("{}: runs at currents it never saw, predicted by the current law with its 95 % predictive band.", law.label)));
+        figs.push(&stem, &format!("{}: runs at currents it never saw, predicted by the current law with its 95 % predictive band.", law.label));
     }
     Ok(())
 }

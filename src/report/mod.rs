@@ -58,9 +58,9 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
     let theta = cal.theta_names();
     let named = |m: &std::collections::BTreeMap<String, f64>| -> Vec<f64> { theta.iter().map(|n| m.get(n).copied().unwrap_or(f64::NAN)).collect() };
     // a current law's coordinates are not the identification's parameters
-    let identified = if rec.is_current_law() { vec![f64::NAN; theta.len()] } else { named(&rec.identification) };
+    let identified = if cal.is_current_law() { vec![f64::NAN; theta.len()] } else { named(&rec.identification) };
     figures::corner(dir, &cal.chains, &positions, &theta, &identified, &named(&rec.map), &mut figs)?;
-    figures::marginals(dir, &cal.chains, &positions, &theta, &cal.theta_priors(), &mut figs)?;
+    figures::marginals(dir, &cal.chains, &positions, &theta, &cal.settings.theta_priors(), &mut figs)?;
     figures::traces(dir, &cal.chains, cal.burn_in(), &mut figs)?;
     let mut loo_figs = Figures::default();
     if let Some(b) = &loo_bands {
@@ -69,7 +69,7 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
         figures::bands(&loo_dir, b, geometry.area_m2, geometry.gap_m, &mut loo_figs)?;
     }
 
-    let title = if rec.is_current_law() {
+    let title = if cal.is_current_law() {
         format!("mrbp report: {}, current law from {:?} A", rec.campaign, rec.currents)
     } else {
         format!("mrbp report: {} at {} A", rec.campaign, rec.current_a)
@@ -80,8 +80,8 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
     page.raw(&format!(
         "<p>B-P parameters of MR fluid calibrated on {} run(s) at {} by ensemble MCMC. {}</p>",
         rec.runs.len(),
-        if rec.is_current_law() {
-            format!("{:?} A as functions of the coil current (reference {} A)", rec.currents, rec.reference_current_a)
+        if cal.is_current_law() {
+            format!("{:?} A as functions of the coil current (reference {} A)", rec.currents, cal.settings.reference_current_a)
         } else {
             format!("{} A", rec.current_a)
         },
@@ -259,7 +259,7 @@ fn coverage_table(page: &mut Page, rows: &[CoverageRow]) {
 /// The report's checks: what, verdict, what was measured.
 fn verdicts(cal: &StoredCalibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, String)> {
     let s = &cal.summary;
-    let max_rhat = s.iter().map(|r| r.r_hat).fold(f64::NAN, f64::max);
+    let max_rhat = cal.max_rhat();
     let min_bulk = s.iter().map(|r| r.ess_bulk).fold(f64::NAN, f64::min);
     let min_tail = s.iter().map(|r| r.ess_tail).fold(f64::NAN, f64::min);
     let tau = cal.tau_max();
