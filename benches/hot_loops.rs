@@ -77,7 +77,7 @@ fn sampler_overhead() {
     let steps = 2000;
     let secs = best_of(3, || {
         let mut s = Sampler::new(&Cheap, SamplerSettings::default(), &init).unwrap();
-        s.run(&RunControl::fixed(steps)).unwrap();
+        s.run(&RunControl::fixed(steps), &mut []).unwrap();
         black_box(s.chains.positions.len());
     });
     let per = secs / (steps * 128) as f64;
@@ -90,13 +90,13 @@ fn sampler_overhead() {
     };
     let secs = best_of(3, || {
         let mut s = Sampler::new(&Cheap, settings.clone(), &init).unwrap();
-        s.run(&RunControl::fixed(steps)).unwrap();
+        s.run(&RunControl::fixed(steps), &mut []).unwrap();
         black_box(s.chains.positions.len());
     });
     println!("| DE 0.8 + snooker 0.2 | {} | {:.0} |", steps * 128, secs / (steps * 128) as f64 * 1e9);
     let secs = best_of(3, || {
         let mut s = Sampler::new(&Cheap, SamplerSettings::default(), &init).unwrap();
-        s.run(&RunControl::fixed(steps)).unwrap();
+        s.run(&RunControl::fixed(steps), &mut []).unwrap();
         black_box(s.diagnostics());
     });
     println!("\nDiagnostics of 128 chains × {steps} steps × 10 coordinates (with sampling): {:.2} s\n", secs);
@@ -148,7 +148,7 @@ fn convergence() {
 /// The B-P log-density over the bundled 1 A runs, evaluated as the sampler
 /// does (batches of 8 walkers, all threads).
 fn likelihood() {
-    use mrbp::posterior::{CalibrationSettings, Posterior};
+    use mrbp::calibrate::CalibrationSettings;
     use rayon::prelude::*;
     println!("## Log-density of the bundled 1 A runs (3 runs, 10 500 sample intervals)\n");
     let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -159,7 +159,7 @@ fn likelihood() {
     println!("|---|---|---|---|---|");
     for (extrapolate, substeps) in [(false, 1), (true, 1), (true, 2)] {
         let integ = Integrator { extrapolate, substeps, ..Integrator::default() };
-        let post = Posterior::new(&campaign, &settings, integ);
+        let post = settings.posterior(&campaign, integ);
         let d = post.dim();
         let p = Params::reference_1a().to_array();
         let points: Vec<f64> = (0..96)
@@ -193,7 +193,7 @@ fn likelihood() {
 
 fn main() {
     let only = std::env::args().nth(1).filter(|a| !a.starts_with('-'));
-    let want = |name: &str| only.as_deref().map_or(true, |o| name.contains(o));
+    let want = |name: &str| only.as_deref().is_none_or(|o| name.contains(o));
     if want("euler") {
         euler();
     }

@@ -11,7 +11,7 @@
 use mrbp::calibrate::calibrate;
 use mrbp::data::Campaign;
 use mrbp::model::{Params, PARAM_NAMES};
-use mrbp::posterior::CalibrationSettings;
+use mrbp::calibrate::CalibrationSettings;
 use mrbp::synth::{write_campaign, SynthSettings};
 
 fn main() -> mrbp::Result<()> {
@@ -29,8 +29,8 @@ fn main() -> mrbp::Result<()> {
         let campaign = Campaign::load(&dir.path().join("campaign.toml"))?;
         let mut settings = CalibrationSettings::default();
         settings.sampler.seed = seed;
-        let cal = calibrate(&campaign, &settings, false)?;
-        seconds += cal.seconds.start + cal.seconds.sampling;
+        let cal = calibrate(&campaign, &settings)?;
+        seconds += cal.seconds();
         let d = &cal.diagnostics;
         let mut zs = Vec::new();
         for i in 0..7 {

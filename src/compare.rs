@@ -1,11 +1,85 @@
-//! Comparing calibrations (of current levels, dampers, settings …): the
-//! posterior of the difference and of the ratio of a parameter between two
-//! independent calibrations, and the probability that one exceeds the other.
+//! Comparing calibrations (of current levels, dampers, settings …): their
+//! summaries side by side, the posterior of the difference and of the ratio
+//! of a parameter between two independent calibrations, and the probability
+//! that one exceeds the other.
 //!
 //! Two calibrations of different records have independent posteriors, so
 //! (a, b) pairs drawn one from each are draws of the joint posterior.
 
+use crate::posterior::{PosteriorSample, SummaryRow};
 use crate::sampler::quantile_sorted;
+
+/// One calibration as a comparison sees it.
+pub struct Entry<'a> {
+    pub label: String,
+    /// The current its parameters describe (a current law's reference).
+    pub current_a: f64,
+    pub summary: &'a [SummaryRow],
+    pub sample: &'a PosteriorSample,
+    /// The positions of the draws to compare.
+    pub positions: Vec<(usize, usize)>,
+}
+
+/// One row of `comparison.parquet`: a calibration's summary of one parameter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ComparisonRow {
+    pub calibration: String,
+    pub current_a: f64,
+    pub parameter: String,
+    pub mean: f64,
+    pub sd: f64,
+    pub q05: f64,
+    pub q50: f64,
+    pub q95: f64,
+}
+
+/// One row of `differences.parquet`: a pair of calibrations and a parameter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DifferenceRow {
+    pub a: String,
+    pub b: String,
+    pub parameter: String,
+    pub difference: Difference,
+}
+
+/// The tables of a comparison.
+pub struct Comparison {
+    pub rows: Vec<ComparisonRow>,
+    pub differences: Vec<DifferenceRow>,
+}
+
+impl Comparison {
+    /// Every calibration's summary, and for every pair the difference of
+    /// every parameter both have (noise scales are per run and left out).
+    pub fn of(entries: &[Entry]) -> Comparison {
+        let rows = entries
+            .iter()
+            .flat_map(|e| {
+                e.summary.iter().map(|r| ComparisonRow {
+                    calibration: e.label.clone(),
+                    current_a: e.current_a,
+                    parameter: r.parameter.clone(),
+                    mean: r.mean,
+                    sd: r.sd,
+                    q05: r.q05,
+                    q50: r.q50,
+                    q95: r.q95,
+                })
+            })
+            .collect();
+        let mut differences = Vec::new();
+        for (i, a) in entries.iter().enumerate() {
+            for b in &entries[i + 1..] {
+                for name in a.sample.layout.theta_names() {
+                    if let (Some(da), Some(db)) = (a.sample.values(name, &a.positions), b.sample.values(name, &b.positions)) {
+                        differences.push(DifferenceRow { a: a.label.clone(), b: b.label.clone(), parameter: name.clone(), difference: difference(&da, &db) });
+                    }
+                }
+            }
+        }
+        Comparison { rows, differences }
+    }
+}
 
 /// The posterior of a − b and a / b for one parameter.
 #[derive(Clone, Copy, Debug, PartialEq)]

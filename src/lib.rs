@@ -1,15 +1,30 @@
 //! mrbp: Bayesian calibration and uncertainty quantification of the
 //! Bodner-Partom viscoplastic model of MR fluid in MR dampers.
 //!
-//! The pipeline, one module per stage:
+//! The modules, from the ground floor up (each uses only those above it in
+//! this list; docs/architecture.md says more):
 //!
-//! * [`model`]: the B-P law (paper eqs. 3–4) and its Euler integrators;
-//! * [`data`]: test campaigns, records and the shear quantities of eqs. 1–2;
+//! * [`error`], [`rng`], [`atomic`], [`fit`], [`plot`]: errors and exit
+//!   codes, counter-based random streams, atomic file writing,
+//!   Levenberg-Marquardt fits, figures;
+//! * [`model`]: the B-P law (paper eqs. 3–4), its current law and its Euler
+//!   integrators; knows nothing of data or MCMC;
+//! * [`sampler`]: the ensemble MCMC sampler, generic over a log-density, and
+//!   its diagnostics; knows nothing of the model;
+//! * [`data`]: test campaigns, records, shear quantities (eqs. 1–2);
 //! * [`synth`]: virtual experiments on a crank-driven stand;
-//! * [`sampler`]: the ensemble MCMC sampler, generic over a log-density;
-//! * [`output`]: atomic file writing and Parquet tables;
+//! * [`identify`]: the paper's deterministic identification;
+//! * [`posterior`]: the posterior density, its layout, start and samples;
+//! * [`calibrate`]: one calibration, identification to posterior sample;
+//! * [`predict`]: posterior draws through the integrator: bands, coverage;
+//! * [`validate`]: leave-one-out validation;
+//! * [`compare`]: comparisons between calibrations;
+//! * [`store`]: the files of a calibration folder, written and read;
+//! * [`report`]: figures and HTML reports;
+//! * [`pipeline`]: the stages of a study as library calls;
 //! * [`cli`]: the command line.
 
+pub mod atomic;
 pub mod calibrate;
 pub mod cli;
 pub mod compare;
@@ -18,13 +33,14 @@ pub mod error;
 pub mod fit;
 pub mod identify;
 pub mod model;
-pub mod output;
+pub mod pipeline;
+pub mod plot;
 pub mod posterior;
 pub mod predict;
 pub mod report;
 pub mod rng;
 pub mod sampler;
-pub mod stored;
+pub mod store;
 pub mod synth;
 pub mod validate;
 

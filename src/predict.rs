@@ -11,40 +11,33 @@ use rand::RngExt;
 use rand_distr::{StandardNormal, StudentT};
 use rayon::prelude::*;
 
+use serde::{Deserialize, Serialize};
+
+use crate::data::Run;
 use crate::error::{Error, Result};
 use crate::model::{Integrator, Params, LANES};
-use crate::posterior::{NoiseModel, RunData};
+use crate::posterior::{Draw, LikelihoodSettings, NoiseModel, RunData};
 use crate::rng;
 use crate::sampler::quantile_sorted;
-
-/// One posterior draw as a run sees it: the B-P parameters and the noise of
-/// that run (σ, and ρ for AR(1) noise; 0 otherwise).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Draw {
-    pub params: Params,
-    pub sigma: f64,
-    pub rho: f64,
-}
-
-impl Draw {
-    /// The draw for a run the posterior did not see, whose own noise is
-    /// unknown: the root-mean-square σ (and mean ρ) of the runs it saw.
-    pub fn for_unseen_run(params: Params, sigmas: &[f64], rhos: &[f64]) -> Draw {
-        let mean = |v: &[f64]| if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 };
-        let squares: Vec<f64> = sigmas.iter().map(|s| s * s).collect();
-        Draw { params, sigma: mean(&squares).sqrt(), rho: mean(rhos) }
-    }
-}
 
 /// How the bands are computed.
 #[derive(Clone, Copy, Debug)]
 pub struct PredictSettings {
+    /// The integrator the likelihood used.
+    pub integrator: Integrator,
     pub noise: NoiseModel,
     /// Degrees of freedom of Student-t noise.
     pub student_nu: f64,
     /// Noise replicates per draw in the predictive band.
     pub replicates: usize,
     pub seed: u64,
+}
+
+impl PredictSettings {
+    /// Bands with the likelihood's integrator and noise model.
+    pub fn new(integrator: Integrator, likelihood: &LikelihoodSettings, replicates: usize, seed: u64) -> Self {
+        PredictSettings { integrator, noise: likelihood.noise, student_nu: likelihood.student_nu, replicates, seed }
+    }
 }
 
 /// Probabilities of the model band and of the predictive band.
@@ -81,8 +74,7 @@ impl Bands {
     pub fn coverage(&self, tau_obs: &[f64]) -> Coverage {
         let n = tau_obs.len().saturating_sub(1).max(1);
         let (mut inside_p, mut inside_m, mut sq) = (0usize, 0usize, 0.0);
-        for k in 1..tau_obs.len() {
-            let y = tau_obs[k];
+        for (k, &y) in tau_obs.iter().enumerate().skip(1) {
             inside_p += (y >= self.predictive[0][k] && y <= self.predictive[1][k]) as usize;
             inside_m += (y >= self.model[0][k] && y <= self.model[4][k]) as usize;
             sq += (y - self.model[2][k]).powi(2);
@@ -103,10 +95,10 @@ pub fn bands(
     run: &RunData,
     run_index: usize,
     draws: &[Draw],
-    integrator: &Integrator,
     settings: &PredictSettings,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Bands> {
+    let integrator = &settings.integrator;
     let n = run.time.len();
     // model stress of each draw, in draw order; None where it failed
     let paths: Vec<Option<Vec<f64>>> = draws
@@ -168,13 +160,102 @@ pub fn bands(
     Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed: draws.len() - kept.len() })
 }
 
-/// Indices of `count` draws spread evenly over `available` (all of them if
-/// there are fewer): deterministic thinning without randomness.
-pub fn evenly_spaced(available: usize, count: usize) -> Vec<usize> {
-    if count == 0 || available <= count {
-        return (0..available).collect();
+/// One run's bands with the record they describe: what `bands.parquet`
+/// holds for the run, and what the figures draw.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunBands {
+    pub run: String,
+    pub current_a: f64,
+    pub time: Vec<f64>,
+    /// The measured strain.
+    pub gamma: Vec<f64>,
+    /// The smoothed strain that drove the model.
+    pub gamma_model: Vec<f64>,
+    pub tau_obs: Vec<f64>,
+    /// q025, q25, q50, q75, q975 of the model stress (Pa).
+    pub model: [Vec<f64>; 5],
+    /// p025, p975 of a new measurement (Pa).
+    pub predictive: [Vec<f64>; 2],
+    pub displacement: Vec<f64>,
+    pub force: Vec<f64>,
+}
+
+impl RunBands {
+    /// The bands of `run`, whose model was driven by `data`.
+    pub fn of(run: &Run, data: &RunData, bands: Bands) -> RunBands {
+        let n = data.time.len();
+        RunBands {
+            run: run.id().to_string(),
+            current_a: run.spec.current_a,
+            time: data.time.clone(),
+            gamma: run.shear.gamma[..n].to_vec(),
+            gamma_model: data.gamma.clone(),
+            tau_obs: data.tau.clone(),
+            model: bands.model,
+            predictive: bands.predictive,
+            displacement: run.record.displacement[..n].to_vec(),
+            force: run.record.force[..n].to_vec(),
+        }
     }
-    (0..count).map(|i| (i * available) / count + available / (2 * count)).collect()
+}
+
+/// The coverage of one run, as `coverage.parquet` holds it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CoverageRow {
+    pub run: String,
+    pub current_a: f64,
+    pub samples: usize,
+    pub inside_p95: f64,
+    pub inside_q95: f64,
+    pub rmse_q50_pa: f64,
+    pub draws: usize,
+    pub failed_draws: usize,
+    /// Whether the calibration saw this run (false: a true prediction).
+    #[serde(default = "yes")]
+    pub calibrated: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl CoverageRow {
+    pub fn of(run: &Run, bands: &Bands, coverage: &Coverage, calibrated: bool) -> Self {
+        CoverageRow {
+            run: run.id().to_string(),
+            current_a: run.spec.current_a,
+            samples: coverage.samples,
+            inside_p95: coverage.inside_predictive,
+            inside_q95: coverage.inside_model,
+            rmse_q50_pa: coverage.rmse_median,
+            draws: bands.draws,
+            failed_draws: bands.failed,
+            calibrated,
+        }
+    }
+}
+
+/// A run's bands and coverage from posterior draws: the whole of what a
+/// prediction says about one run.
+pub struct RunPrediction {
+    pub bands: RunBands,
+    pub coverage: CoverageRow,
+}
+
+/// Integrates `draws` along `run` (driven as `data`) and forms its bands
+/// and coverage; `run_index` keys the noise stream.
+pub fn predict_run(
+    run: &Run,
+    data: &RunData,
+    run_index: usize,
+    draws: &[Draw],
+    settings: &PredictSettings,
+    calibrated: bool,
+    tick: &(dyn Fn() + Sync),
+) -> Result<RunPrediction> {
+    let b = bands(data, run_index, draws, settings, tick)?;
+    let coverage = CoverageRow::of(run, &b, &b.coverage(&data.tau), calibrated);
+    Ok(RunPrediction { bands: RunBands::of(run, data, b), coverage })
 }
 
 #[cfg(test)]
@@ -188,13 +269,6 @@ mod tests {
         RunData { id: "r".into(), time, gamma, tau: vec![0.0; 400], initial_tau: 0.0, current_a: 1.0 }
     }
 
-    #[test]
-    fn evenly_spaced_indices_cover_the_range() {
-        assert_eq!(evenly_spaced(5, 10), vec![0, 1, 2, 3, 4]);
-        let i = evenly_spaced(1000, 4);
-        assert_eq!(i, vec![125, 375, 625, 875]);
-    }
-
     /// One fixed parameter set: the model band collapses onto the
     /// trajectory, and the predictive band is that trajectory ± 1.96 σ up to
     /// the Monte Carlo error of the 2.5 % quantile of 4000 normals
@@ -206,8 +280,8 @@ mod tests {
         let p = Params::reference_1a();
         let sigma = 500.0;
         let draws = vec![Draw { params: p, sigma, rho: 0.0 }; 40];
-        let settings = PredictSettings { noise: NoiseModel::Gaussian, student_nu: 5.0, replicates: 100, seed: 3 };
-        let b = bands(&run, 0, &draws, &integ, &settings, &|| {}).unwrap();
+        let settings = PredictSettings { integrator: integ, noise: NoiseModel::Gaussian, student_nu: 5.0, replicates: 100, seed: 3 };
+        let b = bands(&run, 0, &draws, &settings, &|| {}).unwrap();
         let truth = integ.run(&p, &run.time, &run.gamma).unwrap().tau;
         for k in (0..400).step_by(37) {
             for q in &b.model {
@@ -226,8 +300,8 @@ mod tests {
         let integ = Integrator { substeps: 1, ..Integrator::default() };
         let (sigma, rho) = (300.0f64, 0.8f64);
         let draws = vec![Draw { params: Params::reference_1a(), sigma, rho }; 40];
-        let settings = PredictSettings { noise: NoiseModel::Ar1, student_nu: 5.0, replicates: 100, seed: 9 };
-        let b = bands(&run, 0, &draws, &integ, &settings, &|| {}).unwrap();
+        let settings = PredictSettings { integrator: integ, noise: NoiseModel::Ar1, student_nu: 5.0, replicates: 100, seed: 9 };
+        let b = bands(&run, 0, &draws, &settings, &|| {}).unwrap();
         let sd = sigma / (1.0 - rho * rho).sqrt();
         for k in [1, 200, 399] {
             let half = 0.5 * (b.predictive[1][k] - b.predictive[0][k]);

@@ -14,9 +14,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::{Columns, Geometry, Manifest, Record, RunSpec};
 use crate::error::{Error, Result};
-use crate::model::{Integrator, Params};
-use crate::output::atomic_write;
-use crate::output::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
+use crate::atomic;
+use crate::model::{CurrentLaw, Integrator, Params};
+use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 
 /// Crank-slider kinematics of the test stand.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
@@ -55,45 +55,33 @@ impl Crank {
     }
 }
 
-/// How the B-P parameters vary with coil current in the virtual campaign.
+/// The virtual stand's fluid: its B-P parameters at 1 A and how they follow
+/// the coil current, as the settings file writes them.
 ///
-/// Field-induced quantities follow the magnetisation of the particles, which
-/// saturates: with s(I) = tanh(I/I_s) / tanh(1 A/I_s) (s(1 A) = 1),
-/// R0, R1, D1 scale with s(I), the pre-yield modulus G with (1 + s(I))/2 (the
-/// carrier fluid and the particle chains both carry shear), and the rate
-/// parameters m1, m2, n do not depend on the field.
+/// The stand uses the current law of [`crate::model::CurrentLaw`] with
+/// reference current 1 A and saturation current `saturation_a`; the
+/// pre-yield modulus G is half field-induced, half the carrier fluid's, so
+/// G(I) = G (1 + s(I))/2, and m1, m2, n do not depend on the field.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct CurrentLaw {
+pub struct StandLaw {
     pub at_1a: Params,
     /// Saturation current I_s (A).
     pub saturation_a: f64,
 }
 
-impl Default for CurrentLaw {
+impl Default for StandLaw {
     fn default() -> Self {
-        CurrentLaw {
+        StandLaw {
             at_1a: Params::reference_1a(),
             saturation_a: 1.0,
         }
     }
 }
 
-impl CurrentLaw {
-    pub fn scale(&self, current_a: f64) -> f64 {
-        (current_a / self.saturation_a).tanh() / (1.0 / self.saturation_a).tanh()
-    }
-
-    pub fn params_at(&self, current_a: f64) -> Params {
-        let s = self.scale(current_a);
-        let p = self.at_1a;
-        Params {
-            g: p.g * 0.5 * (1.0 + s),
-            r0: p.r0 * s,
-            r1: p.r1 * s,
-            d1: p.d1 * s,
-            ..p
-        }
+impl StandLaw {
+    pub fn law(&self) -> CurrentLaw {
+        CurrentLaw::through(&self.at_1a, 1.0, self.saturation_a, 0.5)
     }
 }
 
@@ -104,7 +92,7 @@ pub struct SynthSettings {
     pub name: String,
     pub geometry: Geometry,
     pub crank: Crank,
-    pub law: CurrentLaw,
+    pub law: StandLaw,
     pub currents_a: Vec<f64>,
     pub rpms: Vec<f64>,
     /// Crank revolutions recorded per run.
@@ -127,7 +115,7 @@ impl Default for SynthSettings {
                 gap_m: 1.0e-3,
             },
             crank: Crank::default(),
-            law: CurrentLaw::default(),
+            law: StandLaw::default(),
             currents_a: vec![0.5, 1.0, 1.5],
             rpms: vec![100.0, 200.0, 400.0],
             cycles: 2.0,
@@ -206,7 +194,7 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     let mut panels = Vec::new();
     let mut stream = 0u64;
     for &current in &settings.currents_a {
-        let p = settings.law.params_at(current);
+        let p = settings.law.law().params_at(current);
         p.validate()
             .map_err(|e| Error::Usage(format!("at {current} A: {e}")))?;
         let mut chart = Chart::new(
@@ -226,7 +214,7 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
                 rec.displacement.iter().map(|x| x * 1e3).collect(),
                 rec.force.iter().map(|f| f * 1e-3).collect(),
             ).with_width(1));
-            atomic_write(&dir.join(&file), csv_text(&rec).as_bytes())?;
+            atomic::write(&dir.join(&file), csv_text(&rec).as_bytes())?;
             runs.push(RunSpec {
                 id,
                 file: file.into(),
@@ -247,9 +235,9 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     let header = "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
                   # Synthetic data: B-P model + sensor noise, not measurements.\n";
     let body = toml::to_string(&manifest).map_err(|e| Error::Compute(e.to_string()))?;
-    atomic_write(&dir.join("campaign.toml"), format!("{header}{body}").as_bytes())?;
+    atomic::write(&dir.join("campaign.toml"), format!("{header}{body}").as_bytes())?;
     let settings_text = toml::to_string(settings).map_err(|e| Error::Compute(e.to_string()))?;
-    atomic_write(
+    atomic::write(
         &dir.join("synth.toml"),
         format!("# Settings of `mrbp synth` that made this campaign.\n{settings_text}").as_bytes(),
     )?;
@@ -285,15 +273,5 @@ mod tests {
         let top = c.displacement(100.0, 0.3); // half a revolution
         assert!((top - 2.0 * c.radius_m).abs() < 1e-12);
         assert!((c.nominal_shear_rate(100.0, 1e-3) - 45.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn current_law_is_one_at_1a_and_saturates() {
-        let law = CurrentLaw::default();
-        assert!((law.scale(1.0) - 1.0).abs() < 1e-15);
-        assert_eq!(law.params_at(1.0), law.at_1a);
-        let (a, b, c) = (law.scale(0.5), law.scale(1.0), law.scale(1.5));
-        assert!(a < b && b < c);
-        assert!(c - b < b - a, "saturating");
     }
 }

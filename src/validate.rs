@@ -8,13 +8,12 @@
 //! The held-out run's noise level is not known to that posterior; the
 //! prediction uses the root-mean-square σ of the runs it did see.
 
-use crate::calibrate::si_diagnostics;
+use crate::calibrate::CalibrationSettings;
 use crate::data::{Campaign, Run};
 use crate::error::{Error, Result};
-use crate::posterior::{Posterior, RunData};
-use crate::predict::{self, Bands, Draw};
-use crate::sampler::{LogDensity, RunControl, Sampler, SamplerSettings};
-use crate::stored::StoredCalibration;
+use crate::posterior::{PosteriorSample, RecordPart, RunData};
+use crate::predict::{predict_run, PredictSettings, RunPrediction};
+use crate::sampler::{Diagnostics, Observer, RunControl, Sampler};
 
 /// How each held-out posterior is sampled and propagated.
 #[derive(Clone, Copy, Debug)]
@@ -32,70 +31,74 @@ impl Default for LooSettings {
     }
 }
 
-/// One held-out run: its bands and the sampler's convergence.
+/// One held-out run: its prediction and the sampler's convergence.
 pub struct HeldOut {
-    pub run: String,
-    pub data: RunData,
-    pub bands: Bands,
+    pub prediction: RunPrediction,
     pub max_rhat: f64,
     pub burn_in: usize,
 }
 
-/// Leaves out each run of the calibration in `stored` in turn.
-pub fn leave_one_out(stored: &StoredCalibration, campaign: &Campaign, settings: &LooSettings, progress: bool) -> Result<Vec<HeldOut>> {
+/// Leaves out each run of `campaign` in turn. `settings` are the full
+/// calibration's (walkers and sub-steps filled in), `sample` its posterior
+/// sample, whose last positions start each held-out sampler. `observe`
+/// makes the observers of each held-out run, told its id.
+pub fn leave_one_out(
+    campaign: &Campaign,
+    settings: &CalibrationSettings,
+    sample: &PosteriorSample,
+    loo: &LooSettings,
+    observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>,
+) -> Result<Vec<HeldOut>> {
     if campaign.runs.len() < 2 {
         return Err(Error::Usage("leave-one-out needs a calibration of at least two runs".into()));
     }
-    let mut out = Vec::new();
-    for (j, left_out) in campaign.runs.iter().enumerate() {
-        if progress {
-            eprintln!("  leave-one-out: calibrating without {} ({} steps)", left_out.id(), settings.steps);
-        }
-        out.push(hold_out(stored, campaign, j, left_out, settings, progress)?);
-    }
-    Ok(out)
+    campaign
+        .runs
+        .iter()
+        .enumerate()
+        .map(|(j, left_out)| {
+            let mut observers = observe(left_out.id());
+            let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
+            hold_out(campaign, settings, sample, j, left_out, loo, &mut refs)
+        })
+        .collect()
 }
 
-fn hold_out(stored: &StoredCalibration, campaign: &Campaign, j: usize, left_out: &Run, settings: &LooSettings, progress: bool) -> Result<HeldOut> {
+fn hold_out(
+    campaign: &Campaign,
+    settings: &CalibrationSettings,
+    sample: &PosteriorSample,
+    j: usize,
+    left_out: &Run,
+    loo: &LooSettings,
+    observers: &mut [&mut dyn Observer],
+) -> Result<HeldOut> {
     let kept = campaign.filtered(|r| r.id() != left_out.id());
-    let posterior = Posterior::new(&kept, &stored.settings, stored.integrator());
-    let names = posterior.names();
-    let ch = &stored.chains;
-    let last = ch.steps - 1;
-    // the full calibration's walkers, in this posterior's coordinates
-    let columns: Vec<usize> = names
+    let integrator = settings.integrator.integrator(settings.integrator.substeps);
+    let posterior = settings.posterior(&kept, integrator);
+    let layout = &posterior.layout;
+    // the full calibration's last walkers, in this posterior's coordinates
+    let ch = &sample.chains;
+    let last = ch.steps() - 1;
+    let columns: Vec<usize> = layout
+        .names
         .iter()
-        .map(|n| ch.index(n).ok_or_else(|| Error::input(stored.dir.join("chains.parquet"), format!("no column '{n}'"))))
+        .map(|n| sample.layout.index(n).ok_or_else(|| Error::Compute(format!("the calibration's sample has no '{n}'"))))
         .collect::<Result<_>>()?;
-    let init: Vec<Vec<f64>> = (0..ch.chains)
-        .map(|c| posterior.from_si(&columns.iter().map(|&i| ch.at(i, last, c)).collect::<Vec<f64>>()))
-        .collect();
-    let s = &stored.settings.sampler;
-    let sampler_settings = SamplerSettings {
-        walkers: stored.record.walkers,
-        ensembles: stored.record.ensembles,
-        moves: s.moves.clone(),
-        // a stream of its own for each held-out run
-        seed: s.seed ^ (0x100 + j as u64),
-    };
-    let mut sampler = Sampler::new(&posterior, sampler_settings, &init)?;
-    sampler.run(&RunControl { max_steps: settings.steps, until_converged: false, check_every: 100, min_ess: 0.0, checkpoint: None, progress })?;
-    let chains = &sampler.chains;
-    let diagnostics = si_diagnostics(&posterior, chains, None);
-    let burn = diagnostics.burn_in;
-    let pairs: Vec<(usize, usize)> = (burn..chains.steps()).flat_map(|st| (0..chains.chains()).map(move |c| (st, c))).collect();
-    let (d, nt, nr) = (posterior.dim(), posterior.theta_len(), kept.runs.len());
-    let draws: Vec<Draw> = predict::evenly_spaced(pairs.len(), settings.draws)
-        .into_iter()
-        .map(|i| {
-            let (st, c) = pairs[i];
-            let x: Vec<f64> = (0..d).map(|k| chains.at(st, c, k)).collect();
-            let si = posterior.to_si(&x);
-            Draw::for_unseen_run(posterior.params_at_current(&x, left_out.spec.current_a), &si[nt..nt + nr], &si[nt + nr..])
-        })
-        .collect();
-    let data = stored.prediction_data(left_out);
-    let predict_settings = stored.predict_settings(settings.replicates, settings.seed);
-    let bands = predict::bands(&data, j, &draws, &stored.integrator(), &predict_settings, &|| {})?;
-    Ok(HeldOut { run: left_out.id().to_string(), data, bands, max_rhat: diagnostics.max_rhat(), burn_in: burn })
+    let init: Vec<Vec<f64>> =
+        (0..ch.chains()).map(|c| layout.from_si(&columns.iter().map(|&i| ch.at(last, c, i)).collect::<Vec<f64>>())).collect();
+    let s = &settings.sampler;
+    // a stream of its own for each held-out run
+    let mut sampler = Sampler::new(&posterior, s.sampler(s.walkers, s.seed ^ (0x100 + j as u64)), &init)?;
+    sampler.run(&RunControl::fixed(loo.steps), observers)?;
+    let held = PosteriorSample::from_coordinates(layout, posterior.model, &sampler.chains);
+    let burn_in = Diagnostics::burn_in_rule(&sampler.chains);
+    let diagnostics = held.diagnostics(burn_in);
+    // short chains: every step after burn-in, not thinned
+    let positions = held.positions(burn_in, 1, loo.draws);
+    let draws = held.draws(&positions, left_out.id(), left_out.spec.current_a);
+    let data = RunData::from_run(left_out, RecordPart::WholeRecord, settings.likelihood.smooth_strain_ms);
+    let predict = PredictSettings::new(integrator, &settings.likelihood, loo.replicates, loo.seed);
+    let prediction = predict_run(left_out, &data, j, &draws, &predict, false, &|| {})?;
+    Ok(HeldOut { prediction, max_rhat: diagnostics.max_rhat(), burn_in })
 }

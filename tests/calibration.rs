@@ -4,8 +4,8 @@
 use mrbp::calibrate::calibrate;
 use mrbp::data::Campaign;
 use mrbp::model::Params;
-use mrbp::output::read_parquet;
-use mrbp::posterior::CalibrationSettings;
+use mrbp::store::read_parquet;
+use mrbp::calibrate::CalibrationSettings;
 use mrbp::synth::{write_campaign, SynthSettings};
 
 /// One crank revolution per run at 2 kHz, 1 A: small enough for a test.
@@ -42,7 +42,7 @@ fn quick_settings() -> CalibrationSettings {
 #[test]
 fn posterior_recovers_known_parameters() {
     let (_dir, campaign) = campaign_with(7, 0.0);
-    let cal = calibrate(&campaign, &quick_settings(), false).unwrap();
+    let cal = calibrate(&campaign, &quick_settings()).unwrap();
     let truth = Params::reference_1a().to_array();
     for (i, name) in ["G", "R0", "R1", "D1", "m1", "m2", "n"].iter().enumerate() {
         let p = &cal.diagnostics.coordinates[i];
@@ -65,7 +65,7 @@ fn same_seed_same_chains_whatever_the_thread_count() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| calibrate(&campaign, &s, false).unwrap().chains)
+            .install(|| calibrate(&campaign, &s).unwrap().chains)
     };
     assert_eq!(run(1), run(2));
 }
@@ -120,21 +120,21 @@ fn sample_command_writes_the_contract_tables() {
 
 #[test]
 fn interrupted_sample_resumes_to_the_same_chains() {
-    use mrbp::calibrate::{calibrate_with, Checkpointing};
+    use mrbp::calibrate::{sample, start};
+    use mrbp::sampler::Checkpointer;
     let (_dir, campaign) = small_campaign(11);
     let cp = tempfile::tempdir().unwrap();
     let path = cp.path().join("sampler.checkpoint");
     let mut s = quick_settings();
     s.integrator.substeps = 1;
     s.sampler.steps = 60;
-    let whole = calibrate_with(&campaign, &s, false, &Checkpointing::default()).unwrap().chains;
+    let whole = calibrate(&campaign, &s).unwrap().chains;
     // "killed" after 30 steps: only the checkpoint survives
     let mut first = s.clone();
     first.sampler.steps = 30;
-    let saving = Checkpointing { path: Some(path.clone()), every: 10, resume: false };
-    calibrate_with(&campaign, &first, false, &saving).unwrap();
-    let resuming = Checkpointing { resume: true, ..saving };
-    let resumed = calibrate_with(&campaign, &s, false, &resuming).unwrap().chains;
+    let mut saver = Checkpointer { path: path.clone(), every: 10 };
+    sample(&campaign, start(&campaign, &first, &mut |_| {}).unwrap(), None, &mut [&mut saver]).unwrap();
+    let resumed = sample(&campaign, start(&campaign, &s, &mut |_| {}).unwrap(), Some(&path), &mut []).unwrap().chains;
     assert_eq!(resumed, whole);
 }
 

@@ -131,7 +131,7 @@ fn malformed_manifest() {
 
 #[test]
 fn parquet_records_are_read_and_checked() {
-    use mrbp::output::{write_parquet, Table};
+    use mrbp::store::{write_parquet, Table};
     let dir = tempfile::tempdir().unwrap();
     let good = Table::new()
         .f64("time_s", vec![0.0, 0.1, 0.2])
@@ -214,4 +214,15 @@ fn usage_errors_exit_2() {
     assert_eq!(o.status.code(), Some(2));
     let o = mrbp(&["--no-such-flag"]);
     assert_eq!(o.status.code(), Some(2));
+}
+
+/// `mrbp` alone outside the project folder prints the help, not a job.
+#[test]
+fn bare_command_outside_the_project_prints_help() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_mrbp")).current_dir(dir.path()).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("Usage"), "help printed");
+    assert!(stderr(&o).contains("data/campaign.toml"), "{}", stderr(&o));
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing written");
 }

@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use mrbp::output::{column_names, f64_column, read_parquet, str_column};
+use mrbp::store::{column_names, f64_column, read_parquet, str_column};
 use mrbp::synth::{write_campaign, SynthSettings};
 
 fn mrbp(args: &[&str]) -> Output {

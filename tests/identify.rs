@@ -4,7 +4,7 @@
 use mrbp::data::Campaign;
 use mrbp::identify::{identify_campaign, identify_current, IdentifySettings};
 use mrbp::model::{Params, PHYSICAL_RANGE};
-use mrbp::output::read_parquet;
+use mrbp::store::read_parquet;
 use mrbp::synth::{write_campaign, SynthSettings};
 
 #[test]

@@ -3,7 +3,7 @@
 //! effective sample size; seeds are fixed.
 
 use mrbp::sampler::diagnostics::{ess_bulk, ess_tail, quantile};
-use mrbp::sampler::{Diagnostics, LogDensity, Move, RunControl, Sampler, SamplerSettings};
+use mrbp::sampler::{Checkpointer, Diagnostics, LogDensity, Move, RunControl, Sampler, SamplerSettings};
 use nalgebra::{DMatrix, DVector};
 
 /// Tolerance in Monte Carlo standard errors: a correct sampler fails a single
@@ -67,7 +67,7 @@ fn check_gaussian(moves: Vec<(Move, f64)>, steps: usize) {
         check_every: 1000,
         ..RunControl::fixed(steps)
     };
-    s.run(&control).unwrap();
+    s.run(&control, &mut []).unwrap();
     let diag = s.diagnostics();
     assert!(diag.converged(), "{moves:?}: {:?}", diag.warnings);
     let b = diag.burn_in;
@@ -119,7 +119,7 @@ fn rosenbrock_banana_marginal_moments() {
     };
     let init = start_ball(2, 128, &[1.0, 1.0], 0.1);
     let mut s = Sampler::new(&Banana, settings, &init).unwrap();
-    s.run(&RunControl::fixed(10000)).unwrap();
+    s.run(&RunControl::fixed(10000), &mut []).unwrap();
     let diag = s.diagnostics();
     assert!(diag.converged(), "{:?}", diag.warnings);
     let truth_mean = [1.0, 2.0];
@@ -168,7 +168,7 @@ fn lognormal_quantiles() {
     };
     let init = start_ball(2, 64, &[1.0, 1.0], 0.2);
     let mut s = Sampler::new(&LogNormal2, settings, &init).unwrap();
-    s.run(&RunControl::fixed(5000)).unwrap();
+    s.run(&RunControl::fixed(5000), &mut []).unwrap();
     let diag = s.diagnostics();
     assert!(diag.converged(), "{:?}", diag.warnings);
     let dist = LogNormal::new(0.0, 1.0).unwrap();
@@ -197,7 +197,7 @@ fn small_run(threads: usize, steps: usize) -> Vec<f64> {
         };
         let init = start_ball(2, 24, &[1.0, 1.0], 0.1);
         let mut s = Sampler::new(&Banana, settings, &init).unwrap();
-        s.run(&RunControl::fixed(steps)).unwrap();
+        s.run(&RunControl::fixed(steps), &mut []).unwrap();
         s.chains.positions.clone()
     })
 }
@@ -225,18 +225,17 @@ fn resumed_run_equals_uninterrupted_run() {
     let init = start_ball(2, 16, &[1.0, 1.0], 0.1);
 
     let mut whole = Sampler::new(&Banana, settings.clone(), &init).unwrap();
-    whole.run(&RunControl::fixed(200)).unwrap();
+    whole.run(&RunControl::fixed(200), &mut []).unwrap();
 
     // "killed" after step 120: only the checkpoint file survives
     {
         let mut first = Sampler::new(&Banana, settings, &init).unwrap();
-        let mut control = RunControl::fixed(120);
-        control.checkpoint = Some((cp.clone(), 40));
-        first.run(&control).unwrap();
+        let mut saver = Checkpointer { path: cp.clone(), every: 40 };
+        first.run(&RunControl::fixed(120), &mut [&mut saver]).unwrap();
     }
     let mut resumed = Sampler::resume(&Banana, &cp).unwrap();
     assert_eq!(resumed.chains.steps(), 121);
-    resumed.run(&RunControl::fixed(200)).unwrap();
+    resumed.run(&RunControl::fixed(200), &mut []).unwrap();
     assert_eq!(resumed.chains, whole.chains);
 }
 
@@ -263,7 +262,7 @@ fn stuck_walker_is_detected() {
     };
     let init = start_ball(2, 8, &[1.0, 1.0], 0.1);
     let mut s = Sampler::new(&Banana, settings, &init).unwrap();
-    s.run(&RunControl::fixed(200)).unwrap();
+    s.run(&RunControl::fixed(200), &mut []).unwrap();
     let nc = s.chains.chains();
     for step in 0..s.chains.steps() {
         s.chains.accepted[step * nc + 3] = false;

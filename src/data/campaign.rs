@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::branches::loading_branches;
-use super::shear::Shear;
+use super::shear::{Geometry, Shear};
 use super::table::{ColumnMap, Record};
 use crate::error::{Error, Result};
 
@@ -20,16 +20,6 @@ pub struct Manifest {
     pub columns: Columns,
     #[serde(rename = "run", default)]
     pub runs: Vec<RunSpec>,
-}
-
-/// Damper geometry that turns force and displacement into stress and strain.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Geometry {
-    /// Working interface area A (m²).
-    pub area_m2: f64,
-    /// Gap size h (m).
-    pub gap_m: f64,
 }
 
 /// Column names in the data files and the factors to SI units.
@@ -220,10 +210,28 @@ impl Campaign {
         }
     }
 
-    /// The runs at one coil current (within 1 mA).
+    /// The runs at one coil current.
     pub fn at_current(&self, current_a: f64) -> Campaign {
-        self.filtered(|r| (r.spec.current_a - current_a).abs() < 1e-3)
+        self.filtered(|r| same_current(r.spec.current_a, current_a))
     }
+
+    /// Whether any run is at `current_a`.
+    pub fn has_current(&self, current_a: f64) -> bool {
+        self.runs.iter().any(|r| same_current(r.spec.current_a, current_a))
+    }
+}
+
+/// Coil currents that differ by less than this (A) are one current level.
+pub const CURRENT_TOLERANCE_A: f64 = 1e-3;
+
+/// Whether two coil currents are the same level.
+pub fn same_current(a: f64, b: f64) -> bool {
+    (a - b).abs() < CURRENT_TOLERANCE_A
+}
+
+/// Label of a current level in folder and file names, e.g. `I1.0A`.
+pub fn current_tag(current_a: f64) -> String {
+    format!("I{current_a:.1}A")
 }
 
 fn one_line(s: &str) -> String {

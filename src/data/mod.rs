@@ -1,12 +1,14 @@
-//! Test campaigns: the manifest, the stand records, and the shear quantities
-//! derived from them (paper eqs. 1–2).
+//! Test campaigns: the manifest, the stand records, the shear quantities
+//! derived from them (paper eqs. 1–2), loading branches and smoothing.
 
 pub mod branches;
 pub mod campaign;
 pub mod shear;
+pub mod smooth;
 pub mod table;
 
 pub use branches::loading_branches;
-pub use campaign::{Campaign, Columns, Geometry, Manifest, Run, RunSpec};
-pub use shear::{local_polynomial, Inelastic, Shear};
+pub use campaign::{current_tag, same_current, Campaign, Columns, Manifest, Run, RunSpec};
+pub use shear::{Geometry, Inelastic, Shear};
+pub use smooth::local_polynomial;
 pub use table::Record;

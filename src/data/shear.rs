@@ -1,8 +1,20 @@
 //! Shear stress and strain from a stand record (paper eq. 1) and the
 //! inelastic strain and its rate (eqs. 1–2).
 
-use super::campaign::Geometry;
+use serde::{Deserialize, Serialize};
+
+use super::smooth::local_polynomial;
 use super::table::Record;
+
+/// Damper geometry that turns force and displacement into stress and strain.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Geometry {
+    /// Working interface area A (m²).
+    pub area_m2: f64,
+    /// Gap size h (m).
+    pub gap_m: f64,
+}
 
 /// τ(t) and γ(t) of one record.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -76,87 +88,9 @@ impl Shear {
     }
 }
 
-/// Local least-squares polynomials of `degree` (a Savitzky-Golay filter that
-/// also works on uneven grids): at every sample, the value and the slope of
-/// the polynomial fitted to the samples within `half_window` on each side
-/// (fewer at the ends). Unlike a plain difference, the slope does not
-/// amplify sensor noise by 1/Δt.
-/// A cubic keeps the bias of value and slope at a sharp bend (the yield
-/// knee) an order smaller than a straight line over the same window, at the
-/// price of more noise.
-pub fn local_polynomial(t: &[f64], y: &[f64], half_window: usize, degree: usize) -> (Vec<f64>, Vec<f64>) {
-    use nalgebra::{DMatrix, DVector};
-    let n = t.len();
-    let h = half_window.max(1);
-    let mut values = Vec::with_capacity(n);
-    let mut slopes = Vec::with_capacity(n);
-    for k in 0..n {
-        let lo = k.saturating_sub(h);
-        let hi = (k + h + 1).min(n);
-        let deg = degree.min(hi - lo - 1);
-        // centred and scaled abscissa for a well-conditioned system
-        let scale = (t[hi - 1] - t[k]).abs().max((t[k] - t[lo]).abs()).max(f64::MIN_POSITIVE);
-        let m = deg + 1;
-        let mut ata = DMatrix::<f64>::zeros(m, m);
-        let mut aty = DVector::<f64>::zeros(m);
-        for i in lo..hi {
-            let u = (t[i] - t[k]) / scale;
-            let mut powers = [1.0; 8];
-            for p in 1..m {
-                powers[p] = powers[p - 1] * u;
-            }
-            for r in 0..m {
-                aty[r] += powers[r] * y[i];
-                for c in 0..m {
-                    ata[(r, c)] += powers[r] * powers[c];
-                }
-            }
-        }
-        match ata.lu().solve(&aty) {
-            Some(coef) if coef.iter().all(|c| c.is_finite()) => {
-                values.push(coef[0]);
-                slopes.push(if m > 1 { coef[1] / scale } else { 0.0 });
-            }
-            _ => {
-                values.push(y[k]);
-                slopes.push(0.0);
-            }
-        }
-    }
-    (values, slopes)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn derivative_is_exact_on_lines_and_close_on_smooth_curves() {
-        let t: Vec<f64> = (0..200).map(|k| 0.001 * k as f64 + 0.3 * (k as f64).sqrt() * 1e-4).collect();
-        let y: Vec<f64> = t.iter().map(|t| 3.0 * t - 1.0).collect();
-        for d in local_polynomial(&t, &y, 5, 1).1 {
-            assert!((d - 3.0).abs() < 1e-9);
-        }
-        // sin: the symmetric window's bias is O(h²); h = 5 ms, ω = 2π
-        let y: Vec<f64> = t.iter().map(|t| (std::f64::consts::TAU * t).sin()).collect();
-        let d = local_polynomial(&t, &y, 5, 1).1;
-        for k in 5..195 {
-            let exact = std::f64::consts::TAU * (std::f64::consts::TAU * t[k]).cos();
-            assert!((d[k] - exact).abs() < 2e-3 * std::f64::consts::TAU, "{k}");
-        }
-    }
-
-    #[test]
-    fn cubic_fits_are_exact_on_cubics() {
-        let t: Vec<f64> = (0..50).map(|k| 0.01 * k as f64 + 1e-4 * ((k * 7) % 3) as f64).collect();
-        let y: Vec<f64> = t.iter().map(|t| 2.0 - t + 3.0 * t * t - 5.0 * t * t * t).collect();
-        let (v, d) = local_polynomial(&t, &y, 4, 3);
-        for k in 0..50 {
-            let tk = t[k];
-            assert!((v[k] - y[k]).abs() < 1e-9);
-            assert!((d[k] - (-1.0 + 6.0 * tk - 15.0 * tk * tk)).abs() < 1e-7, "{k}");
-        }
-    }
 
     #[test]
     fn shear_from_record_uses_geometry() {

@@ -179,15 +179,20 @@ fn identify_run(run: &Run, s: &IdentifySettings) -> RunIdentification {
         return out;
     }
     out.yield_point = Some((tau02, rate02));
+    fit_hardening(&mut out, &strain, &tau, k02, s);
+    out
+}
 
-    // eq. 7 on τ(γᴵ) from the yield point up to the peak of τ: beyond the peak
-    // the falling crank speed, not hardening, shapes the curve
+/// Step 3 for one run: eq. 7 on τ(γᴵ) from the yield sample `k02` up to the
+/// peak of τ (beyond it the falling crank speed, not hardening, shapes the
+/// curve), ψ(τ) along it, and m1, m2 from its end slopes.
+fn fit_hardening(out: &mut RunIdentification, strain: &[f64], tau: &[f64], k02: usize, s: &IdentifySettings) {
     let peak = (k02..tau.len()).max_by(|&i, &j| tau[i].total_cmp(&tau[j])).unwrap_or(k02);
     let (xs, ys) = resample_log(&strain[k02..=peak], &tau[k02..=peak], s.offset_strain, s.curve_points);
     if xs.len() < 8 {
         out.warnings.push(format!("only {} points past yield for eq. 7", xs.len()));
         out.curve_data = (xs, ys);
-        return out;
+        return;
     }
     let fit = hardening::fit_eq7(&xs, &ys);
     if !fit.converged {
@@ -213,7 +218,6 @@ fn identify_run(run: &Run, s: &IdentifySettings) -> RunIdentification {
     out.curve = Some(fit);
     out.curve_data = (xs, ys);
     out.psi = (psi_tau, psi);
-    out
 }
 
 /// `n` points of the curve y(x) at x log-spaced from `from` to the largest x,

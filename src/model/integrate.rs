@@ -244,6 +244,10 @@ impl Integrator {
     /// then no longer holds). This catches the elastic predictor that jumps
     /// far past yield in one step, which the stiffness at the start cannot
     /// see. A lane that has reached the sample time waits for the others.
+    ///
+    /// One function on purpose: step control, the rejection test and the
+    /// update share the lane masks and the track's registers, and this loop
+    /// is where a likelihood spends its time.
     #[inline(always)]
     fn advance(
         &self,

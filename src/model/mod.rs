@@ -1,13 +1,16 @@
-//! The Bodner-Partom law for shear (paper eqs. 3–4) and its time integration.
+//! The Bodner-Partom law for shear (paper eqs. 3–4), how its parameters
+//! follow the coil current, and its time integration.
 //!
 //! This module knows nothing about data files, identification or sampling:
 //! it maps a parameter set and a prescribed strain history to a stress history.
 
+pub mod current_law;
 pub mod integrate;
 pub mod lanes;
 pub mod law;
 pub mod params;
 
+pub use current_law::CurrentLaw;
 pub use integrate::{integrate, IntegrationError, Integrator, LaneStates, Scheme, State, Trajectory};
 pub use lanes::LANES;
-pub use params::{Params, D0, PARAM_NAMES, PHYSICAL_RANGE};
+pub use params::{Params, D0, PARAM_NAMES, PARAM_UNITS, PHYSICAL_RANGE};

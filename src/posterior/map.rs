@@ -77,7 +77,7 @@ fn whitened(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<Vec<f64>> {
 /// correlation, σ the innovation sd) and computes the Laplace covariance
 /// (JᵀJ)⁻¹ of ln θ.
 pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
-    let nt = post.theta_len();
+    let nt = post.layout.theta.len();
     let mut x: Vec<f64> = start[..nt].to_vec();
     let mut sigmas: Vec<f64> = residuals(post, &x)?.iter().map(|r| rms(r).max(1e-9)).collect();
     let mut converged = false;
@@ -114,18 +114,18 @@ pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
     let mut rhos = Vec::new();
     for r in &res {
         let s = rms(r).max(1e-9);
-        let rho = if post.noise == NoiseModel::Ar1 {
+        let rho = if post.likelihood.noise == NoiseModel::Ar1 {
             let num: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
             let den: f64 = r.iter().map(|v| v * v).sum();
             (num / den).clamp(-0.98, 0.98)
         } else {
             0.0
         };
-        let s = if post.noise == NoiseModel::Ar1 { s * (1.0 - rho * rho).sqrt() } else { s };
+        let s = if post.likelihood.noise == NoiseModel::Ar1 { s * (1.0 - rho * rho).sqrt() } else { s };
         full.push(s.ln());
         rhos.push(rho.atanh());
     }
-    if post.noise == NoiseModel::Ar1 {
+    if post.likelihood.noise == NoiseModel::Ar1 {
         full.extend(rhos);
     }
     let log_density = post.log_density(&full);
@@ -184,7 +184,7 @@ pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, 
             return (m, current, study);
         };
         let sd = current.sd();
-        let shifts: Vec<f64> = (0..post.theta_len()).map(|i| (current.x[i] - next.x[i]).abs() / sd[i].max(1e-300)).collect();
+        let shifts: Vec<f64> = post.layout.theta.clone().map(|i| (current.x[i] - next.x[i]).abs() / sd[i].max(1e-300)).collect();
         let check = StepCheck { substeps: m, shifts };
         let ok = check.worst().1 < step_shift_limit(base.extrapolate);
         study.push(check);
@@ -200,7 +200,7 @@ pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, 
 /// the noise coordinates in a small ball, every one with a finite
 /// log-density (redrawn up to 100 times, then a tiny ball around the MAP).
 pub fn initial_walkers(post: &Posterior, map: &MapEstimate, count: usize, seed: u64) -> Vec<Vec<f64>> {
-    let (d, nt) = (post.dim(), post.theta_len());
+    let (d, nt) = (post.dim(), post.layout.theta.len());
     let chol = map.cov.clone().cholesky();
     (0..count)
         .map(|c| {

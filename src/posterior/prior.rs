@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::model::{PARAM_NAMES, PHYSICAL_RANGE};
+use crate::model::PHYSICAL_RANGE;
 
 /// A prior for one positive parameter θ, as a density of ln θ.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -81,14 +81,10 @@ pub fn default_priors() -> [Prior; 7] {
     std::array::from_fn(|i| Prior::plausible(i, plausible[i].0, plausible[i].1))
 }
 
-/// Names of the prior table in the settings file, in parameter order.
-pub fn prior_names() -> [&'static str; 7] {
-    PARAM_NAMES
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::PARAM_NAMES;
 
     #[test]
     fn log_normal_is_centred_and_truncated() {

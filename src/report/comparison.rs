@@ -5,34 +5,27 @@ use std::path::{Path, PathBuf};
 
 use super::html::{esc, num, Mark, Page};
 use super::Figures;
-use crate::compare::difference;
+use crate::atomic;
+use crate::compare::Comparison;
 use crate::data::loading_branches;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::model::PARAM_NAMES;
-use crate::output::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
-use crate::output::prediction::{read_bands, read_coverage, CoverageRow, StoredBands};
-use crate::output::{atomic_write, write_parquet, Table};
+use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
+use crate::predict::{CoverageRow, RunBands};
 use crate::sampler::quantile;
-use crate::stored::StoredCalibration;
+use crate::store::{command_line, StoredCalibration};
 
-/// Posterior draws per calibration for differences and figures.
-const DRAWS: usize = 4000;
-
-/// One calibration as the comparison sees it.
-struct Entry {
-    label: String,
-    cal: StoredCalibration,
-    positions: Vec<(usize, usize)>,
-    bands: Option<Vec<StoredBands>>,
-    coverage: Option<Vec<CoverageRow>>,
+/// One calibration in a comparison: its folder, the draws compared, and
+/// its bands and coverage where they were computed.
+pub struct Entry {
+    pub label: String,
+    pub cal: StoredCalibration,
+    pub positions: Vec<(usize, usize)>,
+    pub bands: Option<Vec<RunBands>>,
+    pub coverage: Option<Vec<CoverageRow>>,
 }
 
 impl Entry {
-    fn draws(&self, name: &str) -> Option<Vec<f64>> {
-        let i = self.cal.chains.index(name)?;
-        Some(self.positions.iter().map(|&(s, c)| self.cal.chains.at(i, s, c)).collect())
-    }
-
     fn is_law(&self) -> bool {
         self.cal.is_current_law()
     }
@@ -55,80 +48,36 @@ fn rpm_of(time: &[f64], displacement: &[f64]) -> f64 {
     60.0 / (2.0 * half[half.len() / 2])
 }
 
-/// Writes `comparison.parquet`, `differences.parquet`, the figures and
-/// `report.html` into `out`. `rpm` picks the runs whose bands are overlaid.
-pub fn write(dirs: &[PathBuf], out: &Path, rpm: Option<f64>) -> Result<PathBuf> {
-    if dirs.len() < 2 {
-        return Err(Error::Usage("compare needs at least two calibration folders".into()));
-    }
-    let mut entries = Vec::new();
-    for d in dirs {
-        let cal = StoredCalibration::open(d)?;
-        let positions = cal.draw_positions(DRAWS);
-        let bands = d.join("bands.parquet").exists().then(|| read_bands(&d.join("bands.parquet"))).transpose()?;
-        let coverage = d.join("coverage.parquet").exists().then(|| read_coverage(&d.join("coverage.parquet"))).transpose()?;
-        let mut label = cal.label();
-        if entries.iter().any(|e: &Entry| e.label == label) {
-            label = d.display().to_string();
-        }
-        entries.push(Entry { label, cal, positions, bands, coverage });
-    }
-    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
-
-    // comparison.parquet: the summary of every calibration, one row per parameter
-    let mut t = (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
-    for e in &entries {
-        for r in &e.cal.summary {
-            t.0.push(e.label.clone());
-            t.1.push(e.cal.record.current_a);
-            t.2.push(r.parameter.clone());
-            t.3.push(r.mean);
-            t.4.push(r.sd);
-            t.5.push(r.q05);
-            t.6.push(r.q50);
-            t.7.push(r.q95);
-        }
-    }
-    write_parquet(
-        &out.join("comparison.parquet"),
-        Table::new().str("calibration", t.0).f64("current_a", t.1).str("parameter", t.2).f64("mean", t.3).f64("sd", t.4).f64("q05", t.5).f64("q50", t.6).f64("q95", t.7),
-    )?;
-
-    // differences.parquet: every pair, every parameter both have (noise scales are per run)
-    let mut rows = Vec::new();
-    for (i, a) in entries.iter().enumerate() {
-        for b in &entries[i + 1..] {
-            for name in a.cal.chains.names.iter().filter(|n| !n.starts_with("sigma_") && !n.starts_with("rho_")) {
-                if let (Some(da), Some(db)) = (a.draws(name), b.draws(name)) {
-                    rows.push((a.label.clone(), b.label.clone(), name.clone(), difference(&da, &db)));
-                }
-            }
-        }
-    }
-    let col = |f: &dyn Fn(&crate::compare::Difference) -> f64| rows.iter().map(|r| f(&r.3)).collect::<Vec<f64>>();
-    write_parquet(
-        &out.join("differences.parquet"),
-        Table::new()
-            .str("calibration_a", rows.iter().map(|r| r.0.clone()).collect())
-            .str("calibration_b", rows.iter().map(|r| r.1.clone()).collect())
-            .str("parameter", rows.iter().map(|r| r.2.clone()).collect())
-            .f64("diff_q05", col(&|d| d.diff_q05))
-            .f64("diff_q50", col(&|d| d.diff_q50))
-            .f64("diff_q95", col(&|d| d.diff_q95))
-            .f64("ratio_q05", col(&|d| d.ratio_q05))
-            .f64("ratio_q50", col(&|d| d.ratio_q50))
-            .f64("ratio_q95", col(&|d| d.ratio_q95))
-            .f64("p_greater", col(&|d| d.p_greater)),
-    )?;
-
+/// Writes the figures and `report.html` of the comparison of `entries`
+/// (whose tables are `comparison`) into `out`. `rpm` picks the runs whose
+/// bands are overlaid.
+pub fn write(out: &Path, entries: &[Entry], comparison: &Comparison, rpm: Option<f64>) -> Result<PathBuf> {
     let mut figs = Figures::default();
-    forest(out, &entries, &mut figs)?;
-    against_current(out, &entries, &mut figs)?;
-    overlay(out, &entries, rpm, &mut figs)?;
-    held_out_figures(out, &entries, &mut figs)?;
+    forest(out, entries, &mut figs)?;
+    against_current(out, entries, &mut figs)?;
+    overlay(out, entries, rpm, &mut figs)?;
+    held_out_figures(out, entries, &mut figs)?;
 
-    // the report
     let mut page = Page::new(&format!("mrbp comparison of {} calibrations", entries.len()));
+    calibrations_section(&mut page, entries);
+    parameters_section(&mut page, entries);
+    differences_section(&mut page, comparison);
+    page.section("current-law", "Current law and held-out currents");
+    law_section(&mut page, entries);
+    for (stem, caption) in figs.items.iter().filter(|f| f.0.starts_with("held_out")) {
+        page.figure(&out.join(format!("{stem}.png")), caption)?;
+    }
+    page.section("figures", "Figures");
+    for (stem, caption) in figs.items.iter().filter(|f| !f.0.starts_with("held_out")) {
+        page.figure(&out.join(format!("{stem}.png")), caption)?;
+    }
+    reproduce_section(&mut page, entries);
+    let path = out.join("report.html");
+    atomic::write(&path, page.finish().as_bytes())?;
+    Ok(path)
+}
+
+fn calibrations_section(page: &mut Page, entries: &[Entry]) {
     page.section("calibrations", "Calibrations");
     let rows_html: Vec<Vec<String>> = entries
         .iter()
@@ -146,27 +95,26 @@ pub fn write(dirs: &[PathBuf], out: &Path, rpm: Option<f64>) -> Result<PathBuf> 
         })
         .collect();
     page.table(&["calibration", "model", "current (A)", "runs", "max R̂", "min ESS", ""], &rows_html);
+}
 
+fn parameters_section(page: &mut Page, entries: &[Entry]) {
     page.section("parameters", "Parameters");
     page.para("Posterior median and 90 % credible interval of each B-P parameter (SI units). In a current law, R0, R1 and D1 are the values at its reference current.");
     let mut header = vec!["parameter".to_string()];
     header.extend(entries.iter().map(|e| e.label.clone()));
-    let names: Vec<String> = {
-        let mut n: Vec<String> = Vec::new();
-        for e in &entries {
-            for r in &e.cal.summary {
-                if !r.parameter.starts_with("sigma_") && !r.parameter.starts_with("rho_") && !n.contains(&r.parameter) {
-                    n.push(r.parameter.clone());
-                }
+    let mut names: Vec<String> = Vec::new();
+    for e in entries {
+        for n in e.cal.sample.layout.theta_names() {
+            if !names.contains(n) {
+                names.push(n.clone());
             }
         }
-        n
-    };
+    }
     let table: Vec<Vec<String>> = names
         .iter()
         .map(|n| {
             let mut row = vec![esc(n)];
-            for e in &entries {
+            for e in entries {
                 row.push(match e.cal.summary.iter().find(|r| &r.parameter == n) {
                     Some(r) => format!("{} [{}, {}]", num(r.q50, 3), num(r.q05, 3), num(r.q95, 3)),
                     None => "–".into(),
@@ -176,18 +124,22 @@ pub fn write(dirs: &[PathBuf], out: &Path, rpm: Option<f64>) -> Result<PathBuf> 
         })
         .collect();
     page.table(&header.iter().map(String::as_str).collect::<Vec<_>>(), &table);
+}
 
+fn differences_section(page: &mut Page, comparison: &Comparison) {
     page.section("differences", "Differences");
     page.para("For each pair a, b and each parameter both have: the 90 % interval of a − b and of a / b, and P(a > b). Probabilities beyond 0.99 or below 0.01 (bold) mean the records tell the two apart.");
-    let table: Vec<Vec<String>> = rows
+    let table: Vec<Vec<String>> = comparison
+        .differences
         .iter()
-        .map(|(a, b, p, d)| {
+        .map(|r| {
+            let d = &r.difference;
             let sure = d.p_greater > 0.99 || d.p_greater < 0.01;
             let pg = format!("{:.3}", d.p_greater);
             vec![
-                esc(a),
-                esc(b),
-                esc(p),
+                esc(&r.a),
+                esc(&r.b),
+                esc(&r.parameter),
                 format!("{} [{}, {}]", num(d.diff_q50, 3), num(d.diff_q05, 3), num(d.diff_q95, 3)),
                 format!("{} [{}, {}]", num(d.ratio_q50, 3), num(d.ratio_q05, 3), num(d.ratio_q95, 3)),
                 if sure { format!("<b>{pg}</b>") } else { pg },
@@ -195,29 +147,16 @@ pub fn write(dirs: &[PathBuf], out: &Path, rpm: Option<f64>) -> Result<PathBuf> 
         })
         .collect();
     page.table(&["a", "b", "parameter", "a − b: median [5 %, 95 %]", "a / b: median [5 %, 95 %]", "P(a > b)"], &table);
+}
 
-    page.section("current-law", "Current law and held-out currents");
-    law_section(&mut page, &entries);
-    for (stem, caption) in figs.items.iter().filter(|f| f.0.starts_with("held_out")) {
-        page.figure(&out.join(format!("{stem}.png")), caption)?;
-    }
-
-    page.section("figures", "Figures");
-    for (stem, caption) in figs.items.iter().filter(|f| !f.0.starts_with("held_out")) {
-        page.figure(&out.join(format!("{stem}.png")), caption)?;
-    }
-
+fn reproduce_section(page: &mut Page, entries: &[Entry]) {
     page.section("reproduce", "Reproduce");
-    let mut rows_html = vec![vec!["command".to_string(), format!("<code>{}</code>", esc(&crate::output::calibration::command_line()))]];
+    let mut rows_html = vec![vec!["command".to_string(), format!("<code>{}</code>", esc(&command_line()))]];
     rows_html.push(vec!["mrbp version".into(), esc(env!("CARGO_PKG_VERSION"))]);
-    for e in &entries {
+    for e in entries {
         rows_html.push(vec![esc(&e.label), format!("<code>{}</code> (seed {})", esc(&e.cal.record.command), e.cal.record.seed)]);
     }
     page.table(&["", ""], &rows_html);
-
-    let path = out.join("report.html");
-    atomic_write(&path, page.finish().as_bytes())?;
-    Ok(path)
 }
 
 /// The held-out runs of current-law calibrations against the per-current
@@ -302,7 +241,7 @@ fn against_current(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<
         .map(|law| {
             let take: Vec<(usize, usize)> = law.positions.iter().step_by((law.positions.len() / 400).max(1)).copied().collect();
             grid.iter()
-                .map(|&i| take.iter().filter_map(|&(s, ch)| law.cal.params_at(s, ch, i).ok()).map(|p| p.to_array()).collect())
+                .map(|&i| take.iter().map(|&(s, ch)| law.cal.sample.params_at(s, ch, i).to_array()).collect())
                 .collect()
         })
         .collect();
@@ -344,7 +283,7 @@ fn against_current(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<
 /// speed, over one another (τ against time over the first revolution).
 fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Figures) -> Result<()> {
     // every record of the per-current calibrations with its crank speed
-    let records: Vec<(&Entry, Vec<(&StoredBands, f64)>)> = entries
+    let records: Vec<(&Entry, Vec<(&RunBands, f64)>)> = entries
         .iter()
         .filter(|e| !e.is_law())
         .filter_map(|e| e.bands.as_ref().map(|bands| (e, bands.iter().map(|b| (b, rpm_of(&b.time, &b.displacement))).collect())))
@@ -355,7 +294,7 @@ fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Figures) 
     }
     speeds.sort_by(f64::total_cmp);
     let target = rpm.unwrap_or(speeds[speeds.len() / 2]);
-    let chosen: Vec<(&Entry, &StoredBands, f64)> = records
+    let chosen: Vec<(&Entry, &RunBands, f64)> = records
         .iter()
         .filter_map(|(e, r)| {
             r.iter().min_by(|a, b| (a.1 - target).abs().total_cmp(&(b.1 - target).abs())).map(|&(b, v)| (*e, b, v))
@@ -379,7 +318,7 @@ fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Figures) 
 fn held_out_figures(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
     for law in entries.iter().filter(|e| e.is_law()) {
         let (Some(bands), Some(cov)) = (&law.bands, &law.coverage) else { continue };
-        let held: Vec<&StoredBands> = bands.iter().filter(|b| cov.iter().any(|r| r.run == b.run && !r.calibrated)).collect();
+        let held: Vec<&RunBands> = bands.iter().filter(|b| cov.iter().any(|r| r.run == b.run && !r.calibrated)).collect();
         if held.is_empty() {
             continue;
         }

@@ -6,11 +6,10 @@ use std::path::Path;
 
 use super::Figures;
 use crate::error::Result;
-use crate::output::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
-use crate::output::prediction::StoredBands;
-use crate::posterior::Prior;
+use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
+use crate::posterior::{PosteriorSample, Prior};
+use crate::predict::RunBands;
 use crate::sampler::quantile;
-use crate::stored::StoredChains;
 
 /// At most this many observations are drawn as points per panel (the PNG
 /// would show no more; the SVG stays small).
@@ -52,7 +51,7 @@ pub(crate) fn loop_band(label: &str, color: plot::RGBColor, x: &[f64], lo: &[f64
 
 /// One figure per run: τ–γ and F–x with the 95 % predictive band, the 95 %
 /// and 50 % model bands, the posterior median and the data.
-pub fn bands(dir: &Path, bands: &[StoredBands], area_m2: f64, gap_m: f64, figs: &mut Figures) -> Result<()> {
+pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mut Figures) -> Result<()> {
     for b in bands {
         let step = every(b.time.len(), MAX_POINTS);
         let pick = |v: &[f64], s: f64| v.iter().step_by(step).map(|x| x * s).collect::<Vec<f64>>();
@@ -87,7 +86,7 @@ pub fn bands(dir: &Path, bands: &[StoredBands], area_m2: f64, gap_m: f64, figs: 
 
 /// τ against time over the first loading up to yield, where the stress
 /// changes fastest and the bands are wide enough to see.
-fn zoom_first_loading(b: &StoredBands) -> Chart {
+fn zoom_first_loading(b: &RunBands) -> Chart {
     let n = b.tau_obs.len();
     let peak = b.model[2].iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let knee = (0..n).find(|&k| b.model[2][k].abs() >= 0.9 * peak).unwrap_or(n / 4);
@@ -105,7 +104,7 @@ fn zoom_first_loading(b: &StoredBands) -> Chart {
 
 /// Residuals τ_obs − median against time, one panel per run, with the 95 %
 /// predictive band about the median.
-pub fn residuals(dir: &Path, bands: &[StoredBands], figs: &mut Figures) -> Result<()> {
+pub fn residuals(dir: &Path, bands: &[RunBands], figs: &mut Figures) -> Result<()> {
     let panels: Vec<Chart> = bands
         .iter()
         .map(|b| {
@@ -113,7 +112,7 @@ pub fn residuals(dir: &Path, bands: &[StoredBands], figs: &mut Figures) -> Resul
             let t: Vec<f64> = b.time.clone();
             let rel = |v: &[f64]| v.iter().zip(&b.model[2]).map(|(y, m)| (y - m) * 1e-3).collect::<Vec<f64>>();
             let res = rel(&b.tau_obs);
-            let mut c = Chart::new(format!("{}", b.run), "time t (s)", "τ_obs − median (kPa)");
+            let mut c = Chart::new(b.run.to_string(), "time t (s)", "τ_obs − median (kPa)");
             c.series.push(Series::band(Some("95 % predictive".into()), PALETTE[5], t.clone(), rel(&b.predictive[0]), rel(&b.predictive[1])));
             c.series.push(Series::points(Some("residual".into()), plot::BLACK_, t.iter().step_by(step).copied().collect(), res.iter().step_by(step).copied().collect()).with_width(1));
             c.series.push(Series::line(None, PALETTE[1], vec![t[0], t[t.len() - 1]], vec![0.0, 0.0]).with_width(1));
@@ -131,17 +130,21 @@ pub fn residuals(dir: &Path, bands: &[StoredBands], figs: &mut Figures) -> Resul
 
 /// Trace plots of every parameter: eight chains spread over the ensembles,
 /// and the end of the burn-in.
-pub fn traces(dir: &Path, chains: &StoredChains, burn_in: usize, figs: &mut Figures) -> Result<()> {
-    let shown: Vec<usize> = (0..8.min(chains.chains)).map(|i| i * chains.chains / 8.min(chains.chains)).collect();
-    let steps: Vec<f64> = (0..chains.steps).map(|s| s as f64).collect();
-    let panels: Vec<Chart> = chains
+pub fn traces(dir: &Path, sample: &PosteriorSample, burn_in: usize, figs: &mut Figures) -> Result<()> {
+    let chains = &sample.chains;
+    let n = chains.chains();
+    let shown: Vec<usize> = (0..8.min(n)).map(|i| i * n / 8.min(n)).collect();
+    let steps: Vec<f64> = (0..chains.steps()).map(|s| s as f64).collect();
+    let panels: Vec<Chart> = sample
+        .layout
         .names
         .iter()
         .enumerate()
         .map(|(i, name)| {
             let mut c = Chart::new(name.clone(), "step", name.clone());
             for (k, &ch) in shown.iter().enumerate() {
-                c.series.push(Series::line(None, PALETTE[k % 7], steps.clone(), chains.trace(i, ch).to_vec()).with_width(1));
+                let trace = (0..chains.steps()).map(|s| chains.at(s, ch, i)).collect();
+                c.series.push(Series::line(None, PALETTE[k % 7], steps.clone(), trace).with_width(1));
             }
             c.series.push(Series::vlines(Some("end of burn-in".into()), GREY, vec![burn_in as f64]).with_width(1));
             c.legend_at = LegendAt::UpperRight;
@@ -149,20 +152,20 @@ pub fn traces(dir: &Path, chains: &StoredChains, burn_in: usize, figs: &mut Figu
         })
         .collect();
     plot::save(&Figure::grid(panels, 3), &dir.join("traces"))?;
-    figs.push("traces", &format!("Trace plots: {} of {} walkers, spread over the ensembles; steps before the grey line are burn-in.", shown.len(), chains.chains));
+    figs.push("traces", &format!("Trace plots: {} of {} walkers, spread over the ensembles; steps before the grey line are burn-in.", shown.len(), n));
     Ok(())
 }
 
 /// The corner plot of the θ parameters (the seven B-P ones or a current law's): marginal histograms on the
 /// diagonal, pairs below it; the identification and the MAP marked where
 /// they fall inside the plotted range.
-pub fn corner(dir: &Path, chains: &StoredChains, positions: &[(usize, usize)], names: &[String], identification: &[f64], map: &[f64], figs: &mut Figures) -> Result<()> {
-    let idx: Vec<usize> = names.iter().filter_map(|n| chains.index(n)).collect();
-    let k = idx.len();
-    if k != names.len() || k == 0 {
+pub fn corner(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usize)], identification: &[f64], map: &[f64], figs: &mut Figures) -> Result<()> {
+    let names = sample.layout.theta_names();
+    let k = names.len();
+    if k == 0 {
         return Ok(());
     }
-    let draws: Vec<Vec<f64>> = idx.iter().map(|&i| positions.iter().map(|&(s, c)| chains.at(i, s, c)).collect()).collect();
+    let draws: Vec<Vec<f64>> = names.iter().filter_map(|n| sample.values(n, positions)).collect();
     let ranges: Vec<(f64, f64)> = draws
         .iter()
         .map(|d| {
@@ -251,11 +254,11 @@ fn histogram(v: &[f64], range: (f64, f64), bins: usize) -> (Vec<f64>, Vec<f64>) 
 /// prior's range: the prior density (scaled to peak 1), the posterior's 90 %
 /// credible interval shaded and its median; the title gives how much the
 /// records narrowed the prior (posterior sd / prior sd of ln θ).
-pub fn marginals(dir: &Path, chains: &StoredChains, positions: &[(usize, usize)], names: &[String], priors: &[Prior], figs: &mut Figures) -> Result<()> {
+pub fn marginals(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usize)], priors: &[Prior], figs: &mut Figures) -> Result<()> {
     let mut panels = Vec::new();
-    for (k, name) in names.iter().enumerate() {
-        let Some(i) = chains.index(name) else { continue };
-        let logs: Vec<f64> = positions.iter().map(|&(s, c)| chains.at(i, s, c).ln()).collect();
+    for (k, name) in sample.layout.theta_names().iter().enumerate() {
+        let Some(values) = sample.values(name, positions) else { continue };
+        let logs: Vec<f64> = values.iter().map(|v| v.ln()).collect();
         let (q05, q50, q95) = (quantile(&logs, 0.05), quantile(&logs, 0.5), quantile(&logs, 0.95));
         let mean = logs.iter().sum::<f64>() / logs.len().max(1) as f64;
         let sd = (logs.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / logs.len().max(2) as f64).sqrt();

@@ -60,12 +60,12 @@ impl Page {
     /// Starts a section with an anchor listed in the navigation bar.
     pub fn section(&mut self, id: &str, heading: &str) {
         self.nav.push((id.to_string(), heading.to_string()));
-        let _ = write!(self.body, "<h2 id=\"{}\">{}</h2>\n", esc(id), esc(heading));
+        let _ = writeln!(self.body, "<h2 id=\"{}\">{}</h2>", esc(id), esc(heading));
     }
 
     /// A paragraph of escaped text.
     pub fn para(&mut self, text: &str) {
-        let _ = write!(self.body, "<p>{}</p>\n", esc(text));
+        let _ = writeln!(self.body, "<p>{}</p>", esc(text));
     }
 
     /// Raw HTML the caller has built (and escaped) itself.
@@ -75,11 +75,11 @@ impl Page {
     }
 
     pub fn note(&mut self, text: &str) {
-        let _ = write!(self.body, "<p class=\"note\">{}</p>\n", esc(text));
+        let _ = writeln!(self.body, "<p class=\"note\">{}</p>", esc(text));
     }
 
     pub fn pre(&mut self, text: &str) {
-        let _ = write!(self.body, "<pre>{}</pre>\n", esc(text));
+        let _ = writeln!(self.body, "<pre>{}</pre>", esc(text));
     }
 
     /// A table; cells are raw HTML (escape text with [`esc`]).
@@ -104,9 +104,9 @@ impl Page {
         let bytes = std::fs::read(png).map_err(|e| Error::input(png, format!("cannot read figure: {e}")))?;
         let data = base64::engine::general_purpose::STANDARD.encode(bytes);
         let alt = png.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let _ = write!(
+        let _ = writeln!(
             self.body,
-            "<figure><img alt=\"{}\" src=\"data:image/png;base64,{data}\"><figcaption>{}</figcaption></figure>\n",
+            "<figure><img alt=\"{}\" src=\"data:image/png;base64,{data}\"><figcaption>{}</figcaption></figure>",
             esc(&alt),
             esc(caption)
         );

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use rustfft::{num_complex::Complex, FftPlanner};
 use statrs::distribution::{ContinuousCDF, Normal};
 
-use super::ensemble::Chains;
+use super::chains::Chains;
 
 /// Sokal's window constant: the sum runs to the first lag M ≥ C τ(M).
 const SOKAL_C: f64 = 5.0;

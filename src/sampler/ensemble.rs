@@ -1,14 +1,17 @@
 //! Several independent ensembles stepped together with the parallel
 //! red-blue update (Foreman-Mackey et al. 2013, after Goodman & Weare 2010).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use rand::RngExt;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
+use super::chains::Chains;
+use super::checkpoint;
 use super::diagnostics::Diagnostics;
 use super::moves::Move;
+use super::observer::{Observer, RunState};
+use super::settings::SamplerSettings;
 use super::LogDensity;
 use crate::error::{Error, Result};
 
@@ -22,56 +25,7 @@ const TAU_STABLE: f64 = 0.05;
 /// Index of the stream that picks the move of an ensemble's step.
 const MOVE_STREAM: u64 = u64::MAX;
 
-/// What the sampler is: ensembles, walkers, moves and seed.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SamplerSettings {
-    /// Walkers per ensemble (even, at least 2 × dim).
-    pub walkers: usize,
-    /// Independent ensembles (R̂ compares them).
-    pub ensembles: usize,
-    /// Moves with their weights; one is picked per ensemble and step.
-    pub moves: Vec<(Move, f64)>,
-    pub seed: u64,
-}
-
-impl Default for SamplerSettings {
-    fn default() -> Self {
-        SamplerSettings {
-            walkers: 32,
-            ensembles: 4,
-            moves: vec![(Move::default(), 1.0)],
-            seed: 1,
-        }
-    }
-}
-
-impl SamplerSettings {
-    fn check(&self, dim: usize) -> Result<()> {
-        if self.walkers % 2 != 0 || self.walkers < 2 * dim.max(2) {
-            return Err(Error::Usage(format!(
-                "walkers per ensemble must be even and at least 2 × dimension = {}; got {}",
-                2 * dim.max(2),
-                self.walkers
-            )));
-        }
-        if self.ensembles == 0 {
-            return Err(Error::Usage("at least one ensemble is needed".into()));
-        }
-        if self.moves.is_empty() || self.moves.iter().any(|(_, w)| !(*w > 0.0) || !w.is_finite()) {
-            return Err(Error::Usage("moves need positive, finite weights".into()));
-        }
-        for (m, _) in &self.moves {
-            m.check().map_err(Error::Usage)?;
-            if m.min_complement() > self.walkers / 2 {
-                return Err(Error::Usage(format!("{m:?} needs more walkers")));
-            }
-        }
-        Ok(())
-    }
-}
-
-/// How long to run and what to do meanwhile.
+/// How long to run.
 #[derive(Clone, Debug)]
 pub struct RunControl {
     /// Run until this many steps in total (including steps already taken).
@@ -82,10 +36,6 @@ pub struct RunControl {
     pub check_every: usize,
     /// Convergence also needs this bulk and tail ESS for every coordinate.
     pub min_ess: f64,
-    /// Save the state here every `checkpoint_every` steps.
-    pub checkpoint: Option<(PathBuf, usize)>,
-    /// Show a progress bar on a terminal.
-    pub progress: bool,
 }
 
 impl RunControl {
@@ -95,80 +45,7 @@ impl RunControl {
             until_converged: false,
             check_every: 500,
             min_ess: 0.0,
-            checkpoint: None,
-            progress: false,
         }
-    }
-}
-
-/// Every step of every walker: positions, log-densities and whether the
-/// step's proposal was accepted. Walker index `w` of ensemble `e` is chain
-/// `e * walkers + w`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Chains {
-    pub dim: usize,
-    pub ensembles: usize,
-    pub walkers: usize,
-    /// Step-major: `[step][chain][coordinate]`.
-    pub positions: Vec<f64>,
-    /// `[step][chain]`.
-    pub log_prob: Vec<f64>,
-    /// `[step][chain]`.
-    pub accepted: Vec<bool>,
-}
-
-impl Chains {
-    pub fn chains(&self) -> usize {
-        self.ensembles * self.walkers
-    }
-
-    pub fn steps(&self) -> usize {
-        self.log_prob.len() / self.chains().max(1)
-    }
-
-    /// Coordinate `i` of chain `c` at `step`.
-    pub fn at(&self, step: usize, chain: usize, i: usize) -> f64 {
-        self.positions[(step * self.chains() + chain) * self.dim + i]
-    }
-
-    /// The trace of coordinate `i` of every chain from step `from` on:
-    /// `[chain][step]`.
-    pub fn traces(&self, i: usize, from: usize) -> Vec<Vec<f64>> {
-        (0..self.chains())
-            .map(|c| (from..self.steps()).map(|s| self.at(s, c, i)).collect())
-            .collect()
-    }
-
-    /// The traces of an arbitrary function of the position.
-    pub fn traces_of(&self, from: usize, f: impl Fn(&[f64]) -> f64) -> Vec<Vec<f64>> {
-        let (d, nc) = (self.dim, self.chains());
-        (0..nc)
-            .map(|c| {
-                (from..self.steps())
-                    .map(|s| f(&self.positions[(s * nc + c) * d..(s * nc + c + 1) * d]))
-                    .collect()
-            })
-            .collect()
-    }
-
-    /// Acceptance fraction of each chain over steps `from..`.
-    pub fn acceptance(&self, from: usize) -> Vec<f64> {
-        let nc = self.chains();
-        let steps = self.steps().saturating_sub(from).max(1);
-        (0..nc)
-            .map(|c| (from..self.steps()).filter(|&s| self.accepted[s * nc + c]).count() as f64 / steps as f64)
-            .collect()
-    }
-
-    /// The last position of every chain, `[chain][coordinate]` flattened.
-    fn last_positions(&self) -> &[f64] {
-        let n = self.chains() * self.dim;
-        &self.positions[self.positions.len() - n..]
-    }
-
-    fn last_log_prob(&self) -> &[f64] {
-        let n = self.chains();
-        &self.log_prob[self.log_prob.len() - n..]
     }
 }
 
@@ -178,15 +55,6 @@ pub struct Sampler<'t, T: LogDensity> {
     pub settings: SamplerSettings,
     pub chains: Chains,
 }
-
-#[derive(Serialize, Deserialize)]
-struct Checkpoint {
-    format: String,
-    settings: SamplerSettings,
-    chains: Chains,
-}
-
-const CHECKPOINT_FORMAT: &str = "mrbp-sampler-checkpoint-1";
 
 impl<'t, T: LogDensity> Sampler<'t, T> {
     /// A sampler whose step 0 is `initial`: one position per chain, ensemble
@@ -230,56 +98,27 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         })
     }
 
-    /// A sampler restored from a checkpoint written by [`Sampler::run`].
+    /// A sampler restored from a checkpoint (see [`super::observer::Checkpointer`]).
     pub fn resume(target: &'t T, path: &Path) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| Error::input(path, format!("cannot read checkpoint: {e}")))?;
-        let cp: Checkpoint = postcard::from_bytes(&bytes)
-            .map_err(|e| Error::input(path, format!("not a sampler checkpoint: {e}")))?;
-        if cp.format != CHECKPOINT_FORMAT || cp.chains.dim != target.dim() {
-            return Err(Error::input(path, "checkpoint of another format or another target"));
-        }
-        cp.settings.check(target.dim())?;
-        Ok(Sampler {
-            target,
-            settings: cp.settings,
-            chains: cp.chains,
-        })
+        let (settings, chains) = checkpoint::load(path, target.dim())?;
+        settings.check(target.dim())?;
+        Ok(Sampler { target, settings, chains })
     }
 
-    /// Saves the full state atomically; resuming from it continues exactly.
-    pub fn save_checkpoint(&self, path: &Path) -> Result<()> {
-        let cp = Checkpoint {
-            format: CHECKPOINT_FORMAT.into(),
-            settings: self.settings.clone(),
-            chains: self.chains.clone(),
-        };
-        let bytes = postcard::to_allocvec(&cp).map_err(|e| Error::output(path, e))?;
-        crate::output::atomic_write(path, &bytes)
-    }
-
-    /// Steps until `control` says stop.
-    pub fn run(&mut self, control: &RunControl) -> Result<()> {
-        let start = self.chains.steps();
-        let bar = progress_bar(control, start);
-        let mut accepted_recent = 0usize;
+    /// Steps until `control` says stop, telling `observers` what happens.
+    pub fn run(&mut self, control: &RunControl, observers: &mut [&mut dyn Observer]) -> Result<()> {
         let mut last_tau = f64::NAN;
+        let mut accepted = 0;
+        for o in observers.iter_mut() {
+            o.started(&self.state(control, accepted))?;
+        }
         while self.chains.steps() < control.max_steps + 1 {
-            let acc = self.step();
-            accepted_recent += acc;
-            let done = self.chains.steps() - 1; // steps taken after the initial state
-            if let Some(bar) = &bar {
-                bar.set_position(done as u64);
-                if done % 20 == 0 {
-                    let rate = accepted_recent as f64 / (20 * self.chains.chains()) as f64;
-                    bar.set_message(format!("acceptance {rate:.2}"));
-                    accepted_recent = 0;
-                }
+            accepted = self.step();
+            let state = self.state(control, accepted);
+            for o in observers.iter_mut() {
+                o.stepped(&state)?;
             }
-            if let Some((path, every)) = &control.checkpoint {
-                if done % every.max(&1) == 0 {
-                    self.save_checkpoint(path)?;
-                }
-            }
+            let done = state.step;
             if control.until_converged && done % control.check_every.max(1) == 0 {
                 // converged: long enough, R̂ fine, enough ESS, and τ stable
                 // within 5 % since the last check (τ estimates of short chains
@@ -287,31 +126,28 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 let diag = self.diagnostics();
                 let stable = (diag.tau_max - last_tau).abs() < TAU_STABLE * diag.tau_max;
                 last_tau = diag.tau_max;
-                if let Some(bar) = &bar {
-                    let line = format!(
-                        "  step {done}: τ_max {:.1}, largest R̂ {:.4}, smallest ESS {:.0}",
-                        diag.tau_max,
-                        diag.max_rhat(),
-                        diag.min_ess()
-                    );
-                    if bar.is_hidden() {
-                        eprintln!("{line}");
-                    } else {
-                        bar.println(line);
-                    }
+                for o in observers.iter_mut() {
+                    o.checked(&state, &diag);
                 }
                 if stable && diag.converged() && diag.min_ess() >= control.min_ess {
                     break;
                 }
             }
         }
-        if let Some(bar) = bar {
-            bar.finish_and_clear();
-        }
-        if let Some((path, _)) = &control.checkpoint {
-            self.save_checkpoint(path)?;
+        for o in observers.iter_mut() {
+            o.finished(&self.state(control, accepted))?;
         }
         Ok(())
+    }
+
+    fn state(&self, control: &RunControl, accepted: usize) -> RunState<'_> {
+        RunState {
+            settings: &self.settings,
+            chains: &self.chains,
+            step: self.chains.steps().saturating_sub(1),
+            max_steps: control.max_steps,
+            accepted,
+        }
     }
 
     /// Diagnostics of the chains so far, with the burn-in rule of
@@ -415,17 +251,4 @@ fn evaluate<T: LogDensity>(target: &T, xs: &[f64], out: &mut [f64]) {
             *v = f64::NEG_INFINITY;
         }
     }
-}
-
-fn progress_bar(control: &RunControl, start: usize) -> Option<indicatif::ProgressBar> {
-    if !control.progress {
-        return None;
-    }
-    let bar = indicatif::ProgressBar::new(control.max_steps as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("sampling {bar:30} {pos}/{len} steps  {msg}  ETA {eta}")
-            .expect("valid template"),
-    );
-    bar.set_position(start.saturating_sub(1) as u64);
-    Some(bar)
 }

@@ -4,7 +4,10 @@
 //! * [`LogDensity`]: what a target implements (one point, or a batch);
 //! * [`moves`]: the stretch, differential-evolution and snooker moves;
 //! * [`ensemble`]: several independent ensembles stepped with the parallel
-//!   red-blue update, run control and checkpoints;
+//!   red-blue update, and when to stop; [`settings`]: what a sampler is;
+//! * [`chains`]: the history of a run;
+//! * [`observer`]: progress, diagnostics lines and checkpoints beside the
+//!   loop; [`checkpoint`]: the state on disk;
 //! * [`diagnostics`]: autocorrelation time, R̂, ESS, MCSE, acceptance.
 //!
 //! Randomness is counter-based ([`crate::rng::stream`]): the draws of walker
@@ -12,13 +15,20 @@
 //! the same bit for bit whatever the number of threads, and a resumed run
 //! equals an uninterrupted one.
 
+pub mod chains;
+pub mod checkpoint;
 pub mod diagnostics;
 pub mod ensemble;
 pub mod moves;
+pub mod observer;
+pub mod settings;
 
+pub use chains::Chains;
 pub use diagnostics::{quantile, quantile_sorted, Diagnostics, ParameterDiagnostics};
-pub use ensemble::{Chains, RunControl, Sampler, SamplerSettings};
+pub use ensemble::{RunControl, Sampler};
 pub use moves::Move;
+pub use observer::{Checkpointer, Observer, Progress, RunState};
+pub use settings::SamplerSettings;
 
 /// An unnormalised log-density over unconstrained real vectors.
 ///

@@ -7,59 +7,13 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::prior::{default_priors, Prior};
+use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::IdentifySettings;
-use crate::model::{Scheme, PARAM_NAMES};
-use crate::sampler::Move;
-
-/// The residual model of the force record.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum NoiseModel {
-    /// Independent Gaussian residuals, one unknown σ per run.
-    Gaussian,
-    /// Independent Student-t residuals (fixed ν), one unknown scale per run:
-    /// robust to outliers.
-    StudentT,
-    /// AR(1) residuals, one unknown innovation σ and lag-one correlation ρ
-    /// per run: for dense records whose residuals are correlated, where an
-    /// independent model claims far too much certainty.
-    Ar1,
-}
-
-/// Which samples of each record enter the likelihood.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum RecordPart {
-    /// The first loading branch (the paper's choice).
-    FirstBranch,
-    /// From the start to the last reversal: every complete branch.
-    AllBranches,
-    /// Every sample.
-    WholeRecord,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct LikelihoodSettings {
-    pub noise: NoiseModel,
-    /// Half-width (ms) of the local cubic fit that smooths the measured
-    /// strain before it drives the model; 0 uses the raw samples. The model
-    /// turns displacement noise into stress noise (G δγ) and biases G
-    /// (an errors-in-variables effect); the crank's displacement is smooth
-    /// on this scale, so the fit removes noise, not signal.
-    pub smooth_strain_ms: f64,
-    /// Degrees of freedom of the Student-t model.
-    pub student_nu: f64,
-    pub part: RecordPart,
-}
-
-impl Default for LikelihoodSettings {
-    fn default() -> Self {
-        LikelihoodSettings { noise: NoiseModel::Gaussian, smooth_strain_ms: 2.0, student_nu: 5.0, part: RecordPart::WholeRecord }
-    }
-}
+use crate::model::{Integrator, Scheme, PARAM_NAMES};
+use crate::posterior::prior::default_priors;
+use crate::posterior::{LikelihoodSettings, ModelKind, ParameterModel, Posterior, Prior};
+use crate::sampler::{Move, RunControl, SamplerSettings};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -84,6 +38,19 @@ impl Default for IntegratorSettings {
     }
 }
 
+impl IntegratorSettings {
+    /// The integrator with `substeps` sub-steps per sample (at least 1).
+    pub fn integrator(&self, substeps: u32) -> Integrator {
+        Integrator {
+            scheme: self.scheme,
+            extrapolate: self.extrapolate,
+            substeps: substeps.max(1),
+            max_substeps: self.max_substeps,
+            ..Integrator::default()
+        }
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SamplingSettings {
@@ -103,6 +70,23 @@ pub struct SamplingSettings {
     pub burn_in: usize,
 }
 
+impl SamplingSettings {
+    /// The sampler with `walkers` per ensemble and a seed of its own.
+    pub fn sampler(&self, walkers: usize, seed: u64) -> SamplerSettings {
+        SamplerSettings { walkers, ensembles: self.ensembles, moves: self.moves.clone(), seed }
+    }
+
+    /// How long to run: a fixed number of steps, or until converged.
+    pub fn control(&self) -> RunControl {
+        RunControl {
+            max_steps: if self.steps > 0 { self.steps } else { self.max_steps },
+            until_converged: self.steps == 0,
+            check_every: self.check_every,
+            min_ess: self.min_ess,
+        }
+    }
+}
+
 impl Default for SamplingSettings {
     fn default() -> Self {
         SamplingSettings {
@@ -115,27 +99,6 @@ impl Default for SamplingSettings {
             min_ess: 400.0,
             check_every: 250,
             burn_in: 0,
-        }
-    }
-}
-
-/// How the B-P parameters relate to the runs of a calibration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ModelKind {
-    /// One parameter set for the runs of one coil current.
-    PerCurrent,
-    /// The parameters as functions of the current (posterior::current_law),
-    /// one posterior for the runs of every current.
-    CurrentLaw,
-}
-
-impl ModelKind {
-    /// Names of the θ coordinates (before the noise ones), SI in outputs.
-    pub fn theta_names(self) -> &'static [&'static str] {
-        match self {
-            ModelKind::PerCurrent => &PARAM_NAMES,
-            ModelKind::CurrentLaw => &super::current_law::LAW_NAMES,
         }
     }
 }
@@ -199,12 +162,7 @@ impl CalibrationSettings {
         if !(lo > 0.0 && hi > lo) {
             return Err("sigma_bounds_pa must be 0 < lower < upper".into());
         }
-        if !(self.likelihood.smooth_strain_ms >= 0.0) {
-            return Err("smooth_strain_ms must be 0 or positive".into());
-        }
-        if self.likelihood.noise == NoiseModel::StudentT && !(self.likelihood.student_nu > 0.0) {
-            return Err("student_nu must be positive".into());
-        }
+        self.likelihood.check()?;
         if !(self.reference_current_a > 0.0) {
             return Err("reference_current_a must be positive".into());
         }
@@ -219,17 +177,15 @@ impl CalibrationSettings {
         std::array::from_fn(|i| self.prior[PARAM_NAMES[i]])
     }
 
-    /// Priors of the θ coordinates, in the order of [`ModelKind::theta_names`].
-    pub fn theta_priors(&self) -> Vec<Prior> {
-        match self.model {
-            ModelKind::PerCurrent => self.priors().to_vec(),
-            ModelKind::CurrentLaw => self.law().priors(&self.priors()),
-        }
+    /// How θ gives the B-P parameters of each run.
+    pub fn parameter_model(&self) -> ParameterModel {
+        ParameterModel::new(self.model, self.reference_current_a)
     }
 
-    /// The current law of a `current-law` model.
-    pub fn law(&self) -> super::CurrentLaw {
-        super::CurrentLaw { reference_a: self.reference_current_a }
+    /// The posterior of the runs of `campaign` with these settings.
+    pub fn posterior(&self, campaign: &Campaign, integrator: Integrator) -> Posterior {
+        let model = self.parameter_model();
+        Posterior::new(campaign, model, model.priors(&self.priors()), &self.likelihood, self.sigma_bounds_pa, integrator)
     }
 
     pub fn to_toml(&self) -> Result<String> {

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use polars::prelude::*;
 
-use super::atomic_write_with;
+use crate::atomic;
 use crate::error::{Error, Result};
 
 /// A table built column by column; each column a name and its values.
@@ -46,7 +46,7 @@ impl Table {
 /// Writes a table to `path` as Parquet (zstd-compressed), atomically.
 pub fn write_parquet(path: &Path, table: Table) -> Result<()> {
     let mut df = table.into_frame()?;
-    atomic_write_with(path, |file| {
+    atomic::write_with(path, |file| {
         ParquetWriter::new(file)
             .with_compression(ParquetCompression::Zstd(None))
             .finish(&mut df)

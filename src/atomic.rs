@@ -1,27 +1,19 @@
-//! Writing results: every file goes to a temporary file beside its target
-//! and is renamed into place, so a crash or an error never leaves a partial
-//! output behind.
-
-pub mod calibration;
-pub mod identification;
-pub mod plot;
-pub mod prediction;
-pub mod table;
+//! Atomic file writing: every output goes to a temporary file beside its
+//! target and is renamed into place, so a crash or an error never leaves a
+//! partial file behind.
 
 use std::io::Write;
 use std::path::Path;
 
 use crate::error::{Error, Result};
 
-pub use table::{column_names, f64_column, read_parquet, str_column, write_parquet, Table};
-
 /// Writes `bytes` to `path` atomically (temporary file + rename).
-pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
-    atomic_write_with(path, |w| w.write_all(bytes).map_err(|e| Error::output(path, e)))
+pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_with(path, |w| w.write_all(bytes).map_err(|e| Error::output(path, e)))
 }
 
 /// Creates `path` atomically from what `fill` writes into it.
-pub fn atomic_write_with(
+pub fn write_with(
     path: &Path,
     fill: impl FnOnce(&mut std::fs::File) -> Result<()>,
 ) -> Result<()> {
@@ -57,10 +49,10 @@ mod tests {
     fn failed_fill_leaves_nothing_behind() {
         let dir = tempfile::tempdir().unwrap();
         let target = dir.path().join("x.txt");
-        let r = atomic_write_with(&target, |_| Err(Error::Compute("boom".into())));
+        let r = write_with(&target, |_| Err(Error::Compute("boom".into())));
         assert!(r.is_err());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
-        atomic_write(&target, b"ok").unwrap();
+        write(&target, b"ok").unwrap();
         assert_eq!(std::fs::read(&target).unwrap(), b"ok");
     }
 }

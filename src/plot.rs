@@ -12,7 +12,7 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 pub use plotters::style::RGBColor;
 
-use super::atomic_write;
+use crate::atomic;
 use crate::error::{Error, Result};
 
 /// Colours that stay distinct for the colour-blind (Okabe & Ito).
@@ -190,7 +190,7 @@ pub fn save(figure: &Figure, stem: &Path) -> Result<()> {
         render(figure, &root).map_err(|e| Error::output(&svg_path, e))?;
         root.present().map_err(|e| Error::output(&svg_path, e))?;
     }
-    atomic_write(&svg_path, svg.as_bytes())?;
+    atomic::write(&svg_path, svg.as_bytes())?;
 
     let png_path = with_ext(".png");
     let mut pixels = vec![0u8; (w * h * 3) as usize];
@@ -202,7 +202,7 @@ pub fn save(figure: &Figure, stem: &Path) -> Result<()> {
     let img = image::RgbImage::from_raw(w, h, pixels).ok_or_else(|| Error::output(&png_path, "bad image buffer"))?;
     let mut png = std::io::Cursor::new(Vec::new());
     img.write_to(&mut png, image::ImageFormat::Png).map_err(|e| Error::output(&png_path, e))?;
-    atomic_write(&png_path, png.get_ref())
+    atomic::write(&png_path, png.get_ref())
 }
 
 type DrawResult<DB> = std::result::Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
@@ -291,12 +291,9 @@ fn padded((lo, hi): (f64, f64), share: f64) -> (f64, f64) {
     (lo - share * span, hi + share * span)
 }
 
-fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
-    if chart.blank {
-        return Ok(());
-    }
-    let (caption, labels, descs, ticks, y_area, x_area, margin) =
-        if chart.compact { (13, 11, 13, 3, 56, 40, 6) } else { (18, 13, 15, 7, 70, 44, 12) };
+/// The plotted ranges of x (log₁₀ on a log axis) and y: as given, else the
+/// data's with a little padding.
+fn axis_ranges(chart: &Chart) -> ((f64, f64), (f64, f64)) {
     let tx = |x: f64| if chart.log_x { x.log10() } else { x };
     let xr = chart
         .x_range
@@ -316,6 +313,17 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
             .map(|r| padded(r, 0.05))
         })
         .unwrap_or((0.0, 1.0));
+    (xr, yr)
+}
+
+fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
+    if chart.blank {
+        return Ok(());
+    }
+    let (caption, labels, descs, ticks, y_area, x_area, margin) =
+        if chart.compact { (13, 11, 13, 3, 56, 40, 6) } else { (18, 13, 15, 7, 70, 44, 12) };
+    let tx = |x: f64| if chart.log_x { x.log10() } else { x };
+    let (xr, yr) = axis_ranges(chart);
     let mut c = ChartBuilder::on(area)
         .caption(&chart.title, (FONT, caption).into_font().style(FontStyle::Bold))
         .margin(margin)
@@ -340,49 +348,7 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
         .draw()?;
     let mut labelled = false;
     for s in &chart.series {
-        let color = s.color;
-        let xs: Vec<f64> = s.x.iter().map(|x| tx(*x)).collect();
-        let anno = match &s.mark {
-            Mark::Line { width } => c.draw_series(LineSeries::new(
-                xs.iter().zip(&s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)),
-                color.stroke_width(*width),
-            ))?,
-            Mark::Dashed { width } => c.draw_series(DashedLineSeries::new(
-                xs.iter().zip(&s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)),
-                8,
-                5,
-                color.stroke_width(*width),
-            ))?,
-            Mark::Points { size } => c.draw_series(
-                xs.iter()
-                    .zip(&s.y)
-                    .filter(|(x, y)| x.is_finite() && y.is_finite())
-                    .map(|(x, y)| Circle::new((*x, *y), *size, color.filled())),
-            )?,
-            Mark::Band { opacity } => {
-                let mut poly: Vec<(f64, f64)> = xs.iter().zip(&s.y2).map(|(x, y)| (*x, *y)).collect();
-                poly.extend(xs.iter().zip(&s.y).rev().map(|(x, y)| (*x, *y)));
-                poly.retain(|(x, y)| x.is_finite() && y.is_finite());
-                c.draw_series(std::iter::once(Polygon::new(poly, color.mix(*opacity).filled())))?
-            }
-            Mark::Bars { opacity } => c.draw_series(xs.windows(2).zip(&s.y).map(|(e, h)| {
-                Rectangle::new([(e[0], 0.0), (e[1], *h)], color.mix(*opacity).filled())
-            }))?,
-            Mark::VLines { width } => c.draw_series(
-                xs.iter().map(|x| PathElement::new(vec![(*x, yr.0), (*x, yr.1)], color.stroke_width(*width))),
-            )?,
-        };
-        if let Some(label) = &s.label {
-            labelled = true;
-            let mark = s.mark.clone();
-            anno.label(label).legend(move |(x, y)| match mark {
-                Mark::Points { .. } => Circle::new((x + 10, y), 4, color.filled()).into_dyn(),
-                Mark::Band { opacity } | Mark::Bars { opacity } => {
-                    Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(opacity.max(0.3)).filled()).into_dyn()
-                }
-                _ => PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3)).into_dyn(),
-            });
-        }
+        labelled |= draw_series(&mut c, s, &tx, yr)?;
     }
     if labelled && chart.legend {
         c.configure_series_labels()
@@ -398,6 +364,55 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
             .draw()?;
     }
     Ok(())
+}
+
+type Plane<'a, DB> = ChartContext<'a, DB, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>;
+
+/// Draws one series on the plane; returns whether it has a legend entry.
+fn draw_series<'a, DB: DrawingBackend + 'a>(c: &mut Plane<'a, DB>, s: &Series, tx: &dyn Fn(f64) -> f64, yr: (f64, f64)) -> std::result::Result<bool, DrawingAreaErrorKind<DB::ErrorType>> {
+    let color = s.color;
+    let xs: Vec<f64> = s.x.iter().map(|x| tx(*x)).collect();
+    let anno = match &s.mark {
+        Mark::Line { width } => c.draw_series(LineSeries::new(
+            xs.iter().zip(&s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)),
+            color.stroke_width(*width),
+        ))?,
+        Mark::Dashed { width } => c.draw_series(DashedLineSeries::new(
+            xs.iter().zip(&s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)),
+            8,
+            5,
+            color.stroke_width(*width),
+        ))?,
+        Mark::Points { size } => c.draw_series(
+            xs.iter()
+                .zip(&s.y)
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .map(|(x, y)| Circle::new((*x, *y), *size, color.filled())),
+        )?,
+        Mark::Band { opacity } => {
+            let mut poly: Vec<(f64, f64)> = xs.iter().zip(&s.y2).map(|(x, y)| (*x, *y)).collect();
+            poly.extend(xs.iter().zip(&s.y).rev().map(|(x, y)| (*x, *y)));
+            poly.retain(|(x, y)| x.is_finite() && y.is_finite());
+            c.draw_series(std::iter::once(Polygon::new(poly, color.mix(*opacity).filled())))?
+        }
+        Mark::Bars { opacity } => c.draw_series(xs.windows(2).zip(&s.y).map(|(e, h)| {
+            Rectangle::new([(e[0], 0.0), (e[1], *h)], color.mix(*opacity).filled())
+        }))?,
+        Mark::VLines { width } => c.draw_series(
+            xs.iter().map(|x| PathElement::new(vec![(*x, yr.0), (*x, yr.1)], color.stroke_width(*width))),
+        )?,
+    };
+    if let Some(label) = &s.label {
+        let mark = s.mark.clone();
+        anno.label(label).legend(move |(x, y)| match mark {
+            Mark::Points { .. } => Circle::new((x + 10, y), 4, color.filled()).into_dyn(),
+            Mark::Band { opacity } | Mark::Bars { opacity } => {
+                Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(opacity.max(0.3)).filled()).into_dyn()
+            }
+            _ => PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3)).into_dyn(),
+        });
+    }
+    Ok(s.label.is_some())
 }
 
 #[cfg(test)]

@@ -1,0 +1,124 @@
+//! The command line (docs/contract.md): the arguments, their mapping onto
+//! the [`crate::pipeline`] stages, and what is printed ([`print`]).
+
+mod args;
+mod print;
+
+use std::path::{Path, PathBuf};
+
+use clap::{CommandFactory, Parser};
+
+use crate::data::{Campaign, Manifest};
+use crate::error::{Error, Result};
+use crate::pipeline::{Pipeline, RunOptions};
+use crate::synth;
+pub use args::{Cli, Command};
+
+/// Runs the command line and returns the process exit status.
+pub fn main() -> i32 {
+    let cli = Cli::parse();
+    match dispatch(cli) {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("mrbp: error: {e}");
+            e.exit_code()
+        }
+    }
+}
+
+fn dispatch(cli: Cli) -> Result<()> {
+    if let Some(n) = cli.threads {
+        if n == 0 {
+            return Err(Error::Usage("--threads must be at least 1".into()));
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| Error::Usage(format!("--threads: {e}")))?;
+    }
+    let mut listener = print::event;
+    let mut pipeline = Pipeline::new(&mut listener, true);
+    match cli.command {
+        None => bundled_job(&mut pipeline),
+        Some(Command::Check { manifest }) => pipeline.check(&manifest).map(drop),
+        Some(Command::Synth(args)) => {
+            let manifest = synth::write_campaign(&args.settings()?, &args.out)?;
+            println!("wrote {} virtual runs and campaign.toml to {}", manifest.runs.len(), args.out.display());
+            Ok(())
+        }
+        Some(Command::Run(args)) => {
+            let options = RunOptions {
+                sample: args.options.request()?,
+                predict: args.predict.options(),
+                leave_one_out: args.validation.leave_one_out.then_some(args.validation.loo_steps),
+                current_law: args.current_law,
+            };
+            whole_job(&mut pipeline, &args.manifest, &args.out, &options)
+        }
+        Some(Command::Identify(args)) => {
+            let settings = args.identify.settings()?;
+            let campaign = Campaign::load(&args.manifest)?;
+            pipeline.identify(&campaign, &args.out, &settings).map(drop)
+        }
+        Some(Command::Sample(args)) => {
+            let request = args.options.request()?;
+            let campaign = Campaign::load(&args.manifest)?;
+            pipeline.sample(&campaign, &args.out, &request).map(drop)
+        }
+        Some(Command::Predict(args)) => {
+            let cal = crate::store::StoredCalibration::open(&args.dir)?;
+            let campaign = cal.full_campaign()?;
+            pipeline.predict(&cal, &campaign, args.out.as_deref().unwrap_or(&args.dir), &args.options.options()).map(drop)
+        }
+        Some(Command::Report(args)) => {
+            let predict = args.predict.options();
+            let loo = args.validation.leave_one_out.then(|| pipeline.loo_settings(args.validation.loo_steps, &predict));
+            pipeline.report(&args.dir, &predict, loo.as_ref()).map(drop)
+        }
+        Some(Command::Compare { dirs, out, rpm }) => {
+            pipeline.compare(&dirs, out.as_deref().unwrap_or(Path::new("comparison")), rpm).map(drop)
+        }
+    }
+}
+
+/// `mrbp` alone, in the project folder: the whole job on the bundled
+/// campaign, with leave-one-out, into `reports/<campaign name>`. Anywhere
+/// else it prints the help: the bundled data lives in the project folder.
+fn bundled_job(pipeline: &mut Pipeline) -> Result<()> {
+    let manifest = PathBuf::from("data/campaign.toml");
+    if !manifest.exists() {
+        Cli::command().print_help().map_err(|e| Error::output("stdout", e))?;
+        return Err(Error::Usage("no command given (and no data/campaign.toml here: the bundled job runs in the mrbp project folder)".into()));
+    }
+    let name = Manifest::read(&manifest)?.name;
+    // the current-law study takes another ~15 min here: `just law` (README)
+    let options = RunOptions {
+        sample: args::SampleOptions::default().request()?,
+        predict: Default::default(),
+        leave_one_out: Some(args::ValidationOptions::default().loo_steps),
+        current_law: false,
+    };
+    whole_job(pipeline, &manifest, &Path::new("reports").join(name), &options)
+}
+
+fn whole_job(pipeline: &mut Pipeline, manifest: &Path, out: &Path, options: &RunOptions) -> Result<()> {
+    let clock = std::time::Instant::now();
+    let reports = pipeline.run(manifest, out, options)?;
+    println!("\nreports:");
+    for r in &reports {
+        println!("  {}", r.display());
+    }
+    println!("whole job: {:.0} s", clock.elapsed().as_secs_f64());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every option of every command has a distinct id and a valid shape.
+    #[test]
+    fn command_line_is_well_formed() {
+        Cli::command().debug_assert();
+    }
+}

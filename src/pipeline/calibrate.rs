@@ -1,0 +1,104 @@
+//! Identification and calibration into folders.
+
+use std::path::Path;
+
+use super::{Event, Pipeline, SampleRequest};
+use crate::calibrate::{self, CalibrationSettings};
+use crate::data::{current_tag, same_current, Campaign};
+use crate::error::{Error, Result};
+use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings};
+use crate::report;
+use crate::sampler::{Checkpointer, Observer};
+use crate::store::{self, CalibrationRecord, StoredCalibration};
+
+/// Steps between two checkpoints of the sampler.
+const CHECKPOINT_EVERY: usize = 100;
+
+/// The sampler's checkpoint in a calibration folder.
+pub const CHECKPOINT: &str = "sampler.checkpoint";
+
+impl Pipeline<'_> {
+    /// The paper's identification of every current level of `campaign`:
+    /// `identification.parquet` and Figs. 1–5 in `out`.
+    pub fn identify(&mut self, campaign: &Campaign, out: &Path, settings: &IdentifySettings) -> Result<Vec<CurrentIdentification>> {
+        let results = identify_campaign(campaign, settings);
+        std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+        store::identification::write(&out.join("identification.parquet"), &results)?;
+        report::identification::write(out, campaign, &results)?;
+        self.emit(Event::Identified(&results));
+        Ok(results)
+    }
+
+    /// Calibrations of `campaign` as `request` says: one per current level
+    /// (in `out`, or `out/I<current>A/` when there are several), or one
+    /// current law over the currents not held out. Returns the folders.
+    pub fn sample(&mut self, campaign: &Campaign, out: &Path, request: &SampleRequest) -> Result<Vec<StoredCalibration>> {
+        let settings = &request.settings;
+        if settings.parameter_model().is_current_law() {
+            let held = &request.hold_out_current;
+            if let Some(h) = held.iter().find(|h| !campaign.has_current(**h)) {
+                return Err(Error::Usage(format!("--hold-out-current {h}: no run at {h} A (currents: {:?})", campaign.currents())));
+            }
+            let used = campaign.filtered(|r| !held.iter().any(|h| same_current(r.spec.current_a, *h)));
+            let what = format!(
+                "the current law on {} run(s) at {:?} A{}",
+                used.runs.len(),
+                used.currents(),
+                if held.is_empty() { String::new() } else { format!(" (holding out {held:?} A)") }
+            );
+            return Ok(vec![self.calibrate_into(&used, out, settings, request.resume, &what)?]);
+        }
+        if !request.hold_out_current.is_empty() {
+            return Err(Error::Usage("--hold-out-current needs --model current-law".into()));
+        }
+        let currents = match request.current {
+            Some(c) if !campaign.has_current(c) => {
+                return Err(Error::Usage(format!("no run at {c} A in {} (currents: {:?})", campaign.manifest_path.display(), campaign.currents())))
+            }
+            Some(c) => vec![c],
+            None => campaign.currents(),
+        };
+        let mut folders = Vec::new();
+        for &c in &currents {
+            let dir = if currents.len() > 1 { out.join(current_tag(c)) } else { out.to_path_buf() };
+            let group = campaign.at_current(c);
+            let what = format!("{} run(s) at {c} A", group.runs.len());
+            folders.push(self.calibrate_into(&group, &dir, settings, request.resume, &what)?);
+        }
+        Ok(folders)
+    }
+
+    /// Calibrates `campaign` into `dir`: identification, chains, summary,
+    /// settings and record. `what` names the calibration in messages.
+    pub fn calibrate_into(&mut self, campaign: &Campaign, dir: &Path, settings: &CalibrationSettings, resume: bool, what: &str) -> Result<StoredCalibration> {
+        let checkpoint = dir.join(CHECKPOINT);
+        if resume && !checkpoint.exists() {
+            return Err(Error::Usage(format!("--resume: no {CHECKPOINT} in {}", dir.display())));
+        }
+        std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+        self.emit(Event::Calibrating { what, dir });
+        let start = calibrate::start(campaign, settings, &mut |line| (self.listener)(Event::Note(line)))?;
+        if resume {
+            self.note(&format!("  resuming from {}", checkpoint.display()));
+        }
+        let mut observers = self.observers();
+        let mut checkpointer = Checkpointer { path: checkpoint.clone(), every: CHECKPOINT_EVERY };
+        let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
+        refs.push(&mut checkpointer);
+        let cal = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)?;
+
+        let group = campaign.at_current(cal.start.current_a);
+        let identification = std::slice::from_ref(&cal.start.identification);
+        store::identification::write(&dir.join("identification.parquet"), identification)?;
+        report::identification::write(dir, &group, identification)?;
+        let stored = StoredCalibration::of(dir, &cal);
+        store::chains::write(&dir.join("chains.parquet"), &cal.sample)?;
+        store::summary::write(&dir.join("summary.parquet"), &stored.summary, &cal.diagnostics, cal.sample.chains.chains())?;
+        store::record::write_config(&dir.join("config.toml"), &cal.start.settings)?;
+        CalibrationRecord::write(&stored.record, &dir.join("calibration.toml"))?;
+        // the chains are complete in chains.parquet: the checkpoint has done its job
+        let _ = std::fs::remove_file(&checkpoint);
+        self.emit(Event::Calibrated(&cal));
+        Ok(stored)
+    }
+}

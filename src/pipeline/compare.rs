@@ -1,0 +1,73 @@
+//! Comparing calibration folders.
+
+use std::path::{Path, PathBuf};
+
+use super::{Event, Pipeline, Prediction};
+use crate::compare::{self, Comparison};
+use crate::error::{Error, Result};
+use crate::report::comparison::Entry;
+use crate::store::{self, StoredCalibration};
+
+/// Posterior draws per calibration for differences and figures.
+const DRAWS: usize = 4000;
+
+/// A calibration as a comparison takes it, with its bands if it has them.
+pub(super) fn entry(cal: StoredCalibration, prediction: Option<Prediction>) -> Entry {
+    let (bands, coverage) = match prediction {
+        Some(p) => (Some(p.bands), Some(p.coverage)),
+        None => (None, None),
+    };
+    Entry { label: cal.label(), positions: cal.draw_positions(DRAWS), cal, bands, coverage }
+}
+
+impl Pipeline<'_> {
+    /// `comparison.parquet`, `differences.parquet`, the figures and
+    /// `report.html` of the calibrations in `dirs`, into `out`. `rpm` picks
+    /// the runs whose bands are overlaid. Returns the report's path.
+    pub fn compare(&mut self, dirs: &[PathBuf], out: &Path, rpm: Option<f64>) -> Result<PathBuf> {
+        if dirs.len() < 2 {
+            return Err(Error::Usage("compare needs at least two calibration folders".into()));
+        }
+        let mut entries = Vec::new();
+        for d in dirs {
+            let cal = StoredCalibration::open(d)?;
+            let prediction = if d.join("bands.parquet").exists() && d.join("coverage.parquet").exists() {
+                Some(Prediction {
+                    bands: store::bands::read(&d.join("bands.parquet"))?,
+                    coverage: store::coverage::read(&d.join("coverage.parquet"))?,
+                    record: store::prediction::read(&d.join("prediction.toml"))?,
+                })
+            } else {
+                None
+            };
+            entries.push(entry(cal, prediction));
+        }
+        self.compare_entries(entries, out, rpm)
+    }
+
+    /// [`Pipeline::compare`] of calibrations already at hand.
+    pub(super) fn compare_entries(&mut self, mut entries: Vec<Entry>, out: &Path, rpm: Option<f64>) -> Result<PathBuf> {
+        // folders of one name in different places: tell them apart by path
+        for i in 1..entries.len() {
+            if entries[..i].iter().any(|e| e.label == entries[i].label) {
+                entries[i].label = entries[i].cal.dir.display().to_string();
+            }
+        }
+        std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+        let tables: Vec<compare::Entry> = entries
+            .iter()
+            .map(|e| compare::Entry {
+                label: e.label.clone(),
+                current_a: e.cal.record.current_a,
+                summary: &e.cal.summary,
+                sample: &e.cal.sample,
+                positions: e.positions.clone(),
+            })
+            .collect();
+        let comparison = Comparison::of(&tables);
+        store::comparison::write(out, &comparison)?;
+        let path = crate::report::comparison::write(out, &entries, &comparison, rpm)?;
+        self.emit(Event::Wrote(&path));
+        Ok(path)
+    }
+}

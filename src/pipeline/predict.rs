@@ -1,0 +1,167 @@
+//! Bands, leave-one-out and the report of a calibration folder.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::{Event, Pipeline, PredictOptions};
+use crate::data::Campaign;
+use crate::error::{Error, Result};
+use crate::posterior::{RecordPart, RunData};
+use crate::predict::{predict_run, CoverageRow, RunBands};
+use crate::report::{self, CalibrationReport};
+use crate::store::{self, command_line, PredictionRecord, StoredCalibration};
+use crate::validate::{leave_one_out, LooSettings};
+
+/// What a prediction of a calibration folder made.
+pub struct Prediction {
+    pub bands: Vec<RunBands>,
+    pub coverage: Vec<CoverageRow>,
+    pub record: PredictionRecord,
+}
+
+/// What a leave-one-out study made: coverage and bands of the held-out runs.
+pub struct LeaveOneOut {
+    pub coverage: Vec<CoverageRow>,
+    pub bands: Vec<RunBands>,
+}
+
+impl Pipeline<'_> {
+    /// Posterior draws of `cal` through the integrator along every run of
+    /// `campaign` that it should predict (its own runs; every run for a
+    /// current law, seen or not): `bands.parquet`, `coverage.parquet` and
+    /// `prediction.toml` into `out`.
+    pub fn predict(&mut self, cal: &StoredCalibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
+        if options.draws == 0 || options.replicates == 0 {
+            return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
+        }
+        let clock = Instant::now();
+        let campaign = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
+        let positions = cal.draw_positions(options.draws);
+        let settings = cal.predict_settings(options.replicates, options.seed);
+        let bar = self.bar((positions.len() * campaign.runs.len()) as u64);
+        let mut bands = Vec::new();
+        let mut coverage = Vec::new();
+        for (j, run) in campaign.runs.iter().enumerate() {
+            let data = RunData::from_run(run, RecordPart::WholeRecord, cal.settings.likelihood.smooth_strain_ms);
+            let draws = cal.sample.draws(&positions, run.id(), run.spec.current_a);
+            let calibrated = cal.record.runs.iter().any(|r| r == run.id());
+            let p = predict_run(run, &data, j, &draws, &settings, calibrated, &|| bar.inc(1))?;
+            bands.push(p.bands);
+            coverage.push(p.coverage);
+        }
+        bar.finish_and_clear();
+        std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+        store::bands::write(&out.join("bands.parquet"), &bands)?;
+        store::coverage::write(&out.join("coverage.parquet"), &coverage)?;
+        let record = PredictionRecord {
+            mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
+            command: command_line(),
+            draws: positions.len(),
+            burn_in: cal.burn_in(),
+            thin: cal.thin(),
+            noise_replicates: options.replicates,
+            seed: options.seed,
+            substeps: settings.integrator.substeps,
+            seconds: clock.elapsed().as_secs_f64(),
+            coverage: coverage.clone(),
+        };
+        store::prediction::write(&out.join("prediction.toml"), &record)?;
+        self.emit(Event::Predicted { record: &record, dir: out });
+        Ok(Prediction { bands, coverage, record })
+    }
+
+    /// The leave-one-out study of `cal` (whose runs are in `campaign`):
+    /// `loo.parquet` and `loo_bands.parquet` in its folder. A calibration of
+    /// a single run has nothing to leave out: `None`.
+    pub fn leave_one_out(&mut self, cal: &StoredCalibration, campaign: &Campaign, loo: &LooSettings) -> Result<Option<LeaveOneOut>> {
+        if loo.steps < 10 {
+            return Err(Error::Usage("--loo-steps must be at least 10".into()));
+        }
+        let campaign = cal.used_runs(campaign);
+        if campaign.runs.len() < 2 {
+            self.note(&format!("leave-one-out skipped: the calibration in {} has a single run", cal.dir.display()));
+            return Ok(None);
+        }
+        let clock = Instant::now();
+        let progress = self.progress;
+        let listener = &mut *self.listener;
+        let mut observe = |run: &str| {
+            listener(Event::Note(&format!("  leave-one-out: calibrating without {run} ({} steps)", loo.steps)));
+            Pipeline::observers_for(progress)
+        };
+        let held = leave_one_out(&campaign, &cal.settings, &cal.sample, loo, &mut observe)?;
+        let coverage: Vec<CoverageRow> = held.iter().map(|h| h.prediction.coverage.clone()).collect();
+        let bands: Vec<RunBands> = held.iter().map(|h| h.prediction.bands.clone()).collect();
+        store::bands::write(&cal.dir.join("loo_bands.parquet"), &bands)?;
+        store::coverage::write(&cal.dir.join("loo.parquet"), &coverage)?;
+        self.emit(Event::LeftOneOut { held: &held, rows: &coverage, steps: loo.steps, seconds: clock.elapsed().as_secs_f64() });
+        Ok(Some(LeaveOneOut { coverage, bands }))
+    }
+
+    /// Bands, leave-one-out (if `loo` is given) and the report of a
+    /// calibration just made, from memory.
+    pub(super) fn predict_and_report(
+        &mut self,
+        cal: &StoredCalibration,
+        campaign: &Campaign,
+        options: &PredictOptions,
+        loo: Option<&LooSettings>,
+    ) -> Result<(PathBuf, Prediction)> {
+        let prediction = self.predict(cal, campaign, &cal.dir, options)?;
+        let loo = match loo {
+            Some(settings) => self.leave_one_out(cal, campaign, settings)?,
+            None => None,
+        };
+        Ok((self.write_report(cal, campaign, &prediction, loo.as_ref())?, prediction))
+    }
+
+    /// The report of the calibration folder `dir`, from its files: the bands
+    /// are predicted first if the folder has none, and the leave-one-out
+    /// study is run if `loo` is given (else an earlier one is shown).
+    pub fn report(&mut self, dir: &Path, options: &PredictOptions, loo: Option<&LooSettings>) -> Result<PathBuf> {
+        let cal = StoredCalibration::open(dir)?;
+        let campaign = cal.full_campaign()?;
+        let prediction = if dir.join("bands.parquet").exists() && dir.join("coverage.parquet").exists() {
+            Prediction {
+                bands: store::bands::read(&dir.join("bands.parquet"))?,
+                coverage: store::coverage::read(&dir.join("coverage.parquet"))?,
+                record: store::prediction::read(&dir.join("prediction.toml"))?,
+            }
+        } else {
+            self.note(&format!("no bands in {} yet: predicting first", dir.display()));
+            self.predict(&cal, &campaign, dir, options)?
+        };
+        let loo = match loo {
+            Some(settings) => self.leave_one_out(&cal, &campaign, settings)?,
+            None if dir.join("loo.parquet").exists() && dir.join("loo_bands.parquet").exists() => Some(LeaveOneOut {
+                coverage: store::coverage::read(&dir.join("loo.parquet"))?,
+                bands: store::bands::read(&dir.join("loo_bands.parquet"))?,
+            }),
+            None => None,
+        };
+        self.write_report(&cal, &campaign, &prediction, loo.as_ref())
+    }
+
+    fn write_report(&mut self, cal: &StoredCalibration, campaign: &Campaign, prediction: &Prediction, loo: Option<&LeaveOneOut>) -> Result<PathBuf> {
+        let path = report::calibration::write(&CalibrationReport {
+            cal,
+            campaign: &cal.used_runs(campaign),
+            bands: &prediction.bands,
+            coverage: &prediction.coverage,
+            prediction: &prediction.record,
+            loo: loo.map(|l| (l.coverage.as_slice(), l.bands.as_slice())),
+        })?;
+        self.emit(Event::Wrote(&path));
+        Ok(path)
+    }
+
+    /// A progress bar of `len` steps, hidden unless progress is wanted.
+    fn bar(&self, len: u64) -> indicatif::ProgressBar {
+        if !self.progress {
+            return indicatif::ProgressBar::hidden();
+        }
+        let bar = indicatif::ProgressBar::new(len);
+        bar.set_style(indicatif::ProgressStyle::with_template("predicting {bar:30} {pos}/{len} run draws  ETA {eta}").expect("valid template"));
+        bar
+    }
+}

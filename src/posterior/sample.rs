@@ -1,0 +1,140 @@
+//! A posterior sample in SI units: the chains of a calibration as the
+//! outputs name them, and the draws that predictions integrate.
+//!
+//! The same type comes from the sampler's chains in memory and from
+//! `chains.parquet` read back, so every later stage (bands, leave-one-out,
+//! comparisons, figures) treats both alike.
+
+use super::layout::Layout;
+use super::parameters::ParameterModel;
+use crate::model::Params;
+use crate::sampler::{Chains, Diagnostics, ParameterDiagnostics};
+
+/// One posterior draw as a run sees it: the B-P parameters and the noise of
+/// that run (σ, and ρ for AR(1) noise; 0 otherwise).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Draw {
+    pub params: Params,
+    pub sigma: f64,
+    pub rho: f64,
+}
+
+/// Every step of every walker in SI units, with the layout that names them.
+#[derive(Clone, Debug)]
+pub struct PosteriorSample {
+    pub layout: Layout,
+    pub model: ParameterModel,
+    /// Positions in SI units (θ, σ, ρ), `[step][chain][coordinate]`.
+    pub chains: Chains,
+}
+
+impl PosteriorSample {
+    /// The sample of sampler chains in unconstrained coordinates.
+    pub fn from_coordinates(layout: &Layout, model: ParameterModel, chains: &Chains) -> Self {
+        PosteriorSample { layout: layout.clone(), model, chains: chains.map_points(|x| layout.to_si(x)) }
+    }
+
+    /// Diagnostics of every coordinate in SI units after `burn_in` steps.
+    pub fn diagnostics(&self, burn_in: usize) -> Diagnostics {
+        Diagnostics::compute(&self.chains, Some(burn_in))
+    }
+
+    /// `count` positions spread evenly over the steps from `burn_in` on,
+    /// thinned to every `thin`-th step; each as `(step, chain)`.
+    pub fn positions(&self, burn_in: usize, thin: usize, count: usize) -> Vec<(usize, usize)> {
+        let all = self.chains.thinned(burn_in, thin);
+        evenly_spaced(all.len(), count).into_iter().map(|i| all[i]).collect()
+    }
+
+    /// The values of coordinate `name` at `positions`.
+    pub fn values(&self, name: &str, positions: &[(usize, usize)]) -> Option<Vec<f64>> {
+        let i = self.layout.index(name)?;
+        Some(positions.iter().map(|&(s, c)| self.chains.at(s, c, i)).collect())
+    }
+
+    /// The B-P parameters at one position, at a coil current.
+    pub fn params_at(&self, step: usize, chain: usize, current_a: f64) -> Params {
+        let x = self.chains.point(step, chain);
+        self.model.params(&x[self.layout.theta.clone()], current_a)
+    }
+
+    /// The draw at one position for run `run` at `current_a`. A run the
+    /// posterior did not see has no noise level of its own: it gets the
+    /// root-mean-square σ (and the mean ρ) of the runs it saw.
+    pub fn draw(&self, step: usize, chain: usize, run: &str, current_a: f64) -> Draw {
+        let params = self.params_at(step, chain, current_a);
+        let x = self.chains.point(step, chain);
+        let (sigmas, rhos) = (&x[self.layout.sigma.clone()], &x[self.layout.rho.clone()]);
+        match self.layout.run_index(run) {
+            Some(j) => Draw { params, sigma: sigmas[j], rho: rhos.get(j).copied().unwrap_or(0.0) },
+            None => {
+                let mean = |v: &[f64]| if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 };
+                let squares: Vec<f64> = sigmas.iter().map(|s| s * s).collect();
+                Draw { params, sigma: mean(&squares).sqrt(), rho: mean(rhos) }
+            }
+        }
+    }
+
+    /// The draws at `positions` for one run.
+    pub fn draws(&self, positions: &[(usize, usize)], run: &str, current_a: f64) -> Vec<Draw> {
+        positions.iter().map(|&(s, c)| self.draw(s, c, run, current_a)).collect()
+    }
+}
+
+/// One row of a posterior summary: a coordinate's name and its statistics.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SummaryRow {
+    pub parameter: String,
+    pub stats: ParameterDiagnostics,
+}
+
+impl std::ops::Deref for SummaryRow {
+    type Target = ParameterDiagnostics;
+    fn deref(&self) -> &ParameterDiagnostics {
+        &self.stats
+    }
+}
+
+impl SummaryRow {
+    /// The rows of `diagnostics`, named by `layout`.
+    pub fn rows(layout: &Layout, diagnostics: &Diagnostics) -> Vec<SummaryRow> {
+        layout.names.iter().zip(&diagnostics.coordinates).map(|(n, d)| SummaryRow { parameter: n.clone(), stats: d.clone() }).collect()
+    }
+}
+
+/// Indices of `count` draws spread evenly over `available` (all of them if
+/// there are fewer): deterministic thinning without randomness.
+pub fn evenly_spaced(available: usize, count: usize) -> Vec<usize> {
+    if count == 0 || available <= count {
+        return (0..available).collect();
+    }
+    (0..count).map(|i| (i * available) / count + available / (2 * count)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::posterior::NoiseModel;
+
+    #[test]
+    fn evenly_spaced_indices_cover_the_range() {
+        assert_eq!(evenly_spaced(5, 10), vec![0, 1, 2, 3, 4]);
+        assert_eq!(evenly_spaced(1000, 4), vec![125, 375, 625, 875]);
+    }
+
+    /// A seen run gets its own σ and ρ; an unseen one the RMS σ and mean ρ.
+    #[test]
+    fn draws_take_the_runs_own_noise_or_the_pooled_one() {
+        let runs = vec!["a".to_string(), "b".to_string()];
+        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1);
+        let mut point = Params::reference_1a().to_array().to_vec();
+        point.extend([3.0, 4.0, 0.2, 0.6]);
+        let chains = Chains { dim: 11, ensembles: 1, walkers: 1, positions: point, log_prob: vec![0.0], accepted: vec![false] };
+        let sample = PosteriorSample { layout, model: ParameterModel::PerCurrent, chains };
+        let own = sample.draw(0, 0, "b", 1.0);
+        assert_eq!((own.sigma, own.rho), (4.0, 0.6));
+        assert_eq!(own.params, Params::reference_1a());
+        let unseen = sample.draw(0, 0, "c", 1.0);
+        assert!((unseen.sigma - 12.5f64.sqrt()).abs() < 1e-12 && (unseen.rho - 0.4).abs() < 1e-12);
+    }
+}

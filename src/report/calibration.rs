@@ -1,0 +1,354 @@
+//! The uncertainty report of one calibration: figures (SVG + PNG) beside
+//! the data, and `report.html`, one self-contained file with every table and
+//! figure inline, to be mailed as it is.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use super::html::{esc, num, Mark, Page};
+use super::{figures, Figures};
+use crate::atomic;
+use crate::data::{current_tag, Campaign};
+use crate::error::{Error, Result};
+use crate::model::PARAM_NAMES;
+use crate::posterior::map::step_shift_limit;
+use crate::predict::{CoverageRow, RunBands};
+use crate::store::{PredictionRecord, StoredCalibration};
+
+/// The share of observations a 95 % predictive band should hold for the
+/// report to call it calibrated.
+pub const COVERAGE_OK: (f64, f64) = (0.90, 0.99);
+
+/// The share a 95 % band must hold of a run at a current the calibration
+/// never saw (a current law's held-out current).
+pub const HELD_OUT_OK: f64 = 0.80;
+
+/// Draws shown in the corner and marginal plots.
+const PLOT_DRAWS: usize = 2000;
+
+/// Everything the report of one calibration shows.
+pub struct CalibrationReport<'a> {
+    pub cal: &'a StoredCalibration,
+    /// The runs it was calibrated on.
+    pub campaign: &'a Campaign,
+    pub bands: &'a [RunBands],
+    pub coverage: &'a [CoverageRow],
+    pub prediction: &'a PredictionRecord,
+    /// The leave-one-out study, where it was run: coverage and bands.
+    pub loo: Option<(&'a [CoverageRow], &'a [RunBands])>,
+}
+
+/// Writes the figures and `report.html` into the calibration's folder.
+/// Returns the report's path.
+pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
+    let dir = &r.cal.dir;
+    let (figs, loo_figs) = draw_figures(r)?;
+    let mut page = Page::new(&title(r.cal));
+    let checks = verdicts(r.cal, r.coverage);
+    let warned = checks.iter().filter(|c| c.1 == Mark::Warn).count();
+    page.raw(&format!(
+        "<p>B-P parameters of MR fluid calibrated on {} run(s) at {} by ensemble MCMC. {}</p>",
+        r.cal.record.runs.len(),
+        calibrated_at(r.cal),
+        if warned == 0 {
+            "<span class=\"pass\">Every check passes.</span>".to_string()
+        } else {
+            format!("<span class=\"warn\">{warned} check(s) warn: see Diagnostics.</span>")
+        }
+    ));
+    campaign_section(&mut page, r);
+    identification_section(&mut page, r.cal);
+    posterior_section(&mut page, r.cal);
+    page.section("diagnostics", "Diagnostics");
+    let rows: Vec<Vec<String>> = checks.iter().map(|(what, mark, detail)| vec![esc(what), mark.html().into(), esc(detail)]).collect();
+    page.table(&["check", "", "measured"], &rows);
+    for w in &r.cal.record.warnings {
+        page.note(w);
+    }
+    coverage_section(&mut page, r);
+    validation_section(&mut page, r, &loo_figs)?;
+    figures_section(&mut page, r.cal, &figs)?;
+    reproduce_section(&mut page, r);
+    let path = dir.join("report.html");
+    atomic::write(&path, page.finish().as_bytes())?;
+    Ok(path)
+}
+
+fn title(cal: &StoredCalibration) -> String {
+    let rec = &cal.record;
+    if cal.is_current_law() {
+        format!("mrbp report: {}, current law from {:?} A", rec.campaign, rec.currents)
+    } else {
+        format!("mrbp report: {} at {} A", rec.campaign, rec.current_a)
+    }
+}
+
+fn calibrated_at(cal: &StoredCalibration) -> String {
+    if cal.is_current_law() {
+        format!("{:?} A as functions of the coil current (reference {} A)", cal.record.currents, cal.settings.reference_current_a)
+    } else {
+        format!("{} A", cal.record.current_a)
+    }
+}
+
+/// The figures of the calibration and of its leave-one-out study.
+fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
+    let (cal, dir) = (r.cal, &r.cal.dir);
+    let rec = &cal.record;
+    let mut figs = Figures::default();
+    let geometry = r.campaign.geometry;
+    figures::bands(dir, r.bands, geometry.area_m2, geometry.gap_m, &mut figs)?;
+    figures::residuals(dir, r.bands, &mut figs)?;
+    let positions = cal.draw_positions(PLOT_DRAWS);
+    let theta = cal.sample.layout.theta_names().to_vec();
+    let named = |m: &BTreeMap<String, f64>| -> Vec<f64> { theta.iter().map(|n| m.get(n).copied().unwrap_or(f64::NAN)).collect() };
+    // a current law's coordinates are not the identification's parameters
+    let identified = if cal.is_current_law() { vec![f64::NAN; theta.len()] } else { named(&rec.identification) };
+    figures::corner(dir, &cal.sample, &positions, &identified, &named(&rec.map), &mut figs)?;
+    let priors = cal.sample.model.priors(&cal.settings.priors());
+    figures::marginals(dir, &cal.sample, &positions, &priors, &mut figs)?;
+    figures::traces(dir, &cal.sample, cal.burn_in(), &mut figs)?;
+    let mut loo_figs = Figures::default();
+    if let Some((_, bands)) = r.loo {
+        let loo_dir = dir.join("loo");
+        std::fs::create_dir_all(&loo_dir).map_err(|e| Error::output(&loo_dir, e))?;
+        figures::bands(&loo_dir, bands, geometry.area_m2, geometry.gap_m, &mut loo_figs)?;
+    }
+    Ok((figs, loo_figs))
+}
+
+fn campaign_section(page: &mut Page, r: &CalibrationReport) {
+    let (cal, rec) = (r.cal, &r.cal.record);
+    page.section("campaign", "Campaign and settings");
+    let rows: Vec<Vec<String>> = r
+        .campaign
+        .runs
+        .iter()
+        .map(|run| {
+            let t = &run.record.time;
+            vec![
+                esc(run.id()),
+                run.record.len().to_string(),
+                num(t[t.len() - 1] - t[0], 3),
+                num(run.spec.current_a, 2),
+                num(run.record.force.iter().fold(0.0f64, |m, f| m.max(f.abs())), 4),
+                run.branches.len().to_string(),
+            ]
+        })
+        .collect();
+    page.table(&["run", "samples", "duration (s)", "current (A)", "peak force (N)", "loading branches"], &rows);
+    let geometry = r.campaign.geometry;
+    let integ = &cal.settings.integrator;
+    page.table(
+        &["setting", "value"],
+        &[
+            vec!["manifest".into(), esc(&rec.manifest)],
+            vec!["geometry".into(), format!("A = {} m², h = {} m", geometry.area_m2, geometry.gap_m)],
+            vec!["noise model".into(), esc(&format!("{:?}", rec.noise))],
+            vec!["samples in the likelihood".into(), esc(&format!("{:?}", rec.part))],
+            vec![
+                "integrator".into(),
+                format!("{:?}, {} sub-step(s) per sample{}", integ.scheme, rec.substeps, if integ.extrapolate { ", Richardson-extrapolated" } else { "" }),
+            ],
+            vec!["sampler".into(), format!("{} ensembles × {} walkers, {} steps, burn-in {}", rec.ensembles, rec.walkers, rec.steps, rec.burn_in)],
+            vec!["seed".into(), rec.seed.to_string()],
+        ],
+    );
+}
+
+fn identification_section(page: &mut Page, cal: &StoredCalibration) {
+    let rec = &cal.record;
+    page.section("identification", "Identification and posterior");
+    let summary_of = |name: &str| cal.summary.iter().find(|r| r.parameter == name);
+    let rows: Vec<Vec<String>> = PARAM_NAMES
+        .iter()
+        .map(|n| {
+            let s = summary_of(n);
+            vec![
+                esc(n),
+                num(rec.identification.get(*n).copied().unwrap_or(f64::NAN), 3),
+                num(rec.map.get(*n).copied().unwrap_or(f64::NAN), 3),
+                s.map_or("–".into(), |s| num(s.q50, 3)),
+                s.map_or("–".into(), |s| format!("{} – {}", num(s.q05, 4), num(s.q95, 4))),
+            ]
+        })
+        .collect();
+    page.para("The paper's step-by-step identification, the posterior mode (MAP) and the posterior median with its 90 % credible interval, in SI units (Pa, 1/Pa, –).");
+    page.table(&["parameter", "identification", "MAP", "posterior median", "90 % credible interval"], &rows);
+}
+
+fn posterior_section(page: &mut Page, cal: &StoredCalibration) {
+    page.section("posterior", "Posterior summary");
+    let min_ess = cal.settings.sampler.min_ess;
+    let rows: Vec<Vec<String>> = cal
+        .summary
+        .iter()
+        .map(|s| {
+            let ok = s.r_hat < 1.01 && s.ess_bulk >= min_ess && s.ess_tail >= min_ess;
+            vec![
+                esc(&s.parameter),
+                num(s.mean, 4),
+                num(s.sd, 3),
+                num(s.q05, 4),
+                num(s.q50, 4),
+                num(s.q95, 4),
+                format!("{:.0}", s.ess_bulk),
+                format!("{:.0}", s.ess_tail),
+                format!("{:.4}", s.r_hat),
+                format!("{:.1}", s.tau_int),
+                Mark::of(ok).html().into(),
+            ]
+        })
+        .collect();
+    page.table(&["parameter", "mean", "sd", "q05", "q50", "q95", "ESS bulk", "ESS tail", "R̂", "τ (steps)", ""], &rows);
+}
+
+fn coverage_section(page: &mut Page, r: &CalibrationReport) {
+    page.section("coverage", "Predictive coverage");
+    page.para(&format!(
+        "{} posterior draws (after the burn-in, thinned by {} steps) integrated along each whole record, with {} noise replicates per draw. A calibrated model holds about 95 % of the observations in its 95 % predictive band; the report passes {}–{} %.",
+        r.prediction.draws,
+        r.prediction.thin,
+        r.prediction.noise_replicates,
+        100.0 * COVERAGE_OK.0,
+        100.0 * COVERAGE_OK.1
+    ));
+    coverage_table(page, r.coverage, false);
+}
+
+fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures) -> Result<()> {
+    page.section("validation", "Leave-one-out validation");
+    match r.loo {
+        Some((rows, _)) => {
+            page.para("Each run predicted by a calibration on the other runs of this current only (its noise level taken as the root-mean-square σ of those runs): the honest test of the bands on data the fit has not seen.");
+            coverage_table(page, rows, true);
+            for (stem, caption) in &loo_figs.items {
+                page.figure(&r.cal.dir.join("loo").join(format!("{stem}.png")), &format!("Held out: {caption}"))?;
+            }
+        }
+        None => page.para("Not run for this calibration: `mrbp run MANIFEST --out DIR --leave-one-out` runs it (the bundled job does)."),
+    }
+    Ok(())
+}
+
+fn figures_section(page: &mut Page, cal: &StoredCalibration, figs: &Figures) -> Result<()> {
+    page.section("figures", "Figures");
+    for (stem, caption) in &figs.items {
+        page.figure(&cal.dir.join(format!("{stem}.png")), caption)?;
+    }
+    let tag = current_tag(cal.record.current_a);
+    let ident = [
+        ("fig1_tau_gamma", "Identification, Fig. 1: the loading branches used by the identification."),
+        ("fig2_yield_rate", "Identification, Fig. 2: yield stress against inelastic strain rate (eq. 6)."),
+        ("fig3_tau_gamma_i", "Identification, Fig. 3: stress against inelastic strain with eq. 7."),
+        ("fig4_euler", "Identification, Fig. 4: Euler solution of the identified model against the records."),
+        ("fig5_psi", "Identification, Fig. 5: the hardening function ψ."),
+    ];
+    for (stem, caption) in ident {
+        let png = cal.dir.join(format!("{stem}_{tag}.png"));
+        if png.exists() {
+            page.figure(&png, caption)?;
+        }
+    }
+    Ok(())
+}
+
+fn reproduce_section(page: &mut Page, r: &CalibrationReport) {
+    let (rec, prediction) = (&r.cal.record, r.prediction);
+    page.section("reproduce", "Reproduce");
+    page.table(
+        &["", ""],
+        &[
+            vec!["mrbp version".into(), esc(&rec.mrbp_version)],
+            vec!["calibration command".into(), format!("<code>{}</code>", esc(&rec.command))],
+            vec!["prediction command".into(), format!("<code>{}</code>", esc(&prediction.command))],
+            vec!["sampler seed".into(), rec.seed.to_string()],
+            vec!["prediction seed".into(), prediction.seed.to_string()],
+            vec![
+                "wall time".into(),
+                format!(
+                    "{:.1} s calibration ({:.1} s sampling), {:.1} s prediction",
+                    rec.seconds_start + rec.seconds_sampling,
+                    rec.seconds_sampling,
+                    prediction.seconds
+                ),
+            ],
+        ],
+    );
+    page.para("The settings below (config.toml in the folder) repeat the calibration with `mrbp sample MANIFEST --config config.toml --out DIR`; the same seed gives the same chains bit for bit, on any number of threads.");
+    let config = std::fs::read_to_string(r.cal.dir.join("config.toml")).unwrap_or_default();
+    page.pre(&config);
+}
+
+/// Whether a run's band holds what it should: 90–99 % of a run the
+/// calibration saw or a held-out run of its own current (leave-one-out),
+/// at least [`HELD_OUT_OK`] of a run at a current it never saw.
+fn coverage_ok(r: &CoverageRow, same_current: bool) -> bool {
+    if r.calibrated || same_current {
+        r.inside_p95 >= COVERAGE_OK.0 && r.inside_p95 <= COVERAGE_OK.1
+    } else {
+        r.inside_p95 >= HELD_OUT_OK
+    }
+}
+
+fn coverage_table(page: &mut Page, rows: &[CoverageRow], leave_one_out: bool) {
+    let rows: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            vec![
+                if r.calibrated || leave_one_out { esc(&r.run) } else { format!("{} <b>(held out)</b>", esc(&r.run)) },
+                num(r.current_a, 2),
+                r.samples.to_string(),
+                format!("{:.1}", 100.0 * r.inside_p95),
+                format!("{:.1}", 100.0 * r.inside_q95),
+                num(r.rmse_q50_pa, 3),
+                r.draws.to_string(),
+                Mark::of(coverage_ok(r, leave_one_out)).html().into(),
+            ]
+        })
+        .collect();
+    page.table(
+        &["run", "current (A)", "samples", "inside 95 % predictive (%)", "inside 95 % model (%)", "RMS residual to median (Pa)", "draws", ""],
+        &rows,
+    );
+}
+
+/// The report's checks: what, verdict, what was measured.
+fn verdicts(cal: &StoredCalibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, String)> {
+    let s = &cal.summary;
+    let max_rhat = cal.max_rhat();
+    let min_bulk = s.iter().map(|r| r.ess_bulk).fold(f64::NAN, f64::min);
+    let min_tail = s.iter().map(|r| r.ess_tail).fold(f64::NAN, f64::min);
+    let tau = cal.tau_max();
+    let kept = cal.record.steps.saturating_sub(cal.record.burn_in) as f64;
+    let min_ess = cal.settings.sampler.min_ess;
+    let mut v = vec![
+        ("R̂ (rank-normalised split, across ensembles) < 1.01".to_string(), Mark::of(max_rhat < 1.01), format!("largest {max_rhat:.4}")),
+        (format!("bulk and tail ESS ≥ {min_ess:.0}"), Mark::of(min_bulk >= min_ess && min_tail >= min_ess), format!("smallest bulk {min_bulk:.0}, tail {min_tail:.0}")),
+        ("chains longer than 50 τ after burn-in".to_string(), Mark::of(kept >= 50.0 * tau), format!("{kept:.0} steps, τ_max {tau:.1} ({:.0} τ)", kept / tau)),
+        ("no sampler warnings (stuck walkers …)".to_string(), Mark::of(cal.record.warnings.is_empty()), format!("{} warning(s)", cal.record.warnings.len())),
+    ];
+    if let Some(last) = cal.record.step_study.last() {
+        let limit = step_shift_limit(cal.settings.integrator.extrapolate);
+        v.push((
+            "integrator step: halving it moves no MAP parameter by the limit".to_string(),
+            Mark::of(last.largest_shift_sd < limit),
+            format!("{} sub-step(s): {:.3} sd ({}), limit {limit:.3}", last.substeps, last.largest_shift_sd, last.parameter),
+        ));
+    }
+    for r in coverage.iter().filter(|r| !r.calibrated) {
+        v.push((
+            format!("{} (held out): 95 % predictive band holds ≥ {:.0} % of the record", r.run, 100.0 * HELD_OUT_OK),
+            Mark::of(coverage_ok(r, false) && r.failed_draws == 0),
+            format!("{:.1} %, {} failed draw(s)", 100.0 * r.inside_p95, r.failed_draws),
+        ));
+    }
+    for r in coverage.iter().filter(|r| r.calibrated) {
+        v.push((
+            format!("{}: 95 % predictive band holds {:.0}–{:.0} % of the record", r.run, 100.0 * COVERAGE_OK.0, 100.0 * COVERAGE_OK.1),
+            Mark::of(coverage_ok(r, false) && r.failed_draws == 0),
+            format!("{:.1} %, {} failed draw(s)", 100.0 * r.inside_p95, r.failed_draws),
+        ));
+    }
+    v
+}

@@ -1,0 +1,67 @@
+//! `bands.parquet` (and `loo_bands.parquet`): one row per run and sample,
+//! the model and predictive bands with the record they describe.
+
+use std::path::Path;
+
+use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
+use crate::error::Result;
+use crate::predict::RunBands;
+
+/// Writes the bands of every run.
+pub fn write(path: &Path, runs: &[RunBands]) -> Result<()> {
+    let col = |f: &dyn Fn(&RunBands) -> &[f64]| runs.iter().flat_map(|b| f(b).iter().copied()).collect::<Vec<f64>>();
+    let per_sample = |f: &dyn Fn(&RunBands) -> f64| runs.iter().flat_map(|b| std::iter::repeat_n(f(b), b.time.len())).collect::<Vec<f64>>();
+    let names = runs.iter().flat_map(|b| std::iter::repeat_n(b.run.clone(), b.time.len())).collect();
+    write_parquet(
+        path,
+        Table::new()
+            .str("run", names)
+            .f64("current_a", per_sample(&|b| b.current_a))
+            .f64("time_s", col(&|b| &b.time))
+            .f64("gamma", col(&|b| &b.gamma))
+            .f64("gamma_model", col(&|b| &b.gamma_model))
+            .f64("tau_obs", col(&|b| &b.tau_obs))
+            .f64("q025", col(&|b| &b.model[0]))
+            .f64("q25", col(&|b| &b.model[1]))
+            .f64("q50", col(&|b| &b.model[2]))
+            .f64("q75", col(&|b| &b.model[3]))
+            .f64("q975", col(&|b| &b.model[4]))
+            .f64("p025", col(&|b| &b.predictive[0]))
+            .f64("p975", col(&|b| &b.predictive[1]))
+            .f64("displacement_m", col(&|b| &b.displacement))
+            .f64("force_n", col(&|b| &b.force)),
+    )
+}
+
+/// Reads the bands of every run back, in file order.
+pub fn read(path: &Path) -> Result<Vec<RunBands>> {
+    let df = read_parquet(path)?;
+    let run = str_column(&df, "run", path)?;
+    let col = |n: &str| f64_column(&df, n, path);
+    let (cur, time, gamma, tau) = (col("current_a")?, col("time_s")?, col("gamma")?, col("tau_obs")?);
+    let gamma_model = col("gamma_model")?;
+    let q = [col("q025")?, col("q25")?, col("q50")?, col("q75")?, col("q975")?];
+    let p = [col("p025")?, col("p975")?];
+    let (disp, force) = (col("displacement_m")?, col("force_n")?);
+    let mut out: Vec<RunBands> = Vec::new();
+    let mut start = 0;
+    for i in 1..=run.len() {
+        if i == run.len() || run[i] != run[start] {
+            let r = start..i;
+            out.push(RunBands {
+                run: run[start].clone(),
+                current_a: cur[start],
+                time: time[r.clone()].to_vec(),
+                gamma: gamma[r.clone()].to_vec(),
+                gamma_model: gamma_model[r.clone()].to_vec(),
+                tau_obs: tau[r.clone()].to_vec(),
+                model: q.clone().map(|c| c[r.clone()].to_vec()),
+                predictive: p.clone().map(|c| c[r.clone()].to_vec()),
+                displacement: disp[r.clone()].to_vec(),
+                force: force[r.clone()].to_vec(),
+            });
+            start = i;
+        }
+    }
+    Ok(out)
+}

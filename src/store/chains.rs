@@ -1,0 +1,74 @@
+//! `chains.parquet`: every walker at every step, burn-in included, in SI
+//! units: `ensemble`, `chain`, `draw`, one column per coordinate,
+//! `log_prob`, `accepted`; rows chain by chain, steps in order.
+
+use std::path::Path;
+
+use super::parquet::{column_names, f64_column, read_parquet, write_parquet, Table};
+use crate::error::{Error, Result};
+use crate::posterior::{Layout, ParameterModel, PosteriorSample};
+use crate::sampler::Chains;
+
+const BOOKKEEPING: [&str; 5] = ["ensemble", "chain", "draw", "log_prob", "accepted"];
+
+pub fn write(path: &Path, sample: &PosteriorSample) -> Result<()> {
+    let ch = &sample.chains;
+    let (nc, steps) = (ch.chains(), ch.steps());
+    let rows = nc * steps;
+    let order = || (0..nc).flat_map(move |c| (0..steps).map(move |s| (s, c)));
+    let mut t = Table::new()
+        .i64("ensemble", order().map(|(_, c)| (c / ch.walkers) as i64).collect())
+        .i64("chain", order().map(|(_, c)| c as i64).collect())
+        .i64("draw", order().map(|(s, _)| s as i64).collect());
+    for (i, name) in sample.layout.names.iter().enumerate() {
+        let mut col = Vec::with_capacity(rows);
+        col.extend(order().map(|(s, c)| ch.at(s, c, i)));
+        t = t.f64(name, col);
+    }
+    let t = t
+        .f64("log_prob", order().map(|(s, c)| ch.log_prob[s * nc + c]).collect())
+        .bool("accepted", order().map(|(s, c)| ch.accepted[s * nc + c]).collect());
+    write_parquet(path, t)
+}
+
+/// Reads the chains back; their coordinates must be those of `layout`.
+pub fn read(path: &Path, layout: &Layout, model: ParameterModel) -> Result<PosteriorSample> {
+    let df = read_parquet(path)?;
+    let chain = f64_column(&df, "chain", path)?;
+    let draw = f64_column(&df, "draw", path)?;
+    let ensemble = f64_column(&df, "ensemble", path)?;
+    let log_prob = f64_column(&df, "log_prob", path)?;
+    let accepted = f64_column(&df, "accepted", path)?;
+    let rows = chain.len();
+    let chains = chain.iter().fold(0.0f64, |m, c| m.max(*c)) as usize + 1;
+    let steps = rows / chains.max(1);
+    // the layout that `write` makes: chain-major, steps in order
+    let ordered = rows > 0
+        && steps * chains == rows
+        && (0..rows).all(|r| chain[r] as usize == r / steps && draw[r] as usize == r % steps);
+    if !ordered {
+        return Err(Error::input(path, "rows are not ordered by chain and draw as `mrbp sample` writes them"));
+    }
+    let names: Vec<String> = column_names(&df).into_iter().filter(|n| !BOOKKEEPING.contains(&n.as_str())).collect();
+    if names != layout.names {
+        return Err(Error::input(path, format!("columns {names:?} are not the calibration's {:?}", layout.names)));
+    }
+    let ensembles = ensemble.iter().fold(0.0f64, |m, e| m.max(*e)) as usize + 1;
+    let columns = names.iter().map(|n| f64_column(&df, n, path)).collect::<Result<Vec<_>>>()?;
+    // file rows are chain-major, the sample is step-major
+    let row = |s: usize, c: usize| c * steps + s;
+    let order = || (0..steps).flat_map(move |s| (0..chains).map(move |c| (s, c)));
+    let positions = order().flat_map(|(s, c)| columns.iter().map(move |col| col[row(s, c)])).collect();
+    Ok(PosteriorSample {
+        layout: layout.clone(),
+        model,
+        chains: Chains {
+            dim: names.len(),
+            ensembles,
+            walkers: chains / ensembles.max(1),
+            positions,
+            log_prob: order().map(|(s, c)| log_prob[row(s, c)]).collect(),
+            accepted: order().map(|(s, c)| accepted[row(s, c)] != 0.0).collect(),
+        },
+    })
+}

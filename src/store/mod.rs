@@ -1,0 +1,33 @@
+//! The files of a calibration folder and of a comparison, one module per
+//! artifact, each owning both its writing and its reading. Every file is
+//! written atomically ([`crate::atomic`]).
+//!
+//! | file | module |
+//! |---|---|
+//! | `identification.parquet` | [`identification`] |
+//! | `chains.parquet` | [`chains`] |
+//! | `summary.parquet` | [`summary`] |
+//! | `calibration.toml`, `config.toml` | [`record`] |
+//! | `bands.parquet`, `loo_bands.parquet` | [`bands`] |
+//! | `coverage.parquet`, `loo.parquet` | [`coverage`] |
+//! | `prediction.toml` | [`prediction`] |
+//! | `comparison.parquet`, `differences.parquet` | [`comparison`] |
+//!
+//! [`folder`] opens a whole calibration folder; [`parquet`] holds the
+//! table helpers.
+
+pub mod bands;
+pub mod chains;
+pub mod comparison;
+pub mod coverage;
+pub mod folder;
+pub mod identification;
+pub mod parquet;
+pub mod prediction;
+pub mod record;
+pub mod summary;
+
+pub use folder::StoredCalibration;
+pub use parquet::{column_names, f64_column, read_parquet, str_column, write_parquet, Table};
+pub use prediction::PredictionRecord;
+pub use record::{command_line, CalibrationRecord};
