@@ -98,15 +98,22 @@ pub fn bands(
     settings: &PredictSettings,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Bands> {
-    let integrator = &settings.integrator;
+    let params: Vec<Params> = draws.iter().map(|d| d.params).collect();
+    let paths = model_paths(run, &params, &settings.integrator, tick);
+    let kept: Vec<(&Draw, &[f64])> = draws.iter().zip(&paths).filter_map(|(d, p)| p.as_deref().map(|p| (d, p))).collect();
+    bands_of(run, run_index, &kept, draws.len() - kept.len(), settings)
+}
+
+/// The model stress along `run` for each parameter set, four at a time in
+/// SIMD lanes and in parallel; `None` where the integration failed.
+pub fn model_paths(run: &RunData, params: &[Params], integrator: &Integrator, tick: &(dyn Fn() + Sync)) -> Vec<Option<Vec<f64>>> {
     let n = run.time.len();
-    // model stress of each draw, in draw order; None where it failed
-    let paths: Vec<Option<Vec<f64>>> = draws
+    params
         .par_chunks(LANES)
         .flat_map_iter(|chunk| {
-            let params: [Params; LANES] = std::array::from_fn(|l| chunk.get(l).map_or(chunk[0].params, |d| d.params));
+            let lanes: [Params; LANES] = std::array::from_fn(|l| chunk.get(l).copied().unwrap_or(chunk[0]));
             let mut tau = vec![vec![0.0; n]; chunk.len()];
-            let outcome = integrator.run_lanes(&params, &run.time, &run.gamma, run.initial_tau, |k, s| {
+            let outcome = integrator.run_lanes(&lanes, &run.time, &run.gamma, run.initial_tau, |k, s| {
                 for (lane, path) in tau.iter_mut().enumerate() {
                     path[k] = s.tau[lane];
                 }
@@ -116,8 +123,13 @@ pub fn bands(
             }
             tau.into_iter().zip(outcome).map(|(p, o)| o.ok().filter(|_| p.iter().all(|v| v.is_finite())).map(|_| p))
         })
-        .collect();
-    let kept: Vec<(&Draw, &Vec<f64>)> = draws.iter().zip(&paths).filter_map(|(d, p)| p.as_ref().map(|p| (d, p))).collect();
+        .collect()
+}
+
+/// The bands of `run` from draws and their model stress paths (`failed`
+/// more draws could not be integrated).
+pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], failed: usize, settings: &PredictSettings) -> Result<Bands> {
+    let n = run.time.len();
     if kept.is_empty() {
         return Err(Error::Compute(format!("run {}: the integration failed for every posterior draw", run.id)));
     }
@@ -157,7 +169,7 @@ pub fn bands(
             band[k] = quantile_sorted(&pred_k, p);
         }
     }
-    Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed: draws.len() - kept.len() })
+    Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed })
 }
 
 /// One run's bands with the record they describe: what `bands.parquet`
@@ -200,7 +212,7 @@ impl RunBands {
 }
 
 /// The coverage of one run, as `coverage.parquet` holds it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct CoverageRow {
     pub run: String,
     pub current_a: f64,

@@ -38,7 +38,7 @@ fn compare_tells_current_levels_apart() {
     let data = tempfile::tempdir().unwrap();
     let manifest = campaign(data.path(), vec![0.5, 1.0], vec![100.0, 400.0]);
     let out = tempfile::tempdir().unwrap();
-    ok(mrbp(&["sample", &manifest, "--out", s(out.path()), "--steps", "300", "--substeps", "2"]));
+    ok(mrbp(&["sample", &manifest, "--out", s(out.path()), "--substeps", "2"]));
     let (lo, hi) = (out.path().join("I0.5A"), out.path().join("I1.0A"));
     for d in [&lo, &hi] {
         ok(mrbp(&["predict", s(d), "--draws", "100"]));
@@ -88,7 +88,7 @@ fn current_law_predicts_a_held_out_current() {
     let manifest = campaign(data.path(), vec![0.5, 1.0, 1.5], vec![200.0]);
     let out = tempfile::tempdir().unwrap();
     let law = out.path().join("law");
-    ok(mrbp(&["sample", &manifest, "--out", s(&law), "--model", "current-law", "--hold-out-current", "1.0", "--steps", "400", "--substeps", "2"]));
+    ok(mrbp(&["sample", &manifest, "--out", s(&law), "--model", "current-law", "--hold-out-current", "1.0", "--substeps", "2"]));
     ok(mrbp(&["predict", s(&law), "--draws", "200"]));
     let path = law.join("coverage.parquet");
     let cov = read_parquet(&path).unwrap();
@@ -102,7 +102,7 @@ fn current_law_predicts_a_held_out_current() {
 
     // the law's folder compares with a per-current one, and the report says what was held out
     let per = out.path().join("per");
-    ok(mrbp(&["sample", &manifest, "--out", s(&per), "--current", "1.0", "--steps", "200", "--substeps", "2"]));
+    ok(mrbp(&["sample", &manifest, "--out", s(&per), "--current", "1.0", "--substeps", "2"]));
     ok(mrbp(&["predict", s(&per), "--draws", "100"]));
     let cmp = out.path().join("cmp");
     ok(mrbp(&["compare", s(&per), s(&law), "--out", s(&cmp)]));

@@ -37,8 +37,6 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
         manifest.to_str().unwrap(),
         "--out",
         out.path().to_str().unwrap(),
-        "--steps",
-        "500",
         "--substeps",
         "2",
         "--leave-one-out",

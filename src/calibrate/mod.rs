@@ -76,7 +76,8 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
         .zip(&from_identification)
         .map(|(p, v)| p.centre().map(|(c, _)| c).unwrap_or(*v))
         .collect();
-    let map = map::best_map(&posterior, &[from_identification, medians])
+    let starts = [from_identification, medians].map(|log| posterior.layout.theta_coordinates(&log));
+    let map = map::best_map(&posterior, &starts)
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
     log(&format!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64()));
     let (substeps, map, step_study) = if integ.substeps == 0 {
@@ -85,13 +86,14 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
         (integ.substeps, map, vec![])
     };
     settings.integrator.substeps = substeps;
+    let names = posterior.layout.coordinate_names();
     for s in &step_study {
         let (i, v) = s.worst();
-        log(&format!("  step rule: {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, posterior.layout.names[i]));
+        log(&format!("  step rule: {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, names[i]));
     }
     let posterior = posterior.with_integrator(integ.integrator(substeps));
     if settings.sampler.walkers == 0 {
-        settings.sampler.walkers = (2 * posterior.layout.dim()).max(24).div_ceil(2) * 2;
+        settings.sampler.walkers = SamplingSettings::walkers_for(posterior.layout.dim());
     }
     Ok(Start { current_a, settings, identification, map, step_study, posterior, seconds: clock.elapsed().as_secs_f64() })
 }
@@ -116,12 +118,18 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
             Sampler::new(posterior, sampler_settings, &init)?
         }
     };
-    sampler.run(&s.control(), observers)?;
+    // convergence is judged on the SI parameters the outputs report
+    let layout = &posterior.layout;
+    let diagnose = |chains: &Chains| {
+        // burn-in from the sampler's own coordinates, in which τ is estimated
+        let burn_in = if s.burn_in > 0 { s.burn_in } else { Diagnostics::burn_in_rule(chains) };
+        PosteriorSample::from_coordinates(layout, posterior.model, chains).diagnostics(burn_in)
+    };
+    sampler.run_until(&s.control(), observers, &diagnose)?;
     let chains = sampler.chains.clone();
     let sampling = clock.elapsed().as_secs_f64();
-    // burn-in from the sampler's own coordinates, in which τ is estimated
     let burn_in = if s.burn_in > 0 { s.burn_in } else { Diagnostics::burn_in_rule(&chains) };
-    let sample = PosteriorSample::from_coordinates(&posterior.layout, posterior.model, &chains);
+    let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains);
     let diagnostics = sample.diagnostics(burn_in);
     Ok(Calibration { start, campaign: campaign.clone(), chains, sample, diagnostics, sampling_seconds: sampling })
 }

@@ -5,9 +5,8 @@ use crate::data::Campaign;
 use crate::identify::CurrentIdentification;
 use crate::pipeline::Event;
 use crate::posterior::ParameterModel;
-use crate::predict::CoverageRow;
 use crate::store::PredictionRecord;
-use crate::validate::HeldOut;
+use crate::validate::LooRow;
 
 /// Prints what a pipeline stage did.
 pub fn event(e: Event) {
@@ -23,7 +22,7 @@ pub fn event(e: Event) {
             prediction_table(record);
             println!("wrote bands.parquet, coverage.parquet and prediction.toml to {}", dir.display());
         }
-        Event::LeftOneOut { held, rows, steps, seconds } => loo_table(held, rows, steps, seconds),
+        Event::LeftOneOut { rows, seconds } => loo_table(rows, seconds),
         Event::Wrote(path) => println!("wrote {}", path.display()),
     }
 }
@@ -105,7 +104,7 @@ fn calibration_summary(cal: &Calibration) {
         );
     }
     if dg.warnings.is_empty() {
-        println!("diagnostics: R̂ < 1.01, chains longer than 50 τ, no stuck walkers");
+        println!("diagnostics: R̂ < 1.01, ESS ≥ {:.0}, chains longer than 10 τ, no stuck walkers", cal.start.settings.sampler.min_ess);
     }
     for w in &dg.warnings {
         println!("warning: {w}");
@@ -143,10 +142,21 @@ fn prediction_table(record: &PredictionRecord) {
     }
 }
 
-fn loo_table(held: &[HeldOut], rows: &[CoverageRow], steps: usize, seconds: f64) {
-    println!("\nleave-one-out ({steps} steps per held-out calibration, {seconds:.0} s):");
-    println!("{:<16} {:>12} {:>12} {:>8}", "held out", "in_p95_%", "rmse_q50_pa", "max_R̂");
-    for (r, h) in rows.iter().zip(held) {
-        println!("{:<16} {:>12.1} {:>12.1} {:>8.4}", r.run, 100.0 * r.inside_p95, r.rmse_q50_pa, h.max_rhat);
+fn loo_table(rows: &[LooRow], seconds: f64) {
+    println!("\nleave-one-out ({seconds:.1} s):");
+    println!("{:<16} {:>12} {:>12} {:>8} {:>10} {:>20} {:>8}", "held out", "in_p95_%", "rmse_q50_pa", "k̂", "k̂_laplace", "held-out posterior", "max_R̂");
+    for r in rows {
+        let c = &r.coverage;
+        let or_dash = |v: f64, digits: usize| if v.is_finite() { format!("{v:.digits$}") } else { "–".into() };
+        println!(
+            "{:<16} {:>12.1} {:>12.1} {:>8.2} {:>10} {:>20} {:>8}",
+            c.run,
+            100.0 * c.inside_p95,
+            c.rmse_q50_pa,
+            r.pareto_k,
+            or_dash(r.pareto_k_laplace, 2),
+            r.by.label(),
+            or_dash(r.max_rhat, 4)
+        );
     }
 }

@@ -19,10 +19,9 @@ use crate::data::{current_tag, Campaign};
 use crate::error::Result;
 use crate::identify::CurrentIdentification;
 use crate::posterior::ModelKind;
-use crate::predict::CoverageRow;
 use crate::sampler::{Observer, Progress};
 use crate::store::PredictionRecord;
-use crate::validate::{HeldOut, LooSettings};
+use crate::validate::{LooRow, LooSettings};
 
 pub use predict::Prediction;
 
@@ -37,7 +36,7 @@ pub enum Event<'a> {
     Calibrating { what: &'a str, dir: &'a Path },
     Calibrated(&'a Calibration),
     Predicted { record: &'a PredictionRecord, dir: &'a Path },
-    LeftOneOut { held: &'a [HeldOut], rows: &'a [CoverageRow], steps: usize, seconds: f64 },
+    LeftOneOut { rows: &'a [LooRow], seconds: f64 },
     /// A file of results (a report) was written.
     Wrote(&'a Path),
 }
@@ -171,6 +170,6 @@ impl<'a> Pipeline<'a> {
     /// Leave-one-out settings with `steps` per held-out run and the bands'
     /// draws, replicates and seed.
     pub fn loo_settings(&self, steps: usize, predict: &PredictOptions) -> LooSettings {
-        LooSettings { steps, draws: predict.draws, replicates: predict.replicates, seed: predict.seed }
+        LooSettings { steps, draws: predict.draws, replicates: predict.replicates, seed: predict.seed, ..LooSettings::default() }
     }
 }

@@ -10,7 +10,7 @@ use crate::posterior::{RecordPart, RunData};
 use crate::predict::{predict_run, CoverageRow, RunBands};
 use crate::report::{self, CalibrationReport};
 use crate::store::{self, command_line, PredictionRecord, StoredCalibration};
-use crate::validate::{leave_one_out, LooSettings};
+use crate::validate::{leave_one_out, Full, LooRow, LooSettings};
 
 /// What a prediction of a calibration folder made.
 pub struct Prediction {
@@ -21,7 +21,7 @@ pub struct Prediction {
 
 /// What a leave-one-out study made: coverage and bands of the held-out runs.
 pub struct LeaveOneOut {
-    pub coverage: Vec<CoverageRow>,
+    pub rows: Vec<LooRow>,
     pub bands: Vec<RunBands>,
 }
 
@@ -75,7 +75,7 @@ impl Pipeline<'_> {
     /// a single run has nothing to leave out: `None`.
     pub fn leave_one_out(&mut self, cal: &StoredCalibration, campaign: &Campaign, loo: &LooSettings) -> Result<Option<LeaveOneOut>> {
         if loo.steps < 10 {
-            return Err(Error::Usage("--loo-steps must be at least 10".into()));
+            return Err(Error::Usage(format!("--loo-steps must be at least 10, got {}", loo.steps)));
         }
         let campaign = cal.used_runs(campaign);
         if campaign.runs.len() < 2 {
@@ -86,16 +86,16 @@ impl Pipeline<'_> {
         let progress = self.progress;
         let listener = &mut *self.listener;
         let mut observe = |run: &str| {
-            listener(Event::Note(&format!("  leave-one-out: calibrating without {run} ({} steps)", loo.steps)));
+            listener(Event::Note(&format!("  leave-one-out: no importance weights can be trusted for {run} (k̂ > 0.7): sampling without it")));
             Pipeline::observers_for(progress)
         };
-        let held = leave_one_out(&campaign, &cal.settings, &cal.sample, loo, &mut observe)?;
-        let coverage: Vec<CoverageRow> = held.iter().map(|h| h.prediction.coverage.clone()).collect();
-        let bands: Vec<RunBands> = held.iter().map(|h| h.prediction.bands.clone()).collect();
+        let full = Full { campaign: &campaign, settings: &cal.settings, sample: &cal.sample, burn_in: cal.burn_in(), thin: cal.thin() };
+        let held = leave_one_out(&full, loo, &mut observe)?;
+        let (bands, rows): (Vec<RunBands>, Vec<LooRow>) = held.into_iter().map(|h| (h.prediction.bands, h.row)).unzip();
         store::bands::write(&cal.dir.join("loo_bands.parquet"), &bands)?;
-        store::coverage::write(&cal.dir.join("loo.parquet"), &coverage)?;
-        self.emit(Event::LeftOneOut { held: &held, rows: &coverage, steps: loo.steps, seconds: clock.elapsed().as_secs_f64() });
-        Ok(Some(LeaveOneOut { coverage, bands }))
+        store::coverage::write_loo(&cal.dir.join("loo.parquet"), &rows)?;
+        self.emit(Event::LeftOneOut { rows: &rows, seconds: clock.elapsed().as_secs_f64() });
+        Ok(Some(LeaveOneOut { rows, bands }))
     }
 
     /// Bands, leave-one-out (if `loo` is given) and the report of a
@@ -134,7 +134,7 @@ impl Pipeline<'_> {
         let loo = match loo {
             Some(settings) => self.leave_one_out(&cal, &campaign, settings)?,
             None if dir.join("loo.parquet").exists() && dir.join("loo_bands.parquet").exists() => Some(LeaveOneOut {
-                coverage: store::coverage::read(&dir.join("loo.parquet"))?,
+                rows: store::coverage::read_loo(&dir.join("loo.parquet"))?,
                 bands: store::bands::read(&dir.join("loo_bands.parquet"))?,
             }),
             None => None,
@@ -149,7 +149,7 @@ impl Pipeline<'_> {
             bands: &prediction.bands,
             coverage: &prediction.coverage,
             prediction: &prediction.record,
-            loo: loo.map(|l| (l.coverage.as_slice(), l.bands.as_slice())),
+            loo: loo.map(|l| (l.rows.as_slice(), l.bands.as_slice())),
         })?;
         self.emit(Event::Wrote(&path));
         Ok(path)

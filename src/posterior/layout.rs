@@ -3,13 +3,30 @@
 //!
 //! A point is θ (the parameter model's coordinates), then one noise scale σ
 //! per run, then (AR(1) noise only) one lag-one correlation ρ per run. The
-//! sampler walks in ln θ, ln σ and atanh ρ; outputs use θ, σ, ρ under the
-//! names `G` … (or a law's), `sigma_<run>`, `rho_<run>`.
+//! sampler walks in ln θ (or [`Coordinates::SaturationShare`]), ln σ and
+//! atanh ρ; outputs use θ, σ, ρ under the names `G` … (or a law's),
+//! `sigma_<run>`, `rho_<run>`.
 
 use std::ops::Range;
 
+use serde::{Deserialize, Serialize};
+
 use super::likelihood::NoiseModel;
 use super::parameters::ParameterModel;
+
+/// The coordinates the sampler walks θ in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Coordinates {
+    /// ln θ.
+    Log,
+    /// ln θ, but R1 and D1 as ln(R1 + D1), the saturated stress the records
+    /// pin down, and logit of D1's share of it, ln(D1/R1), which they may
+    /// not: the ridge R1 + D1 ≈ const, curved in ln R1 and ln D1, becomes
+    /// straight. The map from (ln R1, ln D1) has Jacobian 1, so densities of
+    /// ln θ carry over unchanged.
+    SaturationShare,
+}
 
 /// The layout of a posterior's points.
 #[derive(Clone, Debug, PartialEq)]
@@ -22,10 +39,17 @@ pub struct Layout {
     pub sigma: Range<usize>,
     /// Empty unless the noise is AR(1).
     pub rho: Range<usize>,
+    /// Where R1 and D1 sit in θ when they are walked as saturation and share.
+    share: Option<(usize, usize)>,
+}
+
+/// ln(1 + eᵛ), without overflow.
+fn softplus(v: f64) -> f64 {
+    v.max(0.0) + (-v.abs()).exp().ln_1p()
 }
 
 impl Layout {
-    pub fn new(model: &ParameterModel, runs: &[String], noise: NoiseModel) -> Layout {
+    pub fn new(model: &ParameterModel, runs: &[String], noise: NoiseModel, coordinates: Coordinates) -> Layout {
         let nt = model.names().len();
         let nr = runs.len();
         let rho_len = if noise == NoiseModel::Ar1 { nr } else { 0 };
@@ -38,7 +62,43 @@ impl Layout {
             theta: 0..nt,
             sigma: nt..nt + nr,
             rho: nt + nr..nt + nr + rho_len,
+            share: match coordinates {
+                Coordinates::Log => None,
+                Coordinates::SaturationShare => Some((model.index("R1"), model.index("D1"))),
+            },
         }
+    }
+
+    /// Names of the sampler's coordinates, for messages.
+    pub fn coordinate_names(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.names.iter().enumerate().map(|(i, n)| if self.rho.contains(&i) { format!("atanh {n}") } else { format!("ln {n}") }).collect();
+        if let Some((r1, d1)) = self.share {
+            names[r1] = "ln (R1 + D1)".into();
+            names[d1] = "ln (D1 / R1)".into();
+        }
+        names
+    }
+
+    /// ln θ at the sampler's coordinates `x` (θ first).
+    pub fn log_theta(&self, x: &[f64]) -> Vec<f64> {
+        let mut log = x[self.theta.clone()].to_vec();
+        if let Some((r1, d1)) = self.share {
+            let (u, v) = (x[r1], x[d1]);
+            log[r1] = u - softplus(v);
+            log[d1] = u - softplus(-v);
+        }
+        log
+    }
+
+    /// The sampler's θ coordinates of ln θ (inverse of [`Self::log_theta`]).
+    pub fn theta_coordinates(&self, log_theta: &[f64]) -> Vec<f64> {
+        let mut x = log_theta.to_vec();
+        if let Some((r1, d1)) = self.share {
+            let (a, b) = (log_theta[r1], log_theta[d1]);
+            x[r1] = a.max(b) + (-(a - b).abs()).exp().ln_1p();
+            x[d1] = b - a;
+        }
+        x
     }
 
     pub fn dim(&self) -> usize {
@@ -64,14 +124,18 @@ impl Layout {
         self.runs.iter().position(|r| r == id)
     }
 
-    /// A point in SI units (θ, σ, ρ) from unconstrained coordinates.
+    /// A point in SI units (θ, σ, ρ) from the sampler's coordinates.
     pub fn to_si(&self, x: &[f64]) -> Vec<f64> {
-        x.iter().enumerate().map(|(i, v)| if self.rho.contains(&i) { v.tanh() } else { v.exp() }).collect()
+        let theta = self.log_theta(x).into_iter().map(f64::exp);
+        let noise = x.iter().enumerate().skip(self.theta.end).map(|(i, v)| if self.rho.contains(&i) { v.tanh() } else { v.exp() });
+        theta.chain(noise).collect()
     }
 
-    /// The unconstrained coordinates of a point in SI units (inverse of [`Self::to_si`]).
+    /// The sampler's coordinates of a point in SI units (inverse of [`Self::to_si`]).
     pub fn from_si(&self, si: &[f64]) -> Vec<f64> {
-        si.iter().enumerate().map(|(i, v)| if self.rho.contains(&i) { v.atanh() } else { v.ln() }).collect()
+        let log: Vec<f64> = si[self.theta.clone()].iter().map(|v| v.ln()).collect();
+        let noise = si.iter().enumerate().skip(self.theta.end).map(|(i, v)| if self.rho.contains(&i) { v.atanh() } else { v.ln() });
+        self.theta_coordinates(&log).into_iter().chain(noise).collect()
     }
 }
 
@@ -82,7 +146,7 @@ mod tests {
     #[test]
     fn names_ranges_and_maps_agree() {
         let runs = vec!["a".to_string(), "b".to_string()];
-        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1);
+        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1, Coordinates::Log);
         assert_eq!(l.dim(), 11);
         assert_eq!(&l.names[7..], ["sigma_a", "sigma_b", "rho_a", "rho_b"]);
         assert_eq!((l.sigma.clone(), l.rho.clone()), (7..9, 9..11));
@@ -93,7 +157,36 @@ mod tests {
         for (a, b) in l.from_si(&si).iter().zip(&x) {
             assert!((a - b).abs() < 1e-12);
         }
-        let g = Layout::new(&ParameterModel::CurrentLaw { reference_a: 1.0 }, &runs, NoiseModel::Gaussian);
+        let g = Layout::new(&ParameterModel::CurrentLaw { reference_a: 1.0 }, &runs, NoiseModel::Gaussian, Coordinates::Log);
         assert_eq!((g.dim(), g.rho.len()), (11, 0));
+    }
+
+    /// Saturation-share coordinates: R1 + D1 and ln(D1/R1) at their places,
+    /// the map inverts, and its Jacobian determinant is 1 (finite
+    /// differences), so densities of ln θ need no correction.
+    #[test]
+    fn saturation_share_coordinates_invert_with_unit_jacobian() {
+        let runs = vec!["a".to_string()];
+        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Gaussian, Coordinates::SaturationShare);
+        let si = [2e5, 1.2e5, 1.6e5, 3e4, 4e-6, 2e-4, 1.2, 300.0];
+        let x = l.from_si(&si);
+        assert!((x[2] - (1.9e5f64).ln()).abs() < 1e-12 && (x[3] - (3e4f64 / 1.6e5).ln()).abs() < 1e-12);
+        for (a, b) in l.to_si(&x).iter().zip(&si) {
+            assert!((a / b - 1.0).abs() < 1e-12, "{a} vs {b}");
+        }
+        let h = 1e-6;
+        let at = |du: f64, dv: f64| {
+            let mut y = x.clone();
+            y[2] += du;
+            y[3] += dv;
+            let lt = l.log_theta(&y);
+            (lt[2], lt[3])
+        };
+        let (a0, b0) = at(0.0, 0.0);
+        let (au, bu) = at(h, 0.0);
+        let (av, bv) = at(0.0, h);
+        let det = ((au - a0) * (bv - b0) - (av - a0) * (bu - b0)) / (h * h);
+        assert!((det - 1.0).abs() < 1e-6, "{det}");
+        assert_eq!(l.coordinate_names()[3], "ln (D1 / R1)");
     }
 }

@@ -1,68 +1,121 @@
 //! The start of the sampler: maximum a posteriori (MAP) refinement of the
 //! identification, the Laplace approximation around it, and the rule that
 //! chooses the integrator's step.
+//!
+//! Everything here works on θ in the sampler's coordinates (the noise is
+//! profiled), on the whitened residuals of a Gaussian surrogate: the
+//! residuals of every run divided by its σ, and one pseudo-residual per
+//! log-normal prior. Residuals of several points are integrated together,
+//! four per SIMD batch and runs in parallel, so a Jacobian costs about two
+//! integrations of the records rather than one per coordinate.
 
 use nalgebra::{DMatrix, DVector};
 use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
 
-use super::{NoiseModel, Posterior};
+use super::{Layout, NoiseModel, Posterior, RunData};
 use crate::fit::least_squares;
-use crate::model::Integrator;
+use crate::model::{Integrator, Params, LANES};
 use crate::sampler::LogDensity;
 
 /// The MAP point and the Laplace approximation of θ around it.
 #[derive(Clone, Debug)]
 pub struct MapEstimate {
-    /// Every coordinate (θ in logs, ln σ, atanh ρ).
+    /// Every coordinate (θ, ln σ, atanh ρ), in the sampler's coordinates.
     pub x: Vec<f64>,
-    /// Covariance of the ln θ coordinates (Laplace, Gaussian surrogate).
+    /// Covariance of the θ coordinates (Laplace, Gaussian surrogate).
     pub cov: DMatrix<f64>,
+    /// The Jacobian of the whitened residuals at the MAP (for the step rule).
+    jacobian: DMatrix<f64>,
+    /// The profiled noise scale of each run.
+    sigmas: Vec<f64>,
     pub log_density: f64,
     pub converged: bool,
 }
 
 impl MapEstimate {
-    /// Posterior sd of each ln θ from the Laplace approximation.
+    /// Posterior sd of each θ coordinate from the Laplace approximation.
     pub fn sd(&self) -> Vec<f64> {
         (0..self.cov.nrows()).map(|i| self.cov[(i, i)].max(0.0).sqrt()).collect()
     }
+
+    /// Posterior sd of each ln θ from the Laplace approximation (the delta
+    /// method through the map from the sampler's coordinates).
+    pub fn log_theta_sd(&self, layout: &Layout) -> Vec<f64> {
+        let nt = self.cov.nrows();
+        let at = layout.log_theta(&self.x);
+        let h = 1e-7;
+        let a = DMatrix::from_fn(nt, nt, |i, j| {
+            let mut y = self.x.clone();
+            y[j] += h;
+            (layout.log_theta(&y)[i] - at[i]) / h
+        });
+        let cov = &a * &self.cov * a.transpose();
+        (0..nt).map(|i| cov[(i, i)].max(0.0).sqrt()).collect()
+    }
 }
 
-/// Residuals τ_obs − τ_model of every run at the θ coordinates `x` (None
-/// where the integration fails), run by run.
-fn residuals(post: &Posterior, x: &[f64]) -> Option<Vec<Vec<f64>>> {
-    post.runs
-        .iter()
-        .map(|r| {
-            let p = &post.params_at_current(x, r.current_a);
-            let mut out = Vec::with_capacity(r.compared());
-            let init = crate::model::State { tau: r.initial_tau, w: 0.0 };
-            post.integrator
-                .run_with(p, &r.time, &r.gamma, init, |k, s| {
-                    if k > 0 {
-                        out.push(r.tau[k] - s.tau);
-                    }
-                })
-                .ok()?;
-            Some(out)
+/// Forward-difference step of the Jacobian in the θ coordinates (logs):
+/// large against the integrator's rounding, small against the posterior's
+/// width.
+const JACOBIAN_STEP: f64 = 1e-6;
+
+/// Residuals τ_obs − τ_model of run `r` for up to [`LANES`] parameter sets.
+fn run_residuals(post: &Posterior, r: &RunData, params: &[Params]) -> Vec<Option<Vec<f64>>> {
+    let lanes: [Params; LANES] = std::array::from_fn(|l| params.get(l).copied().unwrap_or(params[0]));
+    let mut out = vec![Vec::with_capacity(r.compared()); params.len()];
+    let outcome = post.integrator.run_lanes(&lanes, &r.time, &r.gamma, r.initial_tau, |k, s| {
+        if k > 0 {
+            for (lane, o) in out.iter_mut().enumerate() {
+                o.push(r.tau[k] - s.tau[lane]);
+            }
+        }
+    });
+    out.into_iter().zip(outcome).map(|(o, ok)| ok.ok().map(|_| o)).collect()
+}
+
+/// Residuals of every run at each of the θ points `xs` (`None` where an
+/// integration fails), `[point][run]`.
+fn residuals_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<Vec<f64>>>> {
+    let groups: Vec<(usize, usize)> = (0..post.runs.len()).flat_map(|r| (0..xs.len()).step_by(LANES).map(move |g| (r, g))).collect();
+    let pieces: Vec<Vec<Option<Vec<f64>>>> = groups
+        .par_iter()
+        .map(|&(r, g)| {
+            let run = &post.runs[r];
+            let params: Vec<Params> = xs[g..(g + LANES).min(xs.len())].iter().map(|x| post.params_at_current(x, run.current_a)).collect();
+            run_residuals(post, run, &params)
         })
-        .collect()
+        .collect();
+    let mut out: Vec<Option<Vec<Vec<f64>>>> = vec![Some(Vec::new()); xs.len()];
+    for (&(_, g), piece) in groups.iter().zip(pieces) {
+        for (k, res) in piece.into_iter().enumerate() {
+            out[g + k] = match (out[g + k].take(), res) {
+                (Some(mut runs), Some(r)) => {
+                    runs.push(r);
+                    Some(runs)
+                }
+                _ => None,
+            };
+        }
+    }
+    out
 }
 
 fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|r| r * r).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
-/// Whitened residuals of the Gaussian surrogate: (τ_obs − τ_model)/σ_run,
-/// then (ln θ − centre)/scale for every log-normal prior. Points outside the
-/// prior support are infeasible.
-fn whitened(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<Vec<f64>> {
-    if post.priors.iter().zip(x).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
+/// Whitened residuals at θ point `x` from its run residuals: (τ_obs −
+/// τ_model)/σ_run, then (ln θ − centre)/scale for every log-normal prior.
+/// Points outside the prior support are infeasible.
+fn whiten(post: &Posterior, sigmas: &[f64], x: &[f64], residuals: Option<Vec<Vec<f64>>>) -> Option<Vec<f64>> {
+    let log_theta = post.layout.log_theta(x);
+    if post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
         return None;
     }
-    let res = residuals(post, x)?;
+    let res = residuals?;
     let mut out: Vec<f64> = res.iter().zip(sigmas).flat_map(|(r, s)| r.iter().map(move |v| v / s)).collect();
-    for (prior, v) in post.priors.iter().zip(x) {
+    for (prior, v) in post.priors.iter().zip(&log_theta) {
         if let Some((c, s)) = prior.centre() {
             out.push((v - c) / s);
         }
@@ -70,66 +123,95 @@ fn whitened(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<Vec<f64>> {
     Some(out)
 }
 
-/// Maximises the posterior over θ from `start`, with each run's σ profiled
-/// (set to its RMS residual and the fit repeated until σ settles), by
-/// Levenberg-Marquardt on the whitened residuals. Then sets the noise
-/// coordinates from the residuals at the optimum: σ = RMS (AR(1): ρ = lag-one
-/// correlation, σ the innovation sd) and computes the Laplace covariance
-/// (JᵀJ)⁻¹ of ln θ.
+fn whitened(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<Vec<f64>> {
+    let res = residuals_many(post, std::slice::from_ref(&x.to_vec())).pop().flatten();
+    whiten(post, sigmas, x, res)
+}
+
+/// The Jacobian of the whitened residuals at `x` by forward differences,
+/// every point integrated in one batch.
+fn jacobian(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<DMatrix<f64>> {
+    let n = x.len();
+    let points: Vec<Vec<f64>> = (0..=n)
+        .map(|j| {
+            let mut q = x.to_vec();
+            if j > 0 {
+                q[j - 1] += JACOBIAN_STEP;
+            }
+            q
+        })
+        .collect();
+    let mut white = residuals_many(post, &points).into_iter().zip(&points).map(|(r, q)| whiten(post, sigmas, q, r));
+    let r0 = white.next()??;
+    let mut jac = DMatrix::zeros(r0.len(), n);
+    for (j, r1) in white.enumerate() {
+        let r1 = r1?;
+        for i in 0..r0.len() {
+            jac[(i, j)] = (r1[i] - r0[i]) / JACOBIAN_STEP;
+        }
+    }
+    Some(jac)
+}
+
+/// Maximises the posterior over θ from `start` (θ coordinates), with each
+/// run's σ profiled (set to its RMS residual and the fit repeated until σ
+/// settles), by Levenberg-Marquardt on the whitened residuals. Then sets the
+/// noise coordinates from the residuals at the optimum: σ = RMS (AR(1): ρ =
+/// lag-one correlation, σ the innovation sd) and computes the Laplace
+/// covariance (JᵀJ)⁻¹ of θ.
 pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
     let nt = post.layout.theta.len();
     let mut x: Vec<f64> = start[..nt].to_vec();
-    let mut sigmas: Vec<f64> = residuals(post, &x)?.iter().map(|r| rms(r).max(1e-9)).collect();
+    let profile = |x: &[f64]| -> Option<Vec<f64>> {
+        Some(residuals_many(post, &[x.to_vec()]).pop()??.iter().map(|r| rms(r).max(1e-9)).collect())
+    };
+    let mut sigmas = profile(&x)?;
     let mut converged = false;
     for _ in 0..4 {
         let f = |p: &[f64]| whitened(post, &sigmas, p);
-        let fit = least_squares(&x, &f, None);
+        let j = |p: &[f64]| jacobian(post, &sigmas, p);
+        let fit = least_squares(&x, &f, Some(&j));
         let moved = fit.params.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         x = fit.params;
         converged = fit.converged;
-        let new_sigmas: Vec<f64> = residuals(post, &x)?.iter().map(|r| rms(r).max(1e-9)).collect();
+        let new_sigmas = profile(&x)?;
         let sigma_change = new_sigmas.iter().zip(&sigmas).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
         sigmas = new_sigmas;
         if moved < 1e-6 && sigma_change < 1e-3 {
             break;
         }
     }
-    // Laplace covariance from the Jacobian of the whitened residuals
-    let f = |p: &[f64]| whitened(post, &sigmas, p);
-    let r0 = f(&x)?;
-    let mut jac = DMatrix::zeros(r0.len(), nt);
-    for j in 0..nt {
-        let h = 1e-6;
-        let mut q = x.clone();
-        q[j] += h;
-        let r1 = f(&q)?;
-        for i in 0..r0.len() {
-            jac[(i, j)] = (r1[i] - r0[i]) / h;
-        }
-    }
+    let jac = jacobian(post, &sigmas, &x)?;
     let cov = (jac.transpose() * &jac).try_inverse()?;
+    let full = with_noise(post, &x)?;
+    let log_density = post.log_density(&full);
+    Some(MapEstimate { x: full, cov, jacobian: jac, sigmas, log_density, converged })
+}
 
-    let res = residuals(post, &x)?;
-    let mut full = x.clone();
+/// θ extended by the noise coordinates that maximise the likelihood of the
+/// residuals at θ: ln σ = ln RMS (AR(1): the innovation sd and atanh of the
+/// lag-one correlation).
+fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
+    let res = residuals_many(post, &[theta.to_vec()]).pop()??;
+    let ar1 = post.likelihood.noise == NoiseModel::Ar1;
+    let mut full = theta.to_vec();
     let mut rhos = Vec::new();
     for r in &res {
         let s = rms(r).max(1e-9);
-        let rho = if post.likelihood.noise == NoiseModel::Ar1 {
+        let rho = if ar1 {
             let num: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
             let den: f64 = r.iter().map(|v| v * v).sum();
             (num / den).clamp(-0.98, 0.98)
         } else {
             0.0
         };
-        let s = if post.likelihood.noise == NoiseModel::Ar1 { s * (1.0 - rho * rho).sqrt() } else { s };
-        full.push(s.ln());
+        full.push(if ar1 { s * (1.0 - rho * rho).sqrt() } else { s }.ln());
         rhos.push(rho.atanh());
     }
-    if post.likelihood.noise == NoiseModel::Ar1 {
+    if ar1 {
         full.extend(rhos);
     }
-    let log_density = post.log_density(&full);
-    Some(MapEstimate { x: full, cov, log_density, converged })
+    Some(full)
 }
 
 /// The best MAP from several starts (θ coordinates), by log-density.
@@ -141,12 +223,12 @@ pub fn best_map(post: &Posterior, starts: &[Vec<f64>]) -> Option<MapEstimate> {
         .max_by(|a, b| a.log_density.total_cmp(&b.log_density))
 }
 
-/// One row of the step study: the MAP with `substeps` and with twice as
-/// many, and the largest shift in units of the posterior sd.
+/// One row of the step study: how far the MAP moves when the step halves
+/// from `substeps`, in units of the posterior sd.
 #[derive(Clone, Debug)]
 pub struct StepCheck {
     pub substeps: u32,
-    /// |ln θ(m) − ln θ(2m)| / sd per parameter.
+    /// |θ(m) − θ(2m)| / sd per θ coordinate.
     pub shifts: Vec<f64>,
 }
 
@@ -170,54 +252,114 @@ pub fn step_shift_limit(extrapolated: bool) -> f64 {
     STEP_ERROR_LIMIT * (gain - 1.0) / gain
 }
 
+/// The MAP's shift when the integrator changes from `post`'s to `finer`:
+/// one Gauss-Newton step of the surrogate, (JᵀJ)⁻¹ Jᵀ Δr, with Δr the
+/// change of the whitened residuals at the MAP. The shift is a small
+/// fraction of the posterior sd, where the linearisation holds, and it
+/// costs one integration instead of a new MAP search.
+fn shift(map: &MapEstimate, post: &Posterior, finer: &Posterior) -> Option<DVector<f64>> {
+    let nt = post.layout.theta.len();
+    let theta = &map.x[..nt];
+    let coarse = whitened(post, &map.sigmas, theta)?;
+    let fine = whitened(finer, &map.sigmas, theta)?;
+    let delta = DVector::from_iterator(coarse.len(), fine.iter().zip(&coarse).map(|(f, c)| f - c));
+    // the residuals are data minus model: the optimum moves by −(JᵀJ)⁻¹ Jᵀ Δr
+    Some(-(&map.cov * (map.jacobian.transpose() * delta)))
+}
+
 /// Chooses the sub-steps per sample: the smallest m (1, 2, 4, …, at most
 /// `max_m`) for which halving the step moves no MAP coordinate of θ by
-/// [`step_shift_limit`] sd or more. Returns the chosen m, the MAP with it,
-/// and the study.
+/// [`step_shift_limit`] sd or more. Returns the chosen m, the MAP moved to
+/// it, and the study.
 pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, max_m: u32) -> (u32, MapEstimate, Vec<StepCheck>) {
     let mut m = base.substeps.max(1);
     let mut current = start.clone();
+    let mut coarse = post.with_integrator(Integrator { substeps: m, ..base });
     let mut study = Vec::new();
     loop {
         let finer = post.with_integrator(Integrator { substeps: 2 * m, ..base });
-        let Some(next) = refine(&finer, &current.x) else {
+        let Some(step) = shift(&current, &coarse, &finer) else {
             return (m, current, study);
         };
         let sd = current.sd();
-        let shifts: Vec<f64> = post.layout.theta.clone().map(|i| (current.x[i] - next.x[i]).abs() / sd[i].max(1e-300)).collect();
+        let shifts: Vec<f64> = (0..step.len()).map(|i| step[i].abs() / sd[i].max(1e-300)).collect();
         let check = StepCheck { substeps: m, shifts };
         let ok = check.worst().1 < step_shift_limit(base.extrapolate);
         study.push(check);
         if ok || 2 * m > max_m {
             return (m, current, study);
         }
+        // the MAP with the finer step: moved by the shift, noise re-profiled
+        let theta: Vec<f64> = current.x[..step.len()].iter().zip(step.iter()).map(|(x, s)| x + s).collect();
+        if let Some(full) = with_noise(&finer, &theta) {
+            current.log_density = finer.log_density(&full);
+            current.x = full;
+        }
         m *= 2;
-        current = next;
+        coarse = finer;
     }
 }
 
-/// Initial walker positions: θ from the Laplace approximation around the MAP,
-/// the noise coordinates in a small ball, every one with a finite
-/// log-density (redrawn up to 100 times, then a tiny ball around the MAP).
+/// The Laplace approximation of the whole posterior: a Gaussian around the
+/// MAP with the covariance of θ from the surrogate's Hessian and, for the
+/// noise of each run, the posterior sd of a Gaussian scale from n
+/// residuals: 1/√(2n) for ln σ, 1/√n for atanh ρ (nearly independent of θ).
+pub struct Laplace {
+    pub mean: Vec<f64>,
+    /// Lower Cholesky factor of the covariance (θ block, then the noise).
+    chol: DMatrix<f64>,
+}
+
+impl Laplace {
+    pub fn new(post: &Posterior, map: &MapEstimate) -> Laplace {
+        let (d, l) = (post.dim(), &post.layout);
+        let nt = l.theta.len();
+        let mut chol = DMatrix::zeros(d, d);
+        // a θ covariance that is not positive definite: a tiny ball instead
+        let theta = map.cov.clone().cholesky().map(|c| c.l()).unwrap_or_else(|| DMatrix::identity(nt, nt) * 1e-4);
+        chol.view_mut((0, 0), (nt, nt)).copy_from(&theta);
+        for i in nt..d {
+            let rho = l.rho.contains(&i);
+            let run = &post.runs[if rho { i - l.rho.start } else { i - l.sigma.start }];
+            let n = run.compared().max(1) as f64;
+            chol[(i, i)] = if rho { 1.0 / n.sqrt() } else { 1.0 / (2.0 * n).sqrt() };
+        }
+        Laplace { mean: map.x.clone(), chol }
+    }
+
+    /// mean + spread · L z.
+    pub fn point(&self, z: &[f64], spread: f64) -> Vec<f64> {
+        let step = &self.chol * DVector::from_column_slice(z) * spread;
+        self.mean.iter().zip(step.iter()).map(|(m, s)| m + s).collect()
+    }
+
+    /// ln of the density at `x` of the multivariate Student-t with `df`
+    /// degrees of freedom and this mean and covariance (scaled by
+    /// `spread`²), up to a constant.
+    pub fn log_t_density(&self, x: &[f64], spread: f64, df: f64) -> f64 {
+        let r = DVector::from_iterator(x.len(), x.iter().zip(&self.mean).map(|(a, m)| (a - m) / spread));
+        let z = self.chol.solve_lower_triangular(&r).unwrap_or(r);
+        -0.5 * (df + x.len() as f64) * (z.norm_squared() / df).ln_1p()
+    }
+}
+
+/// Spread of the initial walkers over the Laplace approximation's: a
+/// little overdispersed, so that R̂ compares ensembles that had to contract
+/// onto the posterior, not ones that started on it.
+const START_SPREAD: f64 = 1.5;
+
+/// Initial walker positions from the [`Laplace`] approximation, spread by
+/// [`START_SPREAD`], every one with a finite log-density (redrawn up to 100
+/// times, then a tiny ball around the MAP).
 pub fn initial_walkers(post: &Posterior, map: &MapEstimate, count: usize, seed: u64) -> Vec<Vec<f64>> {
-    let (d, nt) = (post.dim(), post.layout.theta.len());
-    let chol = map.cov.clone().cholesky();
+    let d = post.dim();
+    let laplace = Laplace::new(post, map);
     (0..count)
         .map(|c| {
             let mut rng = crate::rng::stream(seed, &[u64::MAX - 1, c as u64]);
             for attempt in 0..100 {
                 let z: Vec<f64> = (0..d).map(|_| StandardNormal.sample(&mut rng)).collect();
-                let mut x = map.x.clone();
-                let theta = match &chol {
-                    Some(ch) if attempt < 90 => ch.l() * DVector::from_column_slice(&z[..nt]),
-                    _ => DVector::from_column_slice(&z[..nt]) * 1e-4,
-                };
-                for i in 0..nt {
-                    x[i] += theta[i];
-                }
-                for i in nt..d {
-                    x[i] += 0.01 * z[i];
-                }
+                let x = laplace.point(&z, if attempt < 90 { START_SPREAD } else { 1e-4 });
                 if post.log_density(&x).is_finite() {
                     return x;
                 }

@@ -22,7 +22,7 @@ pub mod sample;
 use crate::data::Campaign;
 use crate::model::{Integrator, Params, LANES};
 use crate::sampler::LogDensity;
-pub use layout::Layout;
+pub use layout::{Coordinates, Layout};
 pub use likelihood::{LikelihoodSettings, NoiseModel, RecordPart, ResidualStats, RunData};
 pub use parameters::{ModelKind, ParameterModel, LAW_NAMES};
 pub use prior::Prior;
@@ -51,12 +51,13 @@ impl Posterior {
         likelihood: &LikelihoodSettings,
         sigma_bounds: (f64, f64),
         integrator: Integrator,
+        coordinates: Coordinates,
     ) -> Posterior {
         let runs: Vec<RunData> =
             campaign.runs.iter().map(|r| RunData::from_run(r, likelihood.part, likelihood.smooth_strain_ms)).collect();
         let ids: Vec<String> = runs.iter().map(|r| r.id.clone()).collect();
         Posterior {
-            layout: Layout::new(&model, &ids, likelihood.noise),
+            layout: Layout::new(&model, &ids, likelihood.noise, coordinates),
             runs,
             model,
             priors,
@@ -70,16 +71,17 @@ impl Posterior {
         Posterior { integrator, ..self.clone() }
     }
 
-    /// The B-P parameters at a coil current, from the unconstrained coordinates `x`.
+    /// The B-P parameters at a coil current, from the sampler's coordinates `x`.
     pub fn params_at_current(&self, x: &[f64], current_a: f64) -> Params {
-        let theta: Vec<f64> = x[self.layout.theta.clone()].iter().map(|v| v.exp()).collect();
+        let theta: Vec<f64> = self.layout.log_theta(x).into_iter().map(f64::exp).collect();
         self.model.params(&theta, current_a)
     }
 
-    /// Log-prior of the coordinates (with the Jacobian of ρ = tanh z).
+    /// Log-prior of the coordinates (the priors are densities of ln θ, and
+    /// the θ coordinates map to ln θ with Jacobian 1; with that of ρ = tanh z).
     pub fn log_prior(&self, x: &[f64]) -> f64 {
         let l = &self.layout;
-        let mut lp: f64 = self.priors.iter().zip(&x[l.theta.clone()]).map(|(p, v)| p.log_density(*v)).sum();
+        let mut lp: f64 = self.priors.iter().zip(&l.log_theta(x)).map(|(p, v)| p.log_density(*v)).sum();
         let (lo, hi) = (self.sigma_bounds.0.ln(), self.sigma_bounds.1.ln());
         for v in &x[l.sigma.clone()] {
             if !(*v >= lo && *v <= hi) {

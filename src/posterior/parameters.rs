@@ -63,6 +63,11 @@ impl ParameterModel {
         }
     }
 
+    /// The position of θ coordinate `name`; it must be one of [`Self::names`].
+    pub fn index(&self, name: &str) -> usize {
+        self.names().iter().position(|n| *n == name).expect("a coordinate of the parameter model")
+    }
+
     /// Priors of θ from the priors of the seven B-P parameters. In a current
     /// law those describe the reference current; G_field and G_zero each get
     /// G's prior, and I_s a log-normal with median I_ref and a factor e

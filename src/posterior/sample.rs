@@ -62,17 +62,30 @@ impl PosteriorSample {
     /// posterior did not see has no noise level of its own: it gets the
     /// root-mean-square σ (and the mean ρ) of the runs it saw.
     pub fn draw(&self, step: usize, chain: usize, run: &str, current_a: f64) -> Draw {
-        let params = self.params_at(step, chain, current_a);
         let x = self.chains.point(step, chain);
-        let (sigmas, rhos) = (&x[self.layout.sigma.clone()], &x[self.layout.rho.clone()]);
         match self.layout.run_index(run) {
-            Some(j) => Draw { params, sigma: sigmas[j], rho: rhos.get(j).copied().unwrap_or(0.0) },
-            None => {
-                let mean = |v: &[f64]| if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 };
-                let squares: Vec<f64> = sigmas.iter().map(|s| s * s).collect();
-                Draw { params, sigma: mean(&squares).sqrt(), rho: mean(rhos) }
-            }
+            Some(j) => Draw {
+                params: self.params_at(step, chain, current_a),
+                sigma: x[self.layout.sigma.start + j],
+                rho: if self.layout.rho.is_empty() { 0.0 } else { x[self.layout.rho.start + j] },
+            },
+            None => self.draw_without(step, chain, run, current_a),
         }
+    }
+
+    /// The draw at one position for run `run` as if the posterior had not
+    /// seen it: the root-mean-square σ (and the mean ρ) of the other runs.
+    pub fn draw_without(&self, step: usize, chain: usize, run: &str, current_a: f64) -> Draw {
+        let x = self.chains.point(step, chain);
+        let others: Vec<usize> = (0..self.layout.runs.len()).filter(|&i| self.layout.runs[i] != run).collect();
+        let mean = |v: &mut dyn Iterator<Item = f64>| {
+            let (sum, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+            if n == 0 { 0.0 } else { sum / n as f64 }
+        };
+        let l = &self.layout;
+        let sigma = mean(&mut others.iter().map(|&i| x[l.sigma.start + i].powi(2))).sqrt();
+        let rho = if l.rho.is_empty() { 0.0 } else { mean(&mut others.iter().map(|&i| x[l.rho.start + i])) };
+        Draw { params: self.params_at(step, chain, current_a), sigma, rho }
     }
 
     /// The draws at `positions` for one run.
@@ -126,7 +139,7 @@ mod tests {
     #[test]
     fn draws_take_the_runs_own_noise_or_the_pooled_one() {
         let runs = vec!["a".to_string(), "b".to_string()];
-        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1);
+        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1, crate::posterior::Coordinates::Log);
         let mut point = Params::reference_1a().to_array().to_vec();
         point.extend([3.0, 4.0, 0.2, 0.6]);
         let chains = Chains { dim: 11, ensembles: 1, walkers: 1, positions: point, log_prob: vec![0.0], accepted: vec![false] };

@@ -14,6 +14,7 @@ use crate::model::PARAM_NAMES;
 use crate::posterior::map::step_shift_limit;
 use crate::predict::{CoverageRow, RunBands};
 use crate::store::{PredictionRecord, StoredCalibration};
+use crate::validate::LooRow;
 
 /// The share of observations a 95 % predictive band should hold for the
 /// report to call it calibrated.
@@ -35,7 +36,7 @@ pub struct CalibrationReport<'a> {
     pub coverage: &'a [CoverageRow],
     pub prediction: &'a PredictionRecord,
     /// The leave-one-out study, where it was run: coverage and bands.
-    pub loo: Option<(&'a [CoverageRow], &'a [RunBands])>,
+    pub loo: Option<(&'a [LooRow], &'a [RunBands])>,
 }
 
 /// Writes the figures and `report.html` into the calibration's folder.
@@ -220,8 +221,23 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
     page.section("validation", "Leave-one-out validation");
     match r.loo {
         Some((rows, _)) => {
-            page.para("Each run predicted by a calibration on the other runs of this current only (its noise level taken as the root-mean-square σ of those runs): the honest test of the bands on data the fit has not seen.");
-            coverage_table(page, rows, true);
+            page.para("Each run predicted by the posterior of the other runs of this calibration only (its noise level taken as the root-mean-square σ of those runs): the honest test of the bands on data the fit has not seen. That posterior is reached by the cheapest way that can be trusted: the full posterior's draws reweighted by Pareto-smoothed importance sampling where the Pareto k̂ of the weights is at most 0.7; else importance sampling from the Laplace approximation of the held-out posterior, if its k̂ is at most 0.7; else ensemble MCMC of the held-out posterior.");
+            let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
+            coverage_table(page, &coverage, true);
+            let how: Vec<Vec<String>> = rows
+                .iter()
+                .map(|r| {
+                    let or_dash = |v: f64, digits: usize| if v.is_finite() { format!("{v:.digits$}") } else { "–".into() };
+                    vec![
+                        esc(&r.coverage.run),
+                        format!("{:.2}", r.pareto_k),
+                        or_dash(r.pareto_k_laplace, 2),
+                        r.by.label().into(),
+                        or_dash(r.max_rhat, 4),
+                    ]
+                })
+                .collect();
+            page.table(&["held out", "Pareto k̂ (reweighting)", "Pareto k̂ (Laplace)", "held-out posterior by", "largest R̂"], &how);
             for (stem, caption) in &loo_figs.items {
                 page.figure(&r.cal.dir.join("loo").join(format!("{stem}.png")), &format!("Held out: {caption}"))?;
             }

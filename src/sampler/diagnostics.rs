@@ -16,14 +16,18 @@ use super::chains::Chains;
 
 /// Sokal's window constant: the sum runs to the first lag M ≥ C τ(M).
 const SOKAL_C: f64 = 5.0;
-/// A chain should be at least this many τ long to trust its estimates.
-pub const MIN_TAU_MULTIPLE: f64 = 50.0;
+/// A chain should be at least this many τ long after burn-in to trust its
+/// estimates of τ and ESS (with many walkers the autocorrelation is averaged
+/// over all of them, so fewer τ suffice than for one chain).
+pub const MIN_TAU_MULTIPLE: f64 = 10.0;
 /// R̂ threshold of Vehtari et al. (2021).
 pub const RHAT_THRESHOLD: f64 = 1.01;
 /// Burn-in is this many τ, at most half the chain.
 const BURN_IN_TAUS: f64 = 3.0;
-/// A walker whose acceptance is below this share of the median is stuck.
-const STUCK_SHARE: f64 = 0.2;
+/// A walker is stuck when so few of its proposals were accepted that a
+/// walker accepting at the median rate would do so with probability below
+/// this, divided by the number of walkers.
+const STUCK_P: f64 = 1e-3;
 
 /// The normalised autocorrelation function of one series, by FFT.
 pub fn autocorrelation(x: &[f64]) -> Vec<f64> {
@@ -336,6 +340,21 @@ impl ParameterDiagnostics {
     }
 }
 
+/// The walkers whose acceptance over `steps` steps is improbably low for a
+/// walker accepting at the `median` rate (binomial tail, Bonferroni over
+/// the walkers).
+fn stuck_walkers(acceptance: &[f64], median: f64, steps: usize) -> Vec<usize> {
+    use statrs::distribution::{Binomial, DiscreteCDF};
+    let Ok(rate) = Binomial::new(median.clamp(0.0, 1.0), steps as u64) else { return vec![] };
+    let limit = STUCK_P / acceptance.len().max(1) as f64;
+    acceptance
+        .iter()
+        .enumerate()
+        .filter(|(_, a)| rate.cdf((**a * steps as f64).round() as u64) < limit)
+        .map(|(c, _)| c)
+        .collect()
+}
+
 fn max_rhat(coordinates: &[ParameterDiagnostics]) -> f64 {
     coordinates.iter().map(|c| c.r_hat).fold(0.0, f64::max)
 }
@@ -391,12 +410,7 @@ impl Diagnostics {
         let mut sorted = acceptance.clone();
         sorted.sort_by(f64::total_cmp);
         let median = quantile_sorted(&sorted, 0.5);
-        let stuck: Vec<usize> = acceptance
-            .iter()
-            .enumerate()
-            .filter(|(_, a)| **a == 0.0 || **a < STUCK_SHARE * median)
-            .map(|(c, _)| c)
-            .collect();
+        let stuck = stuck_walkers(&acceptance, median, total.saturating_sub(burn_in.max(1)));
         let mut warnings = Vec::new();
         if (kept as f64) < MIN_TAU_MULTIPLE * tau_max {
             warnings.push(format!(
@@ -410,7 +424,7 @@ impl Diagnostics {
         }
         if !stuck.is_empty() {
             warnings.push(format!(
-                "{} walker(s) stuck (acceptance below {STUCK_SHARE} × median {median:.2}): chains {:?}",
+                "{} walker(s) stuck (far fewer accepted proposals than the median rate {median:.2} would give): chains {:?}",
                 stuck.len(),
                 stuck
             ));
@@ -436,11 +450,18 @@ impl Diagnostics {
         self.coordinates.iter().map(|c| c.ess_bulk.min(c.ess_tail)).fold(f64::INFINITY, f64::min)
     }
 
-    /// Long enough (≥ 50 τ after burn-in) and every R̂ below 1.01.
-    pub fn converged(&self) -> bool {
-        let kept = (self.steps + 1).saturating_sub(self.burn_in) as f64;
-        kept >= MIN_TAU_MULTIPLE * self.tau_max
-            && self.coordinates.iter().all(|c| c.r_hat < RHAT_THRESHOLD)
+    /// Every R̂ below 1.01 and every bulk and tail ESS at least `min_ess`
+    /// (Vehtari et al. 2021): the ensembles agree and the draws are enough
+    /// for their purpose; and the chains at least [`MIN_TAU_MULTIPLE`] τ
+    /// long after burn-in, so that those estimates rest on more than a few
+    /// autocorrelation times.
+    pub fn converged(&self, min_ess: f64) -> bool {
+        self.coordinates.iter().all(|c| c.r_hat < RHAT_THRESHOLD) && self.min_ess() >= min_ess && self.long_enough()
+    }
+
+    /// At least [`MIN_TAU_MULTIPLE`] τ_max after burn-in.
+    pub fn long_enough(&self) -> bool {
+        (self.steps + 1).saturating_sub(self.burn_in) as f64 >= MIN_TAU_MULTIPLE * self.tau_max
     }
 }
 

@@ -19,9 +19,6 @@ use crate::error::{Error, Result};
 /// batching never depends on the number of threads.
 const BATCH: usize = 8;
 
-/// Relative change of τ_max between convergence checks counted as stable.
-const TAU_STABLE: f64 = 0.05;
-
 /// Index of the stream that picks the move of an ensemble's step.
 const MOVE_STREAM: u64 = u64::MAX;
 
@@ -105,9 +102,21 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         Ok(Sampler { target, settings, chains })
     }
 
-    /// Steps until `control` says stop, telling `observers` what happens.
+    /// Steps until `control` says stop, telling `observers` what happens;
+    /// convergence is judged on the chains as they are.
     pub fn run(&mut self, control: &RunControl, observers: &mut [&mut dyn Observer]) -> Result<()> {
-        let mut last_tau = f64::NAN;
+        self.run_until(control, observers, &|chains| Diagnostics::compute(chains, None))
+    }
+
+    /// [`Sampler::run`], with convergence judged on `diagnose(chains)`: the
+    /// diagnostics of the quantities of interest (SI units, say), which may
+    /// not be the sampler's coordinates.
+    pub fn run_until(
+        &mut self,
+        control: &RunControl,
+        observers: &mut [&mut dyn Observer],
+        diagnose: &dyn Fn(&Chains) -> Diagnostics,
+    ) -> Result<()> {
         let mut accepted = 0;
         for o in observers.iter_mut() {
             o.started(&self.state(control, accepted))?;
@@ -118,18 +127,12 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             for o in observers.iter_mut() {
                 o.stepped(&state)?;
             }
-            let done = state.step;
-            if control.until_converged && done % control.check_every.max(1) == 0 {
-                // converged: long enough, R̂ fine, enough ESS, and τ stable
-                // within 5 % since the last check (τ estimates of short chains
-                // drift upwards; emcee's 1 % rarely settles with a few checks)
-                let diag = self.diagnostics();
-                let stable = (diag.tau_max - last_tau).abs() < TAU_STABLE * diag.tau_max;
-                last_tau = diag.tau_max;
+            if control.until_converged && state.step % control.check_every.max(1) == 0 {
+                let diag = diagnose(&self.chains);
                 for o in observers.iter_mut() {
                     o.checked(&state, &diag);
                 }
-                if stable && diag.converged() && diag.min_ess() >= control.min_ess {
+                if diag.converged(control.min_ess) {
                     break;
                 }
             }
@@ -146,6 +149,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             chains: &self.chains,
             step: self.chains.steps().saturating_sub(1),
             max_steps: control.max_steps,
+            min_ess: control.until_converged.then_some(control.min_ess),
             accepted,
         }
     }

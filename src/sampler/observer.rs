@@ -17,6 +17,8 @@ pub struct RunState<'a> {
     pub step: usize,
     /// The step at which the run stops at the latest.
     pub max_steps: usize,
+    /// The ESS the stopping rule asks for, if the run stops when converged.
+    pub min_ess: Option<f64>,
     /// Proposals accepted in the last step.
     pub accepted: usize,
 }
@@ -58,23 +60,31 @@ impl Observer for Checkpointer {
     }
 }
 
-/// A progress bar on the terminal, with the acceptance rate and a line of
-/// diagnostics at every convergence check.
+/// A progress bar on the terminal, with the acceptance rate and, at every
+/// convergence check, where the diagnostics stand against the stopping rule
+/// and how many steps it will take at this pace.
 #[derive(Default)]
 pub struct Progress {
     bar: Option<indicatif::ProgressBar>,
     accepted: usize,
+    status: String,
 }
 
 /// Steps over which the shown acceptance rate is averaged.
-const ACCEPTANCE_WINDOW: usize = 20;
+const ACCEPTANCE_WINDOW: usize = 10;
 
 impl Observer for Progress {
     fn started(&mut self, state: &RunState) -> Result<()> {
         let bar = indicatif::ProgressBar::new(state.max_steps as u64);
         bar.set_style(
-            indicatif::ProgressStyle::with_template("sampling {bar:30} {pos}/{len} steps  {msg}  ETA {eta}").expect("valid template"),
+            indicatif::ProgressStyle::with_template("sampling {bar:30} step {pos}/{len}  {msg}  ETA {eta}").expect("valid template"),
         );
+        if state.min_ess.is_some() {
+            // the length is an estimate until the first convergence check
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("sampling {bar:30} step {pos}  {msg}").expect("valid template"),
+            );
+        }
         bar.set_position(state.step as u64);
         self.bar = Some(bar);
         Ok(())
@@ -85,21 +95,28 @@ impl Observer for Progress {
         bar.set_position(state.step as u64);
         if state.step % ACCEPTANCE_WINDOW == 0 {
             let rate = self.accepted as f64 / (ACCEPTANCE_WINDOW * state.chains.chains()) as f64;
-            bar.set_message(format!("acceptance {rate:.2}"));
+            bar.set_message(format!("acceptance {rate:.2}{}", self.status));
             self.accepted = 0;
         }
         Ok(())
     }
     fn checked(&mut self, state: &RunState, diag: &Diagnostics) {
-        let line = format!(
-            "  step {}: τ_max {:.1}, largest R̂ {:.4}, smallest ESS {:.0}",
-            state.step,
-            diag.tau_max,
-            diag.max_rhat(),
-            diag.min_ess()
-        );
+        let Some(min_ess) = state.min_ess else { return };
+        let (ess, rhat) = (diag.min_ess(), diag.max_rhat());
+        self.status = format!(", smallest ESS {ess:.0}/{min_ess:.0}, largest R̂ {rhat:.4}/{}", super::diagnostics::RHAT_THRESHOLD);
+        let line = format!("  step {}: smallest ESS {ess:.0} (target {min_ess:.0}), largest R̂ {rhat:.4}, τ_max {:.1}", state.step, diag.tau_max);
         match &self.bar {
-            Some(bar) if !bar.is_hidden() => bar.println(line),
+            Some(bar) if !bar.is_hidden() => {
+                // ESS grows with the steps kept after burn-in: the steps still
+                // needed at this pace give the bar its length and its ETA
+                let kept = state.step.saturating_sub(diag.burn_in).max(1) as f64;
+                let needed = diag.burn_in as f64 + kept * (min_ess / ess.max(1.0)).max(1.0);
+                bar.set_length((needed.ceil() as u64).clamp(state.step as u64 + 1, state.max_steps as u64));
+                bar.set_style(
+                    indicatif::ProgressStyle::with_template("sampling {bar:30} step {pos}/~{len}  {msg}  ETA {eta}").expect("valid template"),
+                );
+                bar.println(line);
+            }
             _ => eprintln!("{line}"),
         }
     }

@@ -1,26 +1,61 @@
-//! `coverage.parquet` (and `loo.parquet`): one row per run, how well its
-//! bands hold the record.
+//! `coverage.parquet` and `loo.parquet`: one row per run, how well its
+//! bands hold the record; `loo.parquet` adds the Pareto k̂ of the held-out
+//! run's importance weights and whether it was calibrated afresh.
 
 use std::path::Path;
 
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::predict::CoverageRow;
+use crate::validate::{HeldOutBy, LooRow};
 
 pub fn write(path: &Path, rows: &[CoverageRow]) -> Result<()> {
-    write_parquet(
-        path,
-        Table::new()
-            .str("run", rows.iter().map(|r| r.run.clone()).collect())
-            .f64("current_a", rows.iter().map(|r| r.current_a).collect())
-            .i64("samples", rows.iter().map(|r| r.samples as i64).collect())
-            .f64("inside_p95", rows.iter().map(|r| r.inside_p95).collect())
-            .f64("inside_q95", rows.iter().map(|r| r.inside_q95).collect())
-            .f64("rmse_q50_pa", rows.iter().map(|r| r.rmse_q50_pa).collect())
-            .i64("draws", rows.iter().map(|r| r.draws as i64).collect())
-            .i64("failed_draws", rows.iter().map(|r| r.failed_draws as i64).collect())
-            .bool("calibrated", rows.iter().map(|r| r.calibrated).collect()),
-    )
+    write_parquet(path, table(rows))
+}
+
+fn table(rows: &[CoverageRow]) -> Table {
+    Table::new()
+        .str("run", rows.iter().map(|r| r.run.clone()).collect())
+        .f64("current_a", rows.iter().map(|r| r.current_a).collect())
+        .i64("samples", rows.iter().map(|r| r.samples as i64).collect())
+        .f64("inside_p95", rows.iter().map(|r| r.inside_p95).collect())
+        .f64("inside_q95", rows.iter().map(|r| r.inside_q95).collect())
+        .f64("rmse_q50_pa", rows.iter().map(|r| r.rmse_q50_pa).collect())
+        .i64("draws", rows.iter().map(|r| r.draws as i64).collect())
+        .i64("failed_draws", rows.iter().map(|r| r.failed_draws as i64).collect())
+        .bool("calibrated", rows.iter().map(|r| r.calibrated).collect())
+}
+
+pub fn write_loo(path: &Path, rows: &[LooRow]) -> Result<()> {
+    let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
+    let t = table(&coverage)
+        .f64("pareto_k", rows.iter().map(|r| r.pareto_k).collect())
+        .f64("pareto_k_laplace", rows.iter().map(|r| r.pareto_k_laplace).collect())
+        .str("held_out_by", rows.iter().map(|r| r.by.label().to_string()).collect())
+        .f64("max_r_hat", rows.iter().map(|r| r.max_rhat).collect());
+    write_parquet(path, t)
+}
+
+pub fn read_loo(path: &Path) -> Result<Vec<LooRow>> {
+    let df = read_parquet(path)?;
+    let coverage = read(path)?;
+    let k = f64_column(&df, "pareto_k", path)?;
+    let k_laplace = f64_column(&df, "pareto_k_laplace", path)?;
+    let by = str_column(&df, "held_out_by", path)?;
+    let rhat = f64_column(&df, "max_r_hat", path)?;
+    coverage
+        .into_iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let by = match by[i].as_str() {
+                "reweighting" => HeldOutBy::Reweighting,
+                "laplace-importance" => HeldOutBy::LaplaceImportance,
+                "sampling" => HeldOutBy::Sampling,
+                other => return Err(Error::input(path, format!("row {}: unknown held_out_by '{other}'", i + 1))),
+            };
+            Ok(LooRow { coverage: c, pareto_k: k[i], pareto_k_laplace: k_laplace[i], by, max_rhat: rhat[i] })
+        })
+        .collect()
 }
 
 pub fn read(path: &Path) -> Result<Vec<CoverageRow>> {

@@ -58,6 +58,7 @@ pub struct CalibrationRecord {
 impl CalibrationRecord {
     pub fn of(cal: &Calibration) -> CalibrationRecord {
         let names = &cal.start.posterior.layout.names;
+        let coordinates = cal.start.posterior.layout.coordinate_names();
         let named = |v: &[f64]| names.iter().zip(v).map(|(n, v)| (n.clone(), *v)).collect();
         let manifest = std::fs::canonicalize(&cal.campaign.manifest_path).unwrap_or(cal.campaign.manifest_path.clone());
         CalibrationRecord {
@@ -78,13 +79,13 @@ impl CalibrationRecord {
                 .iter()
                 .map(|s| {
                     let (i, v) = s.worst();
-                    StepRow { substeps: s.substeps, largest_shift_sd: v, parameter: names[i].clone() }
+                    StepRow { substeps: s.substeps, largest_shift_sd: v, parameter: coordinates[i].clone() }
                 })
                 .collect(),
             identification: PARAM_NAMES.iter().zip(cal.start.identification.params.to_array()).map(|(n, v)| (n.to_string(), v)).collect(),
             map: named(&cal.start.posterior.layout.to_si(&cal.start.map.x)),
             map_log_density: cal.start.map.log_density,
-            laplace_sd_log: named(&cal.start.map.sd()),
+            laplace_sd_log: named(&cal.start.map.log_theta_sd(&cal.start.posterior.layout)),
             walkers: cal.start.settings.sampler.walkers,
             ensembles: cal.start.settings.sampler.ensembles,
             steps: cal.diagnostics.steps,

@@ -1,0 +1,356 @@
+//! Leave-one-out validation of a calibration: for each run, the posterior
+//! from the other runs alone predicts the run it did not see.
+//!
+//! The held-out posterior is first reached by Pareto-smoothed importance
+//! sampling ([`psis`]) of the full posterior's draws, with weights
+//! 1/p(y_j | θ), the run's likelihood with its noise level profiled out. A
+//! run that carries so much of the information that the weights cannot be
+//! trusted (k̂ > 0.7) is calibrated afresh without it, warm-started from the
+//! reweighted draws. The held-out run's noise level is not known to that
+//! posterior; the prediction uses the root-mean-square σ of the other runs.
+
+pub mod psis;
+
+use serde::{Deserialize, Serialize};
+
+use crate::calibrate::CalibrationSettings;
+use crate::data::{Campaign, Run};
+use crate::error::{Error, Result};
+use crate::model::Params;
+use rand::RngExt;
+use rand_distr::{ChiSquared, StandardNormal};
+use rayon::prelude::*;
+
+use crate::posterior::map::{self, Laplace};
+use crate::posterior::{Draw, NoiseModel, Posterior, PosteriorSample, RecordPart, RunData};
+use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictSettings, RunBands, RunPrediction};
+use crate::sampler::{Chains, Diagnostics, LogDensity, Observer, RunControl, Sampler};
+
+/// How each held-out posterior is reached and propagated.
+#[derive(Clone, Copy, Debug)]
+pub struct LooSettings {
+    /// Most steps of a held-out calibration sampled afresh.
+    pub steps: usize,
+    /// Draws of the full posterior weighted to the held-out one.
+    pub weighted_draws: usize,
+    /// Draws propagated into the held-out run's bands.
+    pub draws: usize,
+    pub replicates: usize,
+    pub seed: u64,
+}
+
+impl Default for LooSettings {
+    fn default() -> Self {
+        LooSettings { steps: 600, weighted_draws: 1000, draws: 400, replicates: 10, seed: 1 }
+    }
+}
+
+/// One held-out run: how its posterior was reached and what it predicts.
+pub struct HeldOut {
+    pub prediction: RunPrediction,
+    pub row: LooRow,
+}
+
+/// How the held-out posterior of a run was reached, cheapest first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HeldOutBy {
+    /// The full posterior's draws, Pareto-smoothed importance weights.
+    Reweighting,
+    /// Importance sampling from the Laplace approximation of the held-out
+    /// posterior (a Student-t around its MAP), Pareto-smoothed.
+    LaplaceImportance,
+    /// Ensemble MCMC of the held-out posterior.
+    Sampling,
+}
+
+impl HeldOutBy {
+    pub fn label(self) -> &'static str {
+        match self {
+            HeldOutBy::Reweighting => "reweighting",
+            HeldOutBy::LaplaceImportance => "laplace-importance",
+            HeldOutBy::Sampling => "sampling",
+        }
+    }
+}
+
+/// One row of `loo.parquet`: the coverage of a held-out run, the Pareto k̂
+/// of its importance weights, and how its posterior was reached.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LooRow {
+    pub coverage: CoverageRow,
+    /// k̂ of the full posterior's reweighting.
+    pub pareto_k: f64,
+    /// k̂ of the importance sampling from the Laplace approximation (NaN if
+    /// not needed).
+    pub pareto_k_laplace: f64,
+    pub by: HeldOutBy,
+    /// Largest R̂ of the held-out sampling (NaN if not needed).
+    pub max_rhat: f64,
+}
+
+/// The full calibration a leave-one-out study starts from.
+pub struct Full<'a> {
+    /// Its runs.
+    pub campaign: &'a Campaign,
+    /// Its settings, walkers and sub-steps filled in.
+    pub settings: &'a CalibrationSettings,
+    pub sample: &'a PosteriorSample,
+    pub burn_in: usize,
+    /// Steps between draws that are nearly independent.
+    pub thin: usize,
+}
+
+/// Leaves out each run of the full calibration in turn. `observe` makes the
+/// observers of a fresh calibration, told the id of the run left out.
+pub fn leave_one_out(full: &Full, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<Vec<HeldOut>> {
+    if full.campaign.runs.len() < 2 {
+        return Err(Error::Usage("leave-one-out needs a calibration of at least two runs".into()));
+    }
+    full.campaign.runs.iter().enumerate().map(|(j, run)| hold_out(full, j, run, loo, observe)).collect()
+}
+
+/// Proposals of the importance sampling from the Laplace approximation:
+/// a Student-t with these degrees of freedom, spread by this much more than
+/// the approximation (heavier tails than the target keep the weights finite).
+const LAPLACE_DF: f64 = 5.0;
+const LAPLACE_SPREAD: f64 = 1.2;
+
+/// The held-out run as the prediction sees it, and how bands are made.
+struct Target<'a> {
+    j: usize,
+    run: &'a Run,
+    data: RunData,
+    /// Samples the likelihood compared: a prefix of the whole record.
+    compared: usize,
+    predict: PredictSettings,
+}
+
+impl Target<'_> {
+    /// ln 1/p(y_j | θ) for each model path (−∞ where it failed).
+    fn log_weights(&self, paths: &[Option<Vec<f64>>], noise: NoiseModel, nu: f64) -> Vec<f64> {
+        let n = self.compared;
+        paths
+            .iter()
+            .map(|p| match p {
+                Some(p) => -profile_log_likelihood(noise, &residuals(&self.data.tau[..n], &p[..n]), nu),
+                None => f64::NEG_INFINITY,
+            })
+            .collect()
+    }
+
+    /// Bands from weighted draws with their paths: `count` of them
+    /// resampled by the weights.
+    fn weighted_bands(&self, draws: &[Draw], paths: &[Option<Vec<f64>>], weights: &[f64], count: usize) -> Result<RunPrediction> {
+        let picks = systematic_resample(weights, count);
+        let kept: Vec<(&Draw, &[f64])> = picks.iter().filter_map(|&i| paths[i].as_deref().map(|p| (&draws[i], p))).collect();
+        let bands = bands_of(&self.data, self.j, &kept, picks.len() - kept.len(), &self.predict)?;
+        let coverage = CoverageRow::of(self.run, &bands, &bands.coverage(&self.data.tau), false);
+        Ok(RunPrediction { bands: RunBands::of(self.run, &self.data, bands), coverage })
+    }
+}
+
+fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<HeldOut> {
+    let settings = full.settings;
+    let lik = &settings.likelihood;
+    let integrator = settings.integrator.integrator(settings.integrator.substeps);
+    let current = left_out.spec.current_a;
+    let target = Target {
+        j,
+        run: left_out,
+        data: RunData::from_run(left_out, RecordPart::WholeRecord, lik.smooth_strain_ms),
+        compared: RunData::from_run(left_out, lik.part, lik.smooth_strain_ms).time.len(),
+        predict: PredictSettings::new(integrator, lik, loo.replicates, loo.seed),
+    };
+
+    // 1. the full posterior's draws, reweighted by 1/p(y_j | θ)
+    let positions = full.sample.positions(full.burn_in, 1, loo.weighted_draws);
+    let params: Vec<Params> = positions.iter().map(|&(s, c)| full.sample.params_at(s, c, current)).collect();
+    let paths = model_paths(&target.data, &params, &integrator, &|| {});
+    let reweighted = psis::smooth(&target.log_weights(&paths, lik.noise, lik.student_nu));
+    let mut row = LooRow { coverage: CoverageRow::default(), pareto_k: reweighted.k_hat, pareto_k_laplace: f64::NAN, by: HeldOutBy::Reweighting, max_rhat: f64::NAN };
+    if reweighted.k_hat <= psis::K_THRESHOLD {
+        let draws: Vec<Draw> = positions.iter().map(|&(s, c)| full.sample.draw_without(s, c, left_out.id(), current)).collect();
+        let prediction = target.weighted_bands(&draws, &paths, &reweighted.weights, loo.draws)?;
+        row.coverage = prediction.coverage.clone();
+        return Ok(HeldOut { prediction, row });
+    }
+
+    // 2. importance sampling from the held-out posterior's Laplace
+    //    approximation, around its MAP (found from the weighted draws' mean)
+    let kept = full.campaign.filtered(|r| r.id() != left_out.id());
+    let posterior = settings.posterior(&kept, integrator);
+    let start = weighted_mean_theta(full, &posterior, &positions, &reweighted.weights);
+    let map = map::best_map(&posterior, &[start])
+        .ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the MAP search failed", left_out.id())))?;
+    let laplace = Laplace::new(&posterior, &map);
+    let mut rng = crate::rng::stream(settings.sampler.seed, &[0x1005, j as u64]);
+    let d = posterior.dim();
+    let proposals: Vec<Vec<f64>> = (0..loo.weighted_draws)
+        .map(|_| {
+            let w = (LAPLACE_DF / rng.sample::<f64, _>(ChiSquared::new(LAPLACE_DF).expect("positive df"))).sqrt();
+            let z: Vec<f64> = (0..d).map(|_| w * rng.sample::<f64, _>(StandardNormal)).collect();
+            laplace.point(&z, LAPLACE_SPREAD)
+        })
+        .collect();
+    let log_p = log_densities(&posterior, &proposals);
+    let log_w: Vec<f64> = proposals.iter().zip(&log_p).map(|(x, lp)| lp - laplace.log_t_density(x, LAPLACE_SPREAD, LAPLACE_DF)).collect();
+    let from_laplace = psis::smooth(&log_w);
+    row.pareto_k_laplace = from_laplace.k_hat;
+    if from_laplace.k_hat <= psis::K_THRESHOLD {
+        let draws: Vec<Draw> = proposals.iter().map(|x| unseen_draw(&posterior, x, current)).collect();
+        let params: Vec<Params> = draws.iter().map(|d| d.params).collect();
+        let paths = model_paths(&target.data, &params, &integrator, &|| {});
+        let prediction = target.weighted_bands(&draws, &paths, &from_laplace.weights, loo.draws)?;
+        row.coverage = prediction.coverage.clone();
+        row.by = HeldOutBy::LaplaceImportance;
+        return Ok(HeldOut { prediction, row });
+    }
+
+    // 3. the held-out posterior sampled afresh, from walkers around its MAP
+    let s = &settings.sampler;
+    let init = map::initial_walkers(&posterior, &map, s.walkers * s.ensembles, s.seed ^ (0x100 + j as u64));
+    let mut observers = observe(left_out.id());
+    let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
+    // a stream of its own for each held-out run
+    let mut sampler = Sampler::new(&posterior, s.sampler(s.walkers, s.seed ^ (0x100 + j as u64)), &init)?;
+    let control = RunControl { max_steps: loo.steps, until_converged: true, check_every: s.check_every, min_ess: s.min_ess };
+    let layout = &posterior.layout;
+    let diagnose = |chains: &Chains| {
+        let burn_in = Diagnostics::burn_in_rule(chains);
+        PosteriorSample::from_coordinates(layout, posterior.model, chains).diagnostics(burn_in)
+    };
+    sampler.run_until(&control, &mut refs, &diagnose)?;
+    let burn_in = Diagnostics::burn_in_rule(&sampler.chains);
+    let held = PosteriorSample::from_coordinates(layout, posterior.model, &sampler.chains);
+    let diagnostics = held.diagnostics(burn_in);
+    let thin = diagnostics.tau_max.ceil().max(1.0) as usize;
+    let draws = held.draws(&held.positions(burn_in, thin, loo.draws), left_out.id(), current);
+    let prediction = predict_run(left_out, &target.data, j, &draws, &target.predict, false, &|| {})?;
+    row.coverage = prediction.coverage.clone();
+    row.by = HeldOutBy::Sampling;
+    row.max_rhat = diagnostics.max_rhat();
+    Ok(HeldOut { prediction, row })
+}
+
+/// The weighted mean of the full posterior's draws at `positions`, in the
+/// held-out posterior's θ coordinates: a start for its MAP search.
+fn weighted_mean_theta(full: &Full, posterior: &Posterior, positions: &[(usize, usize)], weights: &[f64]) -> Vec<f64> {
+    let layout = &posterior.layout;
+    let mut mean = vec![0.0; layout.theta.len()];
+    for (&(step, chain), w) in positions.iter().zip(weights) {
+        let point = full.sample.chains.point(step, chain);
+        let si: Vec<f64> = layout.names.iter().map(|n| full.sample.layout.index(n).map_or(1.0, |k| point[k])).collect();
+        for (m, v) in mean.iter_mut().zip(layout.from_si(&si)) {
+            *m += w * v;
+        }
+    }
+    mean
+}
+
+/// Log-densities of `points`, in parallel batches.
+fn log_densities(posterior: &Posterior, points: &[Vec<f64>]) -> Vec<f64> {
+    let flat: Vec<f64> = points.iter().flatten().copied().collect();
+    let d = posterior.dim();
+    let mut out = vec![0.0; points.len()];
+    flat.par_chunks(8 * d).zip(out.par_chunks_mut(8)).for_each(|(x, o)| posterior.log_density_batch(x, o));
+    out
+}
+
+/// The draw at coordinates `x` of a posterior that did not see the run:
+/// its B-P parameters at `current_a` and the pooled noise of its runs.
+fn unseen_draw(posterior: &Posterior, x: &[f64], current_a: f64) -> Draw {
+    let l = &posterior.layout;
+    let si = l.to_si(x);
+    let sigmas = &si[l.sigma.clone()];
+    let rhos = &si[l.rho.clone()];
+    let sigma = (sigmas.iter().map(|s| s * s).sum::<f64>() / sigmas.len().max(1) as f64).sqrt();
+    let rho = if rhos.is_empty() { 0.0 } else { rhos.iter().sum::<f64>() / rhos.len() as f64 };
+    Draw { params: posterior.params_at_current(x, current_a), sigma, rho }
+}
+
+fn residuals(obs: &[f64], model: &[f64]) -> Vec<f64> {
+    obs.iter().zip(model).skip(1).map(|(o, m)| o - m).collect()
+}
+
+/// ln p(y | θ) of one run with its noise parameters profiled out (set to
+/// their maximum-likelihood values given the residuals `r`): for Gaussian
+/// noise under the log-uniform prior on σ this is the σ-marginal up to a
+/// constant, −(n/2) ln Σr²; for AR(1) and Student-t noise a Laplace-type
+/// approximation of it.
+pub fn profile_log_likelihood(noise: NoiseModel, r: &[f64], student_nu: f64) -> f64 {
+    let n = r.len() as f64;
+    let sum_sq: f64 = r.iter().map(|v| v * v).sum();
+    match noise {
+        NoiseModel::Gaussian => -0.5 * n * (sum_sq / n).ln(),
+        NoiseModel::Ar1 => {
+            let cross: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
+            let lag_sq: f64 = r[..r.len().saturating_sub(1)].iter().map(|v| v * v).sum();
+            let rho = (cross / lag_sq).clamp(-0.99, 0.99);
+            let innov = (sum_sq - r[0] * r[0]) - 2.0 * rho * cross + rho * rho * lag_sq + (1.0 - rho * rho) * r[0] * r[0];
+            -0.5 * n * (innov / n).ln() + 0.5 * (1.0 - rho * rho).ln()
+        }
+        NoiseModel::StudentT => {
+            // the scale by golden-section search on ln s around the RMS
+            let ll = |log_s: f64| {
+                let s2 = (2.0 * log_s).exp();
+                -n * log_s - 0.5 * (student_nu + 1.0) * r.iter().map(|v| (v * v / (student_nu * s2)).ln_1p()).sum::<f64>()
+            };
+            let centre = 0.5 * (sum_sq / n).ln();
+            let (mut a, mut b) = (centre - 3.0, centre + 1.0);
+            let g = 0.5 * (5f64.sqrt() - 1.0);
+            for _ in 0..60 {
+                let (c, d) = (b - g * (b - a), a + g * (b - a));
+                if ll(c) > ll(d) {
+                    b = d;
+                } else {
+                    a = c;
+                }
+            }
+            ll(0.5 * (a + b))
+        }
+    }
+}
+
+/// `count` indices drawn in proportion to `weights` (normalised) by
+/// systematic resampling with the fixed offset ½: deterministic, and as
+/// even as resampling gets.
+pub fn systematic_resample(weights: &[f64], count: usize) -> Vec<usize> {
+    let mut out = Vec::with_capacity(count);
+    let mut cumulative = 0.0;
+    let mut i = 0;
+    for k in 0..count {
+        let u = (k as f64 + 0.5) / count as f64;
+        while i + 1 < weights.len() && cumulative + weights[i] < u {
+            cumulative += weights[i];
+            i += 1;
+        }
+        out.push(i);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn systematic_resampling_follows_the_weights() {
+        let picks = systematic_resample(&[0.5, 0.0, 0.25, 0.25], 8);
+        assert_eq!(picks, vec![0, 0, 0, 0, 2, 2, 3, 3]);
+    }
+
+    /// The Gaussian profile is −(n/2) ln(Σr²/n), and the AR(1) one reduces
+    /// to it for residuals without correlation structure beyond a tiny ρ.
+    #[test]
+    fn profile_likelihoods_agree_where_they_should() {
+        let r: Vec<f64> = (0..200).map(|k| ((k * 7919) % 13) as f64 - 6.0).collect();
+        let g = profile_log_likelihood(NoiseModel::Gaussian, &r, 5.0);
+        let n = r.len() as f64;
+        let direct = -0.5 * n * (r.iter().map(|v| v * v).sum::<f64>() / n).ln();
+        assert!((g - direct).abs() < 1e-9);
+        let t = profile_log_likelihood(NoiseModel::StudentT, &r, 1e6);
+        // ν → ∞: Student-t becomes Gaussian: ll = −n ln s − n/2 at its optimum
+        assert!((t - (g - 0.5 * n)).abs() < 1e-3 * n, "{t} vs {}", g - 0.5 * n);
+    }
+}
