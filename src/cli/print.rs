@@ -94,13 +94,23 @@ fn calibration_summary(cal: &Calibration) {
         cal.start.settings.integrator.substeps
     );
     println!(
-        "{:<22} {:>11} {:>10} {:>11} {:>11} {:>11} {:>8} {:>8} {:>7} {:>6}",
-        "parameter", "mean", "sd", "q05", "q50", "q95", "ess_bulk", "ess_tail", "r_hat", "tau"
+        "{:<22} {:>11} {:>10} {:>11} {:>11} {:>11} {:>8} {:>8} {:>7} {:>7} {:>6}",
+        "parameter", "mean", "sd", "q05", "q50", "q95", "ess_bulk", "ess_tail", "ess/s", "r_hat", "tau"
     );
     for (name, p) in cal.sample.layout.names.iter().zip(&dg.coordinates) {
         println!(
-            "{:<22} {:>11.4e} {:>10.3e} {:>11.4e} {:>11.4e} {:>11.4e} {:>8.0} {:>8.0} {:>7.4} {:>6.1}",
-            name, p.mean, p.sd, p.q05, p.q50, p.q95, p.ess_bulk, p.ess_tail, p.r_hat, p.tau_int
+            "{:<22} {:>11.4e} {:>10.3e} {:>11.4e} {:>11.4e} {:>11.4e} {:>8.0} {:>8.0} {:>7.0} {:>7.4} {:>6.1}",
+            name,
+            p.mean,
+            p.sd,
+            p.q05,
+            p.q50,
+            p.q95,
+            p.ess_bulk,
+            p.ess_tail,
+            p.ess_bulk / cal.seconds(),
+            p.r_hat,
+            p.tau_int
         );
     }
     if dg.warnings.is_empty() {

@@ -22,12 +22,12 @@
 //! ([`super::lanes`]): a likelihood integrates several walkers together,
 //! and a single integration uses one lane. Lanes never interact, so a
 //! parameter set gives the same bits whichever lane it runs in and whatever
-//! runs beside it.
-
-use wide::{f64x4, CmpGt};
+//! runs beside it. The loop is compiled for any CPU and, where the CPU has
+//! it, for AVX2, with identical results ([`super::simd`]).
 
 use super::lanes::{LaneLaw, LANES};
 use super::params::Params;
+use super::simd::{F64xN, Portable};
 
 /// Largest change of τ in one sub-step, as a share of (R + D)/√3.
 const MAX_STRESS_STEP: f64 = 0.25;
@@ -113,26 +113,36 @@ pub struct LaneStates {
 /// hardening at it, carried from step to step so that each accepted
 /// sub-step evaluates the law once.
 #[derive(Clone, Copy)]
-struct Track {
-    tau: f64x4,
-    w: f64x4,
+struct Track<S> {
+    tau: S,
+    w: S,
     /// γ̇ᴵ and ∂γ̇ᴵ/∂τ at (τ, Wᴵ)
-    rate: f64x4,
-    slope: f64x4,
+    rate: S,
+    slope: S,
     /// R + D at Wᴵ
-    z: f64x4,
+    z: S,
 }
 
-impl Track {
-    fn new(law: &LaneLaw, tau: f64x4, w: f64x4) -> Self {
+impl<S: F64xN> Track<S> {
+    #[inline(always)]
+    fn new(law: &LaneLaw<S>, tau: S, w: S) -> Self {
         let z = law.hardening_sum(w);
         let (rate, slope) = law.flow(tau, z);
         Track { tau, w, rate, slope, z }
     }
 }
 
-fn mask_to_bools(m: f64x4) -> [bool; LANES] {
-    m.to_array().map(|v| v.to_bits() != 0)
+/// Whether this CPU runs the AVX2 build of the loop (checked once).
+pub fn uses_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        static DETECTED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *DETECTED.get_or_init(|| std::env::var_os("MRBP_NO_AVX2").is_none() && is_x86_feature_detected!("avx2"))
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 impl Integrator {
@@ -165,9 +175,45 @@ impl Integrator {
         if t.is_empty() {
             return outcome;
         }
-        let law = LaneLaw::new(&usable);
-        let tau0 = f64x4::splat(initial_tau);
-        let mut coarse = Track::new(&law, tau0, f64x4::ZERO);
+        #[cfg(target_arch = "x86_64")]
+        if uses_avx2() {
+            // SAFETY: the CPU has AVX2 (checked just above)
+            unsafe { self.integrate_avx2(&usable, t, gamma, initial_tau, &mut outcome, &mut visit) };
+            return outcome;
+        }
+        self.integrate::<Portable>(&usable, t, gamma, initial_tau, &mut outcome, &mut visit);
+        outcome
+    }
+
+    /// [`Integrator::integrate`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn integrate_avx2(
+        &self,
+        params: &[Params; LANES],
+        t: &[f64],
+        gamma: &[f64],
+        initial_tau: f64,
+        outcome: &mut [Result<(), IntegrationError>; LANES],
+        visit: &mut impl FnMut(usize, &LaneStates),
+    ) {
+        self.integrate::<super::simd::avx2::Avx2>(params, t, gamma, initial_tau, outcome, visit)
+    }
+
+    /// The loop over the samples of a record, in the lanes of `S`.
+    #[inline(always)]
+    fn integrate<S: F64xN>(
+        &self,
+        params: &[Params; LANES],
+        t: &[f64],
+        gamma: &[f64],
+        initial_tau: f64,
+        outcome: &mut [Result<(), IntegrationError>; LANES],
+        visit: &mut impl FnMut(usize, &LaneStates),
+    ) {
+        let law = LaneLaw::<S>::new(params);
+        let tau0 = S::splat(initial_tau);
+        let mut coarse = Track::new(&law, tau0, S::splat(0.0));
         let mut finer = coarse;
         let fine = Integrator { substeps: 2 * self.substeps, ..*self };
         let mut states = LaneStates { tau: [initial_tau; LANES], w: [0.0; LANES] };
@@ -176,14 +222,15 @@ impl Integrator {
             let dt = t[k + 1] - t[k];
             if !(dt > 0.0) {
                 let e = IntegrationError::InvalidHistory(format!("time does not increase at sample {}", k + 1));
-                return std::array::from_fn(|_| Err(e.clone()));
+                *outcome = std::array::from_fn(|_| Err(e.clone()));
+                return;
             }
             let strain_rate = (gamma[k + 1] - gamma[k]) / dt;
-            self.advance(&law, &mut coarse, strain_rate, dt, t[k], &mut outcome);
+            self.advance(&law, &mut coarse, strain_rate, dt, t[k], outcome);
             let (tau, w) = if self.extrapolate {
                 // independent of the coarse track: the CPU overlaps the two
-                fine.advance(&law, &mut finer, strain_rate, dt, t[k], &mut outcome);
-                let two = f64x4::splat(2.0);
+                fine.advance(&law, &mut finer, strain_rate, dt, t[k], outcome);
+                let two = S::splat(2.0);
                 (two * finer.tau - coarse.tau, two * finer.w - coarse.w)
             } else {
                 (coarse.tau, coarse.w)
@@ -192,7 +239,6 @@ impl Integrator {
             states.w = w.to_array();
             visit(k + 1, &states);
         }
-        outcome
     }
 
     /// Integrates one parameter set from `initial` at `t[0]` and calls
@@ -249,36 +295,38 @@ impl Integrator {
     /// update share the lane masks and the track's registers, and this loop
     /// is where a likelihood spends its time.
     #[inline(always)]
-    fn advance(
+    fn advance<S: F64xN>(
         &self,
-        law: &LaneLaw,
-        tr: &mut Track,
+        law: &LaneLaw<S>,
+        tr: &mut Track<S>,
         strain_rate: f64,
         dt: f64,
         t0: f64,
         outcome: &mut [Result<(), IntegrationError>; LANES],
     ) {
         let explicit = self.scheme == Scheme::Explicit;
-        let zero = f64x4::ZERO;
+        let zero = S::splat(0.0);
+        let one = S::splat(1.0);
         let g = law.g;
-        let gd = f64x4::splat(strain_rate);
-        let h_max = f64x4::splat(dt / self.substeps as f64);
-        let stability = f64x4::splat(self.stability);
-        let done_below = f64x4::splat(1e-12 * dt);
-        let shortest = f64x4::splat(1e-9 * dt);
+        let gd = S::splat(strain_rate);
+        let h_max = S::splat(dt / self.substeps as f64);
+        let stability = S::splat(self.stability);
+        let per_stability = S::splat(1.0 / self.stability);
+        let done_below = S::splat(1e-12 * dt);
+        let shortest = S::splat(1e-9 * dt);
         // lanes that already failed do not step
-        let failed = f64x4::from(outcome.each_ref().map(|o| if o.is_err() { 1.0 } else { 0.0 })).cmp_gt(zero);
-        let mut left = failed.blend(zero, f64x4::splat(dt));
+        let failed = S::from_array(outcome.each_ref().map(|o| if o.is_err() { 1.0 } else { 0.0 })).gt(zero);
+        let mut left = S::select(failed, zero, S::splat(dt));
         let mut h_cap = h_max;
         let mut attempts = 0u32;
         loop {
-            let running = left.cmp_gt(done_below);
-            if running.none() {
+            let running = left.gt(done_below);
+            if !running.any() {
                 break;
             }
             attempts += 1;
             if attempts > self.max_substeps {
-                for (lane, r) in mask_to_bools(running).into_iter().enumerate() {
+                for (lane, r) in running.mask_to_bools().into_iter().enumerate() {
                     if r && outcome[lane].is_ok() {
                         outcome[lane] = Err(IntegrationError::TooStiff { time: t0, substeps: self.max_substeps });
                     }
@@ -290,44 +338,40 @@ impl Integrator {
             let mut h = left.min(h_cap);
             if explicit {
                 // equal sub-steps over what is left, each within the stability limit
-                let unstable = (lambda * h).cmp_gt(stability);
-                h = unstable.blend(left / (left * lambda / stability).ceil(), h);
+                let unstable = (lambda * h).gt(stability);
+                h = S::select(unstable, left / (left * lambda * per_stability).ceil(), h);
             }
-            let max_dtau = f64x4::splat(MAX_STRESS_STEP * INV_SQRT_3) * tr.z;
-            let big = (stress_rate.abs() * h).cmp_gt(max_dtau);
-            h = big.blend(max_dtau / stress_rate.abs(), h);
+            let max_dtau = S::splat(MAX_STRESS_STEP * INV_SQRT_3) * tr.z;
+            let big = (stress_rate.abs() * h).gt(max_dtau);
+            h = S::select(big, max_dtau / stress_rate.abs(), h);
             let dtau = stress_rate * h;
-            let dtau = if explicit { dtau } else { dtau / (f64x4::ONE + h * lambda) };
+            let dtau = if explicit { dtau } else { dtau / (one + h * lambda) };
             let tau = tr.tau + dtau;
             // τ γ̇ᴵ ≥ 0 because γ̇ᴵ has the sign of τ: Wᴵ never decreases
             let w = tr.w + h * tr.tau * tr.rate;
             let z = law.hardening_sum(w);
             let (rate, slope) = law.flow(tau, z);
             let end_lambda = g * slope;
-            let too_long = if explicit {
-                (end_lambda * h).cmp_gt(f64x4::splat(2.0))
-            } else {
-                ((end_lambda - lambda) * h).cmp_gt(f64x4::ONE)
-            };
-            let reject = running & too_long & h.cmp_gt(shortest);
-            let accept = running & !reject;
-            h_cap = reject.blend(h * f64x4::splat(0.5), accept.blend((h + h).min(h_max), h_cap));
-            tr.tau = accept.blend(tau, tr.tau);
-            tr.w = accept.blend(w, tr.w);
-            tr.rate = accept.blend(rate, tr.rate);
-            tr.slope = accept.blend(slope, tr.slope);
-            tr.z = accept.blend(z, tr.z);
-            left = accept.blend(left - h, left);
+            let too_long = if explicit { (end_lambda * h).gt(S::splat(2.0)) } else { ((end_lambda - lambda) * h).gt(one) };
+            let reject = running.and(too_long).and(h.gt(shortest));
+            let accept = reject.and_not(running);
+            h_cap = S::select(reject, h * S::splat(0.5), S::select(accept, (h + h).min(h_max), h_cap));
+            tr.tau = S::select(accept, tau, tr.tau);
+            tr.w = S::select(accept, w, tr.w);
+            tr.rate = S::select(accept, rate, tr.rate);
+            tr.slope = S::select(accept, slope, tr.slope);
+            tr.z = S::select(accept, z, tr.z);
+            left = S::select(accept, left - h, left);
         }
-        let finite = tr.tau.is_finite() & tr.w.is_finite();
+        let finite = tr.tau.finite().and(tr.w.finite());
         if !finite.all() {
-            for (lane, ok) in mask_to_bools(finite).into_iter().enumerate() {
+            for (lane, ok) in finite.mask_to_bools().into_iter().enumerate() {
                 if !ok && outcome[lane].is_ok() {
                     outcome[lane] = Err(IntegrationError::NonFinite { time: t0 + dt });
                 }
             }
             // keep the failed lanes finite so they cannot disturb the loop
-            *tr = Track::new(law, finite.blend(tr.tau, zero), finite.blend(tr.w, zero));
+            *tr = Track::new(law, S::select(finite, tr.tau, zero), S::select(finite, tr.w, zero));
         }
     }
 }
@@ -512,13 +556,49 @@ mod tests {
         let integ = Integrator { max_substeps: 50, ..Integrator::default() };
         let alone = integ.run(&p, &t, &g).unwrap().tau;
         let mut mixed = vec![[0.0; LANES]; t.len()];
-        let outcome = integ.run_lanes(&[stiff, bad, p, p], &t, &g, 0.0, |k, s| mixed[k] = s.tau);
+        let outcome = integ.run_lanes(&[stiff, bad, p, p, stiff, p, bad, p], &t, &g, 0.0, |k, s| mixed[k] = s.tau);
         assert!(matches!(outcome[0], Err(IntegrationError::TooStiff { .. })));
         assert!(matches!(outcome[1], Err(IntegrationError::InvalidParams(_))));
-        assert!(outcome[2].is_ok() && outcome[3].is_ok());
-        for (k, a) in alone.iter().enumerate() {
-            assert_eq!(a.to_bits(), mixed[k][2].to_bits());
-            assert_eq!(a.to_bits(), mixed[k][3].to_bits());
+        for lane in [2, 3, 5, 7] {
+            assert!(outcome[lane].is_ok());
+            for (k, a) in alone.iter().enumerate() {
+                assert_eq!(a.to_bits(), mixed[k][lane].to_bits());
+            }
+        }
+    }
+
+    /// The AVX2 build of the loop gives the portable build's bits along a
+    /// crank record, Richardson extrapolation and a stiff lane included.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_loop_equals_portable_loop() {
+        if !is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 on this CPU: nothing to compare");
+            return;
+        }
+        let (t, g) = crank(3000);
+        let mut stiff = Params::reference_1a();
+        stiff.g = 2.0e6;
+        stiff.n = 3.0;
+        let p = Params::reference_1a();
+        let params = [p, stiff, Params { n: 0.6, ..p }, Params { m2: 1e-3, ..p }, Params { g: 5e4, ..p }, Params { r0: 3e4, ..p }, Params { d1: 1e5, ..p }, Params { m1: 1e-5, ..p }];
+        for integ in [Integrator { extrapolate: true, substeps: 2, ..Integrator::default() }, Integrator { scheme: Scheme::LinearlyImplicit, ..Integrator::default() }] {
+            let run = |avx: bool| {
+                let mut out = Vec::new();
+                let mut outcome = std::array::from_fn(|_| Ok(()));
+                let mut visit = |_: usize, s: &LaneStates| out.extend(s.tau.iter().chain(&s.w).map(|v| v.to_bits()));
+                if avx {
+                    // SAFETY: AVX2 detected above
+                    unsafe { integ.integrate_avx2(&params, &t, &g, 0.0, &mut outcome, &mut visit) };
+                } else {
+                    integ.integrate::<Portable>(&params, &t, &g, 0.0, &mut outcome, &mut visit);
+                }
+                (out, outcome)
+            };
+            let (a, oa) = run(true);
+            let (p, op) = run(false);
+            assert_eq!(oa, op);
+            assert!(a == p, "{integ:?}: the builds differ");
         }
     }
 
@@ -532,16 +612,16 @@ mod tests {
         let tr = integrate(&p, &t, &g).unwrap();
         assert!((tr.tau[1] - p.g * 1e-3).abs() < 1e-9 * p.g * 1e-3);
         // the lane flow rule agrees with the scalar one of law.rs
-        let law = LaneLaw::new(&[p; LANES]);
+        let law = LaneLaw::<Portable>::new(&[p; LANES]);
         let z = crate::model::law::Law::new(&p).hardening_sum(1.0e4);
-        let (rate, slope) = law.flow(f64x4::from([3.0e4, -3.2e4, 0.0, 2.0e3]), f64x4::splat(z));
+        let (rate, slope) = law.flow(Portable::from_array([3.0e4, -3.2e4, 0.0, 2.0e3, 3.0e4, -3.2e4, 0.0, 2.0e3]), Portable::splat(z));
         let scalar = crate::model::law::Law::new(&p);
         for (i, tau) in [3.0e4, -3.2e4, 0.0, 2.0e3].iter().enumerate() {
             let f = scalar.flow(*tau, z);
             assert!((rate.to_array()[i] - f.rate).abs() <= 1e-11 * f.rate.abs() + 1e-300, "{tau}");
             assert!((slope.to_array()[i] - f.slope).abs() <= 1e-11 * f.slope.abs() + 1e-300, "{tau}");
         }
-        assert!((law.hardening_sum(f64x4::splat(1.0e4)).to_array()[0] - z).abs() < 1e-9 * z);
+        assert!((law.hardening_sum(Portable::splat(1.0e4)).to_array()[0] - z).abs() < 1e-9 * z);
     }
 
     #[test]

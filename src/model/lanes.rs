@@ -1,12 +1,11 @@
 //! The law of [`super::law`] for [`LANES`] parameter sets at once, one per
-//! SIMD lane (`wide::f64x4`), for the integrator's hot loop.
-
-use wide::{f64x4, CmpGt};
+//! SIMD lane, for the integrator's hot loop; generic over the build of the
+//! lanes ([`super::simd`]).
 
 use super::params::{Params, D0};
+use super::simd::{exp_of_finite, ln_of_positive, F64xN};
 
-/// Parameter sets integrated together.
-pub const LANES: usize = 4;
+pub use super::simd::LANES;
 
 const INV_SQRT_3: f64 = 0.577_350_269_189_625_8;
 
@@ -15,22 +14,23 @@ const INV_SQRT_3: f64 = 0.577_350_269_189_625_8;
 const MAX_LOG_Q: f64 = 700.0;
 
 /// Per-lane parameters with the constants of eq. 3 precomputed.
-pub struct LaneLaw {
-    pub g: f64x4,
-    r0: f64x4,
-    r1: f64x4,
-    d1: f64x4,
-    m1: f64x4,
-    m2: f64x4,
+pub struct LaneLaw<S> {
+    pub g: S,
+    r0: S,
+    r1: S,
+    d1: S,
+    m1: S,
+    m2: S,
     /// ½ (n+1)/n
-    half_n1_over_n: f64x4,
-    two_n: f64x4,
-    n_plus_1: f64x4,
+    half_n1_over_n: S,
+    two_n: S,
+    n_plus_1: S,
 }
 
-impl LaneLaw {
+impl<S: F64xN> LaneLaw<S> {
+    #[inline(always)]
     pub fn new(p: &[Params; LANES]) -> Self {
-        let lanes = |f: fn(&Params) -> f64| f64x4::from(p.each_ref().map(f));
+        let lanes = |f: fn(&Params) -> f64| S::from_array(p.each_ref().map(f));
         LaneLaw {
             g: lanes(|p| p.g),
             r0: lanes(|p| p.r0),
@@ -46,23 +46,26 @@ impl LaneLaw {
 
     /// R + D after inelastic work `w` (eq. 4).
     #[inline(always)]
-    pub fn hardening_sum(&self, w: f64x4) -> f64x4 {
-        let e1 = (-self.m1 * w).exp();
-        let e2 = (-self.m2 * w).exp();
-        self.r1 + (self.r0 - self.r1) * e1 + self.d1 * (f64x4::ONE - e2)
+    pub fn hardening_sum(&self, w: S) -> S {
+        // the state carries a NaN on by itself: the checked exp is not needed
+        let e1 = exp_of_finite(-self.m1 * w);
+        let e2 = exp_of_finite(-self.m2 * w);
+        self.r1 + (self.r0 - self.r1) * e1 + self.d1 * (S::splat(1.0) - e2)
     }
 
     /// γ̇ᴵ (with the sign of τ) and ∂γ̇ᴵ/∂τ at stress `tau` under hardening
     /// `z` (eq. 3); both 0 at τ = 0 and far below yield.
     #[inline(always)]
-    pub fn flow(&self, tau: f64x4, z: f64x4) -> (f64x4, f64x4) {
-        let abs_tau = tau.abs();
-        // at τ = 0 the logarithm is +∞ and the cap makes q finite and huge
-        let log_q = (self.two_n * (z * f64x4::splat(INV_SQRT_3) / abs_tau).ln()).min(f64x4::splat(MAX_LOG_Q));
-        let q = log_q.exp();
-        let magnitude = f64x4::splat(2.0 * D0) * (-self.half_n1_over_n * q).exp();
-        let flowing = magnitude.cmp_gt(f64x4::ZERO);
-        let slope = flowing.blend(magnitude * self.n_plus_1 * q / abs_tau, f64x4::ZERO);
+    pub fn flow(&self, tau: S, z: S) -> (S, S) {
+        // one division for both uses of 1/|τ|
+        let inv_abs_tau = S::splat(1.0) / tau.abs();
+        // at τ = 0 the ratio is +∞, the logarithm too, and the cap makes q
+        // finite and huge; z > 0 (R0, R1 > 0) keeps the ratio positive
+        let log_q = (self.two_n * ln_of_positive(z * S::splat(INV_SQRT_3) * inv_abs_tau)).min(S::splat(MAX_LOG_Q));
+        let q = exp_of_finite(log_q);
+        let magnitude = S::splat(2.0 * D0) * exp_of_finite(-self.half_n1_over_n * q);
+        let flowing = magnitude.gt(S::splat(0.0));
+        let slope = S::select(flowing, magnitude * self.n_plus_1 * q * inv_abs_tau, S::splat(0.0));
         (magnitude.copysign(tau), slope)
     }
 }

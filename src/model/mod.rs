@@ -9,8 +9,9 @@ pub mod integrate;
 pub mod lanes;
 pub mod law;
 pub mod params;
+pub mod simd;
 
 pub use current_law::CurrentLaw;
-pub use integrate::{integrate, IntegrationError, Integrator, LaneStates, Scheme, State, Trajectory};
+pub use integrate::{integrate, uses_avx2, IntegrationError, Integrator, LaneStates, Scheme, State, Trajectory};
 pub use lanes::LANES;
 pub use params::{Params, D0, PARAM_NAMES, PARAM_UNITS, PHYSICAL_RANGE};

@@ -195,13 +195,15 @@ fn posterior_section(page: &mut Page, cal: &StoredCalibration) {
                 num(s.q95, 4),
                 format!("{:.0}", s.ess_bulk),
                 format!("{:.0}", s.ess_tail),
+                cal.record.ess_bulk_per_second.get(&s.parameter).map_or("–".into(), |v| format!("{v:.0}")),
                 format!("{:.4}", s.r_hat),
                 format!("{:.1}", s.tau_int),
                 Mark::of(ok).html().into(),
             ]
         })
         .collect();
-    page.table(&["parameter", "mean", "sd", "q05", "q50", "q95", "ESS bulk", "ESS tail", "R̂", "τ (steps)", ""], &rows);
+    page.para("ESS/s: bulk effective sample size per second of the whole calibration (identification, MAP, step rule and sampling).");
+    page.table(&["parameter", "mean", "sd", "q05", "q50", "q95", "ESS bulk", "ESS tail", "ESS/s", "R̂", "τ (steps)", ""], &rows);
 }
 
 fn coverage_section(page: &mut Page, r: &CalibrationReport) {

@@ -52,6 +52,10 @@ pub struct CalibrationRecord {
     pub burn_in: usize,
     pub seconds_start: f64,
     pub seconds_sampling: f64,
+    /// Bulk ESS per second of the whole calibration's wall time, per
+    /// parameter: what the calibration's cost bought.
+    #[serde(default)]
+    pub ess_bulk_per_second: BTreeMap<String, f64>,
     pub warnings: Vec<String>,
 }
 
@@ -92,6 +96,7 @@ impl CalibrationRecord {
             burn_in: cal.diagnostics.burn_in,
             seconds_start: cal.start.seconds,
             seconds_sampling: cal.sampling_seconds,
+            ess_bulk_per_second: names.iter().zip(&cal.diagnostics.coordinates).map(|(n, d)| (n.clone(), d.ess_bulk / cal.seconds())).collect(),
             warnings: cal.diagnostics.warnings.clone(),
         }
     }
