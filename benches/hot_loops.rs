@@ -191,6 +191,54 @@ fn likelihood() {
     println!();
 }
 
+/// One current of three campaigns calibrated with the default settings, to
+/// R̂ < 1.01 and ESS ≥ 400: the bundled virtual campaign (1 A), a fresh
+/// `mrbp synth` campaign at 2 kHz with 20 N force noise (1 A), and the
+/// bundled measured campaign (1 A).
+fn calibration() {
+    use mrbp::calibrate::{calibrate, CalibrationSettings};
+    use mrbp::data::Campaign;
+    use mrbp::synth::{write_campaign, SynthSettings};
+    println!("## One current calibrated to R̂ < 1.01 and ESS ≥ 400 (default settings, all threads)\n");
+    println!("| campaign | runs | samples | wall (s) | of which start (s) | steps × walkers | acceptance | min bulk ESS | min tail ESS | max R̂ | ESS/s (min over θ) | M walker-steps/s |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let fresh = tempfile::tempdir().unwrap();
+    let synth = SynthSettings { currents_a: vec![1.0], rate_hz: 2000.0, noise_force_n: 20.0, seed: 99, ..SynthSettings::default() };
+    write_campaign(&synth, fresh.path()).unwrap();
+    let campaigns = [
+        ("bundled virtual", repo.join("data/campaign.toml")),
+        ("fresh synth, 2 kHz", fresh.path().join("campaign.toml")),
+        ("bundled measured (utfsm-mts)", repo.join("data/utfsm-mts/campaign.toml")),
+    ];
+    for (name, manifest) in campaigns {
+        let campaign = Campaign::load(&manifest).unwrap().at_current(1.0);
+        let cal = calibrate(&campaign, &CalibrationSettings::default()).unwrap();
+        let d = &cal.diagnostics;
+        let nt = cal.start.posterior.layout.theta.len();
+        let min_bulk = d.coordinates[..nt].iter().map(|c| c.ess_bulk).fold(f64::INFINITY, f64::min);
+        let samples: usize = campaign.runs.iter().map(|r| r.shear.len()).sum();
+        let chains = cal.chains.chains();
+        let evals = (d.steps * chains) as f64;
+        let integ = &cal.start.posterior.integrator;
+        let euler_per_interval = integ.substeps as f64 * if integ.extrapolate { 3.0 } else { 1.0 };
+        let acceptance = d.acceptance.iter().sum::<f64>() / d.acceptance.len() as f64;
+        println!(
+            "| {name} | {} | {samples} | {:.1} | {:.1} | {} × {chains} | {acceptance:.2} | {:.0} | {:.0} | {:.4} | {:.0} | {:.0} |",
+            campaign.runs.len(),
+            cal.seconds(),
+            cal.start.seconds,
+            d.steps,
+            min_bulk,
+            d.min_ess(),
+            d.max_rhat(),
+            min_bulk / cal.seconds(),
+            evals * samples as f64 * euler_per_interval / cal.sampling_seconds * 1e-6
+        );
+    }
+    println!();
+}
+
 fn main() {
     let only = std::env::args().nth(1).filter(|a| !a.starts_with('-'));
     let want = |name: &str| only.as_deref().is_none_or(|o| name.contains(o));
@@ -205,5 +253,8 @@ fn main() {
     }
     if want("sampler") {
         sampler_overhead();
+    }
+    if want("calibration") {
+        calibration();
     }
 }
