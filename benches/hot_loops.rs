@@ -84,16 +84,19 @@ fn sampler_overhead() {
     println!("| moves | walker-steps | ns per walker-step |");
     println!("|---|---|---|");
     println!("| stretch | {} | {:.0} |", steps * 128, per * 1e9);
-    let settings = SamplerSettings {
-        moves: vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)],
-        ..SamplerSettings::default()
-    };
-    let secs = best_of(3, || {
-        let mut s = Sampler::new(&Cheap, settings.clone(), &init).unwrap();
-        s.run(&RunControl::fixed(steps), &mut []).unwrap();
-        black_box(s.chains.positions.len());
-    });
-    println!("| DE 0.8 + snooker 0.2 | {} | {:.0} |", steps * 128, secs / (steps * 128) as f64 * 1e9);
+    let mixtures = [
+        ("DE 0.8 + snooker 0.2", vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)]),
+        ("independence 0.9 + DE 0.1", vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)]),
+    ];
+    for (name, moves) in mixtures {
+        let settings = SamplerSettings { moves, ..SamplerSettings::default() };
+        let secs = best_of(3, || {
+            let mut s = Sampler::new(&Cheap, settings.clone(), &init).unwrap();
+            s.run(&RunControl::fixed(steps), &mut []).unwrap();
+            black_box(s.chains.positions.len());
+        });
+        println!("| {name} | {} | {:.0} |", steps * 128, secs / (steps * 128) as f64 * 1e9);
+    }
     let secs = best_of(3, || {
         let mut s = Sampler::new(&Cheap, SamplerSettings::default(), &init).unwrap();
         s.run(&RunControl::fixed(steps), &mut []).unwrap();
@@ -112,18 +115,11 @@ fn convergence() {
     stiff.g *= 10.0;
     stiff.n = 3.0;
     for (name, p) in [("1 A reference", Params::reference_1a()), ("stiff: 10 G, n = 3", stiff)] {
-        let run = |scheme, substeps| {
-            Integrator {
-                scheme,
-                substeps,
-                max_substeps: 100_000,
-                ..Integrator::default()
-            }
-            .run(&p, &t, &g)
-            .unwrap()
-            .tau
+        let solve = |scheme, substeps, extrapolate| {
+            Integrator { scheme, substeps, extrapolate, max_substeps: 100_000, ..Integrator::default() }.run(&p, &t, &g).unwrap().tau
         };
-        let reference = run(Scheme::Explicit, 256);
+        let run = |scheme, substeps| solve(scheme, substeps, false);
+        let reference = solve(Scheme::Explicit, 256, true);
         let peak = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         println!("{name}: peak τ = {:.0} Pa\n", peak);
         println!("| sub-steps per sample | explicit: max error (Pa) | ratio | linearly implicit: max error (Pa) | ratio |");
@@ -140,6 +136,17 @@ fn convergence() {
             let (e, li) = (err(Scheme::Explicit), err(Scheme::LinearlyImplicit));
             println!("| {m} | {e:.2} | {:.2} | {li:.2} | {:.2} |", last.0 / e, last.1 / li);
             last = (e, li);
+        }
+        println!("\nRichardson-extrapolated (m and 2m sub-steps), max and RMS error (Pa):\n");
+        println!("| m | explicit: max | RMS | linearly implicit: max | RMS |");
+        println!("|---|---|---|---|---|");
+        for m in [1, 2, 4, 8] {
+            let err = |scheme| {
+                let d: Vec<f64> = solve(scheme, m, true).iter().zip(&reference).map(|(a, b)| a - b).collect();
+                (d.iter().fold(0.0f64, |x, v| x.max(v.abs())), (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt())
+            };
+            let (e, li) = (err(Scheme::Explicit), err(Scheme::LinearlyImplicit));
+            println!("| {m} | {:.2} | {:.3} | {:.2} | {:.3} |", e.0, e.1, li.0, li.1);
         }
         println!();
     }
@@ -164,12 +171,13 @@ fn likelihood() {
         let p = Params::reference_1a().to_array();
         let points: Vec<f64> = (0..96)
             .flat_map(|w| {
-                let mut x: Vec<f64> = p.iter().map(|v| v.ln()).collect();
-                x[0] += 1e-3 * (w as f64).sin();
-                x.extend([6.0; 3]);
-                x
+                let mut si = p.to_vec();
+                si[0] *= 1.0 + 1e-3 * (w as f64).sin();
+                si.extend([400.0; 3]);
+                post.layout.from_si(&si)
             })
             .collect();
+        assert!(post.log_density(&points[..d]).is_finite(), "the benchmark's points lie in the support");
         for (threads, batch) in [(1, 1), (1, 8), (2, 8)] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             let secs = best_of(3, || {

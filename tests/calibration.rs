@@ -151,3 +151,30 @@ fn bad_settings_file_is_a_clear_error() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.toml") && err.contains("prior of G"), "{err}");
 }
+
+/// The default sampler (independence proposals fitted to the complementary
+/// half, stopped by the R̂ + ESS rule) and a long run of the former default
+/// (differential evolution and snooker, 1500 steps) sample the same B-P
+/// posterior: every mean within 5 combined Monte Carlo standard errors, and
+/// every sd within 5 of its own standard errors (sd/√(2 ESS) each). A
+/// correct pair fails one of the 20 checks with probability ~1e-5.
+#[test]
+fn default_sampler_agrees_with_a_long_differential_evolution_run() {
+    use mrbp::sampler::Move;
+    let (_dir, campaign) = small_campaign(17);
+    let mut fast = quick_settings();
+    fast.integrator.substeps = 2;
+    let a = calibrate(&campaign, &fast).unwrap();
+    let mut slow = fast.clone();
+    slow.sampler.moves = vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)];
+    slow.sampler.walkers = 24;
+    slow.sampler.steps = 1500;
+    let b = calibrate(&campaign, &slow).unwrap();
+    for (i, name) in a.sample.layout.names.iter().enumerate() {
+        let (p, q) = (&a.diagnostics.coordinates[i], &b.diagnostics.coordinates[i]);
+        let z_mean = (p.mean - q.mean).abs() / (p.mcse_mean.powi(2) + q.mcse_mean.powi(2)).sqrt();
+        let se_sd = (p.sd.powi(2) / (2.0 * p.ess_bulk) + q.sd.powi(2) / (2.0 * q.ess_bulk)).sqrt();
+        let z_sd = (p.sd - q.sd).abs() / se_sd;
+        assert!(z_mean < 5.0 && z_sd < 5.0, "{name}: mean {:.5e} vs {:.5e} ({z_mean:.1} MCSE), sd {:.3e} vs {:.3e} ({z_sd:.1} se)", p.mean, q.mean, p.sd, q.sd);
+    }
+}

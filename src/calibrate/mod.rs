@@ -11,9 +11,10 @@ use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::{identify_current, CurrentIdentification};
 use crate::posterior::map::{self, MapEstimate, StepCheck};
+use crate::model::{Integrator, Scheme};
 use crate::posterior::{Posterior, PosteriorSample};
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
-pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings};
+pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
 
 /// Where sampling starts: the identification, the MAP, the step chosen and
 /// the posterior with it.
@@ -65,7 +66,10 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     let current_a = model.identification_current(&campaign.currents())?;
     let identification = identify_current(campaign, current_a, &settings.identify);
     let integ = settings.integrator.clone();
-    let base = integ.integrator(integ.substeps);
+    // the MAP search runs on the linearly implicit scheme unless told
+    // otherwise: its likelihood is smooth on any record
+    let search_scheme = if integ.scheme == SchemeChoice::Auto { Scheme::LinearlyImplicit } else { integ.scheme.scheme() };
+    let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
     let posterior = settings.posterior(campaign, base);
     // the identification may be far off (docs/identification.md): also start
     // from the prior medians and keep the better optimum
@@ -80,18 +84,37 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     let map = map::best_map(&posterior, &starts)
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
     log(&format!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64()));
-    let (substeps, map, step_study) = if integ.substeps == 0 {
-        map::choose_substeps(&posterior, &map, base, integ.max_rule_substeps)
-    } else {
-        (integ.substeps, map, vec![])
+    let schemes: Vec<Scheme> = match integ.scheme {
+        SchemeChoice::Auto => vec![Scheme::Explicit, Scheme::LinearlyImplicit],
+        chosen => vec![chosen.scheme()],
     };
-    settings.integrator.substeps = substeps;
     let names = posterior.layout.coordinate_names();
-    for s in &step_study {
-        let (i, v) = s.worst();
-        log(&format!("  step rule: {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, names[i]));
+    // each scheme's step, and the Euler steps a log-density costs with it at the MAP
+    let mut candidates = Vec::new();
+    for scheme in schemes {
+        let scheme_base = Integrator { scheme, ..base };
+        let (substeps, at, study) = if integ.substeps == 0 {
+            map::choose_substeps(&posterior.with_integrator(scheme_base), &map, scheme_base, integ.max_rule_substeps)
+        } else {
+            (integ.substeps, map.clone(), vec![])
+        };
+        for s in &study {
+            let (i, v) = s.worst();
+            log(&format!("  step rule ({scheme:?}): {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, names[i]));
+        }
+        let chosen = posterior.with_integrator(Integrator { substeps, ..scheme_base });
+        let work = map::euler_steps(&chosen, &at.x);
+        log(&format!("  {scheme:?} with {substeps} sub-step(s): {work} Euler steps per log-density"));
+        candidates.push((work, chosen, at, study));
     }
-    let posterior = posterior.with_integrator(integ.integrator(substeps));
+    // the cheaper scheme at the accuracy the step rule asks for: explicit on
+    // smooth records, linearly implicit where stiffness makes the explicit
+    // one cut its steps (and its likelihood rugged)
+    let (_, posterior, map, step_study) = candidates.into_iter().min_by_key(|c| c.0).expect("at least one scheme");
+    // the MAP with the chosen integrator, from the one found
+    let map = if posterior.integrator != base { map::refine(&posterior, &map.x).unwrap_or(map) } else { map };
+    settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
+    settings.integrator.substeps = posterior.integrator.substeps;
     if settings.sampler.walkers == 0 {
         settings.sampler.walkers = SamplingSettings::walkers_for(posterior.layout.dim());
     }

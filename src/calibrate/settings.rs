@@ -15,10 +15,39 @@ use crate::posterior::prior::default_priors;
 use crate::posterior::{Coordinates, LikelihoodSettings, ModelKind, ParameterModel, Posterior, Prior};
 use crate::sampler::{Move, RunControl, SamplerSettings};
 
+/// Which Euler scheme integrates the likelihood.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SchemeChoice {
+    /// Explicit, unless the likelihood is rugged with it; chosen at the start.
+    Auto,
+    Explicit,
+    LinearlyImplicit,
+}
+
+impl SchemeChoice {
+    /// The scheme to integrate with (explicit until `auto` is resolved).
+    pub fn scheme(self) -> Scheme {
+        match self {
+            SchemeChoice::LinearlyImplicit => Scheme::LinearlyImplicit,
+            SchemeChoice::Auto | SchemeChoice::Explicit => Scheme::Explicit,
+        }
+    }
+
+    pub fn of(scheme: Scheme) -> Self {
+        match scheme {
+            Scheme::Explicit => SchemeChoice::Explicit,
+            Scheme::LinearlyImplicit => SchemeChoice::LinearlyImplicit,
+        }
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct IntegratorSettings {
-    pub scheme: Scheme,
+    /// `auto`: explicit Euler unless its likelihood is rugged at the MAP
+    /// (see `posterior::map::ruggedness`), linearly implicit Euler then.
+    pub scheme: SchemeChoice,
     /// Richardson extrapolation of two Euler solutions (steps h and h/2):
     /// second order at three Euler steps per sub-step.
     pub extrapolate: bool,
@@ -34,7 +63,7 @@ pub struct IntegratorSettings {
 
 impl Default for IntegratorSettings {
     fn default() -> Self {
-        IntegratorSettings { scheme: Scheme::Explicit, extrapolate: true, substeps: 0, max_rule_substeps: 16, max_substeps: 1000 }
+        IntegratorSettings { scheme: SchemeChoice::Auto, extrapolate: true, substeps: 0, max_rule_substeps: 16, max_substeps: 1000 }
     }
 }
 
@@ -42,7 +71,7 @@ impl IntegratorSettings {
     /// The integrator with `substeps` sub-steps per sample (at least 1).
     pub fn integrator(&self, substeps: u32) -> Integrator {
         Integrator {
-            scheme: self.scheme,
+            scheme: self.scheme.scheme(),
             extrapolate: self.extrapolate,
             substeps: substeps.max(1),
             max_substeps: self.max_substeps,

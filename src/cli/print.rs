@@ -55,6 +55,14 @@ fn identification_table(results: &[CurrentIdentification]) {
             "run", "G", "tau02", "rate02", "R0", "R1", "D1", "m1", "m2", "n", "", "rms_pa"
         );
         for (i, r) in res.runs.iter().enumerate() {
+            if let Some(f) = &r.steady {
+                // steady cycles: G, the saturated R + D and n of the flow curve
+                println!(
+                    "{:<14} {:>9.3e} {:>9} {:>8} {:>9} {:>19} {:>9} {:>9} {:>9.3} {:>6} {:>9.1}",
+                    r.run, r.g, "", "", "", format!("R1+D1 {:.3e}", f.z), "", "", f.n, "steady", res.euler_rms[i]
+                );
+                continue;
+            }
             let (t, g) = r.yield_point.unwrap_or((f64::NAN, f64::NAN));
             println!(
                 "{:<14} {:>9.3e} {:>9.3e} {:>8.1} {:>9} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9} {:>6} {:>9.1}",

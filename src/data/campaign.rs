@@ -229,11 +229,27 @@ pub fn same_current(a: f64, b: f64) -> bool {
     (a - b).abs() < CURRENT_TOLERANCE_A
 }
 
-/// Label of a current level in folder and file names, e.g. `I1.0A`.
+/// Label of a current level in folder and file names: `I1.0A`, `I0.25A`
+/// (the shortest decimal that names it, with at least one decimal).
 pub fn current_tag(current_a: f64) -> String {
-    format!("I{current_a:.1}A")
+    let digits = format!("{current_a}");
+    if digits.contains('.') {
+        format!("I{digits}A")
+    } else {
+        format!("I{digits}.0A")
+    }
 }
 
 fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn current_tags_name_each_level() {
+        assert_eq!(super::current_tag(1.0), "I1.0A");
+        assert_eq!(super::current_tag(0.25), "I0.25A");
+        assert_eq!(super::current_tag(1.5), "I1.5A");
+    }
 }

@@ -11,10 +11,15 @@
 //!    the physical range with a warning where needed;
 //! 5. an Euler solution with the combined parameters against every record.
 //!
+//! Records that do not start with a full-stroke loading from rest (a
+//! servo-hydraulic test whose amplitude ramps up, say) take the route of
+//! [`steady`]: G and the flow curve from steady cycles.
+//!
 //! The result is a starting point for the sampler, not an answer.
 
 pub mod elastic;
 pub mod hardening;
+pub mod steady;
 pub mod yield_stress;
 
 use serde::{Deserialize, Serialize};
@@ -78,6 +83,8 @@ pub struct RunIdentification {
     pub m2: f64,
     pub r1: f64,
     pub d1: f64,
+    /// The steady-cycle route's result, for a record not from rest.
+    pub steady: Option<steady::SteadyFit>,
     pub warnings: Vec<String>,
 }
 
@@ -113,8 +120,16 @@ fn median(v: &[f64]) -> f64 {
     }
 }
 
-/// Steps 1–3 for one run, except R1 and D1, which need R0 of the current.
+/// D1's share of the saturated hardening R1 + D1 where the records do not
+/// show it (steady cycles only): the middle of the plausible ranges.
+const D1_SHARE: f64 = 0.2;
+
+/// Steps 1–3 for one run, except R1 and D1, which need R0 of the current;
+/// or the steady-cycle route for a record not from rest.
 fn identify_run(run: &Run, s: &IdentifySettings) -> RunIdentification {
+    if s.branch == 0 && !steady::starts_from_rest(run) {
+        return identify_steady(run, s);
+    }
     let mut warnings = Vec::new();
     let branch = run
         .branches
@@ -151,6 +166,7 @@ fn identify_run(run: &Run, s: &IdentifySettings) -> RunIdentification {
         m2: f64::NAN,
         r1: f64::NAN,
         d1: f64::NAN,
+        steady: None,
         warnings,
     };
     if elastic_points < 5 {
@@ -220,6 +236,37 @@ fn fit_hardening(out: &mut RunIdentification, strain: &[f64], tau: &[f64], k02: 
     out.psi = (psi_tau, psi);
 }
 
+/// The steady-cycle route ([`steady`]) for one record.
+fn identify_steady(run: &Run, s: &IdentifySettings) -> RunIdentification {
+    let sh = &run.shear;
+    let dt = (sh.time[sh.len() - 1] - sh.time[0]) / (sh.len() - 1) as f64;
+    let half_window = ((s.smooth_ms * 1e-3 / dt).round() as usize).max(2);
+    let (tau, _) = crate::data::local_polynomial(&sh.time, &sh.tau, half_window, 3);
+    let (gamma, rate) = crate::data::local_polynomial(&sh.time, &sh.gamma, half_window, 3);
+    let fit = steady::identify(run, &tau, &gamma, &rate);
+    RunIdentification {
+        run: run.id().to_string(),
+        current_a: run.spec.current_a,
+        branch: run.branches[steady::first_full_stroke(run)].clone(),
+        g: fit.as_ref().map_or(f64::NAN, |f| f.g),
+        elastic_points: fit.as_ref().map_or(0, |f| f.reversals),
+        yield_point: None,
+        curve_data: (vec![], vec![]),
+        curve: None,
+        psi: (vec![], vec![]),
+        ends: None,
+        m1: f64::NAN,
+        m2: f64::NAN,
+        r1: f64::NAN,
+        d1: f64::NAN,
+        warnings: match &fit {
+            Ok(_) => vec![],
+            Err(why) => vec![format!("steady cycles: {why}")],
+        },
+        steady: fit.ok(),
+    }
+}
+
 /// `n` points of the curve y(x) at x log-spaced from `from` to the largest x,
 /// by linear interpolation on the running maximum of x (so a noisy,
 /// non-monotone x cannot make the interpolation ambiguous).
@@ -263,7 +310,27 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
     let mut warnings = Vec::new();
 
     let points: Vec<(f64, f64)> = runs.iter().filter_map(|r| r.yield_point.map(|(t, g)| (g, t))).collect();
-    let yield_fit = yield_stress::fit_eq6(&points);
+    let steady: Vec<&steady::SteadyFit> = runs.iter().filter_map(|r| r.steady.as_ref()).collect();
+    let steady_z = median(&steady.iter().map(|f| f.z).collect::<Vec<_>>());
+    let steady_n = median(&steady.iter().map(|f| f.n).collect::<Vec<_>>());
+    let mut yield_fit = yield_stress::fit_eq6(&points);
+    if points.is_empty() && !steady.is_empty() {
+        // no loading from rest: the initial yield of R0 cannot be seen, and
+        // R0 starts at the saturated value of R (no isotropic hardening)
+        yield_fit = yield_stress::YieldFit {
+            r0: (1.0 - D1_SHARE) * steady_z,
+            n: steady_n,
+            converged: true,
+            rms_log: f64::NAN,
+            note: Some(format!(
+                "no record starts from rest: n = {steady_n:.3} from the flow curve of steady cycles, R0 = R1 = {:.0} % of the saturated flow stress's R + D",
+                100.0 * (1.0 - D1_SHARE)
+            )),
+        };
+    } else if yield_fit.n == 1.0 && yield_fit.note.is_some() && steady_n.is_finite() {
+        yield_fit.note = Some(format!("{}; n = {steady_n:.3} from the flow curve of steady cycles instead", yield_fit.note.as_deref().unwrap_or("")));
+        yield_fit.n = steady_n;
+    }
     if let Some(note) = &yield_fit.note {
         warnings.push(note.clone());
     }
@@ -275,17 +342,29 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
             r.d1 = d1;
         }
     }
-    let col = |f: &dyn Fn(&RunIdentification) -> f64| runs.iter().map(f).collect::<Vec<f64>>();
-    let g: Vec<f64> = col(&|r| r.g).into_iter().filter(|v| *v > 0.0).collect();
-    let raw = [
+    // per-run values that are not positive are not estimates: left out
+    let positive = |f: &dyn Fn(&RunIdentification) -> f64| runs.iter().map(f).filter(|v| *v > 0.0).collect::<Vec<f64>>();
+    let g = positive(&|r| r.g);
+    let mut raw = [
         g.iter().sum::<f64>() / g.len().max(1) as f64,
         yield_fit.r0,
-        median(&col(&|r| r.r1)),
-        median(&col(&|r| r.d1)),
-        median(&col(&|r| r.m1)),
-        median(&col(&|r| r.m2)),
+        median(&positive(&|r| r.r1)),
+        median(&positive(&|r| r.d1)),
+        median(&positive(&|r| r.m1)),
+        median(&positive(&|r| r.m2)),
         yield_fit.n,
     ];
+    if !(raw[2].is_finite() && raw[3].is_finite()) && steady_z.is_finite() {
+        raw[2] = (1.0 - D1_SHARE) * steady_z;
+        raw[3] = D1_SHARE * steady_z;
+        warnings.push(format!("R1 + D1 = {steady_z:.3e} Pa from the flow curve of steady cycles, D1 its {:.0} % (the split shows only in a loading from rest)", 100.0 * D1_SHARE));
+    }
+    for (i, name) in PARAM_NAMES.iter().enumerate() {
+        if !(raw[i] > 0.0) {
+            raw[i] = Params::plausible_centre(i);
+            warnings.push(format!("no run gives {name}: the middle of its plausible range, {:.3e}, starts the calibration", raw[i]));
+        }
+    }
     let (params, moved) = Params::from_array(raw).clamped();
     for name in moved {
         let i = PARAM_NAMES.iter().position(|n| *n == name).unwrap_or(0);

@@ -197,10 +197,19 @@ impl Integrator {
         outcome: &mut [Result<(), IntegrationError>; LANES],
         visit: &mut impl FnMut(usize, &LaneStates),
     ) {
-        self.integrate::<super::simd::avx2::Avx2>(params, t, gamma, initial_tau, outcome, visit)
+        self.integrate::<super::simd::avx2::Avx2>(params, t, gamma, initial_tau, outcome, visit);
     }
 
-    /// The loop over the samples of a record, in the lanes of `S`.
+    /// The Euler steps one integration of `p` along the history takes (both
+    /// tracks of an extrapolated one, rejected steps included): the work a
+    /// log-density costs, which stiff records raise for the explicit scheme.
+    pub fn euler_steps(&self, p: &Params, t: &[f64], gamma: &[f64], initial_tau: f64) -> u64 {
+        let mut outcome = std::array::from_fn(|_| Ok(()));
+        self.integrate::<Portable>(&[*p; LANES], t, gamma, initial_tau, &mut outcome, &mut |_, _| {})
+    }
+
+    /// The loop over the samples of a record, in the lanes of `S`; returns
+    /// the Euler steps it took.
     #[inline(always)]
     fn integrate<S: F64xN>(
         &self,
@@ -210,7 +219,8 @@ impl Integrator {
         initial_tau: f64,
         outcome: &mut [Result<(), IntegrationError>; LANES],
         visit: &mut impl FnMut(usize, &LaneStates),
-    ) {
+    ) -> u64 {
+        let mut steps = 0u64;
         let law = LaneLaw::<S>::new(params);
         let tau0 = S::splat(initial_tau);
         let mut coarse = Track::new(&law, tau0, S::splat(0.0));
@@ -223,13 +233,13 @@ impl Integrator {
             if !(dt > 0.0) {
                 let e = IntegrationError::InvalidHistory(format!("time does not increase at sample {}", k + 1));
                 *outcome = std::array::from_fn(|_| Err(e.clone()));
-                return;
+                return steps;
             }
             let strain_rate = (gamma[k + 1] - gamma[k]) / dt;
-            self.advance(&law, &mut coarse, strain_rate, dt, t[k], outcome);
+            steps += self.advance(&law, &mut coarse, strain_rate, dt, t[k], outcome) as u64;
             let (tau, w) = if self.extrapolate {
                 // independent of the coarse track: the CPU overlaps the two
-                fine.advance(&law, &mut finer, strain_rate, dt, t[k], outcome);
+                steps += fine.advance(&law, &mut finer, strain_rate, dt, t[k], outcome) as u64;
                 let two = S::splat(2.0);
                 (two * finer.tau - coarse.tau, two * finer.w - coarse.w)
             } else {
@@ -239,6 +249,7 @@ impl Integrator {
             states.w = w.to_array();
             visit(k + 1, &states);
         }
+        steps
     }
 
     /// Integrates one parameter set from `initial` at `t[0]` and calls
@@ -280,16 +291,21 @@ impl Integrator {
     /// constant total strain rate `strain_rate`. This is the hot loop of
     /// every likelihood evaluation.
     ///
-    /// Step control, lane by lane: a sub-step is at most `dt / substeps`,
+    /// Step control, lane by lane: a sub-step is at most `dt / substeps` and
     /// moves τ by at most a quarter of (R + D)/√3 (beyond that the flow rate
     /// saturates at 2D₀ and λ no longer measures how fast the state can
-    /// change), and, if explicit, keeps λh ≤ `stability` with λ at its start.
-    /// A sub-step is rejected and halved when it ends where the stiffness
-    /// says it was too long: λh > 2 at its end (explicit), or λ grew by more
-    /// than 1/h over it (linearly implicit, whose linearisation at the start
-    /// then no longer holds). This catches the elastic predictor that jumps
-    /// far past yield in one step, which the stiffness at the start cannot
-    /// see. A lane that has reached the sample time waits for the others.
+    /// change); both limits change continuously with the state. An explicit
+    /// step also keeps λh ≤ `stability` with λ at its start (as long a step
+    /// as that allows, the last one what is left, so that the state at the
+    /// sample time changes continuously with the parameters), and is
+    /// rejected and halved when it ends where the stiffness says it was too
+    /// long (λh > 2 at its end): this catches the elastic predictor that
+    /// jumps far past yield in one step, which the stiffness at the start
+    /// cannot see. The linearly implicit step is stable at any length and
+    /// needs neither: its result is a continuous function of the parameters,
+    /// which keeps the likelihood smooth where the explicit scheme's
+    /// rejections make it rugged (stiff records with large residuals). A lane
+    /// that has reached the sample time waits for the others.
     ///
     /// One function on purpose: step control, the rejection test and the
     /// update share the lane masks and the track's registers, and this loop
@@ -303,7 +319,7 @@ impl Integrator {
         dt: f64,
         t0: f64,
         outcome: &mut [Result<(), IntegrationError>; LANES],
-    ) {
+    ) -> u32 {
         let explicit = self.scheme == Scheme::Explicit;
         let zero = S::splat(0.0);
         let one = S::splat(1.0);
@@ -311,7 +327,6 @@ impl Integrator {
         let gd = S::splat(strain_rate);
         let h_max = S::splat(dt / self.substeps as f64);
         let stability = S::splat(self.stability);
-        let per_stability = S::splat(1.0 / self.stability);
         let done_below = S::splat(1e-12 * dt);
         let shortest = S::splat(1e-9 * dt);
         // lanes that already failed do not step
@@ -337,9 +352,13 @@ impl Integrator {
             let stress_rate = g * (gd - tr.rate);
             let mut h = left.min(h_cap);
             if explicit {
-                // equal sub-steps over what is left, each within the stability limit
+                // as long a step as stability allows, the last one what is
+                // left: the state at the sample time then changes
+                // continuously with the parameters (equal sub-steps would
+                // jump where their count changes, and make the likelihood
+                // rugged on stiff records)
                 let unstable = (lambda * h).gt(stability);
-                h = S::select(unstable, left / (left * lambda * per_stability).ceil(), h);
+                h = S::select(unstable, stability / lambda, h);
             }
             let max_dtau = S::splat(MAX_STRESS_STEP * INV_SQRT_3) * tr.z;
             let big = (stress_rate.abs() * h).gt(max_dtau);
@@ -351,9 +370,12 @@ impl Integrator {
             let w = tr.w + h * tr.tau * tr.rate;
             let z = law.hardening_sum(w);
             let (rate, slope) = law.flow(tau, z);
-            let end_lambda = g * slope;
-            let too_long = if explicit { (end_lambda * h).gt(S::splat(2.0)) } else { ((end_lambda - lambda) * h).gt(one) };
-            let reject = running.and(too_long).and(h.gt(shortest));
+            // an explicit step is too long where the stiffness at its end says
+            // so (λh > 2); the linearly implicit one is stable for any step and
+            // is never rejected, so its result changes continuously with the
+            // parameters
+            let too_long = (g * slope * h).gt(S::splat(2.0));
+            let reject = if explicit { running.and(too_long).and(h.gt(shortest)) } else { zero };
             let accept = reject.and_not(running);
             h_cap = S::select(reject, h * S::splat(0.5), S::select(accept, (h + h).min(h_max), h_cap));
             tr.tau = S::select(accept, tau, tr.tau);
@@ -373,6 +395,7 @@ impl Integrator {
             // keep the failed lanes finite so they cannot disturb the loop
             *tr = Track::new(law, S::select(finite, tr.tau, zero), S::select(finite, tr.w, zero));
         }
+        attempts
     }
 }
 

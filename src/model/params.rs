@@ -27,6 +27,20 @@ pub const PHYSICAL_RANGE: [(f64, f64); 7] = [
     (0.1, 10.0),     // n
 ];
 
+/// The plausible values of each parameter for an RD-1005-3-class damper
+/// (design notes), in the order of [`PARAM_NAMES`]: the ±1 sd span of the
+/// default priors, and where an identification takes what the records do
+/// not show.
+pub const PLAUSIBLE_RANGE: [(f64, f64); 7] = [
+    (1e4, 1e6),   // G
+    (5e4, 3e5),   // R0
+    (5e4, 5e5),   // R1
+    (1e4, 1e5),   // D1
+    (1e-6, 1e-4), // m1
+    (1e-4, 1e-2), // m2
+    (0.5, 3.0),   // n
+];
+
 /// θ = (G, R0, R1, D1, m1, m2, n) in SI units.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -104,6 +118,12 @@ impl Params {
             }
         }
         (Params::from_array(a), moved)
+    }
+
+    /// The geometric middle of [`PLAUSIBLE_RANGE`] of parameter `i`.
+    pub fn plausible_centre(i: usize) -> f64 {
+        let (a, b) = PLAUSIBLE_RANGE[i];
+        (a * b).sqrt()
     }
 
     /// Plausible values at 1 A for an RD-1005-3-class damper (design page):

@@ -44,10 +44,12 @@ pub enum RecordPart {
 pub struct LikelihoodSettings {
     pub noise: NoiseModel,
     /// Half-width (ms) of the local cubic fit that smooths the measured
-    /// strain before it drives the model; 0 uses the raw samples. The model
-    /// turns displacement noise into stress noise (G δγ) and biases G
-    /// (an errors-in-variables effect); the crank's displacement is smooth
-    /// on this scale, so the fit removes noise, not signal.
+    /// strain before it drives the model, at least [`MIN_SMOOTH_SAMPLES`]
+    /// samples; 0 uses the raw samples. The model turns displacement noise
+    /// (and the quantisation of a digital displacement channel) into stress
+    /// noise G δγ and biases G (an errors-in-variables effect); a stand's
+    /// displacement is smooth on this scale, so the fit removes noise, not
+    /// signal.
     pub smooth_strain_ms: f64,
     /// Degrees of freedom of the Student-t model.
     pub student_nu: f64,
@@ -71,6 +73,11 @@ impl LikelihoodSettings {
         Ok(())
     }
 }
+
+/// The fewest samples on each side of the strain's local cubic fit: on a
+/// record sampled at a few hundred hertz a few milliseconds are one sample,
+/// which smooths nothing.
+pub const MIN_SMOOTH_SAMPLES: usize = 5;
 
 /// One run as the likelihood sees it.
 #[derive(Clone, Debug)]
@@ -99,7 +106,7 @@ impl RunData {
         };
         let sh = &run.shear;
         let dt = (sh.time[sh.len() - 1] - sh.time[0]) / (sh.len() - 1) as f64;
-        let half_window = (smooth_strain_ms * 1e-3 / dt).round() as usize;
+        let half_window = if smooth_strain_ms > 0.0 { ((smooth_strain_ms * 1e-3 / dt).round() as usize).max(MIN_SMOOTH_SAMPLES) } else { 0 };
         let gamma = if half_window >= 2 {
             let mut g = local_polynomial(&sh.time, &sh.gamma, half_window, 3).0;
             g[0] = sh.gamma[0]; // the record starts from rest at its reference position

@@ -343,10 +343,16 @@ impl Laplace {
     }
 }
 
+/// The Euler steps of one log-density at `x` (all runs): what the
+/// integrator costs there.
+pub fn euler_steps(post: &Posterior, x: &[f64]) -> u64 {
+    post.runs.iter().map(|r| post.integrator.euler_steps(&post.params_at_current(x, r.current_a), &r.time, &r.gamma, r.initial_tau)).sum()
+}
+
 /// Spread of the initial walkers over the Laplace approximation's: a
 /// little overdispersed, so that R̂ compares ensembles that had to contract
 /// onto the posterior, not ones that started on it.
-const START_SPREAD: f64 = 1.5;
+const START_SPREAD: f64 = 1.0;
 
 /// Initial walker positions from the [`Laplace`] approximation, spread by
 /// [`START_SPREAD`], every one with a finite log-density (redrawn up to 100

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::model::PHYSICAL_RANGE;
+use crate::model::{PHYSICAL_RANGE, PLAUSIBLE_RANGE};
 
 /// A prior for one positive parameter θ, as a density of ln θ.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -77,8 +77,7 @@ impl Prior {
 /// | m2 | 1e-4 – 1e-2 1/Pa |
 /// | n | 0.5 – 3 |
 pub fn default_priors() -> [Prior; 7] {
-    let plausible = [(1e4, 1e6), (5e4, 3e5), (5e4, 5e5), (1e4, 1e5), (1e-6, 1e-4), (1e-4, 1e-2), (0.5, 3.0)];
-    std::array::from_fn(|i| Prior::plausible(i, plausible[i].0, plausible[i].1))
+    std::array::from_fn(|i| Prior::plausible(i, PLAUSIBLE_RANGE[i].0, PLAUSIBLE_RANGE[i].1))
 }
 
 #[cfg(test)]

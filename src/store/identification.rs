@@ -35,6 +35,11 @@ pub fn write(path: &Path, results: &[CurrentIdentification]) -> Result<()> {
                 }
                 push(&r.run, c, "eq7_converged", f.converged as u8 as f64, f.converged as u8 as f64);
             }
+            if let Some(f) = &r.steady {
+                for (name, v) in [("flow_curve_saturated_stress_pa", f.z), ("flow_curve_n", f.n), ("flow_curve_samples", f.flow_samples as f64), ("flow_curve_rms_log", f.rms_log)] {
+                    push(&r.run, c, name, v, v);
+                }
+            }
             push(&r.run, c, "euler_rms_pa", res.euler_rms[i], res.euler_rms[i]);
         }
         for (k, name) in PARAM_NAMES.iter().enumerate() {
