@@ -144,7 +144,8 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
     let mut pred_k = vec![0.0; kept.len() * reps];
     for k in 0..n {
         for (i, (d, path)) in kept.iter().enumerate() {
-            at_k[i] = path[k];
+            let model = path[k] + run.terms_stress(k, d.spring_n_per_m, d.offset_n);
+            at_k[i] = model;
             for r in 0..reps {
                 let z: f64 = match (settings.noise, &student) {
                     (NoiseModel::StudentT, Some(t)) => rng.sample(t),
@@ -157,7 +158,7 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
                     NoiseModel::Ar1 => d.rho * *e + d.sigma * z,
                     _ => d.sigma * z,
                 };
-                pred_k[i * reps + r] = path[k] + *e;
+                pred_k[i * reps + r] = model + *e;
             }
         }
         at_k.sort_unstable_by(f64::total_cmp);
@@ -278,7 +279,7 @@ mod tests {
     fn ramp_run() -> RunData {
         let time: Vec<f64> = (0..400).map(|k| k as f64 * 5e-4).collect();
         let gamma: Vec<f64> = time.iter().map(|t| 0.5 * (1.0 - (2.0 * std::f64::consts::PI * 2.5 * t).cos())).collect();
-        RunData { id: "r".into(), time, gamma, tau: vec![0.0; 400], initial_tau: 0.0, current_a: 1.0 }
+        RunData { id: "r".into(), time, gamma, tau: vec![0.0; 400], initial_tau: 0.0, current_a: 1.0, area_m2: 0.05, gap_m: 1e-3 }
     }
 
     /// One fixed parameter set: the model band collapses onto the
@@ -291,7 +292,7 @@ mod tests {
         let integ = Integrator { scheme: Scheme::Explicit, substeps: 2, ..Integrator::default() };
         let p = Params::reference_1a();
         let sigma = 500.0;
-        let draws = vec![Draw { params: p, sigma, rho: 0.0 }; 40];
+        let draws = vec![Draw::of_law(p, sigma); 40];
         let settings = PredictSettings { integrator: integ, noise: NoiseModel::Gaussian, student_nu: 5.0, replicates: 100, seed: 3 };
         let b = bands(&run, 0, &draws, &settings, &|| {}).unwrap();
         let truth = integ.run(&p, &run.time, &run.gamma).unwrap().tau;
@@ -311,7 +312,7 @@ mod tests {
         let run = ramp_run();
         let integ = Integrator { substeps: 1, ..Integrator::default() };
         let (sigma, rho) = (300.0f64, 0.8f64);
-        let draws = vec![Draw { params: Params::reference_1a(), sigma, rho }; 40];
+        let draws = vec![Draw { rho, ..Draw::of_law(Params::reference_1a(), sigma) }; 40];
         let settings = PredictSettings { integrator: integ, noise: NoiseModel::Ar1, student_nu: 5.0, replicates: 100, seed: 9 };
         let b = bands(&run, 0, &draws, &settings, &|| {}).unwrap();
         let sd = sigma / (1.0 - rho * rho).sqrt();

@@ -80,7 +80,13 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
         .zip(&from_identification)
         .map(|(p, v)| p.centre().map(|(c, _)| c).unwrap_or(*v))
         .collect();
-    let starts = [from_identification, medians].map(|log| posterior.layout.theta_coordinates(&log));
+    // θ from either, the model terms (if any) from zero
+    let fitted = posterior.layout.fitted.len();
+    let starts = [from_identification, medians].map(|log| {
+        let mut x = posterior.layout.theta_coordinates(&log);
+        x.resize(fitted, 0.0);
+        x
+    });
     let map = map::best_map(&posterior, &starts)
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
     log(&format!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64()));
@@ -111,8 +117,12 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     // smooth records, linearly implicit where stiffness makes the explicit
     // one cut its steps (and its likelihood rugged)
     let (_, posterior, map, step_study) = candidates.into_iter().min_by_key(|c| c.0).expect("at least one scheme");
-    // the MAP with the chosen integrator, from the one found
-    let map = if posterior.integrator != base { map::refine(&posterior, &map.x).unwrap_or(map) } else { map };
+    // the MAP with the chosen integrator, from the one found; the curvature
+    // stays the smooth search's
+    let map = match posterior.integrator != base {
+        true => map::refine(&posterior, &map.x).map(|moved| map.curvature_at(moved)).unwrap_or(map),
+        false => map,
+    };
     settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
     settings.integrator.substeps = posterior.integrator.substeps;
     if settings.sampler.walkers == 0 {

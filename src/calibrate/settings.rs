@@ -12,14 +12,14 @@ use crate::error::{Error, Result};
 use crate::identify::IdentifySettings;
 use crate::model::{Integrator, Scheme, PARAM_NAMES};
 use crate::posterior::prior::default_priors;
-use crate::posterior::{Coordinates, LikelihoodSettings, ModelKind, ParameterModel, Posterior, Prior};
+use crate::posterior::{Coordinates, LikelihoodSettings, ModelKind, ModelTerms, ParameterModel, Posterior, Prior};
 use crate::sampler::{Move, RunControl, SamplerSettings};
 
 /// Which Euler scheme integrates the likelihood.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SchemeChoice {
-    /// Explicit, unless the likelihood is rugged with it; chosen at the start.
+    /// The cheaper scheme at the step rule's accuracy; chosen at the start.
     Auto,
     Explicit,
     LinearlyImplicit,
@@ -45,8 +45,8 @@ impl SchemeChoice {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct IntegratorSettings {
-    /// `auto`: explicit Euler unless its likelihood is rugged at the MAP
-    /// (see `posterior::map::ruggedness`), linearly implicit Euler then.
+    /// `auto`: of the two schemes, each at the step the step rule gives it,
+    /// the one that costs fewer Euler steps per log-density at the MAP.
     pub scheme: SchemeChoice,
     /// Richardson extrapolation of two Euler solutions (steps h and h/2):
     /// second order at three Euler steps per sub-step.
@@ -159,6 +159,8 @@ pub struct CalibrationSettings {
     pub prior: BTreeMap<String, Prior>,
     /// Bounds of every noise scale σ (Pa); log-uniform prior between them.
     pub sigma_bounds_pa: (f64, f64),
+    /// Terms a real damper adds to the fluid's force, and their priors.
+    pub terms: ModelTerms,
 }
 
 impl Default for CalibrationSettings {
@@ -172,6 +174,7 @@ impl Default for CalibrationSettings {
             identify: IdentifySettings::default(),
             prior: PARAM_NAMES.iter().zip(default_priors()).map(|(n, p)| (n.to_string(), p)).collect(),
             sigma_bounds_pa: (1.0, 1.0e6),
+            terms: ModelTerms::default(),
         }
     }
 }
@@ -204,6 +207,7 @@ impl CalibrationSettings {
             return Err("sigma_bounds_pa must be 0 < lower < upper".into());
         }
         self.likelihood.check()?;
+        self.terms.check()?;
         if !(self.reference_current_a > 0.0) {
             return Err("reference_current_a must be positive".into());
         }
@@ -226,7 +230,7 @@ impl CalibrationSettings {
     /// The posterior of the runs of `campaign` with these settings.
     pub fn posterior(&self, campaign: &Campaign, integrator: Integrator) -> Posterior {
         let model = self.parameter_model();
-        Posterior::new(campaign, model, model.priors(&self.priors()), &self.likelihood, self.sigma_bounds_pa, integrator, self.sampler.coordinates)
+        Posterior::new(campaign, model, model.priors(&self.priors()), &self.likelihood, self.sigma_bounds_pa, integrator, self.sampler.coordinates, &self.terms)
     }
 
     pub fn to_toml(&self) -> Result<String> {

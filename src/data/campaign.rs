@@ -76,6 +76,8 @@ pub struct Run {
     pub shear: Shear,
     /// Loading branches: sample ranges between displacement reversals.
     pub branches: Vec<std::ops::Range<usize>>,
+    /// The damper's geometry (the campaign's).
+    pub geometry: Geometry,
 }
 
 impl Run {
@@ -183,6 +185,7 @@ impl Campaign {
                 record,
                 shear,
                 branches,
+                geometry: manifest.geometry,
             });
         }
         Ok(Campaign {

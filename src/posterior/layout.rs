@@ -1,11 +1,14 @@
 //! Where each quantity sits in a point of the posterior, and the map
 //! between the sampler's unconstrained coordinates and SI units.
 //!
-//! A point is θ (the parameter model's coordinates), then one noise scale σ
-//! per run, then (AR(1) noise only) one lag-one correlation ρ per run. The
-//! sampler walks in ln θ (or [`Coordinates::SaturationShare`]), ln σ and
-//! atanh ρ; outputs use θ, σ, ρ under the names `G` … (or a law's),
-//! `sigma_<run>`, `rho_<run>`.
+//! A point is θ (the parameter model's coordinates), then the terms of
+//! [`ModelTerms`] that are on (the gas-spring stiffness, a force offset per
+//! run), then one noise scale σ per run, then (AR(1) noise only) one lag-one
+//! correlation ρ per run. The sampler walks in ln θ (or
+//! [`Coordinates::SaturationShare`]), the terms as they are, ln σ and
+//! atanh ρ; outputs use θ, the terms, σ, ρ under the names `G` … (or a
+//! law's), `gas_spring_n_per_m`, `force_offset_n_<run>`, `sigma_<run>`,
+//! `rho_<run>`.
 
 use std::ops::Range;
 
@@ -13,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use super::likelihood::NoiseModel;
 use super::parameters::ParameterModel;
+use super::terms::ModelTerms;
 
 /// The coordinates the sampler walks θ in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -36,6 +40,13 @@ pub struct Layout {
     /// The run ids, in the order of their σ (and ρ).
     pub runs: Vec<String>,
     pub theta: Range<usize>,
+    /// The gas-spring stiffness (empty unless that term is on).
+    pub spring: Range<usize>,
+    /// A force offset per run (empty unless that term is on).
+    pub offset: Range<usize>,
+    /// Everything before the noise: θ and the terms, which the MAP search
+    /// fits while it profiles the noise out.
+    pub fitted: Range<usize>,
     pub sigma: Range<usize>,
     /// Empty unless the noise is AR(1).
     pub rho: Range<usize>,
@@ -49,19 +60,27 @@ fn softplus(v: f64) -> f64 {
 }
 
 impl Layout {
-    pub fn new(model: &ParameterModel, runs: &[String], noise: NoiseModel, coordinates: Coordinates) -> Layout {
+    pub fn new(model: &ParameterModel, runs: &[String], noise: NoiseModel, coordinates: Coordinates, terms: &ModelTerms) -> Layout {
         let nt = model.names().len();
         let nr = runs.len();
+        let ns = usize::from(terms.gas_spring);
+        let no = if terms.force_offset { nr } else { 0 };
+        let nf = nt + ns + no;
         let rho_len = if noise == NoiseModel::Ar1 { nr } else { 0 };
         let mut names: Vec<String> = model.names().iter().map(|s| s.to_string()).collect();
+        names.extend(std::iter::repeat_n("gas_spring_n_per_m".to_string(), ns));
+        names.extend(runs.iter().take(no).map(|r| format!("force_offset_n_{r}")));
         names.extend(runs.iter().map(|r| format!("sigma_{r}")));
         names.extend(runs.iter().take(rho_len).map(|r| format!("rho_{r}")));
         Layout {
             names,
             runs: runs.to_vec(),
             theta: 0..nt,
-            sigma: nt..nt + nr,
-            rho: nt + nr..nt + nr + rho_len,
+            spring: nt..nt + ns,
+            offset: nt + ns..nf,
+            fitted: 0..nf,
+            sigma: nf..nf + nr,
+            rho: nf + nr..nf + nr + rho_len,
             share: match coordinates {
                 Coordinates::Log => None,
                 Coordinates::SaturationShare => Some((model.index("R1"), model.index("D1"))),
@@ -71,7 +90,12 @@ impl Layout {
 
     /// Names of the sampler's coordinates, for messages.
     pub fn coordinate_names(&self) -> Vec<String> {
-        let mut names: Vec<String> = self.names.iter().enumerate().map(|(i, n)| if self.rho.contains(&i) { format!("atanh {n}") } else { format!("ln {n}") }).collect();
+        let mut names: Vec<String> = self
+            .names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| if self.rho.contains(&i) { format!("atanh {n}") } else if self.linear(i) { n.clone() } else { format!("ln {n}") })
+            .collect();
         if let Some((r1, d1)) = self.share {
             names[r1] = "ln (R1 + D1)".into();
             names[d1] = "ln (D1 / R1)".into();
@@ -112,7 +136,22 @@ impl Layout {
 
     /// Whether `name` is a noise coordinate (σ or ρ of a run).
     pub fn is_noise(&self, name: &str) -> bool {
-        self.names.iter().position(|n| n == name).is_some_and(|i| !self.theta.contains(&i))
+        self.names.iter().position(|n| n == name).is_some_and(|i| i >= self.fitted.end)
+    }
+
+    /// Whether coordinate `i` is walked as it is (the terms), not through a
+    /// logarithm.
+    fn linear(&self, i: usize) -> bool {
+        self.spring.contains(&i) || self.offset.contains(&i)
+    }
+
+    /// The gas-spring stiffness (N/m) and the force offset of run `j` (N) at
+    /// `x` (sampler coordinates or SI: the terms are the same in both); 0
+    /// for a term that is off.
+    pub fn terms(&self, x: &[f64], j: usize) -> (f64, f64) {
+        let spring = if self.spring.is_empty() { 0.0 } else { x[self.spring.start] };
+        let offset = if self.offset.is_empty() { 0.0 } else { x[self.offset.start + j] };
+        (spring, offset)
     }
 
     pub fn index(&self, name: &str) -> Option<usize> {
@@ -127,15 +166,31 @@ impl Layout {
     /// A point in SI units (θ, σ, ρ) from the sampler's coordinates.
     pub fn to_si(&self, x: &[f64]) -> Vec<f64> {
         let theta = self.log_theta(x).into_iter().map(f64::exp);
-        let noise = x.iter().enumerate().skip(self.theta.end).map(|(i, v)| if self.rho.contains(&i) { v.tanh() } else { v.exp() });
-        theta.chain(noise).collect()
+        let rest = x.iter().enumerate().skip(self.theta.end).map(|(i, v)| {
+            if self.rho.contains(&i) {
+                v.tanh()
+            } else if self.linear(i) {
+                *v
+            } else {
+                v.exp()
+            }
+        });
+        theta.chain(rest).collect()
     }
 
     /// The sampler's coordinates of a point in SI units (inverse of [`Self::to_si`]).
     pub fn from_si(&self, si: &[f64]) -> Vec<f64> {
         let log: Vec<f64> = si[self.theta.clone()].iter().map(|v| v.ln()).collect();
-        let noise = si.iter().enumerate().skip(self.theta.end).map(|(i, v)| if self.rho.contains(&i) { v.atanh() } else { v.ln() });
-        self.theta_coordinates(&log).into_iter().chain(noise).collect()
+        let rest = si.iter().enumerate().skip(self.theta.end).map(|(i, v)| {
+            if self.rho.contains(&i) {
+                v.atanh()
+            } else if self.linear(i) {
+                *v
+            } else {
+                v.ln()
+            }
+        });
+        self.theta_coordinates(&log).into_iter().chain(rest).collect()
     }
 }
 
@@ -146,7 +201,7 @@ mod tests {
     #[test]
     fn names_ranges_and_maps_agree() {
         let runs = vec!["a".to_string(), "b".to_string()];
-        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1, Coordinates::Log);
+        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1, Coordinates::Log, &ModelTerms::default());
         assert_eq!(l.dim(), 11);
         assert_eq!(&l.names[7..], ["sigma_a", "sigma_b", "rho_a", "rho_b"]);
         assert_eq!((l.sigma.clone(), l.rho.clone()), (7..9, 9..11));
@@ -157,8 +212,15 @@ mod tests {
         for (a, b) in l.from_si(&si).iter().zip(&x) {
             assert!((a - b).abs() < 1e-12);
         }
-        let g = Layout::new(&ParameterModel::CurrentLaw { reference_a: 1.0 }, &runs, NoiseModel::Gaussian, Coordinates::Log);
+        let g = Layout::new(&ParameterModel::CurrentLaw { reference_a: 1.0 }, &runs, NoiseModel::Gaussian, Coordinates::Log, &ModelTerms::default());
         assert_eq!((g.dim(), g.rho.len()), (11, 0));
+        let terms = ModelTerms { force_offset: true, gas_spring: true, ..ModelTerms::default() };
+        let t = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Gaussian, Coordinates::Log, &terms);
+        assert_eq!(&t.names[7..10], ["gas_spring_n_per_m", "force_offset_n_a", "force_offset_n_b"]);
+        assert_eq!((t.fitted.clone(), t.sigma.clone()), (0..10, 10..12));
+        let x: Vec<f64> = (0..12).map(|i| i as f64 - 3.0).collect();
+        assert_eq!(t.terms(&x, 1), (4.0, 6.0));
+        assert_eq!((t.to_si(&x)[8], t.from_si(&t.to_si(&x))[9]), (5.0, 6.0));
     }
 
     /// Saturation-share coordinates: R1 + D1 and ln(D1/R1) at their places,
@@ -167,7 +229,7 @@ mod tests {
     #[test]
     fn saturation_share_coordinates_invert_with_unit_jacobian() {
         let runs = vec!["a".to_string()];
-        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Gaussian, Coordinates::SaturationShare);
+        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Gaussian, Coordinates::SaturationShare, &ModelTerms::default());
         let si = [2e5, 1.2e5, 1.6e5, 3e4, 4e-6, 2e-4, 1.2, 300.0];
         let x = l.from_si(&si);
         assert!((x[2] - (1.9e5f64).ln()).abs() < 1e-12 && (x[3] - (3e4f64 / 1.6e5).ln()).abs() < 1e-12);

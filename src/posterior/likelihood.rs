@@ -89,6 +89,9 @@ pub struct RunData {
     pub tau: Vec<f64>,
     pub initial_tau: f64,
     pub current_a: f64,
+    /// The damper's area and gap, which turn force terms into stress.
+    pub area_m2: f64,
+    pub gap_m: f64,
 }
 
 impl RunData {
@@ -121,12 +124,20 @@ impl RunData {
             tau: run.shear.tau[..end].to_vec(),
             initial_tau: run.shear.initial_tau,
             current_a: run.spec.current_a,
+            area_m2: run.geometry.area_m2,
+            gap_m: run.geometry.gap_m,
         }
     }
 
     /// Residuals compared: every sample after the first.
     pub fn compared(&self) -> usize {
         self.time.len() - 1
+    }
+
+    /// The stress the model terms add at sample `k` (Pa).
+    #[inline(always)]
+    pub fn terms_stress(&self, k: usize, spring_n_per_m: f64, offset_n: f64) -> f64 {
+        super::terms::ModelTerms::stress(offset_n, spring_n_per_m, self.gamma[k], self.area_m2, self.gap_m)
     }
 }
 

@@ -34,6 +34,14 @@ pub struct MapEstimate {
 }
 
 impl MapEstimate {
+    /// This estimate's Laplace approximation around the optimum `moved`
+    /// found by another integrator: the explicit scheme's likelihood can be
+    /// rugged on the scale of a finite-difference step (its step cuts
+    /// switch), so its Jacobian is not a curvature; a smooth scheme's is.
+    pub fn curvature_at(&self, moved: MapEstimate) -> MapEstimate {
+        MapEstimate { cov: self.cov.clone(), jacobian: self.jacobian.clone(), ..moved }
+    }
+
     /// Posterior sd of each θ coordinate from the Laplace approximation.
     pub fn sd(&self) -> Vec<f64> {
         (0..self.cov.nrows()).map(|i| self.cov[(i, i)].max(0.0).sqrt()).collect()
@@ -42,10 +50,10 @@ impl MapEstimate {
     /// Posterior sd of each ln θ from the Laplace approximation (the delta
     /// method through the map from the sampler's coordinates).
     pub fn log_theta_sd(&self, layout: &Layout) -> Vec<f64> {
-        let nt = self.cov.nrows();
+        let (nt, nf) = (layout.theta.len(), self.cov.nrows());
         let at = layout.log_theta(&self.x);
         let h = 1e-7;
-        let a = DMatrix::from_fn(nt, nt, |i, j| {
+        let a = DMatrix::from_fn(nt, nf, |i, j| {
             let mut y = self.x.clone();
             y[j] += h;
             (layout.log_theta(&y)[i] - at[i]) / h
@@ -60,14 +68,15 @@ impl MapEstimate {
 /// width.
 const JACOBIAN_STEP: f64 = 1e-6;
 
-/// Residuals τ_obs − τ_model of run `r` for up to [`LANES`] parameter sets.
-fn run_residuals(post: &Posterior, r: &RunData, params: &[Params]) -> Vec<Option<Vec<f64>>> {
+/// Residuals τ_obs − τ_model of run `r` for up to [`LANES`] parameter sets
+/// with their model terms (gas-spring stiffness, force offset).
+fn run_residuals(post: &Posterior, r: &RunData, params: &[Params], terms: &[(f64, f64)]) -> Vec<Option<Vec<f64>>> {
     let lanes: [Params; LANES] = std::array::from_fn(|l| params.get(l).copied().unwrap_or(params[0]));
     let mut out = vec![Vec::with_capacity(r.compared()); params.len()];
     let outcome = post.integrator.run_lanes(&lanes, &r.time, &r.gamma, r.initial_tau, |k, s| {
         if k > 0 {
             for (lane, o) in out.iter_mut().enumerate() {
-                o.push(r.tau[k] - s.tau[lane]);
+                o.push(r.tau[k] - s.tau[lane] - r.terms_stress(k, terms[lane].0, terms[lane].1));
             }
         }
     });
@@ -82,8 +91,10 @@ fn residuals_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<Vec<f64>>
         .par_iter()
         .map(|&(r, g)| {
             let run = &post.runs[r];
-            let params: Vec<Params> = xs[g..(g + LANES).min(xs.len())].iter().map(|x| post.params_at_current(x, run.current_a)).collect();
-            run_residuals(post, run, &params)
+            let group = &xs[g..(g + LANES).min(xs.len())];
+            let params: Vec<Params> = group.iter().map(|x| post.params_at_current(x, run.current_a)).collect();
+            let terms: Vec<(f64, f64)> = group.iter().map(|x| post.layout.terms(x, r)).collect();
+            run_residuals(post, run, &params, &terms)
         })
         .collect();
     let mut out: Vec<Option<Vec<Vec<f64>>>> = vec![Some(Vec::new()); xs.len()];
@@ -105,9 +116,10 @@ fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|r| r * r).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
-/// Whitened residuals at θ point `x` from its run residuals: (τ_obs −
-/// τ_model)/σ_run, then (ln θ − centre)/scale for every log-normal prior.
-/// Points outside the prior support are infeasible.
+/// Whitened residuals at the fitted point `x` (θ and the model terms) from
+/// its run residuals: (τ_obs − τ_model)/σ_run, then (ln θ − centre)/scale
+/// for every log-normal prior and value/sd for every term's. Points outside
+/// the prior support are infeasible.
 fn whiten(post: &Posterior, sigmas: &[f64], x: &[f64], residuals: Option<Vec<Vec<f64>>>) -> Option<Vec<f64>> {
     let log_theta = post.layout.log_theta(x);
     if post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
@@ -120,6 +132,9 @@ fn whiten(post: &Posterior, sigmas: &[f64], x: &[f64], residuals: Option<Vec<Vec
             out.push((v - c) / s);
         }
     }
+    let l = &post.layout;
+    out.extend(x[l.spring.clone()].iter().map(|v| v / post.terms.gas_spring_sd_n_per_m));
+    out.extend(x[l.offset.clone()].iter().map(|v| v / post.terms.force_offset_sd_n));
     Some(out)
 }
 
@@ -160,7 +175,7 @@ fn jacobian(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<DMatrix<f64>>
 /// lag-one correlation, σ the innovation sd) and computes the Laplace
 /// covariance (JᵀJ)⁻¹ of θ.
 pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
-    let nt = post.layout.theta.len();
+    let nt = post.layout.fitted.len();
     let mut x: Vec<f64> = start[..nt].to_vec();
     let profile = |x: &[f64]| -> Option<Vec<f64>> {
         Some(residuals_many(post, &[x.to_vec()]).pop()??.iter().map(|r| rms(r).max(1e-9)).collect())
@@ -258,7 +273,7 @@ pub fn step_shift_limit(extrapolated: bool) -> f64 {
 /// fraction of the posterior sd, where the linearisation holds, and it
 /// costs one integration instead of a new MAP search.
 fn shift(map: &MapEstimate, post: &Posterior, finer: &Posterior) -> Option<DVector<f64>> {
-    let nt = post.layout.theta.len();
+    let nt = post.layout.fitted.len();
     let theta = &map.x[..nt];
     let coarse = whitened(post, &map.sigmas, theta)?;
     let fine = whitened(finer, &map.sigmas, theta)?;
@@ -313,7 +328,7 @@ pub struct Laplace {
 impl Laplace {
     pub fn new(post: &Posterior, map: &MapEstimate) -> Laplace {
         let (d, l) = (post.dim(), &post.layout);
-        let nt = l.theta.len();
+        let nt = l.fitted.len();
         let mut chol = DMatrix::zeros(d, d);
         // a θ covariance that is not positive definite: a tiny ball instead
         let theta = map.cov.clone().cholesky().map(|c| c.l()).unwrap_or_else(|| DMatrix::identity(nt, nt) * 1e-4);

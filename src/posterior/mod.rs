@@ -18,6 +18,7 @@ pub mod map;
 pub mod parameters;
 pub mod prior;
 pub mod sample;
+pub mod terms;
 
 use crate::data::Campaign;
 use crate::model::{Integrator, Params, LANES};
@@ -27,6 +28,7 @@ pub use likelihood::{LikelihoodSettings, NoiseModel, RecordPart, ResidualStats, 
 pub use parameters::{ModelKind, ParameterModel, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, PosteriorSample, SummaryRow};
+pub use terms::ModelTerms;
 
 /// The posterior density.
 #[derive(Clone)]
@@ -39,11 +41,13 @@ pub struct Posterior {
     /// Bounds of every noise scale σ (Pa); log-uniform between them.
     pub sigma_bounds: (f64, f64),
     pub integrator: Integrator,
+    pub terms: ModelTerms,
     pub layout: Layout,
 }
 
 impl Posterior {
     /// The posterior of the runs of `campaign`.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         campaign: &Campaign,
         model: ParameterModel,
@@ -52,12 +56,14 @@ impl Posterior {
         sigma_bounds: (f64, f64),
         integrator: Integrator,
         coordinates: Coordinates,
+        terms: &ModelTerms,
     ) -> Posterior {
         let runs: Vec<RunData> =
             campaign.runs.iter().map(|r| RunData::from_run(r, likelihood.part, likelihood.smooth_strain_ms)).collect();
         let ids: Vec<String> = runs.iter().map(|r| r.id.clone()).collect();
         Posterior {
-            layout: Layout::new(&model, &ids, likelihood.noise, coordinates),
+            layout: Layout::new(&model, &ids, likelihood.noise, coordinates, terms),
+            terms: terms.clone(),
             runs,
             model,
             priors,
@@ -82,6 +88,10 @@ impl Posterior {
     pub fn log_prior(&self, x: &[f64]) -> f64 {
         let l = &self.layout;
         let mut lp: f64 = self.priors.iter().zip(&l.log_theta(x)).map(|(p, v)| p.log_density(*v)).sum();
+        // zero-mean normal priors of the model terms
+        let normal = |v: f64, sd: f64| -0.5 * (v / sd) * (v / sd);
+        lp += x[l.spring.clone()].iter().map(|v| normal(*v, self.terms.gas_spring_sd_n_per_m)).sum::<f64>();
+        lp += x[l.offset.clone()].iter().map(|v| normal(*v, self.terms.force_offset_sd_n)).sum::<f64>();
         let (lo, hi) = (self.sigma_bounds.0.ln(), self.sigma_bounds.1.ln());
         for v in &x[l.sigma.clone()] {
             if !(*v >= lo && *v <= hi) {
@@ -101,8 +111,10 @@ impl Posterior {
 
     /// Integrates run `r` for up to [`LANES`] parameter sets at once and
     /// gathers each lane's residual statistics (`None` where the
-    /// integration failed). `scales` are the Student-t scales of the lanes.
-    pub fn residual_stats(&self, params: &[Params; LANES], r: &RunData, scales: [f64; LANES]) -> [Option<ResidualStats>; LANES] {
+    /// integration failed). `scales` are the Student-t scales of the lanes,
+    /// `terms` their gas-spring stiffness and force offset for this run.
+    pub fn residual_stats(&self, params: &[Params; LANES], r: &RunData, scales: [f64; LANES], terms: [(f64, f64); LANES]) -> [Option<ResidualStats>; LANES] {
+        let with_terms = terms.iter().any(|t| *t != (0.0, 0.0));
         let mut st = [ResidualStats::default(); LANES];
         let mut prev = [0.0; LANES];
         let nu = self.likelihood.student_nu;
@@ -113,7 +125,8 @@ impl Posterior {
             }
             let obs = r.tau[k];
             for lane in 0..LANES {
-                let res = obs - s.tau[lane];
+                let model = if with_terms { s.tau[lane] + r.terms_stress(k, terms[lane].0, terms[lane].1) } else { s.tau[lane] };
+                let res = obs - model;
                 st[lane].push(k, res, prev[lane], inv_nu_s2[lane]);
                 prev[lane] = res;
             }
@@ -142,7 +155,8 @@ impl Posterior {
                 }
             }
             let scales = std::array::from_fn(|lane| if lane < count { point(lane)[l.sigma.start + i].exp() } else { 1.0 });
-            let stats = self.residual_stats(&params, r, scales);
+            let terms = std::array::from_fn(|lane| if lane < count { l.terms(point(lane), i) } else { (0.0, 0.0) });
+            let stats = self.residual_stats(&params, r, scales, terms);
             for lane in 0..count {
                 if !(out[lane] > f64::NEG_INFINITY) {
                     continue;

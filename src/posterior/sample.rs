@@ -10,13 +10,23 @@ use super::parameters::ParameterModel;
 use crate::model::Params;
 use crate::sampler::{Chains, Diagnostics, ParameterDiagnostics};
 
-/// One posterior draw as a run sees it: the B-P parameters and the noise of
-/// that run (σ, and ρ for AR(1) noise; 0 otherwise).
+/// One posterior draw as a run sees it: the B-P parameters, the model
+/// terms (0 where off) and the noise of that run (σ, and ρ for AR(1) noise;
+/// 0 otherwise).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Draw {
     pub params: Params,
+    pub spring_n_per_m: f64,
+    pub offset_n: f64,
     pub sigma: f64,
     pub rho: f64,
+}
+
+impl Draw {
+    /// A draw of the B-P law alone: no model terms, white noise of `sigma`.
+    pub fn of_law(params: Params, sigma: f64) -> Self {
+        Draw { params, spring_n_per_m: 0.0, offset_n: 0.0, sigma, rho: 0.0 }
+    }
 }
 
 /// Every step of every walker in SI units, with the layout that names them.
@@ -64,17 +74,23 @@ impl PosteriorSample {
     pub fn draw(&self, step: usize, chain: usize, run: &str, current_a: f64) -> Draw {
         let x = self.chains.point(step, chain);
         match self.layout.run_index(run) {
-            Some(j) => Draw {
-                params: self.params_at(step, chain, current_a),
-                sigma: x[self.layout.sigma.start + j],
-                rho: if self.layout.rho.is_empty() { 0.0 } else { x[self.layout.rho.start + j] },
-            },
+            Some(j) => {
+                let (spring_n_per_m, offset_n) = self.layout.terms(x, j);
+                Draw {
+                    params: self.params_at(step, chain, current_a),
+                    spring_n_per_m,
+                    offset_n,
+                    sigma: x[self.layout.sigma.start + j],
+                    rho: if self.layout.rho.is_empty() { 0.0 } else { x[self.layout.rho.start + j] },
+                }
+            }
             None => self.draw_without(step, chain, run, current_a),
         }
     }
 
     /// The draw at one position for run `run` as if the posterior had not
-    /// seen it: the root-mean-square σ (and the mean ρ) of the other runs.
+    /// seen it: the root-mean-square σ (and the mean ρ and force offset) of
+    /// the other runs.
     pub fn draw_without(&self, step: usize, chain: usize, run: &str, current_a: f64) -> Draw {
         let x = self.chains.point(step, chain);
         let others: Vec<usize> = (0..self.layout.runs.len()).filter(|&i| self.layout.runs[i] != run).collect();
@@ -85,7 +101,8 @@ impl PosteriorSample {
         let l = &self.layout;
         let sigma = mean(&mut others.iter().map(|&i| x[l.sigma.start + i].powi(2))).sqrt();
         let rho = if l.rho.is_empty() { 0.0 } else { mean(&mut others.iter().map(|&i| x[l.rho.start + i])) };
-        Draw { params: self.params_at(step, chain, current_a), sigma, rho }
+        let offset_n = mean(&mut others.iter().map(|&i| l.terms(x, i).1));
+        Draw { params: self.params_at(step, chain, current_a), spring_n_per_m: l.terms(x, 0).0, offset_n, sigma, rho }
     }
 
     /// The draws at `positions` for one run.
@@ -139,13 +156,13 @@ mod tests {
     #[test]
     fn draws_take_the_runs_own_noise_or_the_pooled_one() {
         let runs = vec!["a".to_string(), "b".to_string()];
-        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1, crate::posterior::Coordinates::Log);
+        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1, crate::posterior::Coordinates::Log, &Default::default());
         let mut point = Params::reference_1a().to_array().to_vec();
         point.extend([3.0, 4.0, 0.2, 0.6]);
         let chains = Chains { dim: 11, ensembles: 1, walkers: 1, positions: point, log_prob: vec![0.0], accepted: vec![false] };
         let sample = PosteriorSample { layout, model: ParameterModel::PerCurrent, chains };
         let own = sample.draw(0, 0, "b", 1.0);
-        assert_eq!((own.sigma, own.rho), (4.0, 0.6));
+        assert_eq!((own.sigma, own.rho, own.offset_n), (4.0, 0.6, 0.0));
         assert_eq!(own.params, Params::reference_1a());
         let unseen = sample.draw(0, 0, "c", 1.0);
         assert!((unseen.sigma - 12.5f64.sqrt()).abs() < 1e-12 && (unseen.rho - 0.4).abs() < 1e-12);

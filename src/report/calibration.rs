@@ -13,6 +13,7 @@ use crate::error::{Error, Result};
 use crate::model::PARAM_NAMES;
 use crate::posterior::map::step_shift_limit;
 use crate::predict::{CoverageRow, RunBands};
+use crate::sampler::diagnostics::MIN_TAU_MULTIPLE;
 use crate::store::{PredictionRecord, StoredCalibration};
 use crate::validate::LooRow;
 
@@ -343,7 +344,7 @@ fn verdicts(cal: &StoredCalibration, coverage: &[CoverageRow]) -> Vec<(String, M
     let mut v = vec![
         ("R̂ (rank-normalised split, across ensembles) < 1.01".to_string(), Mark::of(max_rhat < 1.01), format!("largest {max_rhat:.4}")),
         (format!("bulk and tail ESS ≥ {min_ess:.0}"), Mark::of(min_bulk >= min_ess && min_tail >= min_ess), format!("smallest bulk {min_bulk:.0}, tail {min_tail:.0}")),
-        ("chains longer than 50 τ after burn-in".to_string(), Mark::of(kept >= 50.0 * tau), format!("{kept:.0} steps, τ_max {tau:.1} ({:.0} τ)", kept / tau)),
+        (format!("chains longer than {MIN_TAU_MULTIPLE} τ after burn-in"), Mark::of(kept >= MIN_TAU_MULTIPLE * tau), format!("{kept:.0} steps, τ_max {tau:.1} ({:.0} τ)", kept / tau)),
         ("no sampler warnings (stuck walkers …)".to_string(), Mark::of(cal.record.warnings.is_empty()), format!("{} warning(s)", cal.record.warnings.len())),
     ];
     if let Some(last) = cal.record.step_study.last() {

@@ -249,7 +249,13 @@ pub fn ess_tail(chains: &[Vec<f64>]) -> f64 {
                 .collect();
             ess(&ind)
         })
-        .fold(f64::INFINITY, f64::min)
+        .fold(f64::INFINITY, nan_min)
+}
+
+/// The smaller of two ESS values, NaN (chains too short to tell) if either
+/// is: `f64::min` would drop the NaN and report the other.
+fn nan_min(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() { f64::NAN } else { a.min(b) }
 }
 
 fn pool(chains: &[Vec<f64>]) -> Vec<f64> {
@@ -447,7 +453,7 @@ impl Diagnostics {
 
     /// The smallest bulk or tail ESS over coordinates.
     pub fn min_ess(&self) -> f64 {
-        self.coordinates.iter().map(|c| c.ess_bulk.min(c.ess_tail)).fold(f64::INFINITY, f64::min)
+        self.coordinates.iter().map(|c| nan_min(c.ess_bulk, c.ess_tail)).fold(f64::INFINITY, nan_min)
     }
 
     /// Every R̂ below 1.01 and every bulk and tail ESS at least `min_ess`
@@ -516,6 +522,14 @@ mod tests {
         for (name, e) in [("bulk", ess_bulk(&chains)), ("tail", ess_tail(&chains)), ("raw", ess(&chains))] {
             assert!((e - 4000.0).abs() < 0.15 * 4000.0, "{name}: {e}");
         }
+    }
+
+    #[test]
+    fn too_short_chains_have_no_ess() {
+        // split halves of 5 draws are shorter than the 4 lags ESS needs:
+        // unknown, not infinite (which would pass any ESS target)
+        let chains: Vec<Vec<f64>> = (0..4).map(|c| ar1(0.0, 5, 30 + c)).collect();
+        assert!(ess_bulk(&chains).is_nan() && ess_tail(&chains).is_nan());
     }
 
     #[test]

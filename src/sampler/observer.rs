@@ -103,6 +103,10 @@ impl Observer for Progress {
     fn checked(&mut self, state: &RunState, diag: &Diagnostics) {
         let Some(min_ess) = state.min_ess else { return };
         let (ess, rhat) = (diag.min_ess(), diag.max_rhat());
+        if ess.is_nan() {
+            // too few steps after burn-in to estimate an ESS yet
+            return;
+        }
         self.status = format!(", smallest ESS {ess:.0}/{min_ess:.0}, largest R̂ {rhat:.4}/{}", super::diagnostics::RHAT_THRESHOLD);
         let line = format!("  step {}: smallest ESS {ess:.0} (target {min_ess:.0}), largest R̂ {rhat:.4}, τ_max {:.1}", state.step, diag.tau_max);
         match &self.bar {

@@ -40,7 +40,7 @@ impl StoredCalibration {
         let record = CalibrationRecord::read(&need("calibration.toml")?)?;
         let summary = summary::read(&need("summary.parquet")?)?;
         let model = settings.parameter_model();
-        let layout = Layout::new(&model, &record.runs, settings.likelihood.noise, settings.sampler.coordinates);
+        let layout = Layout::new(&model, &record.runs, settings.likelihood.noise, settings.sampler.coordinates, &settings.terms);
         let sample = chains::read(&need("chains.parquet")?, &layout, model)?;
         Ok(StoredCalibration { dir: dir.to_path_buf(), settings, record, summary, sample })
     }

@@ -237,7 +237,7 @@ fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &
 /// held-out posterior's θ coordinates: a start for its MAP search.
 fn weighted_mean_theta(full: &Full, posterior: &Posterior, positions: &[(usize, usize)], weights: &[f64]) -> Vec<f64> {
     let layout = &posterior.layout;
-    let mut mean = vec![0.0; layout.theta.len()];
+    let mut mean = vec![0.0; layout.fitted.len()];
     for (&(step, chain), w) in positions.iter().zip(weights) {
         let point = full.sample.chains.point(step, chain);
         let si: Vec<f64> = layout.names.iter().map(|n| full.sample.layout.index(n).map_or(1.0, |k| point[k])).collect();
@@ -266,7 +266,9 @@ fn unseen_draw(posterior: &Posterior, x: &[f64], current_a: f64) -> Draw {
     let rhos = &si[l.rho.clone()];
     let sigma = (sigmas.iter().map(|s| s * s).sum::<f64>() / sigmas.len().max(1) as f64).sqrt();
     let rho = if rhos.is_empty() { 0.0 } else { rhos.iter().sum::<f64>() / rhos.len() as f64 };
-    Draw { params: posterior.params_at_current(x, current_a), sigma, rho }
+    let runs = l.sigma.len();
+    let offset_n = (0..runs).map(|j| l.terms(x, j).1).sum::<f64>() / runs.max(1) as f64;
+    Draw { params: posterior.params_at_current(x, current_a), spring_n_per_m: l.terms(x, 0).0, offset_n, sigma, rho }
 }
 
 fn residuals(obs: &[f64], model: &[f64]) -> Vec<f64> {
