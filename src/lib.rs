@@ -17,6 +17,8 @@
 //! * [`posterior`]: the posterior density, its layout, start and samples;
 //! * [`calibrate`]: one calibration, identification to posterior sample;
 //! * [`predict`]: posterior draws through the integrator: bands, coverage;
+//! * [`adequacy`]: where the calibrated law misses a record (residual force
+//!   against displacement and velocity, its memory, reversals);
 //! * [`validate`]: leave-one-out validation;
 //! * [`compare`]: comparisons between calibrations;
 //! * [`store`]: the files of a calibration folder, written and read;
@@ -24,6 +26,7 @@
 //! * [`pipeline`]: the stages of a study as library calls;
 //! * [`cli`]: the command line.
 
+pub mod adequacy;
 pub mod atomic;
 pub mod calibrate;
 pub mod cli;

@@ -178,3 +178,50 @@ fn default_sampler_agrees_with_a_long_differential_evolution_run() {
         assert!(z_mean < 5.0 && z_sd < 5.0, "{name}: mean {:.5e} vs {:.5e} ({z_mean:.1} MCSE), sd {:.3e} vs {:.3e} ({z_sd:.1} se)", p.mean, q.mean, p.sd, q.sd);
     }
 }
+
+/// The model terms for measured records: records with a known force offset
+/// per run and a known gas spring (F += F₀ + k·x, added to the CSV files as
+/// a test engineer's load cell and accumulator would) are calibrated with
+/// both terms on, and the posterior covers the offsets, the spring and the
+/// B-P parameters (3.5 sd: a correct posterior exceeds it with probability
+/// ~5e-4 per parameter, ~5e-3 over the eleven checked).
+#[test]
+fn model_terms_recover_a_known_offset_and_gas_spring() {
+    let (dir, _) = campaign_with(11, 0.0);
+    let (spring, offsets) = (3000.0, [30.0, -20.0, 10.0]);
+    let manifest = std::fs::read_to_string(dir.path().join("campaign.toml")).unwrap();
+    let files: Vec<String> = manifest.lines().filter_map(|l| l.trim().strip_prefix("file = ")).map(|f| f.trim_matches('"').to_string()).collect();
+    assert_eq!(files.len(), 3);
+    for (file, offset) in files.iter().zip(offsets) {
+        let path = dir.path().join(file);
+        let text = std::fs::read_to_string(&path).unwrap();
+        let mut lines = text.lines();
+        let header = lines.next().unwrap().to_string();
+        assert!(header.starts_with("time_s,displacement_m,force_n"), "{header}");
+        let mut out = header + "\n";
+        for line in lines {
+            let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+            let (x, f): (f64, f64) = (cells[1].parse().unwrap(), cells[2].parse().unwrap());
+            cells[2] = format!("{}", f + offset + spring * x);
+            out += &(cells.join(",") + "\n");
+        }
+        std::fs::write(&path, out).unwrap();
+    }
+    let campaign = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
+    let mut settings = quick_settings();
+    settings.terms.force_offset = true;
+    settings.terms.gas_spring = true;
+    let cal = calibrate(&campaign, &settings).unwrap();
+    let names = &cal.start.posterior.layout.names;
+    let mut truth: Vec<(String, f64)> = ["G", "R0", "R1", "D1", "m1", "m2", "n"].iter().map(|n| n.to_string()).zip(Params::reference_1a().to_array()).collect();
+    truth.push(("gas_spring_n_per_m".into(), spring));
+    for (run, offset) in campaign.runs.iter().zip(offsets) {
+        truth.push((format!("force_offset_n_{}", run.id()), offset));
+    }
+    for (name, value) in truth {
+        let i = names.iter().position(|n| *n == name).unwrap_or_else(|| panic!("no {name} in {names:?}"));
+        let p = &cal.diagnostics.coordinates[i];
+        let z = (p.mean - value).abs() / p.sd;
+        assert!(z < 3.5, "{name}: mean {:.4e} sd {:.3e} truth {value:.4e} ({z:.2} sd)", p.mean, p.sd);
+    }
+}

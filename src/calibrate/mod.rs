@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::identify::{identify_current, CurrentIdentification};
 use crate::posterior::map::{self, MapEstimate, StepCheck};
 use crate::model::{Integrator, Scheme};
-use crate::posterior::{Posterior, PosteriorSample};
+use crate::posterior::{NoiseModel, Posterior, PosteriorSample};
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
 pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
 
@@ -27,6 +27,8 @@ pub struct Start {
     pub map: MapEstimate,
     pub step_study: Vec<StepCheck>,
     pub posterior: Posterior,
+    /// What the start found that the user should know (residuals with memory).
+    pub warnings: Vec<String>,
     pub seconds: f64,
 }
 
@@ -128,7 +130,40 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     if settings.sampler.walkers == 0 {
         settings.sampler.walkers = SamplingSettings::walkers_for(posterior.layout.dim());
     }
-    Ok(Start { current_a, settings, identification, map, step_study, posterior, seconds: clock.elapsed().as_secs_f64() })
+    let warnings = memory_warnings(&posterior, &map);
+    for w in &warnings {
+        log(&format!("  warning: {w}"));
+    }
+    Ok(Start { current_a, settings, identification, map, step_study, posterior, warnings, seconds: clock.elapsed().as_secs_f64() })
+}
+
+/// Lag-1 autocorrelation of the MAP residuals above which independent noise
+/// makes intervals too narrow by more than √3 (AR(1) variance inflation).
+pub const MEMORY_WARNING: f64 = 0.5;
+
+/// A warning per run whose MAP residuals are correlated in time while the
+/// noise model takes them as independent.
+fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
+    if posterior.likelihood.noise == NoiseModel::Ar1 {
+        return Vec::new();
+    }
+    let Some(rhos) = map::residual_autocorrelation(posterior, &map.x) else {
+        return Vec::new();
+    };
+    posterior
+        .runs
+        .iter()
+        .zip(rhos)
+        .filter(|(_, rho)| *rho > MEMORY_WARNING)
+        .map(|(run, rho)| {
+            format!(
+                "{}: the MAP residuals have a lag-1 autocorrelation of {rho:.2}, but the noise model takes them as independent; \
+                 parameter intervals are too narrow by about {:.1}× (see the report's model adequacy section)",
+                run.id,
+                ((1.0 + rho.min(0.999)) / (1.0 - rho.min(0.999))).sqrt()
+            )
+        })
+        .collect()
 }
 
 /// Samples the posterior from `start`: from walkers around the MAP, or from

@@ -122,9 +122,13 @@ fn calibration_summary(cal: &Calibration) {
         );
     }
     if dg.warnings.is_empty() {
-        println!("diagnostics: R̂ < 1.01, ESS ≥ {:.0}, chains longer than 10 τ, no stuck walkers", cal.start.settings.sampler.min_ess);
+        println!(
+            "diagnostics: R̂ < 1.01, ESS ≥ {:.0}, chains longer than {} τ, no stuck walkers",
+            cal.start.settings.sampler.min_ess,
+            crate::sampler::diagnostics::MIN_TAU_MULTIPLE
+        );
     }
-    for w in &dg.warnings {
+    for w in dg.warnings.iter().chain(&cal.start.warnings) {
         println!("warning: {w}");
     }
     println!(

@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::{Event, Pipeline, PredictOptions};
+use crate::adequacy::{self, AdequacyRow};
 use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::posterior::{RecordPart, RunData};
@@ -28,8 +29,8 @@ pub struct LeaveOneOut {
 impl Pipeline<'_> {
     /// Posterior draws of `cal` through the integrator along every run of
     /// `campaign` that it should predict (its own runs; every run for a
-    /// current law, seen or not): `bands.parquet`, `coverage.parquet` and
-    /// `prediction.toml` into `out`.
+    /// current law, seen or not): `bands.parquet`, `coverage.parquet`,
+    /// `adequacy.parquet` and `prediction.toml` into `out`.
     pub fn predict(&mut self, cal: &StoredCalibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
         if options.draws == 0 || options.replicates == 0 {
             return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
@@ -53,6 +54,9 @@ impl Pipeline<'_> {
         std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
         store::bands::write(&out.join("bands.parquet"), &bands)?;
         store::coverage::write(&out.join("coverage.parquet"), &coverage)?;
+        let geometry = &campaign.geometry;
+        let adequacy: Vec<AdequacyRow> = bands.iter().map(|b| adequacy::assess(b, geometry.area_m2, geometry.gap_m)).collect();
+        store::adequacy::write(&out.join("adequacy.parquet"), &adequacy)?;
         let record = PredictionRecord {
             mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
             command: command_line(),

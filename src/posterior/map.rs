@@ -229,6 +229,22 @@ fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
     Some(full)
 }
 
+/// Lag-1 autocorrelation of every run's residuals at `x` (`None` where an
+/// integration fails): what tells independent noise from a misfit with memory.
+pub fn residual_autocorrelation(post: &Posterior, x: &[f64]) -> Option<Vec<f64>> {
+    let res = residuals_many(post, &[x.to_vec()]).pop()??;
+    Some(
+        res.iter()
+            .map(|r| {
+                let mean = r.iter().sum::<f64>() / r.len().max(1) as f64;
+                let num: f64 = r.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
+                let den: f64 = r.iter().map(|v| (v - mean).powi(2)).sum();
+                num / den
+            })
+            .collect(),
+    )
+}
+
 /// The best MAP from several starts (θ coordinates), by log-density.
 pub fn best_map(post: &Posterior, starts: &[Vec<f64>]) -> Option<MapEstimate> {
     starts

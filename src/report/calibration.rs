@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::html::{esc, num, Mark, Page};
-use super::{figures, Figures};
+use super::{adequacy, figures, Figures};
 use crate::atomic;
 use crate::data::{current_tag, Campaign};
 use crate::error::{Error, Result};
@@ -64,10 +64,11 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
     page.section("diagnostics", "Diagnostics");
     let rows: Vec<Vec<String>> = checks.iter().map(|(what, mark, detail)| vec![esc(what), mark.html().into(), esc(detail)]).collect();
     page.table(&["check", "", "measured"], &rows);
-    for w in &r.cal.record.warnings {
+    for w in r.cal.record.warnings.iter().chain(&r.cal.record.model_warnings) {
         page.note(w);
     }
     coverage_section(&mut page, r);
+    adequacy::section(&mut page, dir, r.bands, &r.campaign.geometry)?;
     validation_section(&mut page, r, &loo_figs)?;
     figures_section(&mut page, r.cal, &figs)?;
     reproduce_section(&mut page, r);
@@ -346,6 +347,11 @@ fn verdicts(cal: &StoredCalibration, coverage: &[CoverageRow]) -> Vec<(String, M
         (format!("bulk and tail ESS ≥ {min_ess:.0}"), Mark::of(min_bulk >= min_ess && min_tail >= min_ess), format!("smallest bulk {min_bulk:.0}, tail {min_tail:.0}")),
         (format!("chains longer than {MIN_TAU_MULTIPLE} τ after burn-in"), Mark::of(kept >= MIN_TAU_MULTIPLE * tau), format!("{kept:.0} steps, τ_max {tau:.1} ({:.0} τ)", kept / tau)),
         ("no sampler warnings (stuck walkers …)".to_string(), Mark::of(cal.record.warnings.is_empty()), format!("{} warning(s)", cal.record.warnings.len())),
+        (
+            "residuals as independent as the noise model assumes (MAP lag-1 autocorrelation ≤ 0.5)".to_string(),
+            Mark::of(cal.record.model_warnings.is_empty()),
+            format!("{} run(s) with memory: see Model adequacy", cal.record.model_warnings.len()),
+        ),
     ];
     if let Some(last) = cal.record.step_study.last() {
         let limit = step_shift_limit(cal.settings.integrator.extrapolate);

@@ -4,9 +4,11 @@
 //! * [`calibration`]: the uncertainty report of one calibration;
 //! * [`comparison`]: the report comparing calibrations;
 //! * [`identification`]: the paper's Figs. 1–5;
+//! * [`adequacy`]: the report's section on where the law misses the records;
 //! * [`figures`]: the figures of a calibration report;
 //! * [`html`]: the page writer.
 
+pub mod adequacy;
 pub mod calibration;
 pub mod comparison;
 pub mod figures;

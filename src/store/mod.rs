@@ -10,12 +10,14 @@
 //! | `calibration.toml`, `config.toml` | [`record`] |
 //! | `bands.parquet`, `loo_bands.parquet` | [`bands`] |
 //! | `coverage.parquet`, `loo.parquet` | [`coverage`] |
+//! | `adequacy.parquet` | [`adequacy`] |
 //! | `prediction.toml` | [`prediction`] |
 //! | `comparison.parquet`, `differences.parquet` | [`comparison`] |
 //!
 //! [`folder`] opens a whole calibration folder; [`parquet`] holds the
 //! table helpers.
 
+pub mod adequacy;
 pub mod bands;
 pub mod chains;
 pub mod comparison;

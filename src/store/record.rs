@@ -56,7 +56,11 @@ pub struct CalibrationRecord {
     /// parameter: what the calibration's cost bought.
     #[serde(default)]
     pub ess_bulk_per_second: BTreeMap<String, f64>,
+    /// The sampler's warnings (convergence, stuck walkers).
     pub warnings: Vec<String>,
+    /// What the start found about the model's fit (residuals with memory).
+    #[serde(default)]
+    pub model_warnings: Vec<String>,
 }
 
 impl CalibrationRecord {
@@ -98,6 +102,7 @@ impl CalibrationRecord {
             seconds_sampling: cal.sampling_seconds,
             ess_bulk_per_second: names.iter().zip(&cal.diagnostics.coordinates).map(|(n, d)| (n.clone(), d.ess_bulk / cal.seconds())).collect(),
             warnings: cal.diagnostics.warnings.clone(),
+            model_warnings: cal.start.warnings.clone(),
         }
     }
 
