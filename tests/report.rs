@@ -25,7 +25,7 @@ fn virtual_campaign(dir: &Path) -> PathBuf {
     dir.join("campaign.toml")
 }
 
-const SECTIONS: [&str; 8] = ["campaign", "identification", "posterior", "diagnostics", "coverage", "validation", "figures", "reproduce"];
+const SECTIONS: [&str; 9] = ["campaign", "identification", "posterior", "diagnostics", "coverage", "adequacy", "validation", "figures", "reproduce"];
 
 #[test]
 fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
@@ -101,6 +101,44 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     let again = read_parquet(&copy.path().join("bands.parquet")).unwrap();
     let first = read_parquet(&dir.join("bands.parquet")).unwrap();
     assert!(again.equals(&first), "same seed, one thread: same bands");
+
+    // records of the model with white noise: the adequacy table finds no
+    // memory (lag-1 autocorrelation of white noise from ≥ 300 samples has
+    // sd ≤ 0.06; 0.3 is five of them) and no memory warning is written
+    let path = dir.join("adequacy.parquet");
+    let adequacy = read_parquet(&path).unwrap();
+    for rho in f64_column(&adequacy, "lag1_autocorrelation", &path).unwrap() {
+        assert!(rho.abs() < 0.3, "lag-1 {rho}");
+    }
+    assert!(!html.contains("Memory: the residuals are correlated"));
+
+    // a later test of the same damper (a new noise realisation): every run
+    // is new to the calibration, and its band holds 90–99 % of each
+    let later = tempfile::tempdir().unwrap();
+    let settings = SynthSettings { currents_a: vec![1.0], cycles: 1.0, rate_hz: 2000.0, seed: 99, ..SynthSettings::default() };
+    write_campaign(&settings, later.path()).unwrap();
+    let other = later.path().join("campaign.toml");
+    let o = mrbp(&["predict", dir.to_str().unwrap(), "--campaign", other.to_str().unwrap(), "--draws", "200"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let on = dir.join("on-rd1005-3-virtual");
+    let path = on.join("coverage.parquet");
+    let cov = read_parquet(&path).unwrap();
+    let inside = f64_column(&cov, "inside_p95", &path).unwrap();
+    let calibrated = f64_column(&cov, "calibrated", &path).unwrap();
+    assert_eq!(inside.len(), 3);
+    assert!(calibrated.iter().all(|c| *c == 0.0), "no run of another campaign counts as seen");
+    assert!(inside.iter().all(|s| (0.90..=0.99).contains(s)), "{inside:?}");
+    let report = std::fs::read_to_string(on.join("report.html")).unwrap();
+    assert!(report.contains("id=\"adequacy\"") && report.contains("never saw"));
+
+    // a per-current calibration does not predict another current
+    let half = tempfile::tempdir().unwrap();
+    let settings = SynthSettings { currents_a: vec![0.5], cycles: 1.0, rate_hz: 2000.0, ..SynthSettings::default() };
+    write_campaign(&settings, half.path()).unwrap();
+    let other = half.path().join("campaign.toml");
+    let o = mrbp(&["predict", dir.to_str().unwrap(), "--campaign", other.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("no run at 1 A"), "{}", text(&o));
 }
 
 /// Opens the report in headless Chromium (scripts/browser_check.mjs). CI

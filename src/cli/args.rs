@@ -256,7 +256,13 @@ impl BandOptions {
 pub struct PredictArgs {
     /// A calibration folder (of `mrbp sample` or `mrbp run`)
     pub dir: PathBuf,
-    /// Where to write the bands (default: DIR)
+    /// Predict the runs of this campaign instead of the calibration's own
+    /// (another excitation, a later test, an unseen current for a current
+    /// law), with a report of their coverage and adequacy
+    #[arg(long, value_name = "MANIFEST")]
+    pub campaign: Option<PathBuf>,
+    /// Where to write the bands (default: DIR, or DIR/on-<campaign name>
+    /// with --campaign)
     #[arg(long)]
     pub out: Option<PathBuf>,
     #[command(flatten)]

@@ -67,8 +67,17 @@ fn dispatch(cli: Cli) -> Result<()> {
         }
         Some(Command::Predict(args)) => {
             let cal = crate::store::StoredCalibration::open(&args.dir)?;
-            let campaign = cal.full_campaign()?;
-            pipeline.predict(&cal, &campaign, args.out.as_deref().unwrap_or(&args.dir), &args.options.options()).map(drop)
+            match &args.campaign {
+                Some(manifest) => {
+                    let campaign = Campaign::load(manifest)?;
+                    let out = args.out.clone().unwrap_or_else(|| args.dir.join(format!("on-{}", campaign.name)));
+                    pipeline.predict_campaign(&cal, &campaign, &out, &args.options.options()).map(drop)
+                }
+                None => {
+                    let campaign = cal.full_campaign()?;
+                    pipeline.predict(&cal, &campaign, args.out.as_deref().unwrap_or(&args.dir), &args.options.options()).map(drop)
+                }
+            }
         }
         Some(Command::Report(args)) => {
             let predict = args.predict.options();

@@ -5,11 +5,11 @@ use std::time::Instant;
 
 use super::{Event, Pipeline, PredictOptions};
 use crate::adequacy::{self, AdequacyRow};
-use crate::data::Campaign;
+use crate::data::{same_current, Campaign, Run};
 use crate::error::{Error, Result};
-use crate::posterior::{RecordPart, RunData};
+use crate::posterior::{Draw, RecordPart, RunData};
 use crate::predict::{predict_run, CoverageRow, RunBands};
-use crate::report::{self, CalibrationReport};
+use crate::report::{self, CalibrationReport, PredictionReport};
 use crate::store::{self, command_line, PredictionRecord, StoredCalibration};
 use crate::validate::{leave_one_out, Full, LooRow, LooSettings};
 
@@ -32,11 +32,55 @@ impl Pipeline<'_> {
     /// current law, seen or not): `bands.parquet`, `coverage.parquet`,
     /// `adequacy.parquet` and `prediction.toml` into `out`.
     pub fn predict(&mut self, cal: &StoredCalibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
+        let campaign = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
+        self.predict_runs(cal, &campaign, &|run| cal.record.runs.iter().any(|r| r == run.id()), out, options)
+    }
+
+    /// Posterior draws of `cal` along the runs of another campaign — another
+    /// excitation, a later test of the same damper, a current the
+    /// calibration never saw (a current law's): bands, coverage, adequacy
+    /// and a report into `out`. No run counts as seen unless `campaign` is
+    /// the calibration's own manifest. A per-current calibration predicts
+    /// only the runs at its current.
+    pub fn predict_campaign(&mut self, cal: &StoredCalibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<(PathBuf, Prediction)> {
+        let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+        let own = canonical(&campaign.manifest_path) == canonical(Path::new(&cal.record.manifest));
+        let runs = if cal.is_current_law() {
+            let (lo, hi) = cal.record.currents.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)));
+            for run in campaign.runs.iter().filter(|r| r.spec.current_a < lo - 1e-9 || r.spec.current_a > hi + 1e-9) {
+                self.note(&format!("{}: {} A is outside the calibrated currents {lo}–{hi} A: the current law extrapolates", run.id(), run.spec.current_a));
+            }
+            campaign.clone()
+        } else {
+            let at = cal.record.current_a;
+            let kept = campaign.filtered(|r| same_current(r.spec.current_a, at));
+            if kept.runs.is_empty() {
+                return Err(Error::Usage(format!(
+                    "{} has no run at {at} A, the current of the calibration in {}; a current law (mrbp sample --model current-law) predicts other currents",
+                    campaign.manifest_path.display(),
+                    cal.dir.display()
+                )));
+            }
+            let skipped = campaign.runs.len() - kept.runs.len();
+            if skipped > 0 {
+                self.note(&format!("{skipped} run(s) of {} at other currents than {at} A skipped: a per-current calibration does not predict them", campaign.name));
+            }
+            kept
+        };
+        let prediction = self.predict_runs(cal, &runs, &|run| own && cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
+        let path = report::prediction::write(&PredictionReport { cal, campaign: &runs, dir: out, prediction: &prediction })?;
+        self.emit(Event::Wrote(&path));
+        Ok((path, prediction))
+    }
+
+    /// Bands, coverage and adequacy of `campaign`'s runs into `out`; `seen`
+    /// tells the runs the calibration saw (their own noise level and force
+    /// offset) from those it did not (the others' typical ones).
+    fn predict_runs(&mut self, cal: &StoredCalibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, out: &Path, options: &PredictOptions) -> Result<Prediction> {
         if options.draws == 0 || options.replicates == 0 {
             return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
         }
         let clock = Instant::now();
-        let campaign = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
         let positions = cal.draw_positions(options.draws);
         let settings = cal.predict_settings(options.replicates, options.seed);
         let bar = self.bar((positions.len() * campaign.runs.len()) as u64);
@@ -44,8 +88,12 @@ impl Pipeline<'_> {
         let mut coverage = Vec::new();
         for (j, run) in campaign.runs.iter().enumerate() {
             let data = RunData::from_run(run, RecordPart::WholeRecord, cal.settings.likelihood.smooth_strain_ms);
-            let draws = cal.sample.draws(&positions, run.id(), run.spec.current_a);
-            let calibrated = cal.record.runs.iter().any(|r| r == run.id());
+            let calibrated = seen(run);
+            let (id, current) = (run.id(), run.spec.current_a);
+            let draws: Vec<Draw> = match calibrated {
+                true => cal.sample.draws(&positions, id, current),
+                false => positions.iter().map(|&(s, c)| cal.sample.draw_without(s, c, id, current)).collect(),
+            };
             let p = predict_run(run, &data, j, &draws, &settings, calibrated, &|| bar.inc(1))?;
             bands.push(p.bands);
             coverage.push(p.coverage);

@@ -311,7 +311,7 @@ fn coverage_ok(r: &CoverageRow, same_current: bool) -> bool {
     }
 }
 
-fn coverage_table(page: &mut Page, rows: &[CoverageRow], leave_one_out: bool) {
+pub(super) fn coverage_table(page: &mut Page, rows: &[CoverageRow], leave_one_out: bool) {
     let rows: Vec<Vec<String>> = rows
         .iter()
         .map(|r| {

@@ -3,6 +3,7 @@
 //!
 //! * [`calibration`]: the uncertainty report of one calibration;
 //! * [`comparison`]: the report comparing calibrations;
+//! * [`prediction`]: the report of a calibration predicting another campaign;
 //! * [`identification`]: the paper's Figs. 1–5;
 //! * [`adequacy`]: the report's section on where the law misses the records;
 //! * [`figures`]: the figures of a calibration report;
@@ -14,8 +15,10 @@ pub mod comparison;
 pub mod figures;
 pub mod html;
 pub mod identification;
+pub mod prediction;
 
 pub use calibration::{CalibrationReport, COVERAGE_OK, HELD_OUT_OK};
+pub use prediction::PredictionReport;
 
 /// Figures written so far: file stem and caption, in report order.
 #[derive(Default)]
