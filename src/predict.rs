@@ -19,6 +19,7 @@ use crate::model::{Integrator, Params, LANES};
 use crate::posterior::{Draw, LikelihoodSettings, NoiseModel, RunData};
 use crate::rng;
 use crate::sampler::quantile_sorted;
+use statrs::function::gamma::ln_gamma;
 
 /// How the bands are computed.
 #[derive(Clone, Copy, Debug)]
@@ -55,6 +56,10 @@ pub struct Bands {
     /// Draws used, and draws whose integration failed (left out).
     pub draws: usize,
     pub failed: usize,
+    /// Log pointwise predictive density of the record, Σ_k ln mean_d
+    /// p(τ_obs,k | draw d), over the samples after the first (nat): the
+    /// score of held-out predictions (higher is better).
+    pub lppd: f64,
 }
 
 /// How well the bands hold the observations of one run (samples after the
@@ -68,6 +73,8 @@ pub struct Coverage {
     pub inside_model: f64,
     /// Root-mean-square of τ_obs − q50 (Pa).
     pub rmse_median: f64,
+    /// The bands' log pointwise predictive density (nat).
+    pub lppd: f64,
 }
 
 impl Bands {
@@ -84,6 +91,7 @@ impl Bands {
             inside_predictive: inside_p as f64 / n as f64,
             inside_model: inside_m as f64 / n as f64,
             rmse_median: (sq / n as f64).sqrt(),
+            lppd: self.lppd,
         }
     }
 }
@@ -142,10 +150,14 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
     let mut predictive = [(); 2].map(|_| vec![0.0; n]);
     let mut at_k = vec![0.0; kept.len()];
     let mut pred_k = vec![0.0; kept.len() * reps];
+    let mut log_p = vec![0.0; kept.len()];
+    let mut lppd = 0.0;
+    let density = MarginalDensity::new(settings);
     for k in 0..n {
         for (i, (d, path)) in kept.iter().enumerate() {
             let model = path[k] + run.terms_stress(k, d.spring_n_per_m, d.offset_n);
             at_k[i] = model;
+            log_p[i] = density.ln_pdf(run.tau[k] - model, d);
             for r in 0..reps {
                 let z: f64 = match (settings.noise, &student) {
                     (NoiseModel::StudentT, Some(t)) => rng.sample(t),
@@ -161,6 +173,9 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
                 pred_k[i * reps + r] = model + *e;
             }
         }
+        if k > 0 && run.tau[k].is_finite() {
+            lppd += log_mean_exp(&log_p);
+        }
         at_k.sort_unstable_by(f64::total_cmp);
         pred_k.sort_unstable_by(f64::total_cmp);
         for (band, p) in model.iter_mut().zip(MODEL_PROBS) {
@@ -170,7 +185,45 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
             band[k] = quantile_sorted(&pred_k, p);
         }
     }
-    Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed })
+    Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed, lppd })
+}
+
+/// The density of one observation's residual under a draw's noise model,
+/// marginally (AR(1): its stationary spread σ/√(1 − ρ²)).
+struct MarginalDensity {
+    noise: NoiseModel,
+    nu: f64,
+    /// ln Γ((ν+1)/2) − ln Γ(ν/2) − ½ ln(νπ), the Student-t constant.
+    t_const: f64,
+}
+
+impl MarginalDensity {
+    fn new(settings: &PredictSettings) -> Self {
+        let nu = settings.student_nu;
+        let t_const = ln_gamma(0.5 * (nu + 1.0)) - ln_gamma(0.5 * nu) - 0.5 * (nu * std::f64::consts::PI).ln();
+        MarginalDensity { noise: settings.noise, nu, t_const }
+    }
+
+    fn ln_pdf(&self, r: f64, d: &Draw) -> f64 {
+        const HALF_LN_2PI: f64 = 0.918_938_533_204_672_7;
+        match self.noise {
+            NoiseModel::Gaussian => -HALF_LN_2PI - d.sigma.ln() - 0.5 * (r / d.sigma).powi(2),
+            NoiseModel::Ar1 => {
+                let s = d.sigma / (1.0 - d.rho * d.rho).max(1e-12).sqrt();
+                -HALF_LN_2PI - s.ln() - 0.5 * (r / s).powi(2)
+            }
+            NoiseModel::StudentT => self.t_const - d.sigma.ln() - 0.5 * (self.nu + 1.0) * (r * r / (self.nu * d.sigma * d.sigma)).ln_1p(),
+        }
+    }
+}
+
+/// ln of the mean of exp(v), without overflow.
+fn log_mean_exp(v: &[f64]) -> f64 {
+    let m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if !m.is_finite() {
+        return m;
+    }
+    m + (v.iter().map(|x| (x - m).exp()).sum::<f64>() / v.len() as f64).ln()
 }
 
 /// One run's bands with the record they describe: what `bands.parquet`
@@ -226,6 +279,13 @@ pub struct CoverageRow {
     /// Whether the calibration saw this run (false: a true prediction).
     #[serde(default = "yes")]
     pub calibrated: bool,
+    /// Log pointwise predictive density of the record (nat; see [`Bands`]).
+    #[serde(default = "not_known")]
+    pub lppd: f64,
+}
+
+fn not_known() -> f64 {
+    f64::NAN
 }
 
 fn yes() -> bool {
@@ -244,6 +304,7 @@ impl CoverageRow {
             draws: bands.draws,
             failed_draws: bands.failed,
             calibrated,
+            lppd: coverage.lppd,
         }
     }
 }
@@ -304,6 +365,10 @@ mod tests {
             assert!((b.predictive[1][k] - (truth[k] + 1.96 * sigma)).abs() < 0.2 * sigma, "k {k}");
         }
         assert_eq!((b.draws, b.failed), (40, 0));
+        // identical draws: the lppd is the Gaussian log-likelihood of the
+        // record (zeros) about the trajectory, summed by hand
+        let by_hand: f64 = truth[1..].iter().map(|m| -0.5 * (2.0 * std::f64::consts::PI).ln() - sigma.ln() - 0.5 * (m / sigma).powi(2)).sum();
+        assert!((b.lppd - by_hand).abs() < 1e-9 * by_hand.abs(), "{} vs {by_hand}", b.lppd);
     }
 
     /// AR(1) noise keeps its stationary variance σ²/(1 − ρ²) along the record.
@@ -330,6 +395,7 @@ mod tests {
             predictive: [vec![-1.0; 5], vec![1.0; 5]],
             draws: 1,
             failed: 0,
+            lppd: 0.0,
         };
         let c = b.coverage(&[9.0, 0.5, 2.0, -0.5, -3.0]);
         assert_eq!(c.samples, 4);

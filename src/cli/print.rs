@@ -166,15 +166,16 @@ fn prediction_table(record: &PredictionRecord) {
 
 fn loo_table(rows: &[LooRow], seconds: f64) {
     println!("\nleave-one-out ({seconds:.1} s):");
-    println!("{:<16} {:>12} {:>12} {:>8} {:>10} {:>20} {:>8}", "held out", "in_p95_%", "rmse_q50_pa", "k̂", "k̂_laplace", "held-out posterior", "max_R̂");
+    println!("{:<16} {:>12} {:>12} {:>10} {:>8} {:>10} {:>20} {:>8}", "held out", "in_p95_%", "rmse_q50_pa", "lppd/sample", "k̂", "k̂_laplace", "held-out posterior", "max_R̂");
     for r in rows {
         let c = &r.coverage;
         let or_dash = |v: f64, digits: usize| if v.is_finite() { format!("{v:.digits$}") } else { "–".into() };
         println!(
-            "{:<16} {:>12.1} {:>12.1} {:>8.2} {:>10} {:>20} {:>8}",
+            "{:<16} {:>12.1} {:>12.1} {:>10.3} {:>8.2} {:>10} {:>20} {:>8}",
             c.run,
             100.0 * c.inside_p95,
             c.rmse_q50_pa,
+            c.lppd / c.samples.max(1) as f64,
             r.pareto_k,
             or_dash(r.pareto_k_laplace, 2),
             r.by.label(),

@@ -225,7 +225,7 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
     page.section("validation", "Leave-one-out validation");
     match r.loo {
         Some((rows, _)) => {
-            page.para("Each run predicted by the posterior of the other runs of this calibration only (its noise level taken as the root-mean-square σ of those runs): the honest test of the bands on data the fit has not seen. That posterior is reached by the cheapest way that can be trusted: the full posterior's draws reweighted by Pareto-smoothed importance sampling where the Pareto k̂ of the weights is at most 0.7; else importance sampling from the Laplace approximation of the held-out posterior, if its k̂ is at most 0.7; else ensemble MCMC of the held-out posterior.");
+            page.para("Each run predicted by the posterior of the other runs of this calibration only (its noise level taken as the root-mean-square σ of those runs): the honest test of the bands on data the fit has not seen. That posterior is reached by the cheapest way that can be trusted: the full posterior's draws reweighted by Pareto-smoothed importance sampling where the Pareto k̂ of the weights is at most 0.7; else importance sampling from the Laplace approximation of the held-out posterior, if its k̂ is at most 0.7; else ensemble MCMC of the held-out posterior. The log predictive density (mean over the run's samples of ln p(τ_obs | other runs)) scores the held-out prediction as a whole: compare it between model variants (terms, noise models) on the same records; higher is better.");
             let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
             coverage_table(page, &coverage, true);
             let how: Vec<Vec<String>> = rows
@@ -234,6 +234,7 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
                     let or_dash = |v: f64, digits: usize| if v.is_finite() { format!("{v:.digits$}") } else { "–".into() };
                     vec![
                         esc(&r.coverage.run),
+                        or_dash(r.coverage.lppd / r.coverage.samples.max(1) as f64, 3),
                         format!("{:.2}", r.pareto_k),
                         or_dash(r.pareto_k_laplace, 2),
                         r.by.label().into(),
@@ -241,7 +242,7 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
                     ]
                 })
                 .collect();
-            page.table(&["held out", "Pareto k̂ (reweighting)", "Pareto k̂ (Laplace)", "held-out posterior by", "largest R̂"], &how);
+            page.table(&["held out", "log predictive density per sample (nat)", "Pareto k̂ (reweighting)", "Pareto k̂ (Laplace)", "held-out posterior by", "largest R̂"], &how);
             for (stem, caption) in &loo_figs.items {
                 page.figure(&r.cal.dir.join("loo").join(format!("{stem}.png")), &format!("Held out: {caption}"))?;
             }

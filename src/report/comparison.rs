@@ -4,7 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use super::html::{esc, num, Mark, Page};
+use super::adequacy as report_adequacy;
 use super::Figures;
+use crate::adequacy::{AdequacyRow, Excitation};
 use crate::atomic;
 use crate::compare::Comparison;
 use crate::data::loading_branches;
@@ -62,6 +64,7 @@ pub fn write(out: &Path, entries: &[Entry], comparison: &Comparison, rpm: Option
     calibrations_section(&mut page, entries);
     parameters_section(&mut page, entries);
     differences_section(&mut page, comparison);
+    adequacy_section(&mut page, entries);
     page.section("current-law", "Current law and held-out currents");
     law_section(&mut page, entries);
     for (stem, caption) in figs.items.iter().filter(|f| f.0.starts_with("held_out")) {
@@ -199,6 +202,58 @@ fn law_section(page: &mut Page, entries: &[Entry]) {
             &table,
         );
     }
+}
+
+/// Excitations closer than this in amplitude and frequency (relative) are
+/// the same test at different currents.
+const SAME_EXCITATION: f64 = 0.1;
+
+/// The misfit of every per-current calibration, as a matrix of excitation
+/// (rows) by current (columns): where across the test programme the law
+/// describes the damper and where it does not.
+fn adequacy_section(page: &mut Page, entries: &[Entry]) {
+    let mut cells: Vec<(f64, AdequacyRow)> = Vec::new();
+    for e in entries.iter().filter(|e| !e.is_law()) {
+        if let (Some(bands), Some(geometry)) = (&e.bands, e.cal.geometry()) {
+            cells.extend(report_adequacy::assess(bands, &geometry).into_iter().map(|a| (e.cal.record.current_a, a)));
+        }
+    }
+    if cells.is_empty() {
+        return;
+    }
+    page.section("adequacy", "Model adequacy by excitation and current");
+    page.para(
+        "Each cell: the residual force RMS as a share of the peak force, the lag-1 autocorrelation of the residual, and the share of the \
+         record inside the 95 % predictive band — for the run of that excitation at that current. Each calibration's own report says more.",
+    );
+    let close = |a: f64, b: f64| (a - b).abs() <= SAME_EXCITATION * a.abs().max(b.abs());
+    let mut groups: Vec<Excitation> = Vec::new();
+    for (_, a) in &cells {
+        let e = a.excitation;
+        if !groups.iter().any(|g| close(g.amplitude_m, e.amplitude_m) && (close(g.frequency_hz, e.frequency_hz) || !(g.frequency_hz.is_finite() || e.frequency_hz.is_finite()))) {
+            groups.push(e);
+        }
+    }
+    groups.sort_by(|a, b| a.frequency_hz.total_cmp(&b.frequency_hz).then(b.amplitude_m.total_cmp(&a.amplitude_m)));
+    let mut currents: Vec<f64> = cells.iter().map(|c| c.0).collect();
+    currents.sort_by(f64::total_cmp);
+    currents.dedup();
+    let rows: Vec<Vec<String>> = groups
+        .iter()
+        .map(|g| {
+            let mut row = vec![esc(&g.label())];
+            for &c in &currents {
+                let found = cells.iter().find(|(cur, a)| *cur == c && close(g.amplitude_m, a.excitation.amplitude_m) && (close(g.frequency_hz, a.excitation.frequency_hz) || !g.frequency_hz.is_finite()));
+                row.push(found.map_or("–".into(), |(_, a)| {
+                    format!("{:.1} % · ρ {:.2} · {:.0} %", 100.0 * a.residual_rms_n / a.peak_force_n, a.lag1_autocorrelation, 100.0 * a.inside_p95)
+                }));
+            }
+            row
+        })
+        .collect();
+    let header: Vec<String> = std::iter::once("excitation".to_string()).chain(currents.iter().map(|c| format!("{} A", num(*c, 2)))).collect();
+    let header: Vec<&str> = header.iter().map(String::as_str).collect();
+    page.table(&header, &rows);
 }
 
 /// A forest plot per B-P parameter: each calibration's median and 90 %

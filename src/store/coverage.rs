@@ -24,6 +24,7 @@ fn table(rows: &[CoverageRow]) -> Table {
         .i64("draws", rows.iter().map(|r| r.draws as i64).collect())
         .i64("failed_draws", rows.iter().map(|r| r.failed_draws as i64).collect())
         .bool("calibrated", rows.iter().map(|r| r.calibrated).collect())
+        .f64("lppd", rows.iter().map(|r| r.lppd).collect())
 }
 
 pub fn write_loo(path: &Path, rows: &[LooRow]) -> Result<()> {
@@ -63,6 +64,7 @@ pub fn read(path: &Path) -> Result<Vec<CoverageRow>> {
     let run = str_column(&df, "run", path)?;
     let col = |n: &str| f64_column(&df, n, path);
     let calibrated = f64_column(&df, "calibrated", path).unwrap_or_else(|_| vec![1.0; run.len()]);
+    let lppd = f64_column(&df, "lppd", path).unwrap_or_else(|_| vec![f64::NAN; run.len()]);
     let (cur, samples, p, q, rmse, draws, failed) =
         (col("current_a")?, col("samples")?, col("inside_p95")?, col("inside_q95")?, col("rmse_q50_pa")?, col("draws")?, col("failed_draws")?);
     Ok((0..run.len())
@@ -76,6 +78,7 @@ pub fn read(path: &Path) -> Result<Vec<CoverageRow>> {
             draws: draws[i] as usize,
             failed_draws: failed[i] as usize,
             calibrated: calibrated[i] != 0.0,
+            lppd: lppd[i],
         })
         .collect())
 }

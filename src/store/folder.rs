@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use super::record::{read_config, CalibrationRecord};
 use super::{chains, summary};
 use crate::calibrate::{Calibration, CalibrationSettings};
-use crate::data::Campaign;
+use crate::data::{Campaign, Geometry, Manifest};
 use crate::error::{Error, Result};
 use crate::posterior::{Layout, PosteriorSample, SummaryRow};
 use crate::predict::PredictSettings;
@@ -88,6 +88,12 @@ impl StoredCalibration {
             return Err(Error::input(&manifest, format!("does not hold every run of the calibration in {}: {:?}", self.dir.display(), self.record.runs)));
         }
         Ok(campaign)
+    }
+
+    /// The campaign's geometry: from calibration.toml, or (folders written
+    /// before it was stored there) from the manifest it names.
+    pub fn geometry(&self) -> Option<Geometry> {
+        self.record.geometry.or_else(|| Manifest::read(Path::new(&self.record.manifest)).ok().map(|m| m.geometry))
     }
 
     pub fn is_current_law(&self) -> bool {

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::atomic;
 use crate::calibrate::{Calibration, CalibrationSettings};
 use crate::error::{Error, Result};
+use crate::data::Geometry;
 use crate::model::PARAM_NAMES;
 use crate::posterior::{NoiseModel, RecordPart};
 
@@ -61,6 +62,9 @@ pub struct CalibrationRecord {
     /// What the start found about the model's fit (residuals with memory).
     #[serde(default)]
     pub model_warnings: Vec<String>,
+    /// The campaign's geometry (A, h): what turns the bands into forces.
+    #[serde(default)]
+    pub geometry: Option<Geometry>,
 }
 
 impl CalibrationRecord {
@@ -103,6 +107,7 @@ impl CalibrationRecord {
             ess_bulk_per_second: names.iter().zip(&cal.diagnostics.coordinates).map(|(n, d)| (n.clone(), d.ess_bulk / cal.seconds())).collect(),
             warnings: cal.diagnostics.warnings.clone(),
             model_warnings: cal.start.warnings.clone(),
+            geometry: Some(cal.campaign.geometry),
         }
     }
 

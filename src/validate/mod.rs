@@ -127,13 +127,18 @@ struct Target<'a> {
 }
 
 impl Target<'_> {
-    /// ln 1/p(y_j | θ) for each model path (−∞ where it failed).
-    fn log_weights(&self, paths: &[Option<Vec<f64>>], noise: NoiseModel, nu: f64) -> Vec<f64> {
+    /// ln 1/p(y_j | θ) for each model path with its draw's model terms for
+    /// this run (−∞ where the path failed).
+    fn log_weights(&self, paths: &[Option<Vec<f64>>], draws: &[Draw], noise: NoiseModel, nu: f64) -> Vec<f64> {
         let n = self.compared;
         paths
             .iter()
-            .map(|p| match p {
-                Some(p) => -profile_log_likelihood(noise, &residuals(&self.data.tau[..n], &p[..n]), nu),
+            .zip(draws)
+            .map(|(p, d)| match p {
+                Some(p) => {
+                    let model: Vec<f64> = (0..n).map(|k| p[k] + self.data.terms_stress(k, d.spring_n_per_m, d.offset_n)).collect();
+                    -profile_log_likelihood(noise, &residuals(&self.data.tau[..n], &model), nu)
+                }
                 None => f64::NEG_INFINITY,
             })
             .collect()
@@ -167,7 +172,9 @@ fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &
     let positions = full.sample.positions(full.burn_in, 1, loo.weighted_draws);
     let params: Vec<Params> = positions.iter().map(|&(s, c)| full.sample.params_at(s, c, current)).collect();
     let paths = model_paths(&target.data, &params, &integrator, &|| {});
-    let reweighted = psis::smooth(&target.log_weights(&paths, lik.noise, lik.student_nu));
+    // the run's own force offset (and the spring) in each full-posterior draw
+    let own: Vec<Draw> = positions.iter().map(|&(s, c)| full.sample.draw(s, c, left_out.id(), current)).collect();
+    let reweighted = psis::smooth(&target.log_weights(&paths, &own, lik.noise, lik.student_nu));
     let mut row = LooRow { coverage: CoverageRow::default(), pareto_k: reweighted.k_hat, pareto_k_laplace: f64::NAN, by: HeldOutBy::Reweighting, max_rhat: f64::NAN };
     if reweighted.k_hat <= psis::K_THRESHOLD {
         let draws: Vec<Draw> = positions.iter().map(|&(s, c)| full.sample.draw_without(s, c, left_out.id(), current)).collect();
