@@ -91,7 +91,11 @@ fn dispatch(cli: Cli) -> Result<()> {
 }
 
 /// `mrbp` alone, in the project folder: the whole job on the bundled
-/// campaign, with leave-one-out, into `reports/<campaign name>`. Anywhere
+/// campaigns — the virtual paper replica (every current, leave-one-out and
+/// the comparison) into `reports/<its name>`, then the measured damper at
+/// 1 A (the B-P law alone, the variant that predicts held-out runs best;
+/// docs/real-data.md) into `reports/utfsm-mts`. Its leave-one-out, which
+/// refits most runs (half a minute), is left to `--leave-one-out`. Anywhere
 /// else it prints the help: the bundled data lives in the project folder.
 fn bundled_job(pipeline: &mut Pipeline) -> Result<()> {
     let manifest = PathBuf::from("data/campaign.toml");
@@ -99,26 +103,39 @@ fn bundled_job(pipeline: &mut Pipeline) -> Result<()> {
         Cli::command().print_help().map_err(|e| Error::output("stdout", e))?;
         return Err(Error::Usage("no command given (and no data/campaign.toml here: the bundled job runs in the mrbp project folder)".into()));
     }
-    let name = Manifest::read(&manifest)?.name;
-    // the current-law study takes another ~15 min here: `just law` (README)
-    let options = RunOptions {
-        sample: args::SampleOptions::default().request()?,
-        predict: Default::default(),
-        leave_one_out: Some(args::ValidationOptions::default().loo_steps),
-        current_law: false,
+    let clock = std::time::Instant::now();
+    // the current-law studies take minutes more: `just law` (README)
+    let job = |sample: args::SampleOptions, leave_one_out: bool| -> Result<RunOptions> {
+        Ok(RunOptions {
+            sample: sample.request()?,
+            predict: Default::default(),
+            leave_one_out: leave_one_out.then_some(args::ValidationOptions::default().loo_steps),
+            current_law: false,
+        })
     };
-    whole_job(pipeline, &manifest, &Path::new("reports").join(name), &options)
+    let mut reports = pipeline.run(&manifest, &Path::new("reports").join(Manifest::read(&manifest)?.name), &job(Default::default(), true)?)?;
+    let measured = PathBuf::from("data/utfsm-mts/campaign.toml");
+    if measured.exists() {
+        let sample = args::SampleOptions { current: Some(1.0), ..Default::default() };
+        reports.extend(pipeline.run(&measured, &Path::new("reports").join(Manifest::read(&measured)?.name), &job(sample, false)?)?);
+    }
+    print_reports(&reports, clock);
+    Ok(())
 }
 
 fn whole_job(pipeline: &mut Pipeline, manifest: &Path, out: &Path, options: &RunOptions) -> Result<()> {
     let clock = std::time::Instant::now();
     let reports = pipeline.run(manifest, out, options)?;
+    print_reports(&reports, clock);
+    Ok(())
+}
+
+fn print_reports(reports: &[PathBuf], clock: std::time::Instant) {
     println!("\nreports:");
-    for r in &reports {
+    for r in reports {
         println!("  {}", r.display());
     }
     println!("whole job: {:.0} s", clock.elapsed().as_secs_f64());
-    Ok(())
 }
 
 #[cfg(test)]

@@ -46,6 +46,9 @@ pub struct IdentifySettings {
     pub end_share: f64,
     /// Points of τ(γᴵ) used for the eq. 7 fit, log-spaced in γᴵ.
     pub curve_points: usize,
+    /// Half-width (ms) of the local cubic that smooths the strain driving
+    /// the Euler check of the combined estimate (the calibration's default).
+    pub drive_smooth_ms: f64,
 }
 
 impl Default for IdentifySettings {
@@ -57,6 +60,7 @@ impl Default for IdentifySettings {
             offset_strain: 0.002,
             end_share: 0.15,
             curve_points: 200,
+            drive_smooth_ms: 2.0,
         }
     }
 }
@@ -381,7 +385,9 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
         let integ = Integrator { max_substeps: 100_000, ..Integrator::default() };
         let mut tau = vec![0.0; sh.len()];
         let init = crate::model::State { tau: sh.initial_tau, w: 0.0 };
-        match integ.run_with(&params, &sh.time, &sh.gamma, init, |k, st| tau[k] = st.tau) {
+        // driven by the strain the calibration uses: smooth, not quantised
+        let gamma = crate::data::smoothed_strain(&sh.time, &sh.gamma, s.drive_smooth_ms);
+        match integ.run_with(&params, &sh.time, &gamma, init, |k, st| tau[k] = st.tau) {
             Ok(_) => {
                 let ss: f64 = tau.iter().zip(&sh.tau).map(|(m, o)| (m - o).powi(2)).sum();
                 euler_rms.push((ss / sh.len() as f64).sqrt());

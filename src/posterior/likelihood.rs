@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use statrs::function::gamma::ln_gamma;
 
-use crate::data::{local_polynomial, Run};
+use crate::data::{smoothed_strain, Run};
 
 /// The residual model of the force record.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -44,7 +44,7 @@ pub enum RecordPart {
 pub struct LikelihoodSettings {
     pub noise: NoiseModel,
     /// Half-width (ms) of the local cubic fit that smooths the measured
-    /// strain before it drives the model, at least [`MIN_SMOOTH_SAMPLES`]
+    /// strain before it drives the model, at least [`crate::data::smooth::MIN_SMOOTH_SAMPLES`]
     /// samples; 0 uses the raw samples. The model turns displacement noise
     /// (and the quantisation of a digital displacement channel) into stress
     /// noise G δγ and biases G (an errors-in-variables effect); a stand's
@@ -74,10 +74,6 @@ impl LikelihoodSettings {
     }
 }
 
-/// The fewest samples on each side of the strain's local cubic fit: on a
-/// record sampled at a few hundred hertz a few milliseconds are one sample,
-/// which smooths nothing.
-pub const MIN_SMOOTH_SAMPLES: usize = 5;
 
 /// One run as the likelihood sees it.
 #[derive(Clone, Debug)]
@@ -108,15 +104,7 @@ impl RunData {
             }
         };
         let sh = &run.shear;
-        let dt = (sh.time[sh.len() - 1] - sh.time[0]) / (sh.len() - 1) as f64;
-        let half_window = if smooth_strain_ms > 0.0 { ((smooth_strain_ms * 1e-3 / dt).round() as usize).max(MIN_SMOOTH_SAMPLES) } else { 0 };
-        let gamma = if half_window >= 2 {
-            let mut g = local_polynomial(&sh.time, &sh.gamma, half_window, 3).0;
-            g[0] = sh.gamma[0]; // the record starts from rest at its reference position
-            g
-        } else {
-            sh.gamma.clone()
-        };
+        let gamma = smoothed_strain(&sh.time, &sh.gamma, smooth_strain_ms);
         RunData {
             id: run.id().to_string(),
             time: sh.time[..end].to_vec(),
