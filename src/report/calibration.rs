@@ -341,12 +341,13 @@ fn verdicts(cal: &StoredCalibration, coverage: &[CoverageRow]) -> Vec<(String, M
     let min_bulk = s.iter().map(|r| r.ess_bulk).fold(f64::NAN, f64::min);
     let min_tail = s.iter().map(|r| r.ess_tail).fold(f64::NAN, f64::min);
     let tau = cal.tau_max();
-    let kept = cal.record.steps.saturating_sub(cal.record.burn_in) as f64;
+    // draws 0..=steps are kept from the burn-in on, as the sampler counts them
+    let kept = (cal.record.steps + 1).saturating_sub(cal.record.burn_in) as f64;
     let min_ess = cal.settings.sampler.min_ess;
     let mut v = vec![
         ("R̂ (rank-normalised split, across ensembles) < 1.01".to_string(), Mark::of(max_rhat < 1.01), format!("largest {max_rhat:.4}")),
         (format!("bulk and tail ESS ≥ {min_ess:.0}"), Mark::of(min_bulk >= min_ess && min_tail >= min_ess), format!("smallest bulk {min_bulk:.0}, tail {min_tail:.0}")),
-        (format!("chains longer than {MIN_TAU_MULTIPLE} τ after burn-in"), Mark::of(kept >= MIN_TAU_MULTIPLE * tau), format!("{kept:.0} steps, τ_max {tau:.1} ({:.0} τ)", kept / tau)),
+        (format!("chains longer than {MIN_TAU_MULTIPLE} τ after burn-in"), Mark::of(kept >= MIN_TAU_MULTIPLE * tau), format!("{kept:.0} steps, τ_max {tau:.2} ({:.1} τ)", kept / tau)),
         ("no sampler warnings (stuck walkers …)".to_string(), Mark::of(cal.record.warnings.is_empty()), format!("{} warning(s)", cal.record.warnings.len())),
         (
             "residuals as independent as the noise model assumes (MAP lag-1 autocorrelation ≤ 0.5)".to_string(),
