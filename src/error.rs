@@ -27,6 +27,9 @@ pub enum Error {
     /// Writing output failed.
     #[error("{}: {message}", .path.display())]
     Output { path: PathBuf, message: String },
+    /// Stopped by Ctrl-C or SIGTERM after saving what can be resumed.
+    #[error("{0}")]
+    Interrupted(String),
 }
 
 fn row_text(row: &Option<usize>) -> String {
@@ -73,11 +76,40 @@ impl Error {
         }
     }
 
-    /// Exit status of the command line: 2 for bad input or usage, 1 otherwise.
+    /// Exit status of the command line: 2 for bad input or usage, 130 when
+    /// interrupted, 1 otherwise.
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Input { .. } | Error::Usage(_) => 2,
             Error::Compute(_) | Error::Output { .. } => 1,
+            Error::Interrupted(_) => crate::interrupt::EXIT_STATUS,
         }
     }
+}
+
+thread_local! {
+    static GUARDED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f`, turning a panic inside it into `None`: for third-party readers
+/// of user files (a damaged Parquet file can make its decoder panic), whose
+/// failure is a bad input, not a crash. While `f` runs, the panic hook of
+/// [`install_panic_hook`] stays silent.
+pub fn guard_foreign<T>(f: impl FnOnce() -> T) -> Option<T> {
+    GUARDED.with(|g| g.set(true));
+    let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).ok();
+    GUARDED.with(|g| g.set(false));
+    out
+}
+
+/// A panic hook that keeps quiet about panics [`guard_foreign`] catches and
+/// otherwise reports the panic as an internal error.
+pub fn install_panic_hook() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !GUARDED.with(|g| g.get()) {
+            eprintln!("mrbp: internal error (please report it with the command and input):");
+            default(info);
+        }
+    }));
 }

@@ -4,9 +4,9 @@
 //! The modules, from the ground floor up (each uses only those above it in
 //! this list; docs/architecture.md says more):
 //!
-//! * [`error`], [`rng`], [`atomic`], [`fit`], [`plot`]: errors and exit
-//!   codes, counter-based random streams, atomic file writing,
-//!   Levenberg-Marquardt fits, figures;
+//! * [`error`], [`rng`], [`atomic`], [`fit`], [`plot`], [`interrupt`]:
+//!   errors and exit codes, counter-based random streams, atomic file
+//!   writing, Levenberg-Marquardt fits, figures, Ctrl-C;
 //! * [`model`]: the B-P law (paper eqs. 3–4), its current law and its Euler
 //!   integrators; knows nothing of data or MCMC;
 //! * [`sampler`]: the ensemble MCMC sampler, generic over a log-density, and
@@ -34,6 +34,7 @@ pub mod compare;
 pub mod data;
 pub mod error;
 pub mod fit;
+pub mod interrupt;
 pub mod identify;
 pub mod model;
 pub mod pipeline;

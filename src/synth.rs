@@ -230,6 +230,7 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
         name: settings.name.clone(),
         geometry: settings.geometry,
         columns: Columns::default(),
+        limits: Default::default(),
         runs,
     };
     let header = "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\

@@ -132,7 +132,7 @@ fn interrupted_sample_resumes_to_the_same_chains() {
     // "killed" after 30 steps: only the checkpoint survives
     let mut first = s.clone();
     first.sampler.steps = 30;
-    let mut saver = Checkpointer { path: path.clone(), every: 10 };
+    let mut saver = Checkpointer { path: path.clone(), every: 10, stop: || false };
     sample(&campaign, start(&campaign, &first, &mut |_| {}).unwrap(), None, &mut [&mut saver]).unwrap();
     let resumed = sample(&campaign, start(&campaign, &s, &mut |_| {}).unwrap(), Some(&path), &mut []).unwrap().chains;
     assert_eq!(resumed, whole);

@@ -272,7 +272,7 @@ fn resumed_run_equals_uninterrupted_run() {
     // "killed" after step 120: only the checkpoint file survives
     {
         let mut first = Sampler::new(&Banana, settings, &init).unwrap();
-        let mut saver = Checkpointer { path: cp.clone(), every: 40 };
+        let mut saver = Checkpointer { path: cp.clone(), every: 40, stop: || false };
         first.run(&RunControl::fixed(120), &mut [&mut saver]).unwrap();
     }
     let mut resumed = Sampler::resume(&Banana, &cp).unwrap();

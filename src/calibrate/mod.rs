@@ -73,6 +73,11 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     let search_scheme = if integ.scheme == SchemeChoice::Auto { Scheme::LinearlyImplicit } else { integ.scheme.scheme() };
     let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
     let posterior = settings.posterior(campaign, base);
+    // the sampler's settings are checked before minutes of MAP search
+    if settings.sampler.walkers != 0 {
+        let s = &settings.sampler;
+        s.sampler(s.walkers, s.seed).check(posterior.layout.dim())?;
+    }
     // the identification may be far off (docs/identification.md): also start
     // from the prior medians and keep the better optimum
     let from_identification: Vec<f64> = model.start(&identification.params, current_a).iter().map(|v| v.ln()).collect();

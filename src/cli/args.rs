@@ -115,6 +115,9 @@ pub struct IdentifyArgs {
     /// Output folder
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace an earlier identification in OUT
+    #[arg(long)]
+    pub force: bool,
     #[command(flatten)]
     pub identify: IdentifyOptions,
 }
@@ -179,9 +182,13 @@ pub struct SampleOptions {
     #[arg(long)]
     pub substeps: Option<u32>,
     /// Continue an interrupted run from OUT/sampler.checkpoint (saved every
-    /// 100 steps); the chains equal those of an uninterrupted run
+    /// 100 steps and at Ctrl-C); the chains equal those of an uninterrupted run
     #[arg(long)]
     pub resume: bool,
+    /// Replace the results of an earlier calibration in OUT (and remove
+    /// what was derived from them)
+    #[arg(long)]
+    pub force: bool,
 }
 
 impl SampleOptions {
@@ -217,7 +224,7 @@ impl SampleOptions {
         if !self.hold_out_current.is_empty() && settings.model != ModelKind::CurrentLaw {
             return Err(Error::Usage("--hold-out-current needs --model current-law".into()));
         }
-        Ok(SampleRequest { settings, current: self.current, hold_out_current: self.hold_out_current.clone(), resume: self.resume })
+        Ok(SampleRequest { settings, current: self.current, hold_out_current: self.hold_out_current.clone(), resume: self.resume, force: self.force })
     }
 }
 

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use clap::{CommandFactory, Parser};
 
-use crate::data::{Campaign, Manifest};
+use crate::data::Manifest;
 use crate::error::{Error, Result};
 use crate::pipeline::{Pipeline, RunOptions};
 use crate::synth;
@@ -17,6 +17,8 @@ pub use args::{Cli, Command};
 /// Runs the command line and returns the process exit status.
 pub fn main() -> i32 {
     let cli = Cli::parse();
+    crate::interrupt::install();
+    crate::error::install_panic_hook();
     match dispatch(cli) {
         Ok(()) => 0,
         Err(e) => {
@@ -57,19 +59,19 @@ fn dispatch(cli: Cli) -> Result<()> {
         }
         Some(Command::Identify(args)) => {
             let settings = args.identify.settings()?;
-            let campaign = Campaign::load(&args.manifest)?;
-            pipeline.identify(&campaign, &args.out, &settings).map(drop)
+            let campaign = pipeline.load(&args.manifest)?;
+            pipeline.identify(&campaign, &args.out, &settings, args.force).map(drop)
         }
         Some(Command::Sample(args)) => {
             let request = args.options.request()?;
-            let campaign = Campaign::load(&args.manifest)?;
+            let campaign = pipeline.load(&args.manifest)?;
             pipeline.sample(&campaign, &args.out, &request).map(drop)
         }
         Some(Command::Predict(args)) => {
             let cal = crate::store::StoredCalibration::open(&args.dir)?;
             match &args.campaign {
                 Some(manifest) => {
-                    let campaign = Campaign::load(manifest)?;
+                    let campaign = pipeline.load(manifest)?;
                     let out = args.out.clone().unwrap_or_else(|| args.dir.join(format!("on-{}", campaign.name)));
                     pipeline.predict_campaign(&cal, &campaign, &out, &args.options.options()).map(drop)
                 }
@@ -113,10 +115,12 @@ fn bundled_job(pipeline: &mut Pipeline) -> Result<()> {
             current_law: false,
         })
     };
-    let mut reports = pipeline.run(&manifest, &Path::new("reports").join(Manifest::read(&manifest)?.name), &job(Default::default(), true)?)?;
+    // the bundled job is the demo: it replaces its own earlier results
+    let replace = args::SampleOptions { force: true, ..Default::default() };
+    let mut reports = pipeline.run(&manifest, &Path::new("reports").join(Manifest::read(&manifest)?.name), &job(replace.clone(), true)?)?;
     let measured = PathBuf::from("data/utfsm-mts/campaign.toml");
     if measured.exists() {
-        let sample = args::SampleOptions { current: Some(1.0), ..Default::default() };
+        let sample = args::SampleOptions { current: Some(1.0), ..replace };
         reports.extend(pipeline.run(&measured, &Path::new("reports").join(Manifest::read(&measured)?.name), &job(sample, false)?)?);
     }
     print_reports(&reports, clock);

@@ -18,9 +18,41 @@ pub struct Manifest {
     pub geometry: Geometry,
     #[serde(default)]
     pub columns: Columns,
+    /// Plausible magnitudes: a value beyond them is an input error.
+    #[serde(default, skip_serializing_if = "Limits::is_default")]
+    pub limits: Limits,
     #[serde(rename = "run", default)]
     pub runs: Vec<RunSpec>,
 }
+
+/// The largest magnitudes a stand record may hold, in SI units after the
+/// column scales (`[limits]` in the manifest). The defaults are far beyond
+/// any damper test (a meganewton, ten metres, ten days, a kiloampere), so a
+/// value past them is a unit or export error, caught with its row.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Limits {
+    pub force_n: f64,
+    pub displacement_m: f64,
+    pub time_s: f64,
+    pub current_a: f64,
+}
+
+impl Limits {
+    fn is_default(&self) -> bool {
+        *self == Limits::default()
+    }
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits { force_n: 1e6, displacement_m: 10.0, time_s: 1e6, current_a: 1e3 }
+    }
+}
+
+/// The file's current column may differ from the manifest's current_a by
+/// this much (A) or this share of it, whichever is larger: sensor ripple.
+const CURRENT_AGREEMENT: (f64, f64) = (0.05, 0.05);
 
 /// Column names in the data files and the factors to SI units.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -84,6 +116,19 @@ impl Run {
     pub fn id(&self) -> &str {
         &self.spec.id
     }
+
+    /// Why the run cannot be identified or calibrated, if it cannot: no
+    /// motion (no loading branch) or no force signal.
+    pub fn unusable(&self) -> Option<String> {
+        let span = |v: &[f64]| v.iter().fold(f64::NEG_INFINITY, |m, x| m.max(*x)) - v.iter().fold(f64::INFINITY, |m, x| m.min(*x));
+        if span(&self.record.displacement) == 0.0 || self.branches.is_empty() {
+            Some(format!("run '{}': the displacement never changes direction or never moves (no loading branch)", self.id()))
+        } else if span(&self.record.force) == 0.0 {
+            Some(format!("run '{}': the force is constant (no force signal)", self.id()))
+        } else {
+            None
+        }
+    }
 }
 
 /// A validated campaign with every record loaded.
@@ -94,6 +139,9 @@ pub struct Campaign {
     pub geometry: Geometry,
     pub columns: Columns,
     pub runs: Vec<Run>,
+    /// What loading noticed but did not refuse (files outside the
+    /// manifest's folder, runs without motion or force).
+    pub notes: Vec<String>,
 }
 
 impl Manifest {
@@ -127,6 +175,10 @@ impl Manifest {
         positive(self.columns.time_scale, "columns.time_scale")?;
         positive(self.columns.displacement_scale, "columns.displacement_scale")?;
         positive(self.columns.force_scale, "columns.force_scale")?;
+        positive(self.limits.force_n, "limits.force_n")?;
+        positive(self.limits.displacement_m, "limits.displacement_m")?;
+        positive(self.limits.time_s, "limits.time_s")?;
+        positive(self.limits.current_a, "limits.current_a")?;
         if self.name.trim().is_empty() {
             return Err(Error::input(path, "name must not be empty"));
         }
@@ -160,6 +212,31 @@ impl Manifest {
     }
 }
 
+/// Whether `file` lies outside the folder `dir` (by its path, after
+/// resolving both where they exist).
+fn outside(dir: &Path, file: &Path) -> bool {
+    let resolve = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let dir = resolve(if dir.as_os_str().is_empty() { Path::new(".") } else { dir });
+    !resolve(file).starts_with(&dir)
+}
+
+/// The file's current column must agree with the manifest's current_a.
+fn check_current(path: &Path, map: &ColumnMap, spec: &RunSpec, current: &[f64]) -> Result<()> {
+    let mut sorted = current.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let tolerance = CURRENT_AGREEMENT.0.max(CURRENT_AGREEMENT.1 * spec.current_a.abs());
+    if (median - spec.current_a).abs() > tolerance {
+        return Err(Error::input_at(
+            path,
+            None,
+            Some(map.current),
+            format!("the file's coil current is {median} A (median), the manifest's current_a for run '{}' is {} A", spec.id, spec.current_a),
+        ));
+    }
+    Ok(())
+}
+
 impl Campaign {
     /// Reads the manifest and every data file it names; the first problem
     /// found is the error.
@@ -174,9 +251,22 @@ impl Campaign {
             current: &c.current,
         };
         let mut runs = Vec::with_capacity(manifest.runs.len());
+        let mut notes = Vec::new();
         for spec in &manifest.runs {
             let path = dir.join(&spec.file);
+            if outside(dir, &path) {
+                notes.push(format!(
+                    "run '{}': its file {} is outside the manifest's folder {} (read anyway; keep a campaign's files below its manifest so it travels whole)",
+                    spec.id,
+                    path.display(),
+                    dir.display()
+                ));
+            }
             let record = Record::read(&path, &map)?;
+            record.check_limits(&path, &map, &manifest.limits)?;
+            if let Some(current) = &record.current {
+                check_current(&path, &map, spec, current)?;
+            }
             let shear = Shear::from_record(&record, &manifest.geometry, spec.initial_stress_pa);
             let branches = loading_branches(&record.displacement, 0.1);
             runs.push(Run {
@@ -188,13 +278,28 @@ impl Campaign {
                 geometry: manifest.geometry,
             });
         }
+        for run in &runs {
+            notes.extend(run.unusable());
+        }
         Ok(Campaign {
             name: manifest.name,
             manifest_path: manifest_path.to_path_buf(),
             geometry: manifest.geometry,
             columns: manifest.columns,
             runs,
+            notes,
         })
+    }
+
+    /// Refuses a campaign whose runs cannot be identified or calibrated (no
+    /// motion, no force signal): `what` names the command.
+    pub fn require_usable(&self, what: &str) -> Result<()> {
+        for run in &self.runs {
+            if let Some(problem) = run.unusable() {
+                return Err(Error::input(&run.path, format!("{problem}: nothing for {what} to fit")));
+            }
+        }
+        Ok(())
     }
 
     /// The distinct coil currents of the campaign, ascending.
@@ -243,7 +348,7 @@ pub fn current_tag(current_a: f64) -> String {
     }
 }
 
-fn one_line(s: &str) -> String {
+pub(crate) fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 

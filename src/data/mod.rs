@@ -8,7 +8,7 @@ pub mod smooth;
 pub mod table;
 
 pub use branches::loading_branches;
-pub use campaign::{current_tag, same_current, Campaign, Columns, Manifest, Run, RunSpec};
+pub use campaign::{current_tag, same_current, Campaign, Columns, Limits, Manifest, Run, RunSpec};
 pub use shear::{Geometry, Inelastic, Shear};
 pub use smooth::{local_polynomial, smoothed_strain};
 pub use table::Record;

@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use super::campaign::{one_line, Limits};
 use crate::error::{Error, Result};
 
 /// One test record: time (s), displacement (m), force (N), and the coil
@@ -27,8 +28,36 @@ pub struct ColumnMap<'a> {
     pub current: &'a str,
 }
 
+/// The fewest samples a record may have: below it there is no loading and
+/// unloading to fit, and the identification would only print NaN.
+pub const MIN_ROWS: usize = 10;
+
 impl Record {
-    /// Reads a `.csv` or `.parquet` file and checks it: at least two rows,
+    /// Refuses values beyond the plausible `limits` (SI), naming the row
+    /// and column of the first.
+    pub fn check_limits(&self, path: &Path, columns: &ColumnMap, limits: &Limits) -> Result<()> {
+        let mut checks: Vec<(&[f64], &str, f64, &str)> = vec![
+            (&self.time, columns.time.0, limits.time_s, "limits.time_s"),
+            (&self.displacement, columns.displacement.0, limits.displacement_m, "limits.displacement_m"),
+            (&self.force, columns.force.0, limits.force_n, "limits.force_n"),
+        ];
+        if let Some(current) = &self.current {
+            checks.push((current, columns.current, limits.current_a, "limits.current_a"));
+        }
+        for (values, name, limit, key) in checks {
+            if let Some(k) = values.iter().position(|v| v.abs() > limit) {
+                return Err(Error::input_at(
+                    path,
+                    Some(k + 1),
+                    Some(name),
+                    format!("{:e} (SI, after the column's scale) is beyond the plausible {limit:e}; a unit or export error? ({key} in the manifest raises the limit)", values[k]),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads a `.csv` or `.parquet` file and checks it: at least MIN_ROWS rows,
     /// every value a finite number, time strictly increasing.
     pub fn read(path: &Path, columns: &ColumnMap) -> Result<Record> {
         let ext = path
@@ -58,10 +87,10 @@ impl Record {
     }
 
     fn check(&self, path: &Path, columns: &ColumnMap) -> Result<()> {
-        if self.time.len() < 2 {
+        if self.time.len() < MIN_ROWS {
             return Err(Error::input(
                 path,
-                format!("record has {} data rows; at least 2 are needed", self.time.len()),
+                format!("record has {} data rows; at least {MIN_ROWS} are needed (a loading and an unloading)", self.time.len()),
             ));
         }
         for (k, w) in self.time.windows(2).enumerate() {
@@ -80,9 +109,21 @@ impl Record {
 
 fn parse_cell(path: &Path, row: usize, column: &str, text: &str) -> Result<f64> {
     let value: f64 = text.trim().parse().map_err(|_| {
-        Error::input_at(path, Some(row), Some(column), format!("'{text}' is not a number"))
+        Error::input_at(path, Some(row), Some(column), format!("'{}' is text where a number belongs", shown(text)))
     })?;
     finite(path, row, column, value)
+}
+
+/// A cell as an error message shows it: its first line, at most 40
+/// characters (a stray quote can make a cell of many lines).
+fn shown(text: &str) -> String {
+    let line = text.lines().next().unwrap_or("");
+    let cut: String = line.chars().take(40).collect();
+    if cut.len() < text.len() {
+        format!("{cut}…")
+    } else {
+        cut
+    }
 }
 
 fn finite(path: &Path, row: usize, column: &str, value: f64) -> Result<f64> {
@@ -108,6 +149,16 @@ fn read_csv(path: &Path, columns: &ColumnMap) -> Result<Record> {
         .map_err(|e| Error::input(path, format!("cannot read the header: {e}")))?
         .clone();
     let find = |name: &str| headers.iter().position(|h| h == name);
+    for (i, h) in headers.iter().enumerate() {
+        if let Some(j) = headers.iter().skip(i + 1).position(|o| o == h) {
+            return Err(Error::input_at(
+                path,
+                None,
+                Some(h),
+                format!("the header names this column twice (columns {} and {}): which one is meant?", i + 1, i + j + 2),
+            ));
+        }
+    }
     let required = [columns.time, columns.displacement, columns.force];
     let mut index = [0usize; 3];
     for (slot, (name, _)) in index.iter_mut().zip(required) {
@@ -143,14 +194,21 @@ fn read_parquet(path: &Path, columns: &ColumnMap) -> Result<Record> {
     use polars::prelude::*;
     let file = std::fs::File::open(path)
         .map_err(|e| Error::input(path, format!("cannot open: {}", e.kind())))?;
-    let df = ParquetReader::new(file)
-        .finish()
-        .map_err(|e| Error::input(path, format!("not a readable Parquet file: {e}")))?;
+    let df = crate::error::guard_foreign(|| ParquetReader::new(file).finish())
+        .ok_or_else(|| Error::input(path, "not a readable Parquet file (damaged: its decoder failed)"))?
+        .map_err(|e| Error::input(path, format!("not a readable Parquet file: {}", one_line(&e.to_string()))))?;
     let column = |name: &str, scale: f64| -> Result<Vec<f64>> {
-        let series = df
-            .column(name)
-            .map_err(|_| missing_column(path, name))?
-            .as_materialized_series()
+        let raw = df.column(name).map_err(|_| missing_column(path, name))?.as_materialized_series();
+        if let Ok(text) = raw.str() {
+            // text columns: every cell must read as a number
+            return (0..text.len())
+                .map(|i| match text.get(i) {
+                    Some(t) => parse_cell(path, i + 1, name, t).map(|v| v * scale),
+                    None => Err(Error::input_at(path, Some(i + 1), Some(name), "missing value")),
+                })
+                .collect();
+        }
+        let series = raw
             .cast(&DataType::Float64)
             .map_err(|_| Error::input_at(path, None, Some(name), "column is not numeric"))?;
         let values = series.f64().expect("cast to Float64");

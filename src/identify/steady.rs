@@ -144,6 +144,7 @@ mod tests {
             name: "t".into(),
             geometry: Geometry { area_m2: 0.05, gap_m: 1e-3 },
             columns: Columns::default(),
+            limits: Default::default(),
             runs: vec![RunSpec { id: "r".into(), file: "r.csv".into(), current_a: 1.0, shear_rate: None, initial_stress_pa: None }],
         };
         std::fs::write(dir.path().join("c.toml"), toml::to_string(&manifest).unwrap()).unwrap();

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use super::{Event, Pipeline, SampleRequest};
+use super::{folders, Event, Pipeline, SampleRequest};
 use crate::calibrate::{self, CalibrationSettings};
 use crate::data::{current_tag, same_current, Campaign};
 use crate::error::{Error, Result};
@@ -17,12 +17,45 @@ const CHECKPOINT_EVERY: usize = 100;
 /// The sampler's checkpoint in a calibration folder.
 pub const CHECKPOINT: &str = "sampler.checkpoint";
 
+/// Checks a checkpoint against the options before any work: readable, the
+/// same sampler (ensembles, walkers where given, moves, seed), and not
+/// longer than a fixed `--steps`.
+fn check_resumable(checkpoint: &Path, settings: &CalibrationSettings) -> Result<()> {
+    if !checkpoint.exists() {
+        return Ok(());
+    }
+    let (saved, chains) = crate::sampler::checkpoint::read(checkpoint)?;
+    let s = &settings.sampler;
+    let mismatch = |what: &str, theirs: String, ours: String| {
+        Err(Error::input(checkpoint, format!("--resume: the checkpoint was made with {what} {theirs}, the options ask for {ours}; use the same options, or start afresh with --force")))
+    };
+    if saved.seed != s.seed {
+        return mismatch("--seed", saved.seed.to_string(), s.seed.to_string());
+    }
+    if saved.ensembles != s.ensembles {
+        return mismatch("--ensembles", saved.ensembles.to_string(), s.ensembles.to_string());
+    }
+    if s.walkers != 0 && saved.walkers != s.walkers {
+        return mismatch("--walkers", saved.walkers.to_string(), s.walkers.to_string());
+    }
+    if saved.moves != s.moves {
+        return mismatch("moves", format!("{:?}", saved.moves), format!("{:?}", s.moves));
+    }
+    let done = chains.steps().saturating_sub(1);
+    if s.steps > 0 && done > s.steps {
+        return Err(Error::Usage(format!("--steps {} is fewer than the {done} steps the checkpoint already holds: ask for at least {done}", s.steps)));
+    }
+    Ok(())
+}
+
 impl Pipeline<'_> {
     /// The paper's identification of every current level of `campaign`:
-    /// `identification.parquet` and Figs. 1–5 in `out`.
-    pub fn identify(&mut self, campaign: &Campaign, out: &Path, settings: &IdentifySettings) -> Result<Vec<CurrentIdentification>> {
+    /// `identification.parquet` and Figs. 1–5 in `out` (an earlier
+    /// identification there is replaced only if `force`).
+    pub fn identify(&mut self, campaign: &Campaign, out: &Path, settings: &IdentifySettings, force: bool) -> Result<Vec<CurrentIdentification>> {
+        folders::prepare(out, "--out", &[campaign], &folders::IDENTIFICATION, force)?;
+        campaign.require_usable("the identification")?;
         let results = identify_campaign(campaign, settings);
-        std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
         store::identification::write(&out.join("identification.parquet"), &results)?;
         report::identification::write(out, campaign, &results)?;
         self.emit(Event::Identified(&results));
@@ -34,6 +67,8 @@ impl Pipeline<'_> {
     /// current law over the currents not held out. Returns the folders.
     pub fn sample(&mut self, campaign: &Campaign, out: &Path, request: &SampleRequest) -> Result<Vec<StoredCalibration>> {
         let settings = &request.settings;
+        campaign.require_usable("the calibration")?;
+        folders::prepare(out, "--out", &[campaign], &[], true)?;
         if settings.parameter_model().is_current_law() {
             let held = &request.hold_out_current;
             if let Some(h) = held.iter().find(|h| !campaign.has_current(**h)) {
@@ -46,7 +81,7 @@ impl Pipeline<'_> {
                 used.currents(),
                 if held.is_empty() { String::new() } else { format!(" (holding out {held:?} A)") }
             );
-            return Ok(vec![self.calibrate_into(&used, out, settings, request.resume, &what)?]);
+            return Ok(vec![self.calibrate_into(&used, out, request, &what)?]);
         }
         if !request.hold_out_current.is_empty() {
             return Err(Error::Usage("--hold-out-current needs --model current-law".into()));
@@ -63,26 +98,36 @@ impl Pipeline<'_> {
             let dir = if currents.len() > 1 { out.join(current_tag(c)) } else { out.to_path_buf() };
             let group = campaign.at_current(c);
             let what = format!("{} run(s) at {c} A", group.runs.len());
-            folders.push(self.calibrate_into(&group, &dir, settings, request.resume, &what)?);
+            folders.push(self.calibrate_into(&group, &dir, request, &what)?);
         }
         Ok(folders)
     }
 
-    /// Calibrates `campaign` into `dir`: identification, chains, summary,
-    /// settings and record. `what` names the calibration in messages.
-    pub fn calibrate_into(&mut self, campaign: &Campaign, dir: &Path, settings: &CalibrationSettings, resume: bool, what: &str) -> Result<StoredCalibration> {
+    /// Calibrates `campaign` into `dir` as `request` says: identification,
+    /// chains, summary, settings and record; the files derived from an
+    /// earlier calibration there are removed. `what` names the calibration
+    /// in messages.
+    pub fn calibrate_into(&mut self, campaign: &Campaign, dir: &Path, request: &SampleRequest, what: &str) -> Result<StoredCalibration> {
+        let settings = &request.settings;
         let checkpoint = dir.join(CHECKPOINT);
-        if resume && !checkpoint.exists() {
-            return Err(Error::Usage(format!("--resume: no {CHECKPOINT} in {}", dir.display())));
+        folders::prepare(dir, "--out", &[campaign], &folders::CALIBRATION, request.force || request.resume)?;
+        if request.resume {
+            check_resumable(&checkpoint, settings)?;
         }
-        std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+        let resume = request.resume && {
+            let found = checkpoint.exists();
+            if !found {
+                self.note(&format!("--resume: no {CHECKPOINT} in {} (stopped before sampling began?): starting from scratch", dir.display()));
+            }
+            found
+        };
         self.emit(Event::Calibrating { what, dir });
         let start = calibrate::start(campaign, settings, &mut |line| (self.listener)(Event::Note(line)))?;
         if resume {
             self.note(&format!("  resuming from {}", checkpoint.display()));
         }
         let mut observers = self.observers();
-        let mut checkpointer = Checkpointer { path: checkpoint.clone(), every: CHECKPOINT_EVERY };
+        let mut checkpointer = Checkpointer { path: checkpoint.clone(), every: CHECKPOINT_EVERY, stop: crate::interrupt::requested };
         let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
         refs.push(&mut checkpointer);
         let cal = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)?;
@@ -92,6 +137,7 @@ impl Pipeline<'_> {
         store::identification::write(&dir.join("identification.parquet"), identification)?;
         report::identification::write(dir, &group, identification)?;
         let stored = StoredCalibration::of(dir, &cal);
+        folders::clear_derived(dir)?;
         store::chains::write(&dir.join("chains.parquet"), &cal.sample)?;
         store::summary::write(&dir.join("summary.parquet"), &stored.summary, &cal.diagnostics, cal.sample.chains.chains())?;
         store::record::write_config(&dir.join("config.toml"), &cal.start.settings)?;

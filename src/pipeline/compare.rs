@@ -53,7 +53,7 @@ impl Pipeline<'_> {
                 entries[i].label = entries[i].cal.dir.display().to_string();
             }
         }
-        std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+        super::folders::prepare(out, "--out", &[], &[], true)?;
         let tables: Vec<compare::Entry> = entries
             .iter()
             .map(|e| compare::Entry {

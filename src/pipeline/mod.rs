@@ -10,6 +10,7 @@
 
 mod calibrate;
 mod compare;
+pub mod folders;
 mod predict;
 
 use std::path::{Path, PathBuf};
@@ -52,6 +53,8 @@ pub struct SampleRequest {
     pub hold_out_current: Vec<f64>,
     /// Continue from the folder's sampler checkpoint.
     pub resume: bool,
+    /// Replace the results of an earlier calibration in the folder.
+    pub force: bool,
 }
 
 /// How posterior draws are propagated into bands.
@@ -115,9 +118,18 @@ impl<'a> Pipeline<'a> {
         }
     }
 
+    /// Loads a campaign and tells what loading noticed but did not refuse.
+    pub fn load(&mut self, manifest: &Path) -> Result<Campaign> {
+        let campaign = Campaign::load(manifest)?;
+        for n in &campaign.notes {
+            self.note(&format!("note: {n}"));
+        }
+        Ok(campaign)
+    }
+
     /// Loads and checks a campaign.
     pub fn check(&mut self, manifest: &Path) -> Result<Campaign> {
-        let campaign = Campaign::load(manifest)?;
+        let campaign = self.load(manifest)?;
         self.emit(Event::Checked(&campaign));
         Ok(campaign)
     }

@@ -99,7 +99,7 @@ impl Pipeline<'_> {
             coverage.push(p.coverage);
         }
         bar.finish_and_clear();
-        std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+        super::folders::prepare(out, "--out", &[campaign], &[], true)?;
         store::bands::write(&out.join("bands.parquet"), &bands)?;
         store::coverage::write(&out.join("coverage.parquet"), &coverage)?;
         let geometry = &campaign.geometry;
@@ -115,6 +115,7 @@ impl Pipeline<'_> {
             seed: options.seed,
             substeps: settings.integrator.substeps,
             seconds: clock.elapsed().as_secs_f64(),
+            calibration_id: cal.record.calibration_id.clone(),
             coverage: coverage.clone(),
         };
         store::prediction::write(&out.join("prediction.toml"), &record)?;
@@ -173,15 +174,25 @@ impl Pipeline<'_> {
     pub fn report(&mut self, dir: &Path, options: &PredictOptions, loo: Option<&LooSettings>) -> Result<PathBuf> {
         let cal = StoredCalibration::open(dir)?;
         let campaign = cal.full_campaign()?;
-        let prediction = if dir.join("bands.parquet").exists() && dir.join("coverage.parquet").exists() {
-            Prediction {
+        let files = ["bands.parquet", "coverage.parquet", "prediction.toml"];
+        let stored = match files.iter().all(|f| dir.join(f).exists()) {
+            true => Some(store::prediction::read(&dir.join("prediction.toml"))?),
+            false => None,
+        };
+        let prediction = match stored {
+            Some(record) if record.calibration_id == cal.record.calibration_id => Prediction {
                 bands: store::bands::read(&dir.join("bands.parquet"))?,
                 coverage: store::coverage::read(&dir.join("coverage.parquet"))?,
-                record: store::prediction::read(&dir.join("prediction.toml"))?,
+                record,
+            },
+            Some(_) => {
+                self.note(&format!("the bands in {} come from another calibration than its chains: predicting again", dir.display()));
+                self.predict(&cal, &campaign, dir, options)?
             }
-        } else {
-            self.note(&format!("no bands in {} yet: predicting first", dir.display()));
-            self.predict(&cal, &campaign, dir, options)?
+            None => {
+                self.note(&format!("no bands in {} yet: predicting first", dir.display()));
+                self.predict(&cal, &campaign, dir, options)?
+            }
         };
         let loo = match loo {
             Some(settings) => self.leave_one_out(&cal, &campaign, settings)?,

@@ -28,10 +28,20 @@ pub fn save(path: &Path, settings: &SamplerSettings, chains: &Chains) -> Result<
 
 /// Reads a checkpoint written by [`save`] for a target of `dim` coordinates.
 pub fn load(path: &Path, dim: usize) -> Result<(SamplerSettings, Chains)> {
+    let (settings, chains) = read(path)?;
+    if chains.dim != dim {
+        return Err(Error::input(path, format!("checkpoint of a target with {} coordinates, not {dim}: another calibration's?", chains.dim)));
+    }
+    Ok((settings, chains))
+}
+
+/// Reads a checkpoint written by [`save`], whatever its target: to check
+/// it against the options before any work.
+pub fn read(path: &Path) -> Result<(SamplerSettings, Chains)> {
     let bytes = std::fs::read(path).map_err(|e| Error::input(path, format!("cannot read checkpoint: {e}")))?;
-    let cp: Checkpoint = postcard::from_bytes(&bytes).map_err(|e| Error::input(path, format!("not a sampler checkpoint: {e}")))?;
-    if cp.format != FORMAT || cp.chains.dim != dim {
-        return Err(Error::input(path, "checkpoint of another format or another target"));
+    let cp: Checkpoint = postcard::from_bytes(&bytes).map_err(|_| Error::input(path, "not a sampler checkpoint (damaged, or another file): remove it to start afresh"))?;
+    if cp.format != FORMAT {
+        return Err(Error::input(path, format!("checkpoint format '{}', this mrbp reads '{FORMAT}'", cp.format)));
     }
     Ok((cp.settings, cp.chains))
 }

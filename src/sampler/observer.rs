@@ -7,7 +7,7 @@ use super::chains::Chains;
 use super::checkpoint;
 use super::diagnostics::Diagnostics;
 use super::settings::SamplerSettings;
-use crate::error::Result;
+use crate::error::{Error, Result};
 
 /// The state of a run as observers see it.
 pub struct RunState<'a> {
@@ -42,16 +42,27 @@ pub trait Observer {
     }
 }
 
-/// Saves the sampler's state every `every` steps and at the end.
+/// Saves the sampler's state every `every` steps and at the end; when
+/// `stop` says so, saves it at once and stops the run with
+/// [`Error::Interrupted`].
 pub struct Checkpointer {
     pub path: PathBuf,
     pub every: usize,
+    pub stop: fn() -> bool,
 }
 
 impl Observer for Checkpointer {
     fn stepped(&mut self, state: &RunState) -> Result<()> {
-        if state.step % self.every.max(1) == 0 {
+        let stop = (self.stop)();
+        if stop || state.step % self.every.max(1) == 0 {
             checkpoint::save(&self.path, state.settings, state.chains)?;
+        }
+        if stop {
+            return Err(Error::Interrupted(format!(
+                "interrupted after step {}: the chains so far are in {}; the same command with --resume continues them",
+                state.step,
+                self.path.display()
+            )));
         }
         Ok(())
     }

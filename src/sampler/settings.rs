@@ -34,13 +34,13 @@ impl SamplerSettings {
     pub fn check(&self, dim: usize) -> Result<()> {
         if self.walkers % 2 != 0 || self.walkers < 2 * dim.max(2) {
             return Err(Error::Usage(format!(
-                "walkers per ensemble must be even and at least 2 × dimension = {}; got {}",
+                "--walkers: walkers per ensemble must be even and at least 2 × dimension = {}; got {}",
                 2 * dim.max(2),
                 self.walkers
             )));
         }
         if self.ensembles == 0 {
-            return Err(Error::Usage("at least one ensemble is needed".into()));
+            return Err(Error::Usage("--ensembles: at least one ensemble is needed".into()));
         }
         if self.moves.is_empty() || self.moves.iter().any(|(_, w)| !(*w > 0.0) || !w.is_finite()) {
             return Err(Error::Usage("moves need positive, finite weights".into()));

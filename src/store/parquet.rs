@@ -58,8 +58,8 @@ pub fn write_parquet(path: &Path, table: Table) -> Result<()> {
 /// Reads a Parquet file back (for tests and for later stages).
 pub fn read_parquet(path: &Path) -> Result<DataFrame> {
     let file = std::fs::File::open(path).map_err(|e| Error::input(path, format!("cannot open: {e}")))?;
-    ParquetReader::new(file)
-        .finish()
+    crate::error::guard_foreign(|| ParquetReader::new(file).finish())
+        .ok_or_else(|| Error::input(path, "not a readable Parquet file (damaged: its decoder failed)"))?
         .map_err(|e| Error::input(path, format!("not a readable Parquet file: {e}")))
 }
 

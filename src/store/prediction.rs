@@ -19,6 +19,9 @@ pub struct PredictionRecord {
     pub seed: u64,
     pub substeps: u32,
     pub seconds: f64,
+    /// The calibration the bands came from (its `calibration_id`).
+    #[serde(default)]
+    pub calibration_id: String,
     pub coverage: Vec<CoverageRow>,
 }
 

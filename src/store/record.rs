@@ -65,6 +65,16 @@ pub struct CalibrationRecord {
     /// The campaign's geometry (A, h): what turns the bands into forces.
     #[serde(default)]
     pub geometry: Option<Geometry>,
+    /// Names this calibration: files derived from it record it, so a later
+    /// stage can tell them from those of an earlier calibration.
+    #[serde(default)]
+    pub calibration_id: String,
+}
+
+/// A name for a new calibration: when and by which process it was made.
+fn new_calibration_id() -> String {
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    format!("{nanos:x}-{:x}", std::process::id())
 }
 
 impl CalibrationRecord {
@@ -108,6 +118,7 @@ impl CalibrationRecord {
             warnings: cal.diagnostics.warnings.clone(),
             model_warnings: cal.start.warnings.clone(),
             geometry: Some(cal.campaign.geometry),
+            calibration_id: new_calibration_id(),
         }
     }
 

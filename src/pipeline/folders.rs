@@ -1,0 +1,86 @@
+//! Output folders: where results may go, and what a new calibration makes
+//! stale. Every stage that writes a folder asks [`prepare`] first, so a bad
+//! `--out` is one clear line (exit 2) before any work, never a raw OS error
+//! after minutes of sampling.
+
+use std::path::Path;
+
+use crate::data::Campaign;
+use crate::error::{Error, Result};
+
+/// The files of a calibration folder derived from its chains: a new
+/// calibration removes them, since they would describe the old one.
+pub const DERIVED: [&str; 8] = [
+    "bands.parquet",
+    "coverage.parquet",
+    "adequacy.parquet",
+    "prediction.toml",
+    "loo.parquet",
+    "loo_bands.parquet",
+    "report.html",
+    "residuals.png",
+];
+
+/// The results of `mrbp sample` in a calibration folder.
+pub const CALIBRATION: [&str; 5] = ["chains.parquet", "summary.parquet", "calibration.toml", "config.toml", "identification.parquet"];
+
+/// The results of `mrbp identify`.
+pub const IDENTIFICATION: [&str; 1] = ["identification.parquet"];
+
+/// Makes `out` (named by `option` in messages) ready for results: refuses a
+/// path that is a file or lies under one, a folder that cannot be written, a
+/// campaign's own folder (`inputs`), and — unless `force` — a folder that
+/// already holds any of `results`, listing them.
+pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str], force: bool) -> Result<()> {
+    let shown = out.display();
+    if out.is_file() {
+        return Err(Error::Usage(format!("{option} {shown}: this is a file, not a folder")));
+    }
+    let canonical = |p: &Path| std::fs::canonicalize(p).ok();
+    if let Some(here) = canonical(out) {
+        for c in inputs {
+            let dir = c.manifest_path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+            if canonical(dir).as_ref() == Some(&here) {
+                return Err(Error::Usage(format!(
+                    "{option} {shown}: this is the folder of the campaign {} itself; results go to a folder of their own",
+                    c.manifest_path.display()
+                )));
+            }
+        }
+    }
+    std::fs::create_dir_all(out).map_err(|e| Error::Usage(format!("{option} {shown}: cannot create this folder ({})", reason(&e))))?;
+    tempfile::NamedTempFile::new_in(out).map_err(|e| Error::Usage(format!("{option} {shown}: cannot write in this folder ({})", reason(&e))))?;
+    let present: Vec<&str> = results.iter().copied().filter(|f| out.join(f).exists()).collect();
+    if !present.is_empty() && !force {
+        return Err(Error::Usage(format!(
+            "{option} {shown} already holds results ({}): pass --force to replace them, or choose another folder",
+            present.join(", ")
+        )));
+    }
+    Ok(())
+}
+
+/// Removes the files derived from an earlier calibration in `dir`.
+pub fn clear_derived(dir: &Path) -> Result<()> {
+    for f in DERIVED {
+        let path = dir.join(f);
+        if path.exists() {
+            std::fs::remove_file(&path).map_err(|e| Error::output(&path, e))?;
+        }
+    }
+    let loo = dir.join("loo");
+    if loo.is_dir() {
+        std::fs::remove_dir_all(&loo).map_err(|e| Error::output(&loo, e))?;
+    }
+    Ok(())
+}
+
+fn reason(e: &std::io::Error) -> String {
+    match e.kind() {
+        std::io::ErrorKind::PermissionDenied => "permission denied".into(),
+        std::io::ErrorKind::NotADirectory => "a part of the path is a file".into(),
+        std::io::ErrorKind::AlreadyExists => "a part of the path is a file".into(),
+        std::io::ErrorKind::ReadOnlyFilesystem => "read-only file system".into(),
+        _ => e.to_string(),
+    }
+}
