@@ -70,7 +70,9 @@ fn parquet_campaign(root: &Path, bytes: Vec<u8>) -> PathBuf {
     setup(root, &manifest_with("", &one_run("run1.parquet")), &[("run1.parquet", bytes)])
 }
 
-fn sine(n: usize) -> (Vec<Option<f64>>, Vec<Option<f64>>, Vec<Option<f64>>) {
+type Cells = Vec<Option<f64>>;
+
+fn sine(n: usize) -> (Cells, Cells, Cells) {
     let t: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
     let x: Vec<f64> = t.iter().map(|t| 0.005 * (2.0 * std::f64::consts::PI * 5.0 * t).sin()).collect();
     let f: Vec<f64> = t.iter().map(|t| 500.0 * (2.0 * std::f64::consts::PI * 5.0 * t).cos()).collect();

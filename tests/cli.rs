@@ -93,7 +93,7 @@ fn parquet_records_are_read_and_checked() {
 #[test]
 fn column_names_and_units_are_configurable() {
     let dir = tempfile::tempdir().unwrap();
-    let rows: String = (0..12).map(|k| format!("{k},{},{}\n", 0.1 * (6 - (k as i32 - 6).abs()) as f64, 0.01 * k as f64)).collect();
+    let rows: String = (0..12).map(|k| format!("{k},{},{}\n", 0.1 * (6 - (k - 6i32).abs()) as f64, 0.01 * k as f64)).collect();
     std::fs::write(dir.path().join("r.csv"), format!("t_ms,x_mm,F_kN\n{rows}")).unwrap();
     let manifest = dir.path().join("c.toml");
     std::fs::write(

@@ -26,7 +26,7 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     assert!(o.status.success(), "{}", text(&o));
 
     // a run far longer than the test waits, interrupted while it samples
-    let mut child = Command::new(env!("CARGO_BIN_EXE_mrbp"))
+    let child = Command::new(env!("CARGO_BIN_EXE_mrbp"))
         .current_dir(dir)
         .args(["sample", "data/campaign.toml", "--out", "cal", "--steps", "100000", "--substeps", "1"])
         .stdout(Stdio::piped())

@@ -51,6 +51,28 @@ pub fn local_polynomial(t: &[f64], y: &[f64], half_window: usize, degree: usize)
     (values, slopes)
 }
 
+/// The fewest samples on each side of the strain's local cubic fit: on a
+/// record sampled at a few hundred hertz a few milliseconds are one sample,
+/// which smooths nothing.
+pub const MIN_SMOOTH_SAMPLES: usize = 5;
+
+/// The strain that drives the model: the measured one smoothed by a local
+/// cubic of half-width `smooth_ms` (at least [`MIN_SMOOTH_SAMPLES`] samples;
+/// 0 keeps the raw samples), its first sample kept (the record starts at its
+/// reference position). Displacement noise and the steps of a quantised
+/// displacement channel would otherwise drive the stiff law as stress noise.
+pub fn smoothed_strain(time: &[f64], gamma: &[f64], smooth_ms: f64) -> Vec<f64> {
+    let n = time.len();
+    if n < 2 || smooth_ms <= 0.0 {
+        return gamma.to_vec();
+    }
+    let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
+    let half_window = ((smooth_ms * 1e-3 / dt).round() as usize).max(MIN_SMOOTH_SAMPLES);
+    let mut g = local_polynomial(time, gamma, half_window, 3).0;
+    g[0] = gamma[0];
+    g
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -82,26 +104,4 @@ mod tests {
             assert!((d[k] - (-1.0 + 6.0 * tk - 15.0 * tk * tk)).abs() < 1e-7, "{k}");
         }
     }
-}
-
-/// The fewest samples on each side of the strain's local cubic fit: on a
-/// record sampled at a few hundred hertz a few milliseconds are one sample,
-/// which smooths nothing.
-pub const MIN_SMOOTH_SAMPLES: usize = 5;
-
-/// The strain that drives the model: the measured one smoothed by a local
-/// cubic of half-width `smooth_ms` (at least [`MIN_SMOOTH_SAMPLES`] samples;
-/// 0 keeps the raw samples), its first sample kept (the record starts at its
-/// reference position). Displacement noise and the steps of a quantised
-/// displacement channel would otherwise drive the stiff law as stress noise.
-pub fn smoothed_strain(time: &[f64], gamma: &[f64], smooth_ms: f64) -> Vec<f64> {
-    let n = time.len();
-    if n < 2 || smooth_ms <= 0.0 {
-        return gamma.to_vec();
-    }
-    let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
-    let half_window = ((smooth_ms * 1e-3 / dt).round() as usize).max(MIN_SMOOTH_SAMPLES);
-    let mut g = local_polynomial(time, gamma, half_window, 3).0;
-    g[0] = gamma[0];
-    g
 }
