@@ -32,12 +32,22 @@ pub struct PredictSettings {
     /// Noise replicates per draw in the predictive band.
     pub replicates: usize,
     pub seed: u64,
+    /// The strain noise through the tangent stiffness joins the noise of a
+    /// new measurement (the likelihood's errors in variables).
+    pub errors_in_variables: bool,
 }
 
 impl PredictSettings {
     /// Bands with the likelihood's integrator and noise model.
     pub fn new(integrator: Integrator, likelihood: &LikelihoodSettings, replicates: usize, seed: u64) -> Self {
-        PredictSettings { integrator, noise: likelihood.noise, student_nu: likelihood.student_nu, replicates, seed }
+        PredictSettings {
+            integrator,
+            noise: likelihood.noise,
+            student_nu: likelihood.student_nu,
+            replicates,
+            seed,
+            errors_in_variables: likelihood.errors_in_variables,
+        }
     }
 }
 
@@ -153,10 +163,20 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
     let mut log_p = vec![0.0; kept.len()];
     let mut lppd = 0.0;
     let density = MarginalDensity::new(settings);
+    let strain_var = if settings.errors_in_variables { run.strain_noise_var } else { 0.0 };
     for k in 0..n {
+        let dg = if k > 0 { run.gamma[k] - run.gamma[k - 1] } else { 0.0 };
         for (i, (d, path)) in kept.iter().enumerate() {
             let model = path[k] + run.terms_stress(k, d.spring_n_per_m, d.offset_n);
             at_k[i] = model;
+            // errors in variables: σ² + S_k² s_γ², S_k the path's tangent stiffness
+            let d = &if strain_var > 0.0 {
+                let g = d.params.g;
+                let s = if k > 0 && dg.abs() > 1e-12 { ((path[k] - path[k - 1]) / dg).clamp(0.0, g) } else { g };
+                Draw { sigma: (d.sigma * d.sigma + s * s * strain_var).sqrt(), ..**d }
+            } else {
+                **d
+            };
             log_p[i] = density.ln_pdf(run.tau[k] - model, d);
             for r in 0..reps {
                 let z: f64 = match (settings.noise, &student) {
@@ -340,7 +360,7 @@ mod tests {
     fn ramp_run() -> RunData {
         let time: Vec<f64> = (0..400).map(|k| k as f64 * 5e-4).collect();
         let gamma: Vec<f64> = time.iter().map(|t| 0.5 * (1.0 - (2.0 * std::f64::consts::PI * 2.5 * t).cos())).collect();
-        RunData { id: "r".into(), time, gamma, tau: vec![0.0; 400], initial_tau: 0.0, current_a: 1.0, area_m2: 0.05, gap_m: 1e-3 }
+        RunData { id: "r".into(), time, gamma, tau: vec![0.0; 400], initial_tau: 0.0, current_a: 1.0, area_m2: 0.05, gap_m: 1e-3, strain_noise_var: 0.0 }
     }
 
     /// One fixed parameter set: the model band collapses onto the
@@ -354,7 +374,7 @@ mod tests {
         let p = Params::reference_1a();
         let sigma = 500.0;
         let draws = vec![Draw::of_law(p, sigma); 40];
-        let settings = PredictSettings { integrator: integ, noise: NoiseModel::Gaussian, student_nu: 5.0, replicates: 100, seed: 3 };
+        let settings = PredictSettings { integrator: integ, noise: NoiseModel::Gaussian, student_nu: 5.0, replicates: 100, seed: 3, errors_in_variables: false };
         let b = bands(&run, 0, &draws, &settings, &|| {}).unwrap();
         let truth = integ.run(&p, &run.time, &run.gamma).unwrap().tau;
         for k in (0..400).step_by(37) {
@@ -378,7 +398,7 @@ mod tests {
         let integ = Integrator { substeps: 1, ..Integrator::default() };
         let (sigma, rho) = (300.0f64, 0.8f64);
         let draws = vec![Draw { rho, ..Draw::of_law(Params::reference_1a(), sigma) }; 40];
-        let settings = PredictSettings { integrator: integ, noise: NoiseModel::Ar1, student_nu: 5.0, replicates: 100, seed: 9 };
+        let settings = PredictSettings { integrator: integ, noise: NoiseModel::Ar1, student_nu: 5.0, replicates: 100, seed: 9, errors_in_variables: false };
         let b = bands(&run, 0, &draws, &settings, &|| {}).unwrap();
         let sd = sigma / (1.0 - rho * rho).sqrt();
         for k in [1, 200, 399] {

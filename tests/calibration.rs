@@ -225,3 +225,29 @@ fn model_terms_recover_a_known_offset_and_gas_spring() {
         assert!(z < 3.5, "{name}: mean {:.4e} sd {:.3e} truth {value:.4e} ({z:.2} sd)", p.mean, p.sd);
     }
 }
+
+/// Errors in variables: with 2 µm displacement noise, the exact-input
+/// likelihood's 90 % interval of G misses the truth on this realisation
+/// (z = +2.10 in the replicate study, docs/calibration.md) and the
+/// errors-in-variables one holds it (z = +1.22). The margins to the
+/// interval's edge (±1.645 sd) are 0.4 sd, against a Monte Carlo error of
+/// the 5 % and 95 % quantiles of about 0.05 sd at these ESS (≥ 700): the
+/// seeds make the outcome fixed, and a change of the method that moves it
+/// by more than the Monte Carlo error shows here.
+#[test]
+fn errors_in_variables_holds_a_g_the_exact_input_likelihood_misses() {
+    let (_dir, campaign) = campaign_with(1027, 2.0e-6);
+    let g = Params::reference_1a().g;
+    let interval = |eiv: bool| {
+        let mut s = CalibrationSettings::default();
+        s.sampler.seed = 27;
+        s.likelihood.errors_in_variables = eiv;
+        let cal = calibrate(&campaign, &s).unwrap();
+        let p = cal.diagnostics.coordinates[0].clone();
+        (p.q05, p.q95, (p.mean - g) / p.sd)
+    };
+    let (lo, hi, z) = interval(false);
+    assert!(!(lo <= g && g <= hi), "exact input: [{lo:.1}, {hi:.1}] holds G = {g} (z {z:.2})");
+    let (lo, hi, z) = interval(true);
+    assert!(lo <= g && g <= hi, "errors in variables: [{lo:.1}, {hi:.1}] misses G = {g} (z {z:.2})");
+}

@@ -10,5 +10,5 @@ pub mod table;
 pub use branches::loading_branches;
 pub use campaign::{current_tag, same_current, Campaign, Columns, Limits, Manifest, Run, RunSpec};
 pub use shear::{Geometry, Inelastic, Shear};
-pub use smooth::{local_polynomial, smoothed_strain};
+pub use smooth::{local_polynomial, noise_variance, smoothed_strain};
 pub use table::Record;

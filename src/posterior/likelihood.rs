@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use statrs::function::gamma::ln_gamma;
 
-use crate::data::{smoothed_strain, Run};
+use crate::data::{noise_variance, smoothed_strain, Run};
 
 /// The residual model of the force record.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -54,11 +54,23 @@ pub struct LikelihoodSettings {
     /// Degrees of freedom of the Student-t model.
     pub student_nu: f64,
     pub part: RecordPart,
+    /// Errors in variables (Gaussian noise): the measured strain is noisy
+    /// too, and its noise reaches the stress through the model's tangent
+    /// stiffness S_k = dτ/dγ along the path (G when elastic, near 0 in
+    /// flow). Each residual then has variance σ² + S_k² s_γ², with s_γ² the
+    /// strain noise estimated from the record (docs/calibration.md).
+    pub errors_in_variables: bool,
 }
 
 impl Default for LikelihoodSettings {
     fn default() -> Self {
-        LikelihoodSettings { noise: NoiseModel::Gaussian, smooth_strain_ms: 2.0, student_nu: 5.0, part: RecordPart::WholeRecord }
+        LikelihoodSettings {
+            noise: NoiseModel::Gaussian,
+            smooth_strain_ms: 2.0,
+            student_nu: 5.0,
+            part: RecordPart::WholeRecord,
+            errors_in_variables: false,
+        }
     }
 }
 
@@ -69,6 +81,9 @@ impl LikelihoodSettings {
         }
         if self.noise == NoiseModel::StudentT && !(self.student_nu > 0.0) {
             return Err("student_nu must be positive".into());
+        }
+        if self.errors_in_variables && self.noise != NoiseModel::Gaussian {
+            return Err("errors_in_variables works with the gaussian noise model only".into());
         }
         Ok(())
     }
@@ -88,6 +103,10 @@ pub struct RunData {
     /// The damper's area and gap, which turn force terms into stress.
     pub area_m2: f64,
     pub gap_m: f64,
+    /// Variance of the measured strain's noise (displacement noise and
+    /// quantisation over h²), estimated from the record: what the
+    /// errors-in-variables likelihood propagates into stress.
+    pub strain_noise_var: f64,
 }
 
 impl RunData {
@@ -105,6 +124,7 @@ impl RunData {
         };
         let sh = &run.shear;
         let gamma = smoothed_strain(&sh.time, &sh.gamma, smooth_strain_ms);
+        let strain_noise_var = noise_variance(&sh.time, &sh.gamma, &gamma, smooth_strain_ms);
         RunData {
             id: run.id().to_string(),
             time: sh.time[..end].to_vec(),
@@ -114,6 +134,7 @@ impl RunData {
             current_a: run.spec.current_a,
             area_m2: run.geometry.area_m2,
             gap_m: run.geometry.gap_m,
+            strain_noise_var,
         }
     }
 
@@ -142,6 +163,9 @@ pub struct ResidualStats {
     pub first: f64,
     /// Σ ln(1 + r²/(ν s²)) (Student-t, with the run's scale)
     pub log_t: f64,
+    /// Errors in variables: Σ ln(1 + a_k/σ²) and Σ r_k²/(σ² + a_k), with
+    /// a_k = S_k² s_γ² the propagated strain noise (σ the lane's).
+    pub eiv: Option<(f64, f64)>,
 }
 
 impl ResidualStats {
@@ -170,7 +194,10 @@ impl NoiseModel {
     pub fn log_likelihood(self, st: &ResidualStats, log_sigma: f64, rho: f64, student_nu: f64) -> f64 {
         let sigma2 = (2.0 * log_sigma).exp();
         match self {
-            NoiseModel::Gaussian => -st.n * log_sigma - 0.5 * st.sum_sq / sigma2,
+            NoiseModel::Gaussian => match st.eiv {
+                Some((log_inflation, weighted_sq)) => -st.n * log_sigma - 0.5 * log_inflation - 0.5 * weighted_sq,
+                None => -st.n * log_sigma - 0.5 * st.sum_sq / sigma2,
+            },
             NoiseModel::StudentT => {
                 let nu = student_nu;
                 st.n * (ln_gamma(0.5 * (nu + 1.0)) - ln_gamma(0.5 * nu) - 0.5 * (nu * std::f64::consts::PI).ln())

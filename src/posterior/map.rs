@@ -27,8 +27,9 @@ pub struct MapEstimate {
     pub cov: DMatrix<f64>,
     /// The Jacobian of the whitened residuals at the MAP (for the step rule).
     jacobian: DMatrix<f64>,
-    /// The profiled noise scale of each run.
-    sigmas: Vec<f64>,
+    /// The profiled noise scale of every sample of each run (σ, or
+    /// √(σ² + a_k) with errors in variables).
+    sigmas: Vec<Vec<f64>>,
     pub log_density: f64,
     pub converged: bool,
 }
@@ -120,13 +121,13 @@ fn rms(v: &[f64]) -> f64 {
 /// its run residuals: (τ_obs − τ_model)/σ_run, then (ln θ − centre)/scale
 /// for every log-normal prior and value/sd for every term's. Points outside
 /// the prior support are infeasible.
-fn whiten(post: &Posterior, sigmas: &[f64], x: &[f64], residuals: Option<Vec<Vec<f64>>>) -> Option<Vec<f64>> {
+fn whiten(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64], residuals: Option<Vec<Vec<f64>>>) -> Option<Vec<f64>> {
     let log_theta = post.layout.log_theta(x);
     if post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
         return None;
     }
     let res = residuals?;
-    let mut out: Vec<f64> = res.iter().zip(sigmas).flat_map(|(r, s)| r.iter().map(move |v| v / s)).collect();
+    let mut out: Vec<f64> = res.iter().zip(sigmas).flat_map(|(r, s)| r.iter().zip(s).map(|(v, s)| v / s)).collect();
     for (prior, v) in post.priors.iter().zip(&log_theta) {
         if let Some((c, s)) = prior.centre() {
             out.push((v - c) / s);
@@ -138,14 +139,14 @@ fn whiten(post: &Posterior, sigmas: &[f64], x: &[f64], residuals: Option<Vec<Vec
     Some(out)
 }
 
-fn whitened(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<Vec<f64>> {
+fn whitened(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64]) -> Option<Vec<f64>> {
     let res = residuals_many(post, std::slice::from_ref(&x.to_vec())).pop().flatten();
     whiten(post, sigmas, x, res)
 }
 
 /// The Jacobian of the whitened residuals at `x` by forward differences,
 /// every point integrated in one batch.
-fn jacobian(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<DMatrix<f64>> {
+fn jacobian(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64]) -> Option<DMatrix<f64>> {
     let n = x.len();
     let points: Vec<Vec<f64>> = (0..=n)
         .map(|j| {
@@ -177,10 +178,8 @@ fn jacobian(post: &Posterior, sigmas: &[f64], x: &[f64]) -> Option<DMatrix<f64>>
 pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
     let nt = post.layout.fitted.len();
     let mut x: Vec<f64> = start[..nt].to_vec();
-    let profile = |x: &[f64]| -> Option<Vec<f64>> {
-        Some(residuals_many(post, &[x.to_vec()]).pop()??.iter().map(|r| rms(r).max(1e-9)).collect())
-    };
-    let mut sigmas = profile(&x)?;
+    let profile = |x: &[f64]| -> Option<(Vec<f64>, Vec<Vec<f64>>)> { Some(noise_scales(post, x, &residuals_many(post, &[x.to_vec()]).pop()??)) };
+    let (mut run_sigmas, mut sigmas) = profile(&x)?;
     let mut converged = false;
     for _ in 0..4 {
         let f = |p: &[f64]| whitened(post, &sigmas, p);
@@ -189,9 +188,9 @@ pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
         let moved = fit.params.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         x = fit.params;
         converged = fit.converged;
-        let new_sigmas = profile(&x)?;
-        let sigma_change = new_sigmas.iter().zip(&sigmas).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
-        sigmas = new_sigmas;
+        let (new_run_sigmas, new_sigmas) = profile(&x)?;
+        let sigma_change = new_run_sigmas.iter().zip(&run_sigmas).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
+        (run_sigmas, sigmas) = (new_run_sigmas, new_sigmas);
         if moved < 1e-6 && sigma_change < 1e-3 {
             break;
         }
@@ -203,16 +202,65 @@ pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
     Some(MapEstimate { x: full, cov, jacobian: jac, sigmas, log_density, converged })
 }
 
+/// Each run's noise scale σ and every sample's √(σ² + a_k) from the
+/// residuals `res` at `x`: σ = RMS, or with errors in variables σ² = RMS² −
+/// mean a_k (at least a twentieth of RMS²), a_k = S_k² s_γ² with S_k the
+/// model's tangent stiffness, as the likelihood has it.
+fn noise_scales(post: &Posterior, x: &[f64], res: &[Vec<f64>]) -> (Vec<f64>, Vec<Vec<f64>>) {
+    res.iter()
+        .zip(&post.runs)
+        .map(|(r, run)| {
+            let ms = rms(r).max(1e-9).powi(2);
+            let var = if post.likelihood.errors_in_variables { run.strain_noise_var } else { 0.0 };
+            if var <= 0.0 {
+                return (ms.sqrt(), vec![ms.sqrt(); r.len()]);
+            }
+            let g = post.params_at_current(x, run.current_a).g;
+            // the model stress (with terms) is τ_obs − r; its slope along the drive
+            let fitted: Vec<f64> = r.iter().enumerate().map(|(i, v)| run.tau[i + 1] - v).collect();
+            let a: Vec<f64> = (0..r.len())
+                .map(|i| {
+                    let prev = if i == 0 { run.initial_tau } else { fitted[i - 1] };
+                    let dg = run.gamma[i + 1] - run.gamma[i];
+                    let s = if dg.abs() > 1e-12 { ((fitted[i] - prev) / dg).clamp(0.0, g) } else { g };
+                    s * s * var
+                })
+                .collect();
+            // σ² solving Σ w_k = Σ r_k² w_k², w_k = 1/(σ² + a_k) (the
+            // likelihood's maximum), by the fixed point σ² ← σ² Σ r²w²/Σ w
+            // from the moment estimate
+            let mean_a = a.iter().sum::<f64>() / a.len().max(1) as f64;
+            let mut sigma2 = (ms - mean_a).max(0.05 * ms);
+            for _ in 0..50 {
+                let (mut sw, mut srw) = (0.0, 0.0);
+                for (v, ak) in r.iter().zip(&a) {
+                    let w = 1.0 / (sigma2 + ak);
+                    sw += w;
+                    srw += v * v * w * w;
+                }
+                let next = sigma2 * srw / sw;
+                let done = (next / sigma2 - 1.0).abs() < 1e-6;
+                sigma2 = next.max(1e-6 * ms);
+                if done {
+                    break;
+                }
+            }
+            (sigma2.sqrt(), a.iter().map(|a| (sigma2 + a).sqrt()).collect())
+        })
+        .unzip()
+}
+
 /// θ extended by the noise coordinates that maximise the likelihood of the
-/// residuals at θ: ln σ = ln RMS (AR(1): the innovation sd and atanh of the
-/// lag-one correlation).
+/// residuals at θ: ln σ = ln RMS, or the profiled σ of errors in variables
+/// (AR(1): the innovation sd and atanh of the lag-one correlation).
 fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
     let res = residuals_many(post, &[theta.to_vec()]).pop()??;
+    let (run_sigmas, _) = noise_scales(post, theta, &res);
     let ar1 = post.likelihood.noise == NoiseModel::Ar1;
     let mut full = theta.to_vec();
     let mut rhos = Vec::new();
-    for r in &res {
-        let s = rms(r).max(1e-9);
+    for (r, sigma) in res.iter().zip(&run_sigmas) {
+        let s = if post.likelihood.errors_in_variables { *sigma } else { rms(r).max(1e-9) };
         let rho = if ar1 {
             let num: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
             let den: f64 = r.iter().map(|v| v * v).sum();

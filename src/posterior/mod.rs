@@ -117,6 +117,16 @@ impl Posterior {
         let with_terms = terms.iter().any(|t| *t != (0.0, 0.0));
         let mut st = [ResidualStats::default(); LANES];
         let mut prev = [0.0; LANES];
+        // errors in variables: the strain noise through the tangent stiffness
+        let strain_var = if self.likelihood.errors_in_variables { r.strain_noise_var } else { 0.0 };
+        let eiv = strain_var > 0.0;
+        if eiv {
+            for s in st.iter_mut() {
+                s.eiv = Some((0.0, 0.0));
+            }
+        }
+        let sigma2 = scales.map(|s| s * s);
+        let mut prev_model = [r.initial_tau; LANES];
         let nu = self.likelihood.student_nu;
         let inv_nu_s2 = scales.map(|s| (self.likelihood.noise == NoiseModel::StudentT).then(|| 1.0 / (nu * s * s)));
         let outcome = self.integrator.run_lanes(params, &r.time, &r.gamma, r.initial_tau, |k, s| {
@@ -124,11 +134,22 @@ impl Posterior {
                 return;
             }
             let obs = r.tau[k];
+            let dg = r.gamma[k] - r.gamma[k - 1];
             for lane in 0..LANES {
                 let model = if with_terms { s.tau[lane] + r.terms_stress(k, terms[lane].0, terms[lane].1) } else { s.tau[lane] };
                 let res = obs - model;
                 st[lane].push(k, res, prev[lane], inv_nu_s2[lane]);
                 prev[lane] = res;
+                if eiv {
+                    let g = params[lane].g;
+                    let stiffness = if dg.abs() > 1e-12 { ((s.tau[lane] - prev_model[lane]) / dg).clamp(0.0, g) } else { g };
+                    prev_model[lane] = s.tau[lane];
+                    let a = stiffness * stiffness * strain_var;
+                    if let Some((log_inflation, weighted)) = st[lane].eiv.as_mut() {
+                        *log_inflation += (a / sigma2[lane]).ln_1p();
+                        *weighted += res * res / (sigma2[lane] + a);
+                    }
+                }
             }
         });
         std::array::from_fn(|lane| outcome[lane].is_ok().then_some(st[lane]))
