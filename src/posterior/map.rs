@@ -145,25 +145,42 @@ fn whitened(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64]) -> Option<Vec<f64>
 }
 
 /// The Jacobian of the whitened residuals at `x` by forward differences,
-/// every point integrated in one batch.
+/// every point integrated in one batch; a coordinate whose forward point
+/// leaves the prior's support (a MAP at a truncation bound) is
+/// differenced backwards instead.
 fn jacobian(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64]) -> Option<DMatrix<f64>> {
     let n = x.len();
-    let points: Vec<Vec<f64>> = (0..=n)
-        .map(|j| {
-            let mut q = x.to_vec();
-            if j > 0 {
-                q[j - 1] += JACOBIAN_STEP;
-            }
-            q
-        })
-        .collect();
-    let mut white = residuals_many(post, &points).into_iter().zip(&points).map(|(r, q)| whiten(post, sigmas, q, r));
-    let r0 = white.next()??;
+    let displaced = |sign: f64, which: &[usize]| -> Vec<Vec<f64>> {
+        which
+            .iter()
+            .map(|&j| {
+                let mut q = x.to_vec();
+                if j > 0 {
+                    q[j - 1] += sign * JACOBIAN_STEP;
+                }
+                q
+            })
+            .collect()
+    };
+    let all: Vec<usize> = (0..=n).collect();
+    let points = displaced(1.0, &all);
+    let mut white: Vec<Option<Vec<f64>>> = residuals_many(post, &points).into_iter().zip(&points).map(|(r, q)| whiten(post, sigmas, q, r)).collect();
+    let r0 = white[0].take()?;
+    let outside: Vec<usize> = (1..=n).filter(|&j| white[j].is_none()).collect();
+    let back_points = displaced(-1.0, &outside);
+    let back: Vec<Option<Vec<f64>>> = residuals_many(post, &back_points).into_iter().zip(&back_points).map(|(r, q)| whiten(post, sigmas, q, r)).collect();
     let mut jac = DMatrix::zeros(r0.len(), n);
-    for (j, r1) in white.enumerate() {
-        let r1 = r1?;
-        for i in 0..r0.len() {
-            jac[(i, j)] = (r1[i] - r0[i]) / JACOBIAN_STEP;
+    for j in 1..=n {
+        let column: Vec<f64> = match &white[j] {
+            Some(r1) => r1.iter().zip(&r0).map(|(a, b)| (a - b) / JACOBIAN_STEP).collect(),
+            None => {
+                let k = outside.iter().position(|&o| o == j).expect("listed");
+                let rb = back[k].as_ref()?;
+                r0.iter().zip(rb).map(|(a, b)| (a - b) / JACOBIAN_STEP).collect()
+            }
+        };
+        for (i, v) in column.into_iter().enumerate() {
+            jac[(i, j - 1)] = v;
         }
     }
     Some(jac)
@@ -268,7 +285,9 @@ fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
         } else {
             0.0
         };
-        full.push(if ar1 { s * (1.0 - rho * rho).sqrt() } else { s }.ln());
+        // the most likely σ inside the prior's bounds
+        let (lo, hi) = post.sigma_bounds;
+        full.push(if ar1 { s * (1.0 - rho * rho).sqrt() } else { s }.clamp(lo, hi).ln());
         rhos.push(rho.atanh());
     }
     if ar1 {
