@@ -8,8 +8,9 @@
 //!     cargo run --release --example calibration_coverage -- [N] [DISPLACEMENT_NOISE_M] [SMOOTH_MS] [eiv]
 //!
 //! N defaults to 40, the displacement noise to the bundled 2e-6 m, the
-//! strain smoothing to the default 2 ms; `eiv` switches the
-//! errors-in-variables likelihood on. docs/calibration.md shows its output.
+//! strain smoothing to the default 2 ms; the likelihood takes the strain
+//! as exact unless `eiv` (the default of mrbp) is given. docs/calibration.md
+//! shows its output.
 
 use mrbp::calibrate::calibrate;
 use mrbp::calibrate::CalibrationSettings;

@@ -46,7 +46,7 @@ impl PredictSettings {
             student_nu: likelihood.student_nu,
             replicates,
             seed,
-            errors_in_variables: likelihood.errors_in_variables,
+            errors_in_variables: likelihood.eiv(),
         }
     }
 }
@@ -360,7 +360,7 @@ mod tests {
     fn ramp_run() -> RunData {
         let time: Vec<f64> = (0..400).map(|k| k as f64 * 5e-4).collect();
         let gamma: Vec<f64> = time.iter().map(|t| 0.5 * (1.0 - (2.0 * std::f64::consts::PI * 2.5 * t).cos())).collect();
-        RunData { id: "r".into(), time, gamma, tau: vec![0.0; 400], initial_tau: 0.0, current_a: 1.0, area_m2: 0.05, gap_m: 1e-3, strain_noise_var: 0.0 }
+        RunData { id: "r".into(), time, gamma, tau: vec![0.0; 400], initial_tau: 0.0, current_a: 1.0, area_m2: 0.05, gap_m: 1e-3, strain_noise_var: 0.0, strain_smoothing_share: 1.0 }
     }
 
     /// One fixed parameter set: the model band collapses onto the

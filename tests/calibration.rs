@@ -229,8 +229,8 @@ fn model_terms_recover_a_known_offset_and_gas_spring() {
 /// Errors in variables: with 2 µm displacement noise, the exact-input
 /// likelihood's 90 % interval of G misses the truth on this realisation
 /// (z = +2.10 in the replicate study, docs/calibration.md) and the
-/// errors-in-variables one holds it (z = +1.22). The margins to the
-/// interval's edge (±1.645 sd) are 0.4 sd, against a Monte Carlo error of
+/// errors-in-variables one holds it (z = +0.52). The margins to the
+/// interval's edge (±1.645 sd) are 0.45 sd and more, against a Monte Carlo error of
 /// the 5 % and 95 % quantiles of about 0.05 sd at these ESS (≥ 700): the
 /// seeds make the outcome fixed, and a change of the method that moves it
 /// by more than the Monte Carlo error shows here.

@@ -178,11 +178,11 @@ pub struct SampleOptions {
     /// Samples in the likelihood (default: whole-record)
     #[arg(long, value_enum)]
     pub part: Option<RecordPart>,
-    /// Treat the measured displacement as noisy too: its noise, estimated
-    /// from the record, reaches the stress through the model's stiffness
-    /// (gaussian noise only; docs/calibration.md)
+    /// Take the measured displacement as exact (by default its noise,
+    /// estimated from the record, reaches the stress through the model's
+    /// stiffness: errors in variables, with gaussian noise; docs/calibration.md)
     #[arg(long)]
-    pub errors_in_variables: bool,
+    pub exact_input: bool,
     /// Integrator sub-steps per sample, at least 1 (default: chosen by the step rule)
     #[arg(long)]
     pub substeps: Option<u32>,
@@ -219,7 +219,9 @@ impl SampleOptions {
         s.sampler.seed = self.seed.unwrap_or(s.sampler.seed);
         s.likelihood.noise = self.noise.unwrap_or(s.likelihood.noise);
         s.likelihood.part = self.part.unwrap_or(s.likelihood.part);
-        s.likelihood.errors_in_variables |= self.errors_in_variables;
+        if self.exact_input {
+            s.likelihood.errors_in_variables = false;
+        }
         s.model = self.model.unwrap_or(s.model);
         s.check().map_err(Error::Usage)?;
         Ok(s)

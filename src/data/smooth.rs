@@ -92,11 +92,21 @@ pub fn noise_variance(time: &[f64], raw: &[f64], smoothed: &[f64], smooth_ms: f6
     let mean_square = diff.iter().map(|d| d * d).sum::<f64>() / diff.len() as f64;
     diff.sort_by(f64::total_cmp);
     let mad = diff[diff.len() / 2];
-    // the centre weight: the smoother's response to an impulse mid-record
+    let w0 = centre_weight(time, smooth_ms).min(0.95);
+    (1.4826 * mad).powi(2).min(mean_square) / (1.0 - w0)
+}
+
+/// The smoother's weight on the centre sample (its response to an impulse
+/// mid-record): the share of white noise variance left in a smoothed value.
+/// 1 without smoothing.
+pub fn centre_weight(time: &[f64], smooth_ms: f64) -> f64 {
+    let n = time.len();
+    if n < 2 * MIN_SMOOTH_SAMPLES + 1 || smooth_ms <= 0.0 {
+        return 1.0;
+    }
     let mid = n / 2;
     let impulse: Vec<f64> = (0..n).map(|k| if k == mid { 1.0 } else { 0.0 }).collect();
-    let w0 = smoothed_strain(time, &impulse, smooth_ms)[mid].clamp(0.0, 0.95);
-    (1.4826 * mad).powi(2).min(mean_square) / (1.0 - w0)
+    smoothed_strain(time, &impulse, smooth_ms)[mid].clamp(0.0, 1.0)
 }
 
 #[cfg(test)]

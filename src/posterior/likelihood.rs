@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use statrs::function::gamma::ln_gamma;
 
 use crate::data::{noise_variance, smoothed_strain, Run};
+use crate::data::smooth::centre_weight;
 
 /// The residual model of the force record.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -58,7 +59,10 @@ pub struct LikelihoodSettings {
     /// too, and its noise reaches the stress through the model's tangent
     /// stiffness S_k = dτ/dγ along the path (G when elastic, near 0 in
     /// flow). Each residual then has variance σ² + S_k² s_γ², with s_γ² the
-    /// strain noise estimated from the record (docs/calibration.md).
+    /// strain noise estimated from the record, and the error of the strain
+    /// at each reversal, which the whole branch after it shares, as one
+    /// random offset per branch (docs/calibration.md). On by default; it
+    /// applies with Gaussian noise only.
     pub errors_in_variables: bool,
 }
 
@@ -69,7 +73,7 @@ impl Default for LikelihoodSettings {
             smooth_strain_ms: 2.0,
             student_nu: 5.0,
             part: RecordPart::WholeRecord,
-            errors_in_variables: false,
+            errors_in_variables: true,
         }
     }
 }
@@ -82,10 +86,13 @@ impl LikelihoodSettings {
         if self.noise == NoiseModel::StudentT && !(self.student_nu > 0.0) {
             return Err("student_nu must be positive".into());
         }
-        if self.errors_in_variables && self.noise != NoiseModel::Gaussian {
-            return Err("errors_in_variables works with the gaussian noise model only".into());
-        }
         Ok(())
+    }
+
+    /// Whether the errors-in-variables terms apply: asked for, and with
+    /// Gaussian noise (the other noise models take the strain as exact).
+    pub fn eiv(&self) -> bool {
+        self.errors_in_variables && self.noise == NoiseModel::Gaussian
     }
 }
 
@@ -107,6 +114,9 @@ pub struct RunData {
     /// quantisation over h²), estimated from the record: what the
     /// errors-in-variables likelihood propagates into stress.
     pub strain_noise_var: f64,
+    /// The share of that variance left in the smoothed strain at one sample
+    /// (the smoother's centre weight).
+    pub strain_smoothing_share: f64,
 }
 
 impl RunData {
@@ -125,6 +135,7 @@ impl RunData {
         let sh = &run.shear;
         let gamma = smoothed_strain(&sh.time, &sh.gamma, smooth_strain_ms);
         let strain_noise_var = noise_variance(&sh.time, &sh.gamma, &gamma, smooth_strain_ms);
+        let strain_smoothing_share = centre_weight(&sh.time, smooth_strain_ms);
         RunData {
             id: run.id().to_string(),
             time: sh.time[..end].to_vec(),
@@ -135,6 +146,7 @@ impl RunData {
             area_m2: run.geometry.area_m2,
             gap_m: run.geometry.gap_m,
             strain_noise_var,
+            strain_smoothing_share,
         }
     }
 

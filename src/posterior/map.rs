@@ -228,7 +228,7 @@ fn noise_scales(post: &Posterior, x: &[f64], res: &[Vec<f64>]) -> (Vec<f64>, Vec
         .zip(&post.runs)
         .map(|(r, run)| {
             let ms = rms(r).max(1e-9).powi(2);
-            let var = if post.likelihood.errors_in_variables { run.strain_noise_var } else { 0.0 };
+            let var = if post.likelihood.eiv() { run.strain_noise_var } else { 0.0 };
             if var <= 0.0 {
                 return (ms.sqrt(), vec![ms.sqrt(); r.len()]);
             }
@@ -277,7 +277,7 @@ fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
     let mut full = theta.to_vec();
     let mut rhos = Vec::new();
     for (r, sigma) in res.iter().zip(&run_sigmas) {
-        let s = if post.likelihood.errors_in_variables { *sigma } else { rms(r).max(1e-9) };
+        let s = if post.likelihood.eiv() { *sigma } else { rms(r).max(1e-9) };
         let rho = if ar1 {
             let num: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
             let den: f64 = r.iter().map(|v| v * v).sum();

@@ -118,7 +118,7 @@ impl Posterior {
         let mut st = [ResidualStats::default(); LANES];
         let mut prev = [0.0; LANES];
         // errors in variables: the strain noise through the tangent stiffness
-        let strain_var = if self.likelihood.errors_in_variables { r.strain_noise_var } else { 0.0 };
+        let strain_var = if self.likelihood.eiv() { r.strain_noise_var } else { 0.0 };
         let eiv = strain_var > 0.0;
         if eiv {
             for s in st.iter_mut() {
@@ -127,6 +127,19 @@ impl Posterior {
         }
         let sigma2 = scales.map(|s| s * s);
         let mut prev_model = [r.initial_tau; LANES];
+        // the strain error at a reversal is shared by the stretch after it:
+        // a rank-one term per branch, c_k = S_k, variance v (Sherman-Morrison)
+        let v = strain_var * r.strain_smoothing_share;
+        let mut branch = [(0.0f64, 0.0f64); LANES];
+        let mut direction = 0.0f64;
+        let close = |st: &mut ResidualStats, b: &mut (f64, f64)| {
+            if let Some((log_inflation, weighted)) = st.eiv.as_mut() {
+                let (rc, cc) = *b;
+                *log_inflation += (v * cc).ln_1p();
+                *weighted -= v * rc * rc / (1.0 + v * cc);
+            }
+            *b = (0.0, 0.0);
+        };
         let nu = self.likelihood.student_nu;
         let inv_nu_s2 = scales.map(|s| (self.likelihood.noise == NoiseModel::StudentT).then(|| 1.0 / (nu * s * s)));
         let outcome = self.integrator.run_lanes(params, &r.time, &r.gamma, r.initial_tau, |k, s| {
@@ -135,7 +148,14 @@ impl Posterior {
             }
             let obs = r.tau[k];
             let dg = r.gamma[k] - r.gamma[k - 1];
+            let reversed = eiv && dg != 0.0 && direction != 0.0 && dg.signum() != direction;
+            if dg != 0.0 {
+                direction = dg.signum();
+            }
             for lane in 0..LANES {
+                if reversed {
+                    close(&mut st[lane], &mut branch[lane]);
+                }
                 let model = if with_terms { s.tau[lane] + r.terms_stress(k, terms[lane].0, terms[lane].1) } else { s.tau[lane] };
                 let res = obs - model;
                 st[lane].push(k, res, prev[lane], inv_nu_s2[lane]);
@@ -145,13 +165,21 @@ impl Posterior {
                     let stiffness = if dg.abs() > 1e-12 { ((s.tau[lane] - prev_model[lane]) / dg).clamp(0.0, g) } else { g };
                     prev_model[lane] = s.tau[lane];
                     let a = stiffness * stiffness * strain_var;
+                    let d = sigma2[lane] + a;
                     if let Some((log_inflation, weighted)) = st[lane].eiv.as_mut() {
                         *log_inflation += (a / sigma2[lane]).ln_1p();
-                        *weighted += res * res / (sigma2[lane] + a);
+                        *weighted += res * res / d;
                     }
+                    branch[lane].0 += res * stiffness / d;
+                    branch[lane].1 += stiffness * stiffness / d;
                 }
             }
         });
+        if eiv {
+            for lane in 0..LANES {
+                close(&mut st[lane], &mut branch[lane]);
+            }
+        }
         std::array::from_fn(|lane| outcome[lane].is_ok().then_some(st[lane]))
     }
 
