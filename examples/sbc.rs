@@ -78,14 +78,6 @@ fn main() -> mrbp::Result<()> {
             Err(e) => {
                 eprintln!("replicate {rep}: {e} (θ / reference: {:?}, σ {sigma:.0} Pa)", theta.iter().zip(&reference).map(|(t, r)| (t / r * 100.0).round() / 100.0).collect::<Vec<f64>>());
                 failed += 1;
-                if std::env::var_os("MRBP_SBC_KEEP_FAILED").is_some() {
-                    let keep = std::env::temp_dir().join(format!("sbc-failed-{rep}"));
-                    let _ = std::fs::create_dir_all(&keep);
-                    for f in std::fs::read_dir(dir.path()).into_iter().flatten().flatten() {
-                        let _ = std::fs::copy(f.path(), keep.join(f.file_name()));
-                    }
-                    let _ = mrbp::store::record::write_config(&keep.join("config.toml"), &settings);
-                }
                 continue;
             }
         };

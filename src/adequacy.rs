@@ -115,12 +115,17 @@ pub struct AdequacyRow {
     pub inside_p95_stroke: f64,
 }
 
-/// The displacement that drove the model (the smoothed strain times the
-/// gap, from the record's first position) and its velocity by central
-/// differences, m and m/s.
-pub fn kinematics(b: &RunBands, gap_m: f64) -> (Vec<f64>, Vec<f64>) {
+/// The displacement that drove the model: the smoothed strain times the
+/// gap, from the record's first position (m).
+pub fn model_displacement(b: &RunBands, gap_m: f64) -> Vec<f64> {
     let x0 = b.displacement.first().copied().unwrap_or(0.0);
-    let x: Vec<f64> = b.gamma_model.iter().map(|g| x0 + g * gap_m).collect();
+    b.gamma_model.iter().map(|g| x0 + g * gap_m).collect()
+}
+
+/// [`model_displacement`] and its velocity by central differences, m and
+/// m/s.
+pub fn kinematics(b: &RunBands, gap_m: f64) -> (Vec<f64>, Vec<f64>) {
+    let x = model_displacement(b, gap_m);
     let n = x.len();
     let v = (0..n)
         .map(|k| {
@@ -141,19 +146,12 @@ pub fn residual_force(b: &RunBands, area_m2: f64) -> Vec<f64> {
     b.tau_obs.iter().zip(&b.model[2]).map(|(o, m)| (o - m) * area_m2).collect()
 }
 
-/// Autocorrelation of `r` (mean removed) at lags 0..=max_lag; the usual
-/// biased estimator, so it stays within [−1, 1].
+/// Autocorrelation of `r` at lags 0..=max_lag (the sampler's FFT
+/// estimator: mean removed, biased, so it stays within [−1, 1]).
 pub fn autocorrelation(r: &[f64], max_lag: usize) -> Vec<f64> {
-    let n = r.len();
-    if n < 2 {
-        return vec![f64::NAN; max_lag + 1];
-    }
-    let mean = r.iter().sum::<f64>() / n as f64;
-    let d: Vec<f64> = r.iter().map(|v| v - mean).collect();
-    let c0: f64 = d.iter().map(|v| v * v).sum();
-    (0..=max_lag.min(n - 1))
-        .map(|lag| if c0 > 0.0 { d[..n - lag].iter().zip(&d[lag..]).map(|(a, b)| a * b).sum::<f64>() / c0 } else { f64::NAN })
-        .collect()
+    let mut acf = crate::sampler::diagnostics::autocorrelation(r);
+    acf.truncate(max_lag + 1);
+    acf
 }
 
 /// The number of samples in one cycle of `e` along `time` (the whole record

@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::Run;
 use crate::error::{Error, Result};
 use crate::model::{Integrator, Params, LANES};
-use crate::posterior::{Draw, LikelihoodSettings, NoiseModel, RunData};
+use crate::posterior::{tangent_stiffness, Draw, LikelihoodSettings, NoiseModel, RunData};
 use crate::rng;
 use crate::sampler::quantile_sorted;
 use statrs::function::gamma::ln_gamma;
@@ -172,7 +172,7 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
             // errors in variables: σ² + S_k² s_γ², S_k the path's tangent stiffness
             let d = &if strain_var > 0.0 {
                 let g = d.params.g;
-                let s = if k > 0 && dg.abs() > 1e-12 { ((path[k] - path[k - 1]) / dg).clamp(0.0, g) } else { g };
+                let s = if k > 0 { tangent_stiffness(path[k] - path[k - 1], dg, g) } else { g };
                 Draw { sigma: (d.sigma * d.sigma + s * s * strain_var).sqrt(), ..**d }
             } else {
                 **d

@@ -73,9 +73,9 @@ pub fn smoothed_strain(time: &[f64], gamma: &[f64], smooth_ms: f64) -> Vec<f64> 
     g
 }
 
-/// The variance of the measurement noise of `raw` (sampled at `time`),
-/// from its difference to `smoothed` (the local cubic of half-width
-/// `smooth_ms`, [`smoothed_strain`]): the smaller of the mean square and
+/// The variance of the measurement noise of `raw`, from its difference to
+/// `smoothed` (by [`smoothed_strain`], whose [`centre_weight`] is `w0`):
+/// the smaller of the mean square and
 /// the robust scale (1.4826 × the median absolute difference)² — the first
 /// is right for the uniform noise of a quantised channel, the second
 /// ignores spikes and sharp bends — corrected for the share 1 − w₀ of the
@@ -83,22 +83,20 @@ pub fn smoothed_strain(time: &[f64], gamma: &[f64], smooth_ms: f64) -> Vec<f64> 
 /// centre sample). White sensor noise and the steps of a quantised channel both
 /// show here; so would curvature the window cannot follow, which a stand's
 /// displacement does not have on a few milliseconds. 0 without smoothing.
-pub fn noise_variance(time: &[f64], raw: &[f64], smoothed: &[f64], smooth_ms: f64) -> f64 {
-    let n = time.len();
-    if n < 2 * MIN_SMOOTH_SAMPLES + 1 || smooth_ms <= 0.0 {
+pub fn noise_variance(raw: &[f64], smoothed: &[f64], w0: f64) -> f64 {
+    if raw.len() < 2 * MIN_SMOOTH_SAMPLES + 1 || w0 >= 1.0 {
         return 0.0;
     }
     let mut diff: Vec<f64> = raw.iter().zip(smoothed).skip(1).map(|(r, s)| (r - s).abs()).collect();
     let mean_square = diff.iter().map(|d| d * d).sum::<f64>() / diff.len() as f64;
     diff.sort_by(f64::total_cmp);
     let mad = diff[diff.len() / 2];
-    let w0 = centre_weight(time, smooth_ms).min(0.95);
-    (1.4826 * mad).powi(2).min(mean_square) / (1.0 - w0)
+    (1.4826 * mad).powi(2).min(mean_square) / (1.0 - w0.min(0.95))
 }
 
 /// The smoother's weight on the centre sample (its response to an impulse
 /// mid-record): the share of white noise variance left in a smoothed value.
-/// 1 without smoothing.
+/// 1 without smoothing (then [`noise_variance`] reads no noise).
 pub fn centre_weight(time: &[f64], smooth_ms: f64) -> f64 {
     let n = time.len();
     if n < 2 * MIN_SMOOTH_SAMPLES + 1 || smooth_ms <= 0.0 {
@@ -125,13 +123,14 @@ mod tests {
         let t: Vec<f64> = (0..4000).map(|k| k as f64 / 2000.0).collect();
         let clean: Vec<f64> = t.iter().map(|t| 5.0 * (std::f64::consts::TAU * t).sin()).collect();
         let noisy: Vec<f64> = clean.iter().map(|c| c + 2e-3 * rng.sample::<f64, _>(rand_distr::StandardNormal)).collect();
-        let v = noise_variance(&t, &noisy, &smoothed_strain(&t, &noisy, 2.0), 2.0);
+        let w0 = centre_weight(&t, 2.0);
+        let v = noise_variance(&noisy, &smoothed_strain(&t, &noisy, 2.0), w0);
         assert!((v / 4e-6 - 1.0).abs() < 0.1, "{v}");
         let q = 0.03;
         let steps: Vec<f64> = clean.iter().map(|c| (c / q).round() * q).collect();
-        let v = noise_variance(&t, &steps, &smoothed_strain(&t, &steps, 2.0), 2.0);
+        let v = noise_variance(&steps, &smoothed_strain(&t, &steps, 2.0), w0);
         assert!((v / (q * q / 12.0) - 1.0).abs() < 0.2, "{v} against {}", q * q / 12.0);
-        assert_eq!(noise_variance(&t, &clean, &clean, 0.0), 0.0);
+        assert_eq!(noise_variance(&clean, &clean, centre_weight(&t, 0.0)), 0.0);
     }
 
     #[test]

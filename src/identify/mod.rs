@@ -92,6 +92,31 @@ pub struct RunIdentification {
     pub warnings: Vec<String>,
 }
 
+impl RunIdentification {
+    /// A run's identification with G found on `branch` and nothing past
+    /// yield yet: the route (from rest, or steady cycles) fills in the rest.
+    fn with_g(run: &Run, branch: std::ops::Range<usize>, g: f64, elastic_points: usize, warnings: Vec<String>) -> Self {
+        RunIdentification {
+            run: run.id().to_string(),
+            current_a: run.spec.current_a,
+            branch,
+            g,
+            elastic_points,
+            yield_point: None,
+            curve_data: (vec![], vec![]),
+            curve: None,
+            psi: (vec![], vec![]),
+            ends: None,
+            m1: f64::NAN,
+            m2: f64::NAN,
+            r1: f64::NAN,
+            d1: f64::NAN,
+            steady: None,
+            warnings,
+        }
+    }
+}
+
 /// The identification of one current level.
 #[derive(Clone, Debug)]
 pub struct CurrentIdentification {
@@ -155,24 +180,7 @@ fn identify_run(run: &Run, s: &IdentifySettings) -> RunIdentification {
         &provisional.tau_smooth[b.clone()],
         s.elastic_share,
     );
-    let mut out = RunIdentification {
-        run: run.id().to_string(),
-        current_a: run.spec.current_a,
-        branch: branch.clone(),
-        g,
-        elastic_points,
-        yield_point: None,
-        curve_data: (vec![], vec![]),
-        curve: None,
-        psi: (vec![], vec![]),
-        ends: None,
-        m1: f64::NAN,
-        m2: f64::NAN,
-        r1: f64::NAN,
-        d1: f64::NAN,
-        steady: None,
-        warnings,
-    };
+    let mut out = RunIdentification::with_g(run, branch.clone(), g, elastic_points, warnings);
     if elastic_points < 5 {
         out.warnings.push(format!("only {elastic_points} samples in the elastic part: G is rough"));
     }
@@ -248,27 +256,14 @@ fn identify_steady(run: &Run, s: &IdentifySettings) -> RunIdentification {
     let (tau, _) = crate::data::local_polynomial(&sh.time, &sh.tau, half_window, 3);
     let (gamma, rate) = crate::data::local_polynomial(&sh.time, &sh.gamma, half_window, 3);
     let fit = steady::identify(run, &tau, &gamma, &rate);
-    RunIdentification {
-        run: run.id().to_string(),
-        current_a: run.spec.current_a,
-        branch: run.branches[steady::first_full_stroke(run)].clone(),
-        g: fit.as_ref().map_or(f64::NAN, |f| f.g),
-        elastic_points: fit.as_ref().map_or(0, |f| f.reversals),
-        yield_point: None,
-        curve_data: (vec![], vec![]),
-        curve: None,
-        psi: (vec![], vec![]),
-        ends: None,
-        m1: f64::NAN,
-        m2: f64::NAN,
-        r1: f64::NAN,
-        d1: f64::NAN,
-        warnings: match &fit {
-            Ok(_) => vec![],
-            Err(why) => vec![format!("steady cycles: {why}")],
-        },
-        steady: fit.ok(),
-    }
+    let warnings = match &fit {
+        Ok(_) => vec![],
+        Err(why) => vec![format!("steady cycles: {why}")],
+    };
+    let branch = run.branches[steady::first_full_stroke(run)].clone();
+    let g = fit.as_ref().map_or(f64::NAN, |f| f.g);
+    let elastic_points = fit.as_ref().map_or(0, |f| f.reversals);
+    RunIdentification { steady: fit.ok(), ..RunIdentification::with_g(run, branch, g, elastic_points, warnings) }
 }
 
 /// `n` points of the curve y(x) at x log-spaced from `from` to the largest x,

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 
 /// The files of a calibration folder derived from its chains: a new
 /// calibration removes them, since they would describe the old one.
-pub const DERIVED: [&str; 8] = [
+pub const DERIVED: [&str; 7] = [
     "bands.parquet",
     "coverage.parquet",
     "adequacy.parquet",
@@ -18,8 +18,11 @@ pub const DERIVED: [&str; 8] = [
     "loo.parquet",
     "loo_bands.parquet",
     "report.html",
-    "residuals.png",
 ];
+
+/// The report's figures (SVG and PNG) start so; the identification's
+/// (`fig1…fig5`), which the calibration itself writes, do not.
+const FIGURES: [&str; 6] = ["bands_", "adequacy_", "residuals", "corner", "marginals", "traces"];
 
 /// The results of `mrbp sample` in a calibration folder.
 pub const CALIBRATION: [&str; 5] = ["chains.parquet", "summary.parquet", "calibration.toml", "config.toml", "identification.parquet"];
@@ -62,9 +65,12 @@ pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str],
 
 /// Removes the files derived from an earlier calibration in `dir`.
 pub fn clear_derived(dir: &Path) -> Result<()> {
-    for f in DERIVED {
-        let path = dir.join(f);
-        if path.exists() {
+    let figure = |name: &str| FIGURES.iter().any(|p| name.starts_with(p)) && (name.ends_with(".png") || name.ends_with(".svg"));
+    let listed = std::fs::read_dir(dir).map_err(|e| Error::output(dir, e))?;
+    for entry in listed.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if DERIVED.contains(&name.as_str()) || figure(&name) {
+            let path = entry.path();
             std::fs::remove_file(&path).map_err(|e| Error::output(&path, e))?;
         }
     }

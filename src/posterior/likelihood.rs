@@ -134,8 +134,8 @@ impl RunData {
         };
         let sh = &run.shear;
         let gamma = smoothed_strain(&sh.time, &sh.gamma, smooth_strain_ms);
-        let strain_noise_var = noise_variance(&sh.time, &sh.gamma, &gamma, smooth_strain_ms);
         let strain_smoothing_share = centre_weight(&sh.time, smooth_strain_ms);
+        let strain_noise_var = noise_variance(&sh.gamma, &gamma, strain_smoothing_share);
         RunData {
             id: run.id().to_string(),
             time: sh.time[..end].to_vec(),
@@ -159,6 +159,19 @@ impl RunData {
     #[inline(always)]
     pub fn terms_stress(&self, k: usize, spring_n_per_m: f64, offset_n: f64) -> f64 {
         super::terms::ModelTerms::stress(offset_n, spring_n_per_m, self.gamma[k], self.area_m2, self.gap_m)
+    }
+}
+
+/// The model's tangent stiffness dτ/dγ between two samples (stress change
+/// `dtau` over strain change `dgamma`), within [0, G], and G where the
+/// strain stands still: what carries the strain's noise into the stress
+/// (errors in variables), in the likelihood, the MAP weights and the bands.
+#[inline(always)]
+pub fn tangent_stiffness(dtau: f64, dgamma: f64, g: f64) -> f64 {
+    if dgamma.abs() > 1e-12 {
+        (dtau / dgamma).clamp(0.0, g)
+    } else {
+        g
     }
 }
 

@@ -13,7 +13,7 @@ use nalgebra::{DMatrix, DVector};
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-use super::{Layout, NoiseModel, Posterior, RunData};
+use super::{tangent_stiffness, Layout, NoiseModel, Posterior, RunData};
 use crate::fit::least_squares;
 use crate::model::{Integrator, Params, LANES};
 use crate::sampler::LogDensity;
@@ -239,7 +239,7 @@ fn noise_scales(post: &Posterior, x: &[f64], res: &[Vec<f64>]) -> (Vec<f64>, Vec
                 .map(|i| {
                     let prev = if i == 0 { run.initial_tau } else { fitted[i - 1] };
                     let dg = run.gamma[i + 1] - run.gamma[i];
-                    let s = if dg.abs() > 1e-12 { ((fitted[i] - prev) / dg).clamp(0.0, g) } else { g };
+                    let s = tangent_stiffness(fitted[i] - prev, dg, g);
                     s * s * var
                 })
                 .collect();
@@ -300,16 +300,7 @@ fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
 /// integration fails): what tells independent noise from a misfit with memory.
 pub fn residual_autocorrelation(post: &Posterior, x: &[f64]) -> Option<Vec<f64>> {
     let res = residuals_many(post, &[x.to_vec()]).pop()??;
-    Some(
-        res.iter()
-            .map(|r| {
-                let mean = r.iter().sum::<f64>() / r.len().max(1) as f64;
-                let num: f64 = r.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
-                let den: f64 = r.iter().map(|v| (v - mean).powi(2)).sum();
-                num / den
-            })
-            .collect(),
-    )
+    Some(res.iter().map(|r| crate::sampler::diagnostics::autocorrelation(r).get(1).copied().unwrap_or(f64::NAN)).collect())
 }
 
 /// The best MAP from several starts (θ coordinates), by log-density.

@@ -24,7 +24,7 @@ use crate::data::Campaign;
 use crate::model::{Integrator, Params, LANES};
 use crate::sampler::LogDensity;
 pub use layout::{Coordinates, Layout};
-pub use likelihood::{LikelihoodSettings, NoiseModel, RecordPart, ResidualStats, RunData};
+pub use likelihood::{tangent_stiffness, LikelihoodSettings, NoiseModel, RecordPart, ResidualStats, RunData};
 pub use parameters::{ModelKind, ParameterModel, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, PosteriorSample, SummaryRow};
@@ -162,7 +162,7 @@ impl Posterior {
                 prev[lane] = res;
                 if eiv {
                     let g = params[lane].g;
-                    let stiffness = if dg.abs() > 1e-12 { ((s.tau[lane] - prev_model[lane]) / dg).clamp(0.0, g) } else { g };
+                    let stiffness = tangent_stiffness(s.tau[lane] - prev_model[lane], dg, g);
                     prev_model[lane] = s.tau[lane];
                     let a = stiffness * stiffness * strain_var;
                     let d = sigma2[lane] + a;

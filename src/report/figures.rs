@@ -66,7 +66,7 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
             c.legend_at = LegendAt::Middle;
             c
         };
-        let x_model: Vec<f64> = b.gamma_model.iter().map(|g| (b.displacement[0] + g * gap_m) * 1e3).collect();
+        let x_model: Vec<f64> = crate::adequacy::model_displacement(b, gap_m).iter().map(|x| x * 1e3).collect();
         let x_obs: Vec<f64> = b.displacement.iter().map(|x| x * 1e3).collect();
         let tau_gamma = panel(format!("{}: stress against strain", b.run), "shear strain γ (-)", "shear stress τ (kPa)", &b.gamma_model, &b.gamma, 1e-3);
         let force_disp = panel(format!("{}: force against displacement", b.run), "displacement x (mm)", "force F = τA (N)", &x_model, &x_obs, area_m2);
