@@ -40,6 +40,7 @@ pub mod model;
 pub mod pipeline;
 pub mod plot;
 pub mod posterior;
+pub mod pointwise;
 pub mod predict;
 pub mod report;
 pub mod rng;

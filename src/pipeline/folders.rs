@@ -10,8 +10,9 @@ use crate::error::{Error, Result};
 
 /// The files of a calibration folder derived from its chains: a new
 /// calibration removes them, since they would describe the old one.
-pub const DERIVED: [&str; 7] = [
+pub const DERIVED: [&str; 8] = [
     "bands.parquet",
+    "inference.zarr",
     "coverage.parquet",
     "adequacy.parquet",
     "prediction.toml",
@@ -71,7 +72,8 @@ pub fn clear_derived(dir: &Path) -> Result<()> {
         let name = entry.file_name().to_string_lossy().into_owned();
         if DERIVED.contains(&name.as_str()) || figure(&name) {
             let path = entry.path();
-            std::fs::remove_file(&path).map_err(|e| Error::output(&path, e))?;
+            let removed = if path.is_dir() { std::fs::remove_dir_all(&path) } else { std::fs::remove_file(&path) };
+            removed.map_err(|e| Error::output(&path, e))?;
         }
     }
     let loo = dir.join("loo");

@@ -8,8 +8,10 @@ use crate::adequacy::{self, AdequacyRow};
 use crate::data::{same_current, Campaign, Run};
 use crate::error::{Error, Result};
 use crate::posterior::{Draw, RecordPart, RunData};
+use crate::pointwise::{pointwise_draws, thinned_steps, POINTWISE_DRAWS};
 use crate::predict::{predict_run, CoverageRow, RunBands};
 use crate::report::{self, CalibrationReport, PredictionReport};
+use crate::store::inference::StoreInfo;
 use crate::store::{self, command_line, PredictionRecord, StoredCalibration};
 use crate::validate::{leave_one_out, Full, LooRow, LooSettings};
 
@@ -33,7 +35,35 @@ impl Pipeline<'_> {
     /// `adequacy.parquet` and `prediction.toml` into `out`.
     pub fn predict(&mut self, cal: &StoredCalibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
         let campaign = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
-        self.predict_runs(cal, &campaign, &|run| cal.record.runs.iter().any(|r| r == run.id()), out, options)
+        let prediction = self.predict_runs(cal, &campaign, &|run| cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
+        self.write_inference_data(cal, &campaign, out, options.seed)?;
+        Ok(prediction)
+    }
+
+    /// `inference.zarr`: the posterior, the pointwise log-likelihood and
+    /// replicated records of a thinned set of draws, along the runs the
+    /// calibration saw, as ArviZ's InferenceData.
+    fn write_inference_data(&mut self, cal: &StoredCalibration, campaign: &Campaign, out: &Path, seed: u64) -> Result<()> {
+        let likelihood = &cal.settings.likelihood;
+        let runs: Vec<RunData> = campaign
+            .runs
+            .iter()
+            .filter(|run| cal.record.runs.iter().any(|r| r == run.id()))
+            .map(|run| RunData::from_run(run, likelihood.part, likelihood.smooth_strain_ms))
+            .collect();
+        let chains = &cal.sample.chains;
+        let stride = cal.thin();
+        let steps = thinned_steps(cal.burn_in(), chains.steps(), chains.chains(), POINTWISE_DRAWS, stride);
+        let integrator = cal.predict_settings(1, seed).integrator;
+        let draws = pointwise_draws(&cal.sample, &runs, &steps, &integrator, likelihood, seed);
+        if draws.failed > 0 {
+            self.note(&format!("inference.zarr: {} of {} pointwise draws could not be integrated along every run (their log-likelihood is -inf)", draws.failed, steps.len() * chains.chains()));
+        }
+        let info = StoreInfo { calibration_id: &cal.record.calibration_id, burn_in: cal.burn_in(), ensembles: chains.ensembles, stride };
+        let path = out.join("inference.zarr");
+        store::inference::write(&path, &cal.sample, &draws, &info)?;
+        self.emit(Event::Wrote(&path));
+        Ok(())
     }
 
     /// Posterior draws of `cal` along the runs of another campaign — another

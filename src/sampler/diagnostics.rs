@@ -196,12 +196,14 @@ pub fn ess(chains: &[Vec<f64>]) -> f64 {
         return f64::NAN;
     }
     let rho = |t: usize| 1.0 - (mean_var - acov.iter().map(|a| a[t]).sum::<f64>() / m as f64) / var_plus;
-    let mut rho_hat = vec![0.0; n];
+    // Geyer's initial positive sequence: pairs (ρ_{t+1}, ρ_{t+2}) while
+    // their sum stays positive
+    let mut rho_hat = vec![0.0; n + 1];
     rho_hat[0] = 1.0;
     rho_hat[1] = rho(1);
-    let (mut even, mut odd) = (rho_hat[0], rho_hat[1]);
+    let (mut even, mut odd) = (1.0, rho_hat[1]);
     let mut t = 1;
-    while t + 2 < n - 3 && even + odd > 0.0 {
+    while t < n - 3 && even + odd > 0.0 {
         even = rho(t + 1);
         odd = rho(t + 2);
         if even + odd >= 0.0 {
@@ -210,13 +212,18 @@ pub fn ess(chains: &[Vec<f64>]) -> f64 {
         }
         t += 2;
     }
-    let max_t = t;
-    if rho_hat[max_t] > 0.0 && max_t + 1 < n {
-        rho_hat[max_t + 1] = rho_hat[max_t];
+    // the last positive pair ends at max_t; a positive even term after it
+    // still counts (half of it, through the sum below)
+    if t < 3 {
+        return f64::NAN;
+    }
+    let max_t = t - 2;
+    if even > 0.0 {
+        rho_hat[max_t + 1] = even;
     }
     // initial monotone sequence: pair sums may not increase
     let mut s = 1;
-    while s + 2 <= max_t.saturating_sub(1) {
+    while s + 2 <= max_t {
         let prev = rho_hat[s - 1] + rho_hat[s];
         if rho_hat[s + 1] + rho_hat[s + 2] > prev {
             rho_hat[s + 1] = prev / 2.0;
@@ -225,7 +232,7 @@ pub fn ess(chains: &[Vec<f64>]) -> f64 {
         s += 2;
     }
     let total = (m * n) as f64;
-    let tau = -1.0 + 2.0 * rho_hat[..max_t].iter().sum::<f64>() + rho_hat[max_t];
+    let tau = -1.0 + 2.0 * rho_hat[..=max_t].iter().sum::<f64>() + rho_hat[max_t + 1];
     let tau = tau.max(1.0 / total.log10());
     total / tau
 }

@@ -24,6 +24,7 @@ pub mod comparison;
 pub mod coverage;
 pub mod folder;
 pub mod identification;
+pub mod inference;
 pub mod parquet;
 pub mod prediction;
 pub mod record;

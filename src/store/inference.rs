@@ -1,0 +1,232 @@
+//! `inference.zarr`: the calibration as ArviZ's InferenceData, in Zarr v3,
+//! which xarray opens natively — no glue between `mrbp` and `az.summary`,
+//! `az.plot_trace`, `az.loo`:
+//!
+//! ```python
+//! idata = az.InferenceData.from_datatree(xr.open_datatree("…/inference.zarr", engine="zarr"))
+//! ```
+//!
+//! | group | variables | dims |
+//! |---|---|---|
+//! | `posterior` | every coordinate (SI) | chain (= walker), draw (= step after burn-in) |
+//! | `sample_stats` | `lp`, `accepted` | chain, draw |
+//! | `log_likelihood` | `tau` | chain, draw (thinned steps), obs |
+//! | `posterior_predictive` | `tau` (a replicated record) | chain, draw (thinned steps), obs |
+//! | `observed_data` | `tau` | obs |
+//!
+//! Every observation carries its `run` and `time` as coordinates. The
+//! posterior holds exactly the draws of `summary.parquet` (after burn-in,
+//! an even number per walker), so `az.summary` gives our mean, sd, ESS and
+//! MCSE; its R̂ differs (see [`RHAT_NOTE`]).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use serde_json::{json, Map, Value};
+use zarrs::array::{data_type, ArrayBuilder, DataType, FillValueMetadata, IntoArrayBytes};
+use zarrs::filesystem::FilesystemStore;
+use zarrs::group::GroupBuilder;
+use zarrs::storage::ReadableWritableListableStorage;
+
+use crate::error::{Error, Result};
+use crate::model::{PARAM_NAMES, PARAM_UNITS};
+use crate::pointwise::PointwiseDraws;
+use crate::posterior::PosteriorSample;
+
+/// Why ArviZ's R̂ of this store is not ours, and how to get ours.
+pub const RHAT_NOTE: &str = "Each chain is one walker of an affine-invariant ensemble. Walkers of an \
+ensemble move together and each is short compared with its autocorrelation, so R-hat over walkers \
+reads 1.01-1.03 on a converged run. mrbp's R-hat (summary.parquet) compares the independent \
+ensembles instead: each ensemble's draws, step by step, as one chain (coordinate `ensemble`). \
+ESS, MCSE, mean and sd over walkers are the same as mrbp's.";
+
+/// What the store says of itself, besides the draws.
+pub struct StoreInfo<'a> {
+    pub calibration_id: &'a str,
+    pub burn_in: usize,
+    pub ensembles: usize,
+    /// The pointwise groups' steps are at least this many steps apart (≈ τ).
+    pub stride: usize,
+}
+
+/// Writes the store into `path` (a folder), replacing an earlier one; the
+/// store is built beside it and renamed into place.
+pub fn write(path: &Path, sample: &PosteriorSample, pointwise: &PointwiseDraws, info: &StoreInfo) -> Result<()> {
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let tmp = tempfile::Builder::new().prefix(".mrbp-").suffix(".zarr.tmp").tempdir_in(parent).map_err(|e| Error::output(parent, e))?;
+    build(tmp.path(), sample, pointwise, info).map_err(|e| Error::output(path, e))?;
+    if path.exists() {
+        std::fs::remove_dir_all(path).map_err(|e| Error::output(path, e))?;
+    }
+    std::fs::rename(tmp.path(), path).map_err(|e| Error::output(path, e))?;
+    // the temporary directory is gone; nothing left to clean
+    std::mem::forget(tmp);
+    Ok(())
+}
+
+type Failure = Box<dyn std::error::Error>;
+
+fn build(dir: &Path, sample: &PosteriorSample, pw: &PointwiseDraws, info: &StoreInfo) -> std::result::Result<(), Failure> {
+    let store: ReadableWritableListableStorage = Arc::new(FilesystemStore::new(dir)?);
+    let chains = sample.chains.chains();
+    let walkers = chains / info.ensembles.max(1);
+    // the draws the diagnostics use: after burn-in, an even number
+    let available = sample.chains.steps().saturating_sub(info.burn_in);
+    let n = available / 2 * 2;
+    let first = sample.chains.steps() - n;
+    let mut root = GroupBuilder::new().build(store.clone(), "/")?;
+    root.attributes_mut().extend(attrs(&[
+        ("created_by", json!("mrbp")),
+        ("mrbp_version", json!(env!("CARGO_PKG_VERSION"))),
+        ("inference_library", json!("mrbp")),
+        ("calibration_id", json!(info.calibration_id)),
+        ("sampler", json!(format!("affine-invariant ensemble: {} ensembles of {walkers} walkers", info.ensembles))),
+        ("r_hat_note", json!(RHAT_NOTE)),
+    ]));
+    root.store_metadata()?;
+
+    let draw_coord: Vec<i64> = (first..first + n).map(|s| s as i64).collect();
+    let ensemble: Vec<i64> = (0..chains).map(|c| (c / walkers.max(1)) as i64).collect();
+    let chain_coord: Vec<i64> = (0..chains as i64).collect();
+    let stats_attrs = [("burn_in", json!(info.burn_in)), ("first_draw", json!(first)), ("r_hat_note", json!(RHAT_NOTE))];
+    for group in ["posterior", "sample_stats"] {
+        group_with(&store, group, &stats_attrs)?;
+        let g = format!("/{group}");
+        put(&store, &format!("{g}/chain"), &[("chain", chains)], data_type::int64(), chain_coord.clone(), &[])?;
+        put(&store, &format!("{g}/draw"), &[("draw", n)], data_type::int64(), draw_coord.clone(), &[])?;
+        put(&store, &format!("{g}/ensemble"), &[("chain", chains)], data_type::int64(), ensemble.clone(), &[])?;
+    }
+    let grid = |f: &dyn Fn(usize, usize) -> f64| -> Vec<f64> { (0..chains).flat_map(|c| (first..first + n).map(move |s| (c, s))).map(|(c, s)| f(s, c)).collect() };
+    for (i, name) in sample.layout.names.iter().enumerate() {
+        let values = grid(&|s, c| sample.chains.at(s, c, i));
+        let attrs = [("units", json!(unit_of(name))), ("coordinates", json!("ensemble")), ("long_name", json!(name))];
+        put(&store, &format!("/posterior/{}", node_name(name)), &[("chain", chains), ("draw", n)], data_type::float64(), values, &attrs)?;
+    }
+    let lp = grid(&|s, c| sample.chains.log_prob[s * chains + c]);
+    put(&store, "/sample_stats/lp", &[("chain", chains), ("draw", n)], data_type::float64(), lp, &[("coordinates", json!("ensemble"))])?;
+    let accepted: Vec<bool> = (0..chains).flat_map(|c| (first..first + n).map(move |s| (s, c))).map(|(s, c)| sample.chains.accepted[s * chains + c]).collect();
+    put(&store, "/sample_stats/accepted", &[("chain", chains), ("draw", n)], data_type::bool(), accepted, &[("coordinates", json!("ensemble"))])?;
+
+    // the observations, their coordinates in every group that has them
+    let nobs = pw.observed.len();
+    let obs: Vec<i64> = (0..nobs as i64).collect();
+    let run_names: Vec<String> = pw.run.iter().map(|&j| pw.runs[j].clone()).collect();
+    let pw_steps: Vec<i64> = pw.steps.iter().map(|&s| s as i64).collect();
+    let thinning = [
+        ("thinned_steps", json!(pw.steps)),
+        ("stride_at_least", json!(info.stride)),
+        ("draws", json!(pw.steps.len() * pw.chains)),
+        ("note", json!("every chain at a few steps at least tau_max apart: nearly independent draws, so az.loo(idata, reff=1.0)")),
+        ("factorisation", json!("terms are conditional densities p(y_k | earlier y of the run or branch, theta) that sum to the likelihood the sampler used")),
+    ];
+    for group in ["log_likelihood", "posterior_predictive", "observed_data"] {
+        group_with(&store, group, if group == "observed_data" { &[] } else { &thinning })?;
+        let g = format!("/{group}");
+        put(&store, &format!("{g}/obs"), &[("obs", nobs)], data_type::int64(), obs.clone(), &[])?;
+        put(&store, &format!("{g}/run"), &[("obs", nobs)], data_type::string(), run_names.clone(), &[])?;
+        put(&store, &format!("{g}/time"), &[("obs", nobs)], data_type::float64(), pw.time.clone(), &[("units", json!("s"))])?;
+        if group != "observed_data" {
+            put(&store, &format!("{g}/chain"), &[("chain", chains)], data_type::int64(), chain_coord.clone(), &[])?;
+            put(&store, &format!("{g}/draw"), &[("draw", pw_steps.len())], data_type::int64(), pw_steps.clone(), &[])?;
+        }
+    }
+    let coords = json!("run time");
+    let dims = [("chain", chains), ("draw", pw_steps.len()), ("obs", nobs)];
+    put(&store, "/log_likelihood/tau", &dims, data_type::float64(), pw.log_likelihood.clone(), &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))])?;
+    let replicate: Vec<f32> = pw.replicate.iter().map(|v| *v as f32).collect();
+    let shear = [("coordinates", coords.clone()), ("units", json!("Pa")), ("long_name", json!("shear stress"))];
+    put(&store, "/posterior_predictive/tau", &dims, data_type::float32(), replicate, &shear)?;
+    put(&store, "/observed_data/tau", &[("obs", nobs)], data_type::float64(), pw.observed.clone(), &shear)?;
+    Ok(())
+}
+
+/// The element types of the store and their Zarr fill values (which
+/// xarray reads as a storage detail of Zarr v3, not as a mask).
+trait Element {
+    fn fill() -> FillValueMetadata;
+}
+
+impl Element for f64 {
+    fn fill() -> FillValueMetadata {
+        FillValueMetadata::from(f64::NAN)
+    }
+}
+
+impl Element for f32 {
+    fn fill() -> FillValueMetadata {
+        FillValueMetadata::from(f32::NAN)
+    }
+}
+
+impl Element for i64 {
+    fn fill() -> FillValueMetadata {
+        FillValueMetadata::from(0i64)
+    }
+}
+
+impl Element for bool {
+    fn fill() -> FillValueMetadata {
+        FillValueMetadata::from(false)
+    }
+}
+
+impl Element for String {
+    fn fill() -> FillValueMetadata {
+        FillValueMetadata::from("")
+    }
+}
+
+fn attrs(pairs: &[(&str, Value)]) -> Map<String, Value> {
+    pairs.iter().map(|(k, v)| (k.to_string(), v.clone())).collect()
+}
+
+fn group_with(store: &ReadableWritableListableStorage, name: &str, pairs: &[(&str, Value)]) -> std::result::Result<(), Failure> {
+    let mut g = GroupBuilder::new().build(store.clone(), &format!("/{name}"))?;
+    g.attributes_mut().extend(attrs(pairs));
+    g.store_metadata()?;
+    Ok(())
+}
+
+/// One array over the named dimensions of the given lengths, stored as a
+/// single chunk.
+fn put<T>(store: &ReadableWritableListableStorage, path: &str, dims: &[(&str, usize)], dtype: DataType, values: Vec<T>, pairs: &[(&str, Value)]) -> std::result::Result<(), Failure>
+where
+    Vec<T>: IntoArrayBytes<'static>,
+    T: Element,
+{
+    let shape: Vec<u64> = dims.iter().map(|(_, n)| *n as u64).collect();
+    if shape.iter().product::<u64>() != values.len() as u64 {
+        return Err(format!("{path}: {} values for the shape {shape:?}", values.len()).into());
+    }
+    let fill = T::fill();
+    let array = ArrayBuilder::new(shape.clone(), shape.iter().map(|s| (*s).max(1)).collect::<Vec<u64>>(), dtype, fill)
+        .dimension_names(Some(dims.iter().map(|(d, _)| *d)))
+        .attributes(attrs(pairs))
+        .build(store.clone(), path)?;
+    array.store_metadata()?;
+    if !values.is_empty() {
+        array.store_chunk(&vec![0; dims.len()], values)?;
+    }
+    Ok(())
+}
+
+/// A Zarr node name for a coordinate's name (`/` separates nodes).
+fn node_name(name: &str) -> String {
+    name.replace('/', "_")
+}
+
+/// The unit of a coordinate of the posterior, by its name.
+pub fn unit_of(name: &str) -> &'static str {
+    if let Some(i) = PARAM_NAMES.iter().position(|p| *p == name) {
+        return PARAM_UNITS[i];
+    }
+    match name {
+        "G_field" | "G_zero" => "Pa",
+        "saturation_current_a" => "A",
+        "gas_spring_n_per_m" => "N/m",
+        _ if name.starts_with("sigma_") => "Pa",
+        _ if name.starts_with("force_offset_n_") => "N",
+        _ if name.starts_with("rho_") => "1",
+        _ => "",
+    }
+}
