@@ -1,5 +1,5 @@
 //! Figures: a small description of charts (lines, points, bands, bars)
-//! rendered by plotters to SVG and PNG.
+//! rendered by plotters to SVG, and the SVG rasterised to PNG by resvg.
 //!
 //! Text is drawn with the DejaVu Sans font compiled into the binary, so
 //! figures render the same on a machine without any font configuration.
@@ -54,6 +54,8 @@ pub enum Mark {
     Bars { opacity: f64 },
     /// A vertical line at each `x`.
     VLines { width: u32 },
+    /// Filled rectangles of size `w` × `h`, lower-left corners at (`x`, `y`).
+    Cells { w: f64, h: f64, opacity: f64 },
 }
 
 #[derive(Clone, Debug)]
@@ -81,6 +83,10 @@ impl Series {
     }
     pub fn bars(label: impl Into<Option<String>>, color: RGBColor, edges: Vec<f64>, heights: Vec<f64>) -> Self {
         Series { label: label.into(), color, mark: Mark::Bars { opacity: 0.5 }, x: edges, y: heights, y2: vec![] }
+    }
+    /// Filled `w` × `h` cells with lower-left corners at (`x`, `y`).
+    pub fn cells(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, y: Vec<f64>, (w, h): (f64, f64), opacity: f64) -> Self {
+        Series { label: label.into(), color, mark: Mark::Cells { w, h, opacity }, x, y, y2: vec![] }
     }
     pub fn vlines(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>) -> Self {
         Series { label: label.into(), color, mark: Mark::VLines { width: 2 }, x, y: vec![], y2: vec![] }
@@ -119,6 +125,8 @@ pub struct Chart {
     pub compact: bool,
     /// Leave the panel blank (the upper triangle of a corner plot).
     pub blank: bool,
+    /// No tick labels on the y axis (a density whose scale means nothing).
+    pub hide_y_ticks: bool,
 }
 
 /// Legend placement.
@@ -193,16 +201,37 @@ pub fn save(figure: &Figure, stem: &Path) -> Result<()> {
     atomic::write(&svg_path, svg.as_bytes())?;
 
     let png_path = with_ext(".png");
-    let mut pixels = vec![0u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
-        render(figure, &root).map_err(|e| Error::output(&png_path, e))?;
-        root.present().map_err(|e| Error::output(&png_path, e))?;
-    }
-    let img = image::RgbImage::from_raw(w, h, pixels).ok_or_else(|| Error::output(&png_path, "bad image buffer"))?;
-    let mut png = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut png, image::ImageFormat::Png).map_err(|e| Error::output(&png_path, e))?;
-    atomic::write(&png_path, png.get_ref())
+    let png = rasterise(&svg).map_err(|e| Error::output(&png_path, e))?;
+    atomic::write(&png_path, &png)
+}
+
+/// The PNG of an SVG drawn by [`save`], its text in the embedded DejaVu.
+fn rasterise(svg: &str) -> std::result::Result<Vec<u8>, String> {
+    static FONTS: std::sync::OnceLock<std::sync::Arc<resvg::usvg::fontdb::Database>> = std::sync::OnceLock::new();
+    let fonts = FONTS.get_or_init(|| {
+        let mut db = resvg::usvg::fontdb::Database::new();
+        db.load_font_data(dejavu::sans::regular().to_vec());
+        db.load_font_data(dejavu::sans::bold().to_vec());
+        db.set_sans_serif_family("DejaVu Sans");
+        std::sync::Arc::new(db)
+    });
+    let options = resvg::usvg::Options { fontdb: fonts.clone(), ..Default::default() };
+    let tree = resvg::usvg::Tree::from_str(svg, &options).map_err(|e| e.to_string())?;
+    let size = tree.size().to_int_size();
+    let mut pixmap = resvg::tiny_skia::Pixmap::new(size.width(), size.height()).ok_or("empty figure")?;
+    resvg::render(&tree, resvg::tiny_skia::Transform::default(), &mut pixmap.as_mut());
+    // the figures are opaque (white background): RGB, a quarter smaller than RGBA
+    let rgb: Vec<u8> = pixmap.data().chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+    let mut out = Vec::new();
+    let mut encoder = png::Encoder::new(&mut out, size.width(), size.height());
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_compression(png::Compression::Best);
+    encoder.set_adaptive_filter(png::AdaptiveFilterType::Adaptive);
+    let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
+    writer.write_image_data(&rgb).map_err(|e| e.to_string())?;
+    writer.finish().map_err(|e| e.to_string())?;
+    Ok(out)
 }
 
 type DrawResult<DB> = std::result::Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
@@ -321,7 +350,7 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
         return Ok(());
     }
     let (caption, labels, descs, ticks, y_area, x_area, margin) =
-        if chart.compact { (13, 11, 13, 3, 56, 40, 6) } else { (18, 13, 15, 7, 70, 44, 12) };
+        if chart.compact { (13, 11, 13, 4, 56, 40, 6) } else { (18, 13, 15, 7, 70, 44, 12) };
     let tx = |x: f64| if chart.log_x { x.log10() } else { x };
     let (xr, yr) = axis_ranges(chart);
     let mut c = ChartBuilder::on(area)
@@ -339,8 +368,9 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
         .y_desc(&chart.y_label)
         .label_style((FONT, labels))
         .axis_desc_style((FONT, descs))
-        .x_labels(ticks)
-        .y_labels(ticks)
+        // compact panels are narrow: three x labels never run together
+        .x_labels(if chart.compact { 3 } else { ticks })
+        .y_labels(if chart.hide_y_ticks { 0 } else { ticks })
         .x_label_formatter(&x_fmt)
         .y_label_formatter(&y_fmt)
         .light_line_style(RGBColor(235, 235, 235))
@@ -401,12 +431,15 @@ fn draw_series<'a, DB: DrawingBackend + 'a>(c: &mut Plane<'a, DB>, s: &Series, t
         Mark::VLines { width } => c.draw_series(
             xs.iter().map(|x| PathElement::new(vec![(*x, yr.0), (*x, yr.1)], color.stroke_width(*width))),
         )?,
+        Mark::Cells { w, h, opacity } => c.draw_series(
+            xs.iter().zip(&s.y).map(|(x, y)| Rectangle::new([(*x, *y), (*x + w, *y + h)], color.mix(*opacity).filled())),
+        )?,
     };
     if let Some(label) = &s.label {
         let mark = s.mark.clone();
         anno.label(label).legend(move |(x, y)| match mark {
             Mark::Points { .. } => Circle::new((x + 10, y), 4, color.filled()).into_dyn(),
-            Mark::Band { opacity } | Mark::Bars { opacity } => {
+            Mark::Band { opacity } | Mark::Bars { opacity } | Mark::Cells { opacity, .. } => {
                 Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(opacity.max(0.3)).filled()).into_dyn()
             }
             _ => PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3)).into_dyn(),

@@ -23,7 +23,7 @@ pub const DERIVED: [&str; 8] = [
 
 /// The report's figures (SVG and PNG) start so; the identification's
 /// (`fig1…fig5`), which the calibration itself writes, do not.
-const FIGURES: [&str; 6] = ["bands_", "adequacy_", "residuals", "corner", "marginals", "traces"];
+const FIGURES: [&str; 7] = ["bands_", "adequacy_", "residuals", "corner", "marginals", "traces", "diagnostics"];
 
 /// The results of `mrbp sample` in a calibration folder.
 pub const CALIBRATION: [&str; 5] = ["chains.parquet", "summary.parquet", "calibration.toml", "config.toml", "identification.parquet"];

@@ -95,6 +95,9 @@ fn calibrated_at(cal: &StoredCalibration) -> String {
 }
 
 /// The figures of the calibration and of its leave-one-out study.
+/// The corner plot shows every coordinate up to this many, else θ alone.
+const CORNER_MAX: usize = 12;
+
 fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
     let (cal, dir) = (r.cal, &r.cal.dir);
     let rec = &cal.record;
@@ -103,14 +106,21 @@ fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
     figures::bands(dir, r.bands, geometry.area_m2, geometry.gap_m, &mut figs)?;
     figures::residuals(dir, r.bands, &mut figs)?;
     let positions = cal.draw_positions(PLOT_DRAWS);
-    let theta = cal.sample.layout.theta_names().to_vec();
-    let named = |m: &BTreeMap<String, f64>| -> Vec<f64> { theta.iter().map(|n| m.get(n).copied().unwrap_or(f64::NAN)).collect() };
+    // θ and the noise scales, as long as the matrix stays readable
+    let layout = &cal.sample.layout;
+    let mut shown = layout.theta_names().to_vec();
+    if layout.names.len() <= CORNER_MAX {
+        shown = layout.names.clone();
+    }
+    let named = |m: &BTreeMap<String, f64>| -> Vec<f64> { shown.iter().map(|n| m.get(n).copied().unwrap_or(f64::NAN)).collect() };
     // a current law's coordinates are not the identification's parameters
-    let identified = if cal.is_current_law() { vec![f64::NAN; theta.len()] } else { named(&rec.identification) };
-    figures::corner(dir, &cal.sample, &positions, &identified, &named(&rec.map), &mut figs)?;
+    let identified = if cal.is_current_law() { vec![f64::NAN; shown.len()] } else { named(&rec.identification) };
+    figures::corner(dir, &cal.sample, &shown, &positions, &identified, &named(&rec.map), &mut figs)?;
     let priors = cal.sample.model.priors(&cal.settings.priors());
     figures::marginals(dir, &cal.sample, &positions, &priors, &mut figs)?;
     figures::traces(dir, &cal.sample, cal.burn_in(), &mut figs)?;
+    let tau: Vec<f64> = cal.summary.iter().map(|r| r.tau_int).collect();
+    figures::diagnostics(dir, &cal.sample, cal.burn_in(), &tau, &mut figs)?;
     let mut loo_figs = Figures::default();
     if let Some((_, bands)) = r.loo {
         let loo_dir = dir.join("loo");

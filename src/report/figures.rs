@@ -49,13 +49,16 @@ pub(crate) fn loop_band(label: &str, color: plot::RGBColor, x: &[f64], lo: &[f64
     out
 }
 
-/// One figure per run: τ–γ and F–x with the 95 % predictive band, the 95 %
-/// and 50 % model bands, the posterior median and the data.
+/// One figure per run. Top: the τ–γ, F–x and F–v loops with the 95 %
+/// predictive band, the 95 % and 50 % model bands, the posterior median and
+/// the record. Bottom, where the bands are wide enough to see: both bands
+/// about the median against time, and the stress against time at the first
+/// yield and at the first reversal.
 pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mut Figures) -> Result<()> {
     for b in bands {
         let step = every(b.time.len(), MAX_POINTS);
         let pick = |v: &[f64], s: f64| v.iter().step_by(step).map(|x| x * s).collect::<Vec<f64>>();
-        let panel = |title: String, xl: &str, yl: &str, x: &[f64], xobs: &[f64], yscale: f64| {
+        let panel = |title: String, xl: &str, yl: &str, x: &[f64], xobs: &[f64], yscale: f64, legend_at: LegendAt| {
             let scaled = |v: &[f64]| v.iter().map(|y| y * yscale).collect::<Vec<f64>>();
             let mut c = Chart::new(title, xl, yl);
             c.series.extend(loop_band("95 % predictive", PALETTE[5], x, &scaled(&b.predictive[0]), &scaled(&b.predictive[1]), 0.25));
@@ -63,20 +66,27 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
             c.series.extend(loop_band("50 % model", PALETTE[0], x, &scaled(&b.model[1]), &scaled(&b.model[3]), 0.6));
             c.series.push(Series::points(Some("measured".into()), plot::BLACK_, pick(xobs, 1.0), pick(&b.tau_obs, yscale)).with_width(1));
             c.series.push(Series::line(Some("posterior median".into()), PALETTE[1], x.to_vec(), scaled(&b.model[2])).with_width(1));
-            c.legend_at = LegendAt::Middle;
+            c.legend_at = legend_at;
             c
         };
-        let x_model: Vec<f64> = crate::adequacy::model_displacement(b, gap_m).iter().map(|x| x * 1e3).collect();
-        let x_obs: Vec<f64> = b.displacement.iter().map(|x| x * 1e3).collect();
-        let tau_gamma = panel(format!("{}: stress against strain", b.run), "shear strain γ (-)", "shear stress τ (kPa)", &b.gamma_model, &b.gamma, 1e-3);
-        let force_disp = panel(format!("{}: force against displacement", b.run), "displacement x (mm)", "force F = τA (N)", &x_model, &x_obs, area_m2);
-        let zoom = zoom_first_loading(b);
+        let (x_model, v_model) = crate::adequacy::kinematics(b, gap_m);
+        let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
+        let x_obs = mm(&b.displacement);
+        let tau_gamma = panel(format!("{}: stress against strain", b.run), "shear strain γ (-)", "shear stress τ (kPa)", &b.gamma_model, &b.gamma, 1e-3, LegendAt::Middle);
+        let force_disp = panel(format!("{}: force against displacement", b.run), "displacement x (mm)", "force F = τA (N)", &mm(&x_model), &x_obs, area_m2, LegendAt::Middle);
+        // the measured velocity would be noise; the model's drives both
+        let force_vel = panel(format!("{}: force against velocity", b.run), "velocity v (mm/s)", "force F = τA (N)", &mm(&v_model), &mm(&v_model), area_m2, LegendAt::UpperLeft);
+        let around = band_about_median(b, &b.run);
+        let yield_zoom = zoom(b, first_loading(b), &format!("{}: first yield", b.run), LegendAt::LowerRight);
+        let reversal_zoom = zoom(b, first_reversal(b), &format!("{}: first reversal", b.run), LegendAt::UpperRight);
         let stem = format!("bands_{}", b.run);
-        plot::save(&Figure::grid(vec![tau_gamma, force_disp, zoom], 3), &dir.join(&stem))?;
+        plot::save(&Figure::grid(vec![tau_gamma, force_disp, force_vel, around, yield_zoom, reversal_zoom], 3), &dir.join(&stem))?;
         figs.push(
             &stem,
             &format!(
-                "{} ({} A): posterior bands of the model stress and the 95 % band of a new measurement, with the record (every {}th sample shown).",
+                "{} ({} A): posterior bands of the model stress and the 95 % band of a new measurement, with the record (every {}th sample shown in the loops). \
+                 On the full loops the bands are about a line wide; the lower row shows them where they can be seen: their width about the posterior median \
+                 over the whole record, and the stress at the first yield and at the first reversal.",
                 b.run, b.current_a, step
             ),
         );
@@ -84,47 +94,156 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
     Ok(())
 }
 
-/// τ against time over the first loading up to yield, where the stress
-/// changes fastest and the bands are wide enough to see.
-fn zoom_first_loading(b: &RunBands) -> Chart {
+/// The samples from the start to half again past the knee of the first
+/// loading (90 % of the peak stress), where the stress changes fastest.
+fn first_loading(b: &RunBands) -> std::ops::Range<usize> {
     let n = b.tau_obs.len();
     let peak = b.model[2].iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let knee = (0..n).find(|&k| b.model[2][k].abs() >= 0.9 * peak).unwrap_or(n / 4);
-    let r = 0..(knee + knee / 2 + 10).min(n);
+    0..(knee + knee / 2 + 10).min(n)
+}
+
+/// The samples around the first reversal of the strain: its first extreme,
+/// taken once the strain has come back half-way from it (noise near the
+/// start makes no reversal), from a third of a loading before it to the
+/// knee of the loading after it.
+fn first_reversal(b: &RunBands) -> std::ops::Range<usize> {
+    let g = &b.gamma_model;
+    let n = g.len();
+    if n < 3 {
+        return 0..n;
+    }
+    let start = g[0];
+    let dir = if (g[n / 8] - start) >= 0.0 { 1.0 } else { -1.0 };
+    let mut extreme = 0;
+    for k in 1..n {
+        if dir * g[k] > dir * g[extreme] {
+            extreme = k;
+        }
+        let reach = dir * (g[extreme] - start);
+        if reach > 0.0 && dir * (g[extreme] - g[k]) > 0.5 * reach {
+            break;
+        }
+    }
+    let loading = first_loading(b).end;
+    extreme.saturating_sub(loading / 3)..(extreme + loading).min(n)
+}
+
+/// τ against time over `r` with both bands, the record and the median.
+fn zoom(b: &RunBands, r: std::ops::Range<usize>, title: &str, legend_at: LegendAt) -> Chart {
     let t: Vec<f64> = b.time[r.clone()].to_vec();
     let kpa = |v: &[f64]| v[r.clone()].iter().map(|x| x * 1e-3).collect::<Vec<f64>>();
-    let mut c = Chart::new(format!("{}: first loading", b.run), "time t (s)", "shear stress τ (kPa)");
+    let mut c = Chart::new(title, "time t (s)", "shear stress τ (kPa)");
     c.series.push(Series::band(Some("95 % predictive".into()), PALETTE[5], t.clone(), kpa(&b.predictive[0]), kpa(&b.predictive[1])).with_opacity(0.25));
     c.series.push(Series::band(Some("95 % model".into()), PALETTE[0], t.clone(), kpa(&b.model[0]), kpa(&b.model[4])).with_opacity(0.45));
     c.series.push(Series::points(Some("measured".into()), plot::BLACK_, t.clone(), kpa(&b.tau_obs)).with_width(2));
     c.series.push(Series::line(Some("posterior median".into()), PALETTE[1], t, kpa(&b.model[2])).with_width(1));
-    c.legend_at = LegendAt::LowerRight;
+    c.legend_at = legend_at;
+    c
+}
+
+/// The 95 % predictive and model bands and the residuals about the
+/// posterior median, against time: the bands' width made visible.
+fn band_about_median(b: &RunBands, title: &str) -> Chart {
+    let step = every(b.time.len(), MAX_POINTS);
+    let t = &b.time;
+    let rel = |v: &[f64]| v.iter().zip(&b.model[2]).map(|(y, m)| (y - m) * 1e-3).collect::<Vec<f64>>();
+    let res = rel(&b.tau_obs);
+    let mut c = Chart::new(format!("{title}: about the median"), "time t (s)", "τ − posterior median (kPa)");
+    c.series.push(Series::band(Some("95 % predictive".into()), PALETTE[5], t.clone(), rel(&b.predictive[0]), rel(&b.predictive[1])).with_opacity(0.35));
+    c.series.push(Series::band(Some("95 % model".into()), PALETTE[0], t.clone(), rel(&b.model[0]), rel(&b.model[4])).with_opacity(0.6));
+    c.series.push(Series::points(Some("measured − median".into()), plot::BLACK_, t.iter().step_by(step).copied().collect(), res.iter().step_by(step).copied().collect()).with_width(1));
+    c.legend_at = LegendAt::UpperRight;
     c
 }
 
 /// Residuals τ_obs − median against time, one panel per run, with the 95 %
-/// predictive band about the median.
+/// predictive and model bands about the median.
 pub fn residuals(dir: &Path, bands: &[RunBands], figs: &mut Figures) -> Result<()> {
-    let panels: Vec<Chart> = bands
-        .iter()
-        .map(|b| {
-            let step = every(b.time.len(), MAX_POINTS);
-            let t: Vec<f64> = b.time.clone();
-            let rel = |v: &[f64]| v.iter().zip(&b.model[2]).map(|(y, m)| (y - m) * 1e-3).collect::<Vec<f64>>();
-            let res = rel(&b.tau_obs);
-            let mut c = Chart::new(b.run.to_string(), "time t (s)", "τ_obs − median (kPa)");
-            c.series.push(Series::band(Some("95 % predictive".into()), PALETTE[5], t.clone(), rel(&b.predictive[0]), rel(&b.predictive[1])));
-            c.series.push(Series::points(Some("residual".into()), plot::BLACK_, t.iter().step_by(step).copied().collect(), res.iter().step_by(step).copied().collect()).with_width(1));
-            c.series.push(Series::line(None, PALETTE[1], vec![t[0], t[t.len() - 1]], vec![0.0, 0.0]).with_width(1));
-            c.legend_at = LegendAt::UpperRight;
-            c
-        })
-        .collect();
+    let panels: Vec<Chart> = bands.iter().map(|b| band_about_median(b, &b.run)).collect();
     if panels.is_empty() {
         return Ok(());
     }
     plot::save(&Figure::grid(panels, 3.min(bands.len())), &dir.join("residuals"))?;
-    figs.push("residuals", "Residuals against time: structure over a cycle shows where the B-P law misses the record; the band is the 95 % predictive band about the posterior median.");
+    figs.push("residuals", "Residuals against time: structure over a cycle shows where the B-P law misses the record; the bands are the 95 % predictive and model bands about the posterior median.");
+    Ok(())
+}
+
+/// The diagnostics ArviZ users look for: the log-posterior trace, and per
+/// B-P parameter a rank plot by ensemble (each ensemble's share of the
+/// pooled ranks in 20 bins: flat near 1 when the ensembles agree) and the
+/// walker-averaged autocorrelation with its integrated time τ.
+pub fn diagnostics(dir: &Path, sample: &PosteriorSample, burn_in: usize, tau: &[f64], figs: &mut Figures) -> Result<()> {
+    let chains = &sample.chains;
+    let (n, steps) = (chains.chains(), chains.steps());
+    if steps <= burn_in + 4 {
+        return Ok(());
+    }
+    let shown: Vec<usize> = (0..8.min(n)).map(|i| i * n / 8.min(n)).collect();
+    let xs: Vec<f64> = (0..steps).map(|s| s as f64).collect();
+    let mut lp = Chart::new("log posterior", "step", "ln p(θ | records)");
+    for (k, &ch) in shown.iter().enumerate() {
+        let trace: Vec<f64> = (0..steps).map(|s| chains.log_prob[s * n + ch]).collect();
+        lp.series.push(Series::line(None, PALETTE[k % 7], xs.clone(), trace).with_width(1));
+    }
+    lp.series.push(Series::vlines(Some("end of burn-in".into()), GREY, vec![burn_in as f64]).with_width(1));
+    // the burn-in's first steps can sit far below: show the kept range
+    let kept: Vec<f64> = (burn_in * n..steps * n).map(|i| chains.log_prob[i]).filter(|v| v.is_finite()).collect();
+    if !kept.is_empty() {
+        let (lo, hi) = (quantile(&kept, 0.001), quantile(&kept, 1.0));
+        lp.y_range = Some((lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)));
+    }
+    lp.legend_at = LegendAt::LowerRight;
+    // four columns: every parameter's rank plot and autocorrelation side by side
+    let mut panels = vec![lp, Chart::blank()];
+    let ensembles = chains.ensembles.max(1);
+    let walkers = n / ensembles;
+    for (i, name) in sample.layout.theta_names().iter().enumerate() {
+        let traces = chains.traces(i, burn_in);
+        // rank plot: pooled ranks, each ensemble's histogram over uniform
+        let mut all: Vec<(f64, usize)> = traces.iter().enumerate().flat_map(|(c, t)| t.iter().map(move |v| (*v, c / walkers.max(1)))).collect();
+        all.sort_by(|a, b| a.0.total_cmp(&b.0));
+        const BINS: usize = 20;
+        let mut counts = vec![vec![0.0; BINS]; ensembles];
+        for (rank, (_, e)) in all.iter().enumerate() {
+            counts[(*e).min(ensembles - 1)][rank * BINS / all.len()] += 1.0;
+        }
+        let expected = all.len() as f64 / (BINS * ensembles) as f64;
+        let centres: Vec<f64> = (0..BINS).map(|b| (b as f64 + 0.5) / BINS as f64).collect();
+        let mut rank = Chart::new(format!("{name}: ranks by ensemble"), "pooled rank (fraction)", "count / uniform");
+        for (e, c) in counts.iter().enumerate() {
+            rank.series.push(Series::line(None, PALETTE[e % 7], centres.clone(), c.iter().map(|v| v / expected).collect()).with_width(1));
+        }
+        rank.series.push(Series::dashed(Some("uniform".into()), GREY, vec![0.0, 1.0], vec![1.0, 1.0]).with_width(1));
+        rank.y_range = Some((0.0, 2.0));
+        rank.legend_at = LegendAt::UpperRight;
+        panels.push(rank);
+        // autocorrelation averaged over walkers, to a few τ
+        let len = traces[0].len();
+        let t = tau.get(i).copied().filter(|t| t.is_finite()).unwrap_or(1.0);
+        let lags = ((5.0 * t).ceil() as usize).clamp(10, len.saturating_sub(1).max(1));
+        let mut acf = vec![0.0; lags];
+        for tr in &traces {
+            for (a, r) in acf.iter_mut().zip(crate::sampler::diagnostics::autocorrelation(tr)) {
+                *a += r / n as f64;
+            }
+        }
+        let mut c = Chart::new(format!("{name}: autocorrelation, τ = {}", plot::tick(plot::significant(t, 2))), "lag (steps)", "autocorrelation");
+        c.series.push(Series::line(None, PALETTE[0], (0..lags).map(|l| l as f64).collect(), acf).with_width(2));
+        c.series.push(Series::vlines(Some("τ".into()), GREY, vec![t]).with_width(1));
+        c.y_range = Some((-0.2, 1.05));
+        c.legend_at = LegendAt::UpperRight;
+        panels.push(c);
+    }
+    plot::save(&Figure::grid(panels, 4), &dir.join("diagnostics"))?;
+    figs.push(
+        "diagnostics",
+        &format!(
+            "Sampler diagnostics: the log-posterior of {} walkers (burn-in before the grey line); per B-P parameter, the rank plot of the {ensembles} independent ensembles \
+             (each line is one ensemble's share of the pooled ranks; flat near 1 when they agree, which is what R̂ measures) and the autocorrelation averaged over walkers, with τ.",
+            shown.len()
+        ),
+    );
     Ok(())
 }
 
@@ -159,8 +278,7 @@ pub fn traces(dir: &Path, sample: &PosteriorSample, burn_in: usize, figs: &mut F
 /// The corner plot of the θ parameters (the seven B-P ones or a current law's): marginal histograms on the
 /// diagonal, pairs below it; the identification and the MAP marked where
 /// they fall inside the plotted range.
-pub fn corner(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usize)], identification: &[f64], map: &[f64], figs: &mut Figures) -> Result<()> {
-    let names = sample.layout.theta_names();
+pub fn corner(dir: &Path, sample: &PosteriorSample, names: &[String], positions: &[(usize, usize)], identification: &[f64], map: &[f64], figs: &mut Figures) -> Result<()> {
     let k = names.len();
     if k == 0 {
         return Ok(());
@@ -190,6 +308,7 @@ pub fn corner(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usize)]
             if col == row {
                 let (edges, heights) = histogram(&draws[col], ranges[col], 30);
                 c.series.push(Series::bars(None, PALETTE[0], edges, heights));
+                c.hide_y_ticks = true;
                 for (v, color) in [(identification[col], PALETTE[1]), (map[col], PALETTE[2])] {
                     if inside(v, ranges[col]) {
                         c.series.push(Series::vlines(None, color, vec![v]).with_width(2));
@@ -201,6 +320,10 @@ pub fn corner(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usize)]
                 }
                 c.y_range = Some(ranges[row]);
                 c.series.push(Series::points(None, PALETTE[0].mix_rgb(), draws[col].clone(), draws[row].clone()).with_width(1));
+                for (level, opacity) in [(0.9, 0.35), (0.5, 0.55)] {
+                    let (xs, ys, size) = credible_cells(&draws[col], &draws[row], ranges[col], ranges[row], level);
+                    c.series.push(Series::cells(None, PALETTE[0], xs, ys, size, opacity));
+                }
                 for (p, color) in [(identification, PALETTE[1]), (map, PALETTE[2])] {
                     if inside(p[col], ranges[col]) && inside(p[row], ranges[row]) {
                         c.series.push(Series::points(None, color, vec![p[col]], vec![p[row]]).with_width(5));
@@ -216,11 +339,55 @@ pub fn corner(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usize)]
     figs.push(
         "corner",
         &format!(
-            "Corner plot of {} posterior draws (SI units): marginal histograms and pairs; orange marks the deterministic identification, green the MAP (each where it falls inside the plotted 0.2–99.8 % range).",
+            "Corner plot of {} posterior draws (SI units): marginal histograms and pairs, with the smallest regions of a 20 × 20 grid (counts smoothed over neighbouring cells) that hold 50 % (dark) and 90 % (light) of the draws; orange marks the deterministic identification, green the MAP (each where it falls inside the plotted 0.2–99.8 % range).",
             positions.len()
         ),
     );
     Ok(())
+}
+
+/// The cells of a 20 × 20 grid over `rx` × `ry` that hold `level` of the
+/// draws, densest first (a highest-density region of the counts smoothed
+/// over each cell's neighbours, so a few hundred draws give a smooth
+/// region): their lower-left corners and their size.
+fn credible_cells(x: &[f64], y: &[f64], rx: (f64, f64), ry: (f64, f64), level: f64) -> (Vec<f64>, Vec<f64>, (f64, f64)) {
+    const BINS: usize = 20;
+    let (w, h) = ((rx.1 - rx.0) / BINS as f64, (ry.1 - ry.0) / BINS as f64);
+    let mut counts = vec![0usize; BINS * BINS];
+    for (a, b) in x.iter().zip(y) {
+        let (i, j) = (((a - rx.0) / w).floor(), ((b - ry.0) / h).floor());
+        if (0.0..BINS as f64).contains(&i) && (0.0..BINS as f64).contains(&j) {
+            counts[j as usize * BINS + i as usize] += 1;
+        }
+    }
+    // 3 × 3 smoothing with weights 4 (centre), 2 (sides), 1 (corners)
+    let mut mass = vec![0.0f64; BINS * BINS];
+    for j in 0..BINS {
+        for i in 0..BINS {
+            for (dj, di) in (-1i64..=1).flat_map(|a| (-1i64..=1).map(move |b| (a, b))) {
+                let (jj, ii) = (j as i64 + dj, i as i64 + di);
+                if (0..BINS as i64).contains(&jj) && (0..BINS as i64).contains(&ii) {
+                    let w = [4.0, 2.0, 1.0][(dj.abs() + di.abs()) as usize];
+                    mass[j * BINS + i] += w * counts[jj as usize * BINS + ii as usize] as f64;
+                }
+            }
+        }
+    }
+    let total: f64 = mass.iter().sum();
+    let mut order: Vec<usize> = (0..mass.len()).filter(|&c| mass[c] > 0.0).collect();
+    order.sort_by(|a, b| mass[*b].total_cmp(&mass[*a]));
+    let target = level * total;
+    let mut held = 0.0;
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    for c in order {
+        if held >= target {
+            break;
+        }
+        held += mass[c];
+        xs.push(rx.0 + (c % BINS) as f64 * w);
+        ys.push(ry.0 + (c / BINS) as f64 * h);
+    }
+    (xs, ys, (w, h))
 }
 
 trait Lighter {
@@ -250,10 +417,12 @@ fn histogram(v: &[f64], range: (f64, f64), bins: usize) -> (Vec<f64>, Vec<f64>) 
     (edges, counts.into_iter().map(|c| c * norm).collect())
 }
 
-/// Each B-P parameter's posterior against its prior on a log axis over the
-/// prior's range: the prior density (scaled to peak 1), the posterior's 90 %
-/// credible interval shaded and its median; the title gives how much the
-/// records narrowed the prior (posterior sd / prior sd of ln θ).
+/// Each B-P parameter's posterior against its prior, in two panels. Left,
+/// on a log axis over the prior's range: the prior density (scaled to peak
+/// 1), the posterior's 90 % credible interval shaded and its median; the
+/// title gives how much the records narrowed the prior (posterior sd /
+/// prior sd of ln θ). Right, zoomed on the posterior: its histogram, its
+/// 90 % interval and median, and the prior's shape there.
 pub fn marginals(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usize)], priors: &[Prior], figs: &mut Figures) -> Result<()> {
     let mut panels = Vec::new();
     for (k, name) in sample.layout.theta_names().iter().enumerate() {
@@ -275,13 +444,49 @@ pub fn marginals(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usiz
         let mut c = Chart::new(format!("{name}: posterior sd / prior sd = {}", plot::tick(plot::significant(sd / prior_sd, 2))), format!("{name} (log axis)"), "scaled density");
         c.log_x = true;
         c.y_range = Some((0.0, 1.15));
+        c.hide_y_ticks = true;
+        // narrower than a pixel column on this axis: say where to look
+        let narrow = (q95 - q05) < 0.01 * (range.1 - range.0);
+        let label = if narrow { "posterior 90 % (narrow: see zoom)" } else { "posterior 90 %" };
         c.series.push(Series::line(Some("prior".into()), PALETTE[1], xs.iter().map(|x| x.exp()).collect(), dens.iter().map(|d| d / peak).collect()));
-        c.series.push(Series::band(Some("posterior 90 %".into()), PALETTE[0], vec![q05.exp(), q95.exp()], vec![0.0, 0.0], vec![1.0, 1.0]).with_opacity(0.5));
+        c.series.push(Series::band(Some(label.into()), PALETTE[0], vec![q05.exp(), q95.exp()], vec![0.0, 0.0], vec![1.0, 1.0]).with_opacity(0.5));
         c.series.push(Series::vlines(Some("posterior median".into()), PALETTE[0], vec![q50.exp()]).with_width(2));
         c.legend_at = LegendAt::UpperRight;
         panels.push(c);
+        panels.push(zoomed_marginal(name, &values, &prior));
     }
     plot::save(&Figure::grid(panels, 4), &dir.join("marginals"))?;
-    figs.push("marginals", "Posterior against prior for each B-P parameter: the prior density (scaled to peak 1) over its ±2.5 sd range, the posterior's 90 % credible interval and median. A small sd ratio means the records, not the prior, determine the parameter; the corner plot shows the posterior's shape.");
+    figs.push(
+        "marginals",
+        "Posterior against prior for each B-P parameter. Left of each pair: the prior density (scaled to peak 1) over its ±2.5 sd range, \
+         the posterior's 90 % credible interval and median; a small sd ratio means the records, not the prior, determine the parameter. \
+         Right: zoomed on the posterior, its histogram with the 90 % interval and the prior's shape over that range (rescaled). The corner plot shows the joint shape.",
+    );
     Ok(())
+}
+
+/// One parameter's posterior on a linear axis over its own 0.2–99.8 %
+/// range, with the prior density there rescaled to the histogram's peak.
+fn zoomed_marginal(name: &str, values: &[f64], prior: &Prior) -> Chart {
+    let (lo, hi) = (quantile(values, 0.002), quantile(values, 0.998));
+    let pad = 0.08 * (hi - lo).max(hi.abs() * 1e-9);
+    let range = (lo - pad, hi + pad);
+    let (edges, heights) = histogram(values, range, 40);
+    let top = heights.iter().fold(0.0f64, |m, h| m.max(*h)).max(1e-300);
+    let xs: Vec<f64> = (0..=100).map(|j| range.0 + (range.1 - range.0) * j as f64 / 100.0).collect();
+    // the prior's density in θ (its density in ln θ over θ)
+    let dens: Vec<f64> = xs.iter().map(|x| if *x > 0.0 { (prior.log_density(x.ln()) - x.ln()).exp() } else { 0.0 }).collect();
+    let dtop = dens.iter().fold(0.0f64, |m, d| m.max(*d));
+    let mut c = Chart::new(format!("{name}: posterior, zoomed"), format!("{name} ({})", crate::store::inference::unit_of(name)), "density");
+    c.hide_y_ticks = true;
+    c.x_range = Some(range);
+    c.y_range = Some((0.0, 1.2 * top));
+    c.series.push(Series::bars(Some("posterior".into()), PALETTE[0], edges, heights));
+    if dtop > 0.0 {
+        c.series.push(Series::dashed(Some("prior (rescaled)".into()), PALETTE[1], xs, dens.iter().map(|d| d / dtop * 0.5 * top).collect()));
+    }
+    c.series.push(Series::vlines(Some("median, 90 %".into()), PALETTE[7], vec![quantile(values, 0.5)]).with_width(2));
+    c.series.push(Series::vlines(None, PALETTE[7], vec![quantile(values, 0.05), quantile(values, 0.95)]).with_width(1));
+    c.legend_at = LegendAt::UpperRight;
+    c
 }
