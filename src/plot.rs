@@ -127,6 +127,8 @@ pub struct Chart {
     pub blank: bool,
     /// No tick labels on the y axis (a density whose scale means nothing).
     pub hide_y_ticks: bool,
+    /// Names for the rows y = 1, 2, … (a forest plot), in place of numbers.
+    pub y_names: Option<Vec<String>>,
 }
 
 /// Legend placement.
@@ -351,6 +353,11 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
     }
     let (caption, labels, descs, ticks, y_area, x_area, margin) =
         if chart.compact { (13, 11, 13, 4, 56, 40, 6) } else { (18, 13, 15, 7, 70, 44, 12) };
+    // names on the y axis need room: about 7 px per character
+    let y_area = chart.y_names.as_ref().map_or(y_area, |n| y_area.max(12 + 7 * n.iter().map(|s| s.chars().count()).max().unwrap_or(0) as u32));
+
+    // names on the y axis need room: about 7 px per character
+    let y_area = chart.y_names.as_ref().map_or(y_area, |n| y_area.max(12 + 7 * n.iter().map(|s| s.chars().count()).max().unwrap_or(0) as u32));
     let tx = |x: f64| if chart.log_x { x.log10() } else { x };
     let (xr, yr) = axis_ranges(chart);
     let mut c = ChartBuilder::on(area)
@@ -362,7 +369,19 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
     let log_x = chart.log_x;
     let (x_span, y_span) = (xr.1 - xr.0, yr.1 - yr.0);
     let x_fmt = move |v: &f64| if log_x { tick(significant(10f64.powf(*v), 2)) } else { tick_in(*v, x_span) };
-    let y_fmt = move |v: &f64| tick_in(*v, y_span);
+    let names = chart.y_names.clone();
+    let y_fmt = move |v: &f64| match &names {
+        // a name at each whole row, nothing between rows
+        Some(names) => {
+            let row = v.round();
+            if (v - row).abs() < 1e-6 && row >= 1.0 && (row as usize) <= names.len() {
+                names[row as usize - 1].clone()
+            } else {
+                String::new()
+            }
+        }
+        None => tick_in(*v, y_span),
+    };
     c.configure_mesh()
         .x_desc(&chart.x_label)
         .y_desc(&chart.y_label)
@@ -370,7 +389,12 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
         .axis_desc_style((FONT, descs))
         // compact panels are narrow: three x labels never run together
         .x_labels(if chart.compact { 3 } else { ticks })
-        .y_labels(if chart.hide_y_ticks { 0 } else { ticks })
+        .y_labels(match (&chart.y_names, chart.hide_y_ticks) {
+            // enough requested labels that the steps fall on whole rows
+            (Some(names), _) => 2 * (names.len() + 1),
+            (None, true) => 0,
+            (None, false) => ticks,
+        })
         .x_label_formatter(&x_fmt)
         .y_label_formatter(&y_fmt)
         .light_line_style(RGBColor(235, 235, 235))

@@ -252,3 +252,19 @@ mod tests {
         assert_eq!(l.coordinate_names()[3], "ln (D1 / R1)");
     }
 }
+
+/// The unit of a coordinate of the posterior, by its name.
+pub fn unit_of(name: &str) -> &'static str {
+    if let Some(i) = crate::model::PARAM_NAMES.iter().position(|p| *p == name) {
+        return crate::model::PARAM_UNITS[i];
+    }
+    match name {
+        "G_field" | "G_zero" => "Pa",
+        "saturation_current_a" => "A",
+        "gas_spring_n_per_m" => "N/m",
+        _ if name.starts_with("sigma_") => "Pa",
+        _ if name.starts_with("force_offset_n_") => "N",
+        _ if name.starts_with("rho_") => "1",
+        _ => "",
+    }
+}

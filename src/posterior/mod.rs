@@ -23,7 +23,7 @@ pub mod terms;
 use crate::data::Campaign;
 use crate::model::{Integrator, Params, LANES};
 use crate::sampler::LogDensity;
-pub use layout::{Coordinates, Layout};
+pub use layout::{unit_of, Coordinates, Layout};
 pub use likelihood::{tangent_stiffness, LikelihoodSettings, NoiseModel, RecordPart, ResidualStats, RunData};
 pub use parameters::{ModelKind, ParameterModel, LAW_NAMES};
 pub use prior::Prior;

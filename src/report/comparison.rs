@@ -13,6 +13,7 @@ use crate::data::loading_branches;
 use crate::error::Result;
 use crate::model::PARAM_NAMES;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
+use crate::posterior::unit_of;
 use crate::predict::{CoverageRow, RunBands};
 use crate::sampler::quantile;
 use crate::store::{command_line, StoredCalibration};
@@ -86,6 +87,14 @@ fn calibrations_section(page: &mut Page, entries: &[Entry]) {
         .iter()
         .map(|e| {
             let (rhat, ess) = (e.cal.max_rhat(), e.cal.min_ess());
+            // every warning of the calibration counts, not only R̂ and ESS
+            let warnings: Vec<&String> = e.cal.record.warnings.iter().chain(&e.cal.record.model_warnings).collect();
+            let pass = rhat < 1.01 && ess >= e.cal.settings.sampler.min_ess && e.cal.record.warnings.is_empty();
+            let verdict = if warnings.is_empty() {
+                Mark::of(pass).html().to_string()
+            } else {
+                format!("{} {}", Mark::of(pass).html(), warnings.iter().map(|w| esc(w)).collect::<Vec<_>>().join("; "))
+            };
             vec![
                 esc(&e.label),
                 if e.is_law() { "current law".into() } else { "per current".into() },
@@ -93,11 +102,11 @@ fn calibrations_section(page: &mut Page, entries: &[Entry]) {
                 esc(&e.cal.record.runs.join(", ")),
                 format!("{rhat:.4}"),
                 format!("{ess:.0}"),
-                Mark::of(rhat < 1.01 && ess >= e.cal.settings.sampler.min_ess).html().into(),
+                verdict,
             ]
         })
         .collect();
-    page.table(&["calibration", "model", "current (A)", "runs", "max R̂", "min ESS", ""], &rows_html);
+    page.table(&["calibration", "model", "current (A)", "runs", "max R̂", "min ESS", "converged; warnings"], &rows_html);
 }
 
 fn parameters_section(page: &mut Page, entries: &[Entry]) {
@@ -257,26 +266,34 @@ fn adequacy_section(page: &mut Page, entries: &[Entry]) {
 }
 
 /// A forest plot per B-P parameter: each calibration's median and 90 %
-/// interval.
+/// interval, one row per calibration, named on the y axis.
 fn forest(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
+    let labels: Vec<String> = entries.iter().map(|e| e.label.clone()).collect();
     let mut panels = Vec::new();
     for name in PARAM_NAMES {
-        let mut c = Chart::new(name, format!("{name} (SI)"), "calibration");
+        let mut c = Chart::new(name, format!("{name} ({})", unit_of(name)), "");
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for (k, e) in entries.iter().enumerate() {
             if let Some(r) = e.cal.summary.iter().find(|r| r.parameter == name) {
                 let y = (entries.len() - k) as f64;
                 let color = PALETTE[k % 8];
-                c.series.push(Series::line(Some(e.label.clone()), color, vec![r.q05, r.q95], vec![y, y]).with_width(3));
+                c.series.push(Series::line(None, color, vec![r.q05, r.q95], vec![y, y]).with_width(3));
                 c.series.push(Series::points(None, color, vec![r.q50], vec![y]).with_width(5));
+                (lo, hi) = (lo.min(r.q05), hi.max(r.q95));
             }
         }
-        c.y_range = Some((0.3, entries.len() as f64 + 0.7));
-        c.legend_at = LegendAt::UpperRight;
-        c.legend = panels.is_empty();
+        if lo < hi {
+            let pad = 0.12 * (hi - lo);
+            c.x_range = Some((lo - pad, hi + pad));
+        }
+        c.y_range = Some((0.4, entries.len() as f64 + 0.6));
+        // row k from the top is at y = n − k
+        c.y_names = Some(labels.iter().rev().cloned().collect());
+        c.legend = false;
         panels.push(c);
     }
     plot::save(&Figure::grid(panels, 4), &out.join("forest"))?;
-    figs.push("forest", "Forest plot: median (dot) and 90 % credible interval (bar) of each parameter in each calibration, top to bottom in the order given.");
+    figs.push("forest", "Forest plot: median (dot) and 90 % credible interval (bar) of each parameter in each calibration, named on the left.");
     Ok(())
 }
 
@@ -302,7 +319,7 @@ fn against_current(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<
         .collect();
     let mut panels = Vec::new();
     for (k, name) in PARAM_NAMES.iter().enumerate() {
-        let mut c = Chart::new(*name, "coil current I (A)", format!("{name} (SI)"));
+        let mut c = Chart::new(*name, "coil current I (A)", format!("{name} ({})", unit_of(name)));
         for (j, (law, at_grid)) in laws.iter().zip(&law_params).enumerate() {
             let (mut lo, mut mid, mut hi) = (Vec::new(), Vec::new(), Vec::new());
             for draws in at_grid {

@@ -477,7 +477,7 @@ fn zoomed_marginal(name: &str, values: &[f64], prior: &Prior) -> Chart {
     // the prior's density in θ (its density in ln θ over θ)
     let dens: Vec<f64> = xs.iter().map(|x| if *x > 0.0 { (prior.log_density(x.ln()) - x.ln()).exp() } else { 0.0 }).collect();
     let dtop = dens.iter().fold(0.0f64, |m, d| m.max(*d));
-    let mut c = Chart::new(format!("{name}: posterior, zoomed"), format!("{name} ({})", crate::store::inference::unit_of(name)), "density");
+    let mut c = Chart::new(format!("{name}: posterior, zoomed"), format!("{name} ({})", crate::posterior::unit_of(name)), "density");
     c.hide_y_ticks = true;
     c.x_range = Some(range);
     c.y_range = Some((0.0, 1.2 * top));

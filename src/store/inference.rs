@@ -29,9 +29,8 @@ use zarrs::group::GroupBuilder;
 use zarrs::storage::ReadableWritableListableStorage;
 
 use crate::error::{Error, Result};
-use crate::model::{PARAM_NAMES, PARAM_UNITS};
 use crate::pointwise::PointwiseDraws;
-use crate::posterior::PosteriorSample;
+use crate::posterior::{unit_of, PosteriorSample};
 
 /// Why ArviZ's R̂ of this store is not ours, and how to get ours.
 pub const RHAT_NOTE: &str = "Each chain is one walker of an affine-invariant ensemble. Walkers of an \
@@ -213,20 +212,4 @@ where
 /// A Zarr node name for a coordinate's name (`/` separates nodes).
 fn node_name(name: &str) -> String {
     name.replace('/', "_")
-}
-
-/// The unit of a coordinate of the posterior, by its name.
-pub fn unit_of(name: &str) -> &'static str {
-    if let Some(i) = PARAM_NAMES.iter().position(|p| *p == name) {
-        return PARAM_UNITS[i];
-    }
-    match name {
-        "G_field" | "G_zero" => "Pa",
-        "saturation_current_a" => "A",
-        "gas_spring_n_per_m" => "N/m",
-        _ if name.starts_with("sigma_") => "Pa",
-        _ if name.starts_with("force_offset_n_") => "N",
-        _ if name.starts_with("rho_") => "1",
-        _ => "",
-    }
 }
