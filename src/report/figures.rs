@@ -15,6 +15,13 @@ use crate::sampler::quantile;
 /// would show no more; the SVG stays small).
 const MAX_POINTS: usize = 1500;
 
+/// Points per pair panel of the corner plot.
+const CORNER_POINTS: usize = 600;
+
+/// At most this many vertices per band or line drawn over a record: a
+/// panel is ~500 px wide, so more add file size, not detail.
+const MAX_VERTICES: usize = 2500;
+
 fn every(n: usize, max: usize) -> usize {
     n.div_ceil(max.max(1)).max(1)
 }
@@ -58,14 +65,16 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
     for b in bands {
         let step = every(b.time.len(), MAX_POINTS);
         let pick = |v: &[f64], s: f64| v.iter().step_by(step).map(|x| x * s).collect::<Vec<f64>>();
+        let thin = every(b.time.len(), MAX_VERTICES);
         let panel = |title: String, xl: &str, yl: &str, x: &[f64], xobs: &[f64], yscale: f64, legend_at: LegendAt| {
-            let scaled = |v: &[f64]| v.iter().map(|y| y * yscale).collect::<Vec<f64>>();
+            let scaled = |v: &[f64]| v.iter().step_by(thin).map(|y| y * yscale).collect::<Vec<f64>>();
+            let x = &x.iter().step_by(thin).copied().collect::<Vec<f64>>();
             let mut c = Chart::new(title, xl, yl);
             c.series.extend(loop_band("95 % predictive", PALETTE[5], x, &scaled(&b.predictive[0]), &scaled(&b.predictive[1]), 0.25));
             c.series.extend(loop_band("95 % model", PALETTE[0], x, &scaled(&b.model[0]), &scaled(&b.model[4]), 0.35));
             c.series.extend(loop_band("50 % model", PALETTE[0], x, &scaled(&b.model[1]), &scaled(&b.model[3]), 0.6));
             c.series.push(Series::points(Some("measured".into()), plot::BLACK_, pick(xobs, 1.0), pick(&b.tau_obs, yscale)).with_width(1));
-            c.series.push(Series::line(Some("posterior median".into()), PALETTE[1], x.to_vec(), scaled(&b.model[2])).with_width(1));
+            c.series.push(Series::line(Some("posterior median".into()), PALETTE[1], x.clone(), scaled(&b.model[2])).with_width(1));
             c.legend_at = legend_at;
             c
         };
@@ -146,13 +155,15 @@ fn zoom(b: &RunBands, r: std::ops::Range<usize>, title: &str, legend_at: LegendA
 /// posterior median, against time: the bands' width made visible.
 fn band_about_median(b: &RunBands, title: &str) -> Chart {
     let step = every(b.time.len(), MAX_POINTS);
-    let t = &b.time;
-    let rel = |v: &[f64]| v.iter().zip(&b.model[2]).map(|(y, m)| (y - m) * 1e-3).collect::<Vec<f64>>();
-    let res = rel(&b.tau_obs);
+    let thin = every(b.time.len(), MAX_VERTICES);
+    let rel_all = |v: &[f64]| v.iter().zip(&b.model[2]).map(|(y, m)| (y - m) * 1e-3).collect::<Vec<f64>>();
+    let rel = |v: &[f64]| rel_all(v).into_iter().step_by(thin).collect::<Vec<f64>>();
+    let t = &b.time.iter().step_by(thin).copied().collect::<Vec<f64>>();
+    let res = rel_all(&b.tau_obs);
     let mut c = Chart::new(format!("{title}: about the median"), "time t (s)", "τ − posterior median (kPa)");
     c.series.push(Series::band(Some("95 % predictive".into()), PALETTE[5], t.clone(), rel(&b.predictive[0]), rel(&b.predictive[1])).with_opacity(0.35));
     c.series.push(Series::band(Some("95 % model".into()), PALETTE[0], t.clone(), rel(&b.model[0]), rel(&b.model[4])).with_opacity(0.6));
-    c.series.push(Series::points(Some("measured − median".into()), plot::BLACK_, t.iter().step_by(step).copied().collect(), res.iter().step_by(step).copied().collect()).with_width(1));
+    c.series.push(Series::points(Some("measured − median".into()), plot::BLACK_, b.time.iter().step_by(step).copied().collect(), res.iter().step_by(step).copied().collect()).with_width(1));
     c.legend_at = LegendAt::UpperRight;
     c
 }
@@ -319,7 +330,10 @@ pub fn corner(dir: &Path, sample: &PosteriorSample, names: &[String], positions:
                     c.y_label = names[row].clone();
                 }
                 c.y_range = Some(ranges[row]);
-                c.series.push(Series::points(None, PALETTE[0].mix_rgb(), draws[col].clone(), draws[row].clone()).with_width(1));
+                // the regions carry the density; a few hundred points show the outskirts
+                let thin = every(draws[col].len(), CORNER_POINTS);
+                let (xs, ys) = (draws[col].iter().step_by(thin).copied().collect(), draws[row].iter().step_by(thin).copied().collect());
+                c.series.push(Series::points(None, PALETTE[0].mix_rgb(), xs, ys).with_width(1));
                 for (level, opacity) in [(0.9, 0.35), (0.5, 0.55)] {
                     let (xs, ys, size) = credible_cells(&draws[col], &draws[row], ranges[col], ranges[row], level);
                     c.series.push(Series::cells(None, PALETTE[0], xs, ys, size, opacity));
