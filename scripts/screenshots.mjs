@@ -1,6 +1,6 @@
 // Screenshots of a report's figures as a reader sees them: the page laid
-// out 1400 px wide in headless Chromium, each <figure> whose image alt
-// starts with one of the given stems captured with its caption.
+// out 1400 px wide in headless Chromium, the last <figure> whose image alt
+// is one of the given stems captured with its caption.
 //
 //   node --experimental-websocket scripts/screenshots.mjs REPORT.html OUT_DIR PREFIX STEM ...
 //
@@ -20,7 +20,8 @@ const page = await openPage(report);
 await page.load(1400);
 for (const stem of stems) {
   const box = await page.evaluate(`(() => {
-    const img = Array.from(document.images).find(i => (i.alt || "").startsWith(${JSON.stringify(stem)}));
+    // the last match: the figures section comes after the held-out runs' figures
+    const img = Array.from(document.images).filter(i => (i.alt || "") === ${JSON.stringify(stem)}).pop();
     if (!img) return null;
     const f = img.closest("figure") || img;
     f.scrollIntoView();

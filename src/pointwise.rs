@@ -124,7 +124,9 @@ pub struct PointwiseDraws {
     pub observed: Vec<f64>,
     /// `[chain][step][observation]`
     pub log_likelihood: Vec<f64>,
-    pub replicate: Vec<f64>,
+    /// `[chain][step][observation]`, single precision (a record's noise is
+    /// far above its rounding)
+    pub replicate: Vec<f32>,
     /// Draws whose integration failed on some run (their terms are −∞).
     pub failed: usize,
 }
@@ -154,8 +156,11 @@ pub fn pointwise_draws(
         replicate: Vec::new(),
         failed: 0,
     };
-    // one block per run: [position][sample]
-    let mut blocks = Vec::with_capacity(runs.len());
+    // every run's observations side by side: run j's start in each row
+    let offsets: Vec<usize> = runs.iter().scan(0, |at, r| { let o = *at; *at += r.time.len() - 1; Some(o) }).collect();
+    let total: usize = runs.iter().map(|r| r.time.len() - 1).sum();
+    set.log_likelihood = vec![f64::NEG_INFINITY; positions.len() * total];
+    set.replicate = vec![f32::NAN; positions.len() * total];
     let mut failed = vec![false; positions.len()];
     for (j, run) in runs.iter().enumerate() {
         let draws = sample.draws(&positions, &run.id, run.current_a);
@@ -171,25 +176,21 @@ pub fn pointwise_draws(
             })
             .collect();
         let n = run.time.len() - 1;
+        // into place at once: one run's terms at a time are all that is held twice
         for (i, t) in terms.iter().enumerate() {
-            failed[i] |= t.log_likelihood.len() != n;
+            let at = i * total + offsets[j];
+            if t.log_likelihood.len() == n {
+                set.log_likelihood[at..at + n].copy_from_slice(&t.log_likelihood);
+                for (out, v) in set.replicate[at..at + n].iter_mut().zip(&t.replicate) {
+                    *out = *v as f32;
+                }
+            } else {
+                failed[i] = true;
+            }
         }
         set.run.extend(std::iter::repeat_n(j, n));
         set.time.extend_from_slice(&run.time[1..]);
         set.observed.extend_from_slice(&run.tau[1..]);
-        blocks.push((n, terms));
-    }
-    for i in 0..positions.len() {
-        for (n, terms) in &blocks {
-            let t = &terms[i];
-            if t.log_likelihood.len() == *n {
-                set.log_likelihood.extend_from_slice(&t.log_likelihood);
-                set.replicate.extend_from_slice(&t.replicate);
-            } else {
-                set.log_likelihood.extend(std::iter::repeat_n(f64::NEG_INFINITY, *n));
-                set.replicate.extend(std::iter::repeat_n(f64::NAN, *n));
-            }
-        }
     }
     set.failed = failed.iter().filter(|f| **f).count();
     set

@@ -59,8 +59,8 @@ pub(crate) fn loop_band(label: &str, color: plot::RGBColor, x: &[f64], lo: &[f64
 /// One figure per run. Top: the τ–γ, F–x and F–v loops with the 95 %
 /// predictive band, the 95 % and 50 % model bands, the posterior median and
 /// the record. Bottom, where the bands are wide enough to see: both bands
-/// about the median against time, and the stress against time at the first
-/// yield and at the first reversal.
+/// about the median against time, and the stress against time over the
+/// first loading and around the first reversal.
 pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mut Figures) -> Result<()> {
     for b in bands {
         let step = every(b.time.len(), MAX_POINTS);
@@ -86,16 +86,16 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
         // the measured velocity would be noise; the model's drives both
         let force_vel = panel(format!("{}: force against velocity", b.run), "velocity v (mm/s)", "force F = τA (N)", &mm(&v_model), &mm(&v_model), area_m2, LegendAt::UpperLeft);
         let around = band_about_median(b, &b.run);
-        let yield_zoom = zoom(b, first_loading(b), &format!("{}: first yield", b.run), LegendAt::LowerRight);
+        let yield_zoom = zoom(b, first_loading(b), &format!("{}: first loading", b.run), LegendAt::LowerRight);
         let reversal_zoom = zoom(b, first_reversal(b), &format!("{}: first reversal", b.run), LegendAt::UpperRight);
         let stem = format!("bands_{}", b.run);
         plot::save(&Figure::grid(vec![tau_gamma, force_disp, force_vel, around, yield_zoom, reversal_zoom], 3), &dir.join(&stem))?;
         figs.push(
             &stem,
             &format!(
-                "{} ({} A): posterior bands of the model stress and the 95 % band of a new measurement, with the record (every {}th sample shown in the loops). \
-                 On the full loops the bands are about a line wide; the lower row shows them where they can be seen: their width about the posterior median \
-                 over the whole record, and the stress at the first yield and at the first reversal.",
+                "{} ({} A): posterior bands of the model stress and the 95 % band of a new measurement, with the record (one sample in {} shown in the loops). \
+                 The lower row shows the bands where they are easiest to read: about the posterior median over the whole record, \
+                 and the stress against time over the first loading and around the first reversal.",
                 b.run, b.current_a, step
             ),
         );
@@ -103,24 +103,13 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
     Ok(())
 }
 
-/// The samples from the start to half again past the knee of the first
-/// loading (90 % of the peak stress), where the stress changes fastest.
-fn first_loading(b: &RunBands) -> std::ops::Range<usize> {
-    let n = b.tau_obs.len();
-    let peak = b.model[2].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let knee = (0..n).find(|&k| b.model[2][k].abs() >= 0.9 * peak).unwrap_or(n / 4);
-    0..(knee + knee / 2 + 10).min(n)
-}
-
-/// The samples around the first reversal of the strain: its first extreme,
-/// taken once the strain has come back half-way from it (noise near the
-/// start makes no reversal), from a third of a loading before it to the
-/// knee of the loading after it.
-fn first_reversal(b: &RunBands) -> std::ops::Range<usize> {
-    let g = &b.gamma_model;
+/// The first extreme of the strain: the first reversal, taken once the
+/// strain has come back half-way from it (noise near the start, or a
+/// record that starts at an end of the stroke, makes none).
+fn first_extreme(g: &[f64]) -> usize {
     let n = g.len();
     if n < 3 {
-        return 0..n;
+        return n.saturating_sub(1);
     }
     let start = g[0];
     let dir = if (g[n / 8] - start) >= 0.0 { 1.0 } else { -1.0 };
@@ -134,6 +123,21 @@ fn first_reversal(b: &RunBands) -> std::ops::Range<usize> {
             break;
         }
     }
+    extreme
+}
+
+/// The first loading: from the start to the first reversal, where the
+/// stress first rises through yield.
+fn first_loading(b: &RunBands) -> std::ops::Range<usize> {
+    let n = b.tau_obs.len();
+    0..(first_extreme(&b.gamma_model) + 1).clamp(10.min(n), n)
+}
+
+/// The samples around the first reversal: from a third of the first
+/// loading before it to as long again after it.
+fn first_reversal(b: &RunBands) -> std::ops::Range<usize> {
+    let n = b.tau_obs.len();
+    let extreme = first_extreme(&b.gamma_model);
     let loading = first_loading(b).end;
     extreme.saturating_sub(loading / 3)..(extreme + loading).min(n)
 }

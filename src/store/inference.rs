@@ -91,20 +91,20 @@ fn build(dir: &Path, sample: &PosteriorSample, pw: &PointwiseDraws, info: &Store
     for group in ["posterior", "sample_stats"] {
         group_with(&store, group, &stats_attrs)?;
         let g = format!("/{group}");
-        put(&store, &format!("{g}/chain"), &[("chain", chains)], data_type::int64(), chain_coord.clone(), &[])?;
-        put(&store, &format!("{g}/draw"), &[("draw", n)], data_type::int64(), draw_coord.clone(), &[])?;
-        put(&store, &format!("{g}/ensemble"), &[("chain", chains)], data_type::int64(), ensemble.clone(), &[])?;
+        put(&store, &format!("{g}/chain"), &[("chain", chains)], data_type::int64(), &chain_coord, &[])?;
+        put(&store, &format!("{g}/draw"), &[("draw", n)], data_type::int64(), &draw_coord, &[])?;
+        put(&store, &format!("{g}/ensemble"), &[("chain", chains)], data_type::int64(), &ensemble, &[])?;
     }
     let grid = |f: &dyn Fn(usize, usize) -> f64| -> Vec<f64> { (0..chains).flat_map(|c| (first..first + n).map(move |s| (c, s))).map(|(c, s)| f(s, c)).collect() };
     for (i, name) in sample.layout.names.iter().enumerate() {
         let values = grid(&|s, c| sample.chains.at(s, c, i));
         let attrs = [("units", json!(unit_of(name))), ("coordinates", json!("ensemble")), ("long_name", json!(name))];
-        put(&store, &format!("/posterior/{}", node_name(name)), &[("chain", chains), ("draw", n)], data_type::float64(), values, &attrs)?;
+        put(&store, &format!("/posterior/{}", node_name(name)), &[("chain", chains), ("draw", n)], data_type::float64(), &values, &attrs)?;
     }
     let lp = grid(&|s, c| sample.chains.log_prob[s * chains + c]);
-    put(&store, "/sample_stats/lp", &[("chain", chains), ("draw", n)], data_type::float64(), lp, &[("coordinates", json!("ensemble"))])?;
+    put(&store, "/sample_stats/lp", &[("chain", chains), ("draw", n)], data_type::float64(), &lp, &[("coordinates", json!("ensemble"))])?;
     let accepted: Vec<bool> = (0..chains).flat_map(|c| (first..first + n).map(move |s| (s, c))).map(|(s, c)| sample.chains.accepted[s * chains + c]).collect();
-    put(&store, "/sample_stats/accepted", &[("chain", chains), ("draw", n)], data_type::bool(), accepted, &[("coordinates", json!("ensemble"))])?;
+    put(&store, "/sample_stats/accepted", &[("chain", chains), ("draw", n)], data_type::bool(), &accepted, &[("coordinates", json!("ensemble"))])?;
 
     // the observations, their coordinates in every group that has them
     let nobs = pw.observed.len();
@@ -121,21 +121,20 @@ fn build(dir: &Path, sample: &PosteriorSample, pw: &PointwiseDraws, info: &Store
     for group in ["log_likelihood", "posterior_predictive", "observed_data"] {
         group_with(&store, group, if group == "observed_data" { &[] } else { &thinning })?;
         let g = format!("/{group}");
-        put(&store, &format!("{g}/obs"), &[("obs", nobs)], data_type::int64(), obs.clone(), &[])?;
-        put(&store, &format!("{g}/run"), &[("obs", nobs)], data_type::string(), run_names.clone(), &[])?;
-        put(&store, &format!("{g}/time"), &[("obs", nobs)], data_type::float64(), pw.time.clone(), &[("units", json!("s"))])?;
+        put(&store, &format!("{g}/obs"), &[("obs", nobs)], data_type::int64(), &obs, &[])?;
+        put(&store, &format!("{g}/run"), &[("obs", nobs)], data_type::string(), &run_names, &[])?;
+        put(&store, &format!("{g}/time"), &[("obs", nobs)], data_type::float64(), &pw.time, &[("units", json!("s"))])?;
         if group != "observed_data" {
-            put(&store, &format!("{g}/chain"), &[("chain", chains)], data_type::int64(), chain_coord.clone(), &[])?;
-            put(&store, &format!("{g}/draw"), &[("draw", pw_steps.len())], data_type::int64(), pw_steps.clone(), &[])?;
+            put(&store, &format!("{g}/chain"), &[("chain", chains)], data_type::int64(), &chain_coord, &[])?;
+            put(&store, &format!("{g}/draw"), &[("draw", pw_steps.len())], data_type::int64(), &pw_steps, &[])?;
         }
     }
     let coords = json!("run time");
     let dims = [("chain", chains), ("draw", pw_steps.len()), ("obs", nobs)];
-    put(&store, "/log_likelihood/tau", &dims, data_type::float64(), pw.log_likelihood.clone(), &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))])?;
-    let replicate: Vec<f32> = pw.replicate.iter().map(|v| *v as f32).collect();
+    put(&store, "/log_likelihood/tau", &dims, data_type::float64(), &pw.log_likelihood, &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))])?;
     let shear = [("coordinates", coords.clone()), ("units", json!("Pa")), ("long_name", json!("shear stress"))];
-    put(&store, "/posterior_predictive/tau", &dims, data_type::float32(), replicate, &shear)?;
-    put(&store, "/observed_data/tau", &[("obs", nobs)], data_type::float64(), pw.observed.clone(), &shear)?;
+    put(&store, "/posterior_predictive/tau", &dims, data_type::float32(), &pw.replicate, &shear)?;
+    put(&store, "/observed_data/tau", &[("obs", nobs)], data_type::float64(), &pw.observed, &shear)?;
     Ok(())
 }
 
@@ -186,11 +185,12 @@ fn group_with(store: &ReadableWritableListableStorage, name: &str, pairs: &[(&st
     Ok(())
 }
 
-/// One array over the named dimensions of the given lengths, stored as a
-/// single chunk.
-fn put<T>(store: &ReadableWritableListableStorage, path: &str, dims: &[(&str, usize)], dtype: DataType, values: Vec<T>, pairs: &[(&str, Value)]) -> std::result::Result<(), Failure>
+/// One array over the named dimensions of the given lengths: a single
+/// chunk, or one per chain for the pointwise (chain, draw, obs) arrays,
+/// which keeps the encoding's copies small.
+fn put<'a, T>(store: &ReadableWritableListableStorage, path: &str, dims: &[(&str, usize)], dtype: DataType, values: &'a [T], pairs: &[(&str, Value)]) -> std::result::Result<(), Failure>
 where
-    Vec<T>: IntoArrayBytes<'static>,
+    &'a [T]: IntoArrayBytes<'a>,
     T: Element,
 {
     let shape: Vec<u64> = dims.iter().map(|(_, n)| *n as u64).collect();
@@ -198,13 +198,17 @@ where
         return Err(format!("{path}: {} values for the shape {shape:?}", values.len()).into());
     }
     let fill = T::fill();
-    let array = ArrayBuilder::new(shape.clone(), shape.iter().map(|s| (*s).max(1)).collect::<Vec<u64>>(), dtype, fill)
+    let mut chunk: Vec<u64> = shape.iter().map(|s| (*s).max(1)).collect();
+    if chunk.len() == 3 {
+        chunk[0] = 1;
+    }
+    let array = ArrayBuilder::new(shape.clone(), chunk, dtype, fill)
         .dimension_names(Some(dims.iter().map(|(d, _)| *d)))
         .attributes(attrs(pairs))
         .build(store.clone(), path)?;
     array.store_metadata()?;
     if !values.is_empty() {
-        array.store_chunk(&vec![0; dims.len()], values)?;
+        array.store_array_subset(&array.subset_all(), values)?;
     }
     Ok(())
 }
