@@ -104,22 +104,27 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
 }
 
 /// The first extreme of the strain: the first reversal, taken once the
-/// strain has come back half-way from it (noise near the start, or a
-/// record that starts at an end of the stroke, makes none).
+/// strain has come back half-way from it after moving a tenth of the
+/// record's range (noise at rest before the motion, or a record that
+/// starts at an end of the stroke, makes none).
 fn first_extreme(g: &[f64]) -> usize {
     let n = g.len();
     if n < 3 {
         return n.saturating_sub(1);
     }
     let start = g[0];
-    let dir = if (g[n / 8] - start) >= 0.0 { 1.0 } else { -1.0 };
+    let (lo, hi) = g.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+    let least = 0.1 * (hi - lo);
+    // the direction of the first move of that size
+    let Some(first) = g.iter().position(|v| (v - start).abs() > least) else { return n - 1 };
+    let dir = (g[first] - start).signum();
     let mut extreme = 0;
     for k in 1..n {
         if dir * g[k] > dir * g[extreme] {
             extreme = k;
         }
         let reach = dir * (g[extreme] - start);
-        if reach > 0.0 && dir * (g[extreme] - g[k]) > 0.5 * reach {
+        if reach > least && dir * (g[extreme] - g[k]) > 0.5 * reach {
             break;
         }
     }

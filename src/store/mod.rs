@@ -13,6 +13,7 @@
 //! | `adequacy.parquet` | [`adequacy`] |
 //! | `prediction.toml` | [`prediction`] |
 //! | `comparison.parquet`, `differences.parquet` | [`comparison`] |
+//! | `inference.zarr` (ArviZ) | [`inference`] |
 //!
 //! [`folder`] opens a whole calibration folder; [`parquet`] holds the
 //! table helpers.
