@@ -280,7 +280,7 @@ pub fn traces(dir: &Path, sample: &PosteriorSample, burn_in: usize, figs: &mut F
         .iter()
         .enumerate()
         .map(|(i, name)| {
-            let mut c = Chart::new(name.clone(), "step", name.clone());
+            let mut c = Chart::new(name.clone(), "step", format!("{name} ({})", crate::posterior::unit_of(name)));
             for (k, &ch) in shown.iter().enumerate() {
                 let trace = (0..chains.steps()).map(|s| chains.at(s, ch, i)).collect();
                 c.series.push(Series::line(None, PALETTE[k % 7], steps.clone(), trace).with_width(1));
