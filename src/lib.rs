@@ -46,6 +46,7 @@ pub mod report;
 pub mod rng;
 pub mod sampler;
 pub mod store;
+pub mod study;
 pub mod synth;
 pub mod validate;
 

@@ -48,6 +48,9 @@ pub enum Command {
     Predict(PredictArgs),
     /// Plots and the HTML report from what is in DIR
     Report(ReportArgs),
+    /// Studies of many calibrations: plan, run (here or on a cluster), collect
+    #[command(subcommand)]
+    Study(StudyCommand),
     /// One report comparing calibrations, e.g. of different current levels
     Compare {
         /// Calibration folders to compare (two or more)
@@ -59,6 +62,58 @@ pub enum Command {
         #[arg(long)]
         rpm: Option<f64>,
     },
+}
+
+#[derive(Subcommand, Debug)]
+pub enum StudyCommand {
+    /// Write a study: one task per calibration (docs/studies.md)
+    Plan(StudyPlanArgs),
+    /// Run one task of a study (what a cluster worker runs); a finished task is skipped
+    RunTask {
+        /// The study folder
+        dir: PathBuf,
+        /// The task id (a line of DIR/tasks.csv)
+        id: String,
+    },
+    /// Run the study's unfinished tasks on this machine, then collect
+    Run {
+        /// The study folder
+        dir: PathBuf,
+        /// Tasks at a time (default: one per core)
+        #[arg(long)]
+        jobs: Option<usize>,
+    },
+    /// Gather every task's result into DIR/collected/
+    Collect {
+        /// The study folder
+        dir: PathBuf,
+    },
+}
+
+#[derive(Args, Debug)]
+#[command(group(clap::ArgGroup::new("design").required(true).args(["replicates", "sbc", "campaigns"])))]
+pub struct StudyPlanArgs {
+    /// Folder of the new study
+    pub dir: PathBuf,
+    /// Name of the study (default: the folder's name)
+    #[arg(long)]
+    pub name: Option<String>,
+    /// N noise realisations of a virtual campaign with known parameters
+    /// (coverage of the credible intervals)
+    #[arg(long, value_name = "N")]
+    pub replicates: Option<usize>,
+    /// Simulation-based calibration: N virtual campaigns with parameters and
+    /// noise drawn from the calibration's prior (--config)
+    #[arg(long, value_name = "N")]
+    pub sbc: Option<usize>,
+    /// Calibrate this campaign at each of its currents (or at --current);
+    /// repeat for a fleet
+    #[arg(long = "campaign", value_name = "MANIFEST")]
+    pub campaigns: Vec<PathBuf>,
+    #[command(flatten)]
+    pub synth: SynthOptions,
+    #[command(flatten)]
+    pub sample: SampleOptions,
 }
 
 #[derive(Args, Debug)]
@@ -289,6 +344,13 @@ pub struct SynthArgs {
     /// Output folder for the manifest and the records
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub options: SynthOptions,
+}
+
+/// The virtual stand's settings: a file and the options that override it.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SynthOptions {
     /// Settings file (TOML, the format of the synth.toml that synth writes);
     /// the options below override it
     #[arg(long)]
@@ -316,7 +378,7 @@ pub struct SynthArgs {
     pub seed: Option<u64>,
 }
 
-impl SynthArgs {
+impl SynthOptions {
     /// The settings file (or the bundled campaign's settings) with the
     /// options applied.
     pub fn settings(&self) -> Result<SynthSettings> {

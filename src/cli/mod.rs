@@ -12,7 +12,7 @@ use crate::data::Manifest;
 use crate::error::{Error, Result};
 use crate::pipeline::{Pipeline, RunOptions};
 use crate::synth;
-pub use args::{Cli, Command};
+pub use args::{Cli, Command, StudyCommand};
 
 /// Runs the command line and returns the process exit status.
 pub fn main() -> i32 {
@@ -44,7 +44,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         None => bundled_job(&mut pipeline),
         Some(Command::Check { manifest }) => pipeline.check(&manifest).map(drop),
         Some(Command::Synth(args)) => {
-            let manifest = synth::write_campaign(&args.settings()?, &args.out)?;
+            let manifest = synth::write_campaign(&args.options.settings()?, &args.out)?;
             println!("wrote {} virtual runs and campaign.toml to {}", manifest.runs.len(), args.out.display());
             Ok(())
         }
@@ -86,10 +86,76 @@ fn dispatch(cli: Cli) -> Result<()> {
             let loo = args.validation.leave_one_out.then(|| pipeline.loo_settings(args.validation.loo_steps, &predict));
             pipeline.report(&args.dir, &predict, loo.as_ref()).map(drop)
         }
+        Some(Command::Study(command)) => study(&mut pipeline, command),
         Some(Command::Compare { dirs, out, rpm }) => {
             pipeline.compare(&dirs, out.as_deref().unwrap_or(Path::new("comparison")), rpm).map(drop)
         }
     }
+}
+
+/// `mrbp study …`.
+fn study(pipeline: &mut Pipeline, command: StudyCommand) -> Result<()> {
+    use crate::study;
+    match command {
+        StudyCommand::Plan(args) => {
+            let o = &args.sample;
+            if o.resume || o.force || !o.hold_out_current.is_empty() || o.model.is_some() {
+                return Err(Error::Usage("study plan: --resume, --force, --hold-out-current and --model are not options of a study (each task resumes by itself)".into()));
+            }
+            let settings = o.settings()?;
+            let synth = || -> Result<synth::SynthSettings> {
+                let mut s = args.synth.settings()?;
+                if args.synth.config.is_none() && args.synth.currents.is_none() {
+                    s.currents_a = vec![o.current.unwrap_or(1.0)];
+                }
+                Ok(s)
+            };
+            let design = match (args.replicates, args.sbc) {
+                (Some(n), _) => study::Design::Replicates { n, synth: synth()? },
+                (_, Some(n)) => study::Design::Sbc { n, synth: synth()? },
+                _ => study::Design::Campaigns { manifests: args.campaigns.clone(), currents: o.current.into_iter().collect() },
+            };
+            let name = match &args.name {
+                Some(n) => n.clone(),
+                None => args.dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "study".into()),
+            };
+            let tasks = study::plan(&args.dir, &name, &design, &settings)?;
+            println!("planned study {name}: {} task(s) in {}", tasks.len(), args.dir.display());
+            println!("run them here with `mrbp study run {}`, or on a cluster (docs/studies.md)", args.dir.display());
+            Ok(())
+        }
+        StudyCommand::RunTask { dir, id } => {
+            let (outcome, ran) = study::run_task(pipeline, &dir, &id)?;
+            let when = if ran { "" } else { " (done before: skipped)" };
+            let note = if outcome.message.is_empty() { String::new() } else { format!(": {}", outcome.message) };
+            println!("task {id}: {}{when} in {:.1} s{note}", outcome.status, outcome.seconds);
+            Ok(())
+        }
+        StudyCommand::Run { dir, jobs } => {
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            let jobs = jobs.unwrap_or(cores);
+            let threads = (cores / jobs.max(1)).max(1);
+            study::run_local(&dir, jobs, threads, &|line: &str| println!("{line}"))?;
+            collect_study(&dir)
+        }
+        StudyCommand::Collect { dir } => collect_study(&dir),
+    }
+}
+
+fn collect_study(dir: &Path) -> Result<()> {
+    let found = crate::study::collect(dir)?;
+    println!(
+        "collected {} of {} task(s) into {} ({} failed, {} without a result yet)",
+        found.ok,
+        found.tasks,
+        dir.join("collected").display(),
+        found.failed,
+        found.missing.len()
+    );
+    if !found.missing.is_empty() {
+        println!("without a result: {}", found.missing.join(", "));
+    }
+    Ok(())
 }
 
 /// `mrbp` alone, in the project folder: the whole job on the bundled

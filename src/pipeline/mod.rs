@@ -24,6 +24,7 @@ use crate::sampler::{Observer, Progress};
 use crate::store::PredictionRecord;
 use crate::validate::{LooRow, LooSettings};
 
+pub use calibrate::CHECKPOINT;
 pub use predict::Prediction;
 
 /// What a stage did, for the listener.

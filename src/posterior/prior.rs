@@ -27,6 +27,27 @@ impl Prior {
         }
     }
 
+    /// A draw of θ (truncated log-normal by rejection, which stays cheap
+    /// while the bounds hold a fair share of the mass).
+    pub fn draw(&self, rng: &mut impl rand::Rng) -> f64 {
+        use rand::RngExt;
+        let (lower, upper) = self.bounds();
+        match *self {
+            Prior::LogNormal { median, sd_log, .. } => {
+                for _ in 0..100_000 {
+                    let z: f64 = rng.sample(rand_distr::StandardNormal);
+                    let v = median * (sd_log * z).exp();
+                    if v >= lower && v <= upper {
+                        return v;
+                    }
+                }
+                // bounds far in a tail: their geometric middle
+                (lower * upper).sqrt()
+            }
+            Prior::LogUniform { .. } => (lower.ln() + rng.random::<f64>() * (upper / lower).ln()).exp(),
+        }
+    }
+
     pub fn bounds(&self) -> (f64, f64) {
         match *self {
             Prior::LogNormal { lower, upper, .. } | Prior::LogUniform { lower, upper } => (lower, upper),
