@@ -221,6 +221,6 @@ pub fn read_task(dir: &Path, id: &str) -> Result<TaskSpec> {
         return Err(Error::Usage(format!("task id {id:?} is not one of tasks.csv")));
     }
     let path = task_dir(dir, id).join("task.toml");
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read ({e}): no task {id} in {}", dir.display())))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read ({e}): no task {id} in {} (a folder of mrbp study plan)", dir.display())))?;
     toml::from_str(&text).map_err(|e| Error::input(&path, format!("not a task: {}", e.message())))
 }

@@ -1,0 +1,94 @@
+//! Studies: a plan of independent calibrations, run here (`mrbp study run`)
+//! and on a loopback Dask cluster that loses a worker mid-study
+//! (scripts/dask_loopback_check.py), with the same results.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use mrbp::store::{column_names, f64_column, read_parquet, str_column};
+
+fn mrbp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).output().expect("run mrbp")
+}
+
+fn text(o: &Output) -> String {
+    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+/// Eight short replicate calibrations (one run, 1 kHz, fixed 150 steps).
+fn plan(dir: &Path) {
+    let o = mrbp(&["study", "plan", dir.to_str().unwrap(), "--replicates", "8", "--cycles", "1", "--rate", "1000", "--rpm", "200", "--steps", "150"]);
+    assert!(o.status.success(), "{}", text(&o));
+}
+
+#[test]
+fn a_study_runs_here_once_per_task_and_collects_one_dataset() {
+    let root = tempfile::tempdir().unwrap();
+    let local = root.path().join("local");
+    plan(&local);
+    // planning twice into one folder is refused
+    let o = mrbp(&["study", "plan", local.to_str().unwrap(), "--replicates", "2"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("already holds a study"));
+
+    let o = mrbp(&["study", "run", local.to_str().unwrap(), "--jobs", "2"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("collected 8 of 8"), "{}", text(&o));
+
+    // a finished task is skipped, its result untouched
+    let result = local.join("tasks/t003/result.parquet");
+    let before = std::fs::read(&result).unwrap();
+    let o = mrbp(&["study", "run-task", local.to_str().unwrap(), "t003"]);
+    assert!(o.status.success() && text(&o).contains("skipped"), "{}", text(&o));
+    assert_eq!(before, std::fs::read(&result).unwrap());
+
+    // one partition per task, one row per coordinate, the truth beside it
+    for k in 0..8 {
+        let part = local.join(format!("collected/results/study=local/task=t00{k}/part-0.parquet"));
+        let df = read_parquet(&part).unwrap();
+        let names = column_names(&df);
+        for c in ["parameter", "mean", "sd", "truth", "z", "inside_50", "inside_90", "rank", "rank_draws", "seed"] {
+            assert!(names.contains(&c.to_string()), "{c} missing: {names:?}");
+        }
+        let params = str_column(&df, "parameter", &part).unwrap();
+        let truth = f64_column(&df, "truth", &part).unwrap();
+        let g = params.iter().position(|p| p == "G").unwrap();
+        assert_eq!(truth[g], 2.0e5, "the reference G is the truth of a replicate");
+        // each task's own sampler seed: task k uses 1 + k
+        assert_eq!(f64_column(&df, "seed", &part).unwrap()[0], 1.0 + k as f64);
+    }
+    let tasks = read_parquet(&local.join("collected/tasks.parquet")).unwrap();
+    let status = str_column(&tasks, "status", &local).unwrap();
+    assert_eq!(status, vec!["ok".to_string(); 8]);
+
+    // the same plan on a loopback Dask cluster that loses a worker
+    let cluster = root.path().join("cluster");
+    plan(&cluster);
+    let required = std::env::var("MRBP_DASK_CHECK").is_ok_and(|v| v == "1");
+    let python = std::env::var("MRBP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let has_dask = Command::new(&python).args(["-c", "import dask.distributed, pandas, pyarrow"]).output().is_ok_and(|o| o.status.success());
+    if !has_dask {
+        assert!(!required, "MRBP_DASK_CHECK=1 but {python} cannot import dask.distributed, pandas, pyarrow");
+        eprintln!("Dask check skipped: {python} has no dask.distributed");
+        return;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/dask_loopback_check.py");
+    let o = Command::new(&python).arg(&script).arg(env!("CARGO_BIN_EXE_mrbp")).arg(&local).arg(&cluster).output().unwrap();
+    assert!(o.status.success(), "Dask check failed:\n{}", text(&o));
+    eprintln!("{}", text(&o));
+}
+
+#[test]
+fn study_commands_refuse_what_is_not_a_study() {
+    let empty = tempfile::tempdir().unwrap();
+    for args in [vec!["study", "run-task", empty.path().to_str().unwrap(), "t000"], vec!["study", "collect", empty.path().to_str().unwrap()]] {
+        let o = mrbp(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+        assert!(text(&o).contains("mrbp study plan"), "{}", text(&o));
+    }
+    let o = mrbp(&["study", "plan", empty.path().join("s").to_str().unwrap(), "--replicates", "2", "--resume"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    // a design is required
+    let o = mrbp(&["study", "plan", empty.path().join("t").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+}
