@@ -27,3 +27,14 @@ law:
     cargo run --release -- sample data/campaign.toml --model current-law --hold-out-current 1.0 --out reports/rd1005-3-virtual/current-law-without-I1.0A
     cargo run --release -- report reports/rd1005-3-virtual/current-law-without-I1.0A
     cargo run --release -- compare reports/rd1005-3-virtual/I0.5A reports/rd1005-3-virtual/I1.0A reports/rd1005-3-virtual/I1.5A reports/rd1005-3-virtual/current-law-without-I1.0A --out reports/rd1005-3-virtual/comparison
+
+# the replicate study: 100 noise realisations of a virtual 1 A campaign,
+# coverage of the credible intervals (docs/calibration.md, docs/studies.md)
+coverage:
+    cargo run --release -- study plan target/studies/coverage --replicates 100 --cycles 1 --rate 2000
+    cargo run --release -- study run target/studies/coverage
+
+# simulation-based calibration, 200 replicates, 2 µm displacement noise
+sbc:
+    cargo run --release -- study plan target/studies/sbc --sbc 200 --config studies/sbc-prior.toml --rpm 200 --cycles 1 --rate 1000 --noise-displacement 2e-6
+    cargo run --release -- study run target/studies/sbc

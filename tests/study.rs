@@ -92,3 +92,29 @@ fn study_commands_refuse_what_is_not_a_study() {
     let o = mrbp(&["study", "plan", empty.path().join("t").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
 }
+
+/// scripts/slurm_study.sh runs the task of its array index (no Slurm here:
+/// the variables a job array sets, set by hand).
+#[test]
+fn the_slurm_array_script_runs_the_task_of_its_index() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("s");
+    let o = mrbp(&["study", "plan", dir.to_str().unwrap(), "--replicates", "2", "--cycles", "1", "--rate", "1000", "--rpm", "200", "--steps", "60"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/slurm_study.sh");
+    let element = |index: &str| {
+        Command::new("bash")
+            .arg(&script)
+            .arg(&dir)
+            .env("SLURM_ARRAY_TASK_ID", index)
+            .env("SLURM_CPUS_PER_TASK", "1")
+            .env("MRBP", env!("CARGO_BIN_EXE_mrbp"))
+            .output()
+            .unwrap()
+    };
+    let o = element("2");
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(dir.join("tasks/t001/status.toml").exists() && !dir.join("tasks/t000/status.toml").exists());
+    let o = element("3");
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+}

@@ -67,7 +67,7 @@ pub enum Command {
 #[derive(Subcommand, Debug)]
 pub enum StudyCommand {
     /// Write a study: one task per calibration (docs/studies.md)
-    Plan(StudyPlanArgs),
+    Plan(Box<StudyPlanArgs>),
     /// Run one task of a study (what a cluster worker runs); a finished task is skipped
     RunTask {
         /// The study folder
@@ -110,6 +110,11 @@ pub struct StudyPlanArgs {
     /// repeat for a fleet
     #[arg(long = "campaign", value_name = "MANIFEST")]
     pub campaigns: Vec<PathBuf>,
+    /// The virtual stand's settings (the synth.toml format) for --replicates
+    /// and --sbc; the options below override it (default: the bundled
+    /// campaign's stand at one current, --current or 1 A)
+    #[arg(long, value_name = "FILE")]
+    pub synth_config: Option<PathBuf>,
     #[command(flatten)]
     pub synth: SynthOptions,
     #[command(flatten)]
@@ -344,17 +349,17 @@ pub struct SynthArgs {
     /// Output folder for the manifest and the records
     #[arg(long)]
     pub out: PathBuf,
-    #[command(flatten)]
-    pub options: SynthOptions,
-}
-
-/// The virtual stand's settings: a file and the options that override it.
-#[derive(Args, Debug, Clone, Default)]
-pub struct SynthOptions {
     /// Settings file (TOML, the format of the synth.toml that synth writes);
     /// the options below override it
     #[arg(long)]
     pub config: Option<PathBuf>,
+    #[command(flatten)]
+    pub options: SynthOptions,
+}
+
+/// The options that override the virtual stand's settings.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SynthOptions {
     /// Coil currents (A), comma separated
     #[arg(long, value_delimiter = ',')]
     pub currents: Option<Vec<f64>>,
@@ -379,10 +384,10 @@ pub struct SynthOptions {
 }
 
 impl SynthOptions {
-    /// The settings file (or the bundled campaign's settings) with the
-    /// options applied.
-    pub fn settings(&self) -> Result<SynthSettings> {
-        let mut s = match &self.config {
+    /// The settings file `config` (or the bundled campaign's settings) with
+    /// the options applied.
+    pub fn settings(&self, config: Option<&std::path::Path>) -> Result<SynthSettings> {
+        let mut s = match config {
             Some(path) => {
                 let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
                 toml::from_str::<SynthSettings>(&text).map_err(|e| Error::input(path, format!("invalid synth settings: {}", e.message())))?

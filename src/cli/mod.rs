@@ -44,7 +44,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         None => bundled_job(&mut pipeline),
         Some(Command::Check { manifest }) => pipeline.check(&manifest).map(drop),
         Some(Command::Synth(args)) => {
-            let manifest = synth::write_campaign(&args.options.settings()?, &args.out)?;
+            let manifest = synth::write_campaign(&args.options.settings(args.config.as_deref())?, &args.out)?;
             println!("wrote {} virtual runs and campaign.toml to {}", manifest.runs.len(), args.out.display());
             Ok(())
         }
@@ -104,8 +104,8 @@ fn study(pipeline: &mut Pipeline, command: StudyCommand) -> Result<()> {
             }
             let settings = o.settings()?;
             let synth = || -> Result<synth::SynthSettings> {
-                let mut s = args.synth.settings()?;
-                if args.synth.config.is_none() && args.synth.currents.is_none() {
+                let mut s = args.synth.settings(args.synth_config.as_deref())?;
+                if args.synth_config.is_none() && args.synth.currents.is_none() {
                     s.currents_a = vec![o.current.unwrap_or(1.0)];
                 }
                 Ok(s)
@@ -154,6 +154,13 @@ fn collect_study(dir: &Path) -> Result<()> {
     );
     if !found.missing.is_empty() {
         println!("without a result: {}", found.missing.join(", "));
+    }
+    if !found.coverage.is_empty() {
+        println!("\nagainst the known truths (binomial se at the nominal share: 50 % ± {:.0}, 90 % ± {:.0}):", 100.0 * (0.25 / found.ok.max(1) as f64).sqrt(), 100.0 * (0.09 / found.ok.max(1) as f64).sqrt());
+        println!("{:<22} {:>6} {:>8} {:>8} {:>8} {:>7} {:>8}", "coordinate", "tasks", "in 50 %", "in 90 %", "mean z", "sd z", "rank p");
+        for r in &found.coverage {
+            println!("{:<22} {:>6} {:>7.0}% {:>7.0}% {:>8.2} {:>7.2} {:>8.3}", r.parameter, r.tasks, 100.0 * r.inside_50, 100.0 * r.inside_90, r.z_mean, r.z_sd, r.rank_p);
+        }
     }
     Ok(())
 }

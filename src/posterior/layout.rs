@@ -194,6 +194,22 @@ impl Layout {
     }
 }
 
+/// The unit of a coordinate of the posterior, by its name.
+pub fn unit_of(name: &str) -> &'static str {
+    if let Some(i) = crate::model::PARAM_NAMES.iter().position(|p| *p == name) {
+        return crate::model::PARAM_UNITS[i];
+    }
+    match name {
+        "G_field" | "G_zero" => "Pa",
+        "saturation_current_a" => "A",
+        "gas_spring_n_per_m" => "N/m",
+        _ if name.starts_with("sigma_") => "Pa",
+        _ if name.starts_with("force_offset_n_") => "N",
+        _ if name.starts_with("rho_") => "1",
+        _ => "",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -250,21 +266,5 @@ mod tests {
         let det = ((au - a0) * (bv - b0) - (av - a0) * (bu - b0)) / (h * h);
         assert!((det - 1.0).abs() < 1e-6, "{det}");
         assert_eq!(l.coordinate_names()[3], "ln (D1 / R1)");
-    }
-}
-
-/// The unit of a coordinate of the posterior, by its name.
-pub fn unit_of(name: &str) -> &'static str {
-    if let Some(i) = crate::model::PARAM_NAMES.iter().position(|p| *p == name) {
-        return crate::model::PARAM_UNITS[i];
-    }
-    match name {
-        "G_field" | "G_zero" => "Pa",
-        "saturation_current_a" => "A",
-        "gas_spring_n_per_m" => "N/m",
-        _ if name.starts_with("sigma_") => "Pa",
-        _ if name.starts_with("force_offset_n_") => "N",
-        _ if name.starts_with("rho_") => "1",
-        _ => "",
     }
 }

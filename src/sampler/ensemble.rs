@@ -127,7 +127,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             for o in observers.iter_mut() {
                 o.stepped(&state)?;
             }
-            if control.until_converged && state.step % control.check_every.max(1) == 0 {
+            if control.until_converged && state.step.is_multiple_of(control.check_every.max(1)) {
                 let diag = diagnose(&self.chains);
                 for o in observers.iter_mut() {
                     o.checked(&state, &diag);

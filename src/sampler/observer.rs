@@ -54,7 +54,7 @@ pub struct Checkpointer {
 impl Observer for Checkpointer {
     fn stepped(&mut self, state: &RunState) -> Result<()> {
         let stop = (self.stop)();
-        if stop || state.step % self.every.max(1) == 0 {
+        if stop || state.step.is_multiple_of(self.every.max(1)) {
             checkpoint::save(&self.path, state.settings, state.chains)?;
         }
         if stop {
@@ -104,7 +104,7 @@ impl Observer for Progress {
         let Some(bar) = &self.bar else { return Ok(()) };
         self.accepted += state.accepted;
         bar.set_position(state.step as u64);
-        if state.step % ACCEPTANCE_WINDOW == 0 {
+        if state.step.is_multiple_of(ACCEPTANCE_WINDOW) {
             let rate = self.accepted as f64 / (ACCEPTANCE_WINDOW * state.chains.chains()) as f64;
             bar.set_message(format!("acceptance {rate:.2}{}", self.status));
             self.accepted = 0;

@@ -32,7 +32,7 @@ impl Default for SamplerSettings {
 impl SamplerSettings {
     /// Checks the settings against a target of `dim` coordinates.
     pub fn check(&self, dim: usize) -> Result<()> {
-        if self.walkers % 2 != 0 || self.walkers < 2 * dim.max(2) {
+        if !self.walkers.is_multiple_of(2) || self.walkers < 2 * dim.max(2) {
             return Err(Error::Usage(format!(
                 "--walkers: walkers per ensemble must be even and at least 2 × dimension = {}; got {}",
                 2 * dim.max(2),

@@ -1,10 +1,12 @@
 //! Gathering a study's results: every finished task's rows into one Parquet
 //! dataset partitioned by study and task (hive layout, which pandas,
 //! polars and DuckDB read as one table with `study` and `task` columns),
-//! and one row per task with how it ended.
+//! and one row per task with how it ended; where the truths are known,
+//! what they say about the calibration ([`statistics`]).
 
 use std::path::Path;
 
+use super::statistics::{self, CoverageRow, Tally};
 use super::task::read_outcome;
 use super::{read_record, task_dir, task_ids};
 use crate::error::{Error, Result};
@@ -18,12 +20,15 @@ pub struct Collected {
     pub failed: usize,
     /// Tasks without a result yet (not run, or lost mid-run).
     pub missing: Vec<String>,
+    /// Per coordinate with a known truth: coverage, z, ranks.
+    pub coverage: Vec<CoverageRow>,
 }
 
 /// Writes `collected/results/study=<name>/task=<id>/part-0.parquet` for
 /// every task that ended well and `collected/tasks.parquet` (task, status,
 /// message, seconds, steps, max_r_hat, min_ess, warnings) into the study
-/// folder `dir`, replacing an earlier collection.
+/// folder `dir`, replacing an earlier collection; with known truths also
+/// `collected/coverage.parquet` and the rank histograms `collected/ranks`.
 pub fn collect(dir: &Path) -> Result<Collected> {
     let record = read_record(dir)?;
     let ids = task_ids(dir)?;
@@ -33,7 +38,8 @@ pub fn collect(dir: &Path) -> Result<Collected> {
         std::fs::remove_dir_all(&results).map_err(|e| Error::output(&results, e))?;
     }
     let mut table = TaskRows::default();
-    let mut found = Collected { tasks: ids.len(), ok: 0, failed: 0, missing: vec![] };
+    let mut found = Collected { tasks: ids.len(), ok: 0, failed: 0, missing: vec![], coverage: vec![] };
+    let mut tally = Tally::default();
     for id in &ids {
         let folder = task_dir(dir, id);
         match read_outcome(&folder)? {
@@ -46,6 +52,7 @@ pub fn collect(dir: &Path) -> Result<Collected> {
                     let from = folder.join("result.parquet");
                     let bytes = std::fs::read(&from).map_err(|e| Error::input(&from, format!("cannot read: {e}")))?;
                     crate::atomic::write(&results.join(format!("task={id}")).join("part-0.parquet"), &bytes)?;
+                    tally.add(&from)?;
                     found.ok += 1;
                 } else {
                     found.failed += 1;
@@ -55,6 +62,10 @@ pub fn collect(dir: &Path) -> Result<Collected> {
         }
     }
     crate::store::write_parquet(&out.join("tasks.parquet"), table.into_table())?;
+    found.coverage = tally.rows();
+    if !found.coverage.is_empty() {
+        statistics::write(&out, &found.coverage)?;
+    }
     Ok(found)
 }
 

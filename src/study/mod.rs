@@ -18,10 +18,11 @@
 //! | `study.toml`, `tasks.csv`, `tasks/<id>/task.toml` | [`plan`] |
 //! | `tasks/<id>/calibration/` | [`run_task`]: the calibration folder |
 //! | `tasks/<id>/result.parquet`, then `tasks/<id>/status.toml` | [`run_task`]: the task's rows; its end |
-//! | `collected/results/study=<name>/task=<id>/part-0.parquet`, `collected/tasks.parquet` | [`collect`] |
+//! | `collected/results/study=<name>/task=<id>/part-0.parquet`, `collected/tasks.parquet`, `collected/coverage.parquet`, `collected/ranks.svg` | [`collect`] |
 
 mod collect;
 mod local;
+pub mod statistics;
 mod task;
 
 use std::collections::BTreeMap;
