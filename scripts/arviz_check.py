@@ -3,7 +3,8 @@
     python scripts/arviz_check.py CALIBRATION_FOLDER
 
 Opens inference.zarr with xarray and ArviZ as the README says, and checks
-that az.summary gives the numbers of summary.parquet, that the ensemble R-hat
+that az.summary gives the numbers of summary.parquet, that az.plot_trace
+draws, that the ensemble R-hat
 recipe of the README gives mrbp's R-hat, that az.loo runs on the pointwise
 log-likelihood, and that the replicated records and the observed data are
 those of bands.parquet. Exits non-zero with a message on the first miss.
@@ -12,7 +13,10 @@ those of bands.parquet. Exits non-zero with a message on the first miss.
 import sys
 from pathlib import Path
 
-import arviz as az
+import matplotlib
+
+matplotlib.use("Agg")  # no display in CI
+import arviz as az  # noqa: E402
 import numpy as np
 import pandas as pd
 import xarray as xr
@@ -52,6 +56,13 @@ def main(folder):
         close(t["ess_tail"], row["ess_tail"], 1e-9, f"{name} ess_tail")
         close(t["mcse_mean"], row["mcse_mean"], 1e-9, f"{name} mcse_mean")
         close(rhat[name], row["r_hat"], 1e-9, f"{name} ensemble R-hat")
+
+    # az.plot_trace draws every B-P parameter (a figure that can be saved)
+    axes = az.plot_trace(idata, var_names=["G", "R0", "n"], compact=True)
+    if axes.shape != (3, 2):
+        sys.exit(f"az.plot_trace gave axes of shape {axes.shape}")
+    axes[0, 0].figure.savefig(folder / "arviz_trace_check.png")
+    (folder / "arviz_trace_check.png").unlink()
 
     # az.loo on the pointwise log-likelihood (thinned, nearly independent draws)
     loo = az.loo(idata, reff=1.0, pointwise=True)

@@ -33,7 +33,8 @@ def fail(message):
 
 def results(study):
     df = pd.read_parquet(Path(study) / "collected" / "results")
-    return df.drop(columns=["study"]).sort_values(["task", "parameter"]).reset_index(drop=True)
+    # everything but where it ran and how long it took
+    return df.drop(columns=["study", "seconds"]).sort_values(["task", "parameter"]).reset_index(drop=True)
 
 
 def main(mrbp, local, cluster):

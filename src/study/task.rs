@@ -53,9 +53,7 @@ pub fn run_task(pipeline: &mut Pipeline, dir: &Path, id: &str) -> Result<(TaskOu
     let clock = Instant::now();
     let outcome = match calibrate(pipeline, &spec, &folder) {
         Ok(cal) => {
-            let rows = result_table(&spec, &cal);
-            crate::store::write_parquet(&folder.join("result.parquet"), rows)?;
-            TaskOutcome {
+            let outcome = TaskOutcome {
                 task: spec.id.clone(),
                 status: "ok".into(),
                 message: String::new(),
@@ -64,7 +62,9 @@ pub fn run_task(pipeline: &mut Pipeline, dir: &Path, id: &str) -> Result<(TaskOu
                 max_r_hat: cal.max_rhat(),
                 min_ess: cal.min_ess(),
                 warnings: cal.record.warnings.iter().chain(&cal.record.model_warnings).cloned().collect(),
-            }
+            };
+            crate::store::write_parquet(&folder.join("result.parquet"), result_table(&spec, &cal, &outcome))?;
+            outcome
         }
         // bad input or a calculation that cannot succeed: the task's result
         Err(e @ (Error::Input { .. } | Error::Compute(_) | Error::Usage(_))) => TaskOutcome {
@@ -115,8 +115,9 @@ fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<
 
 /// One row per coordinate: the summary, and against the truth where it is
 /// known — z = (mean − truth)/sd, whether the central 50 % and 90 %
-/// intervals hold it, and its rank among [`RANK_DRAWS`] thinned draws.
-fn result_table(spec: &TaskSpec, cal: &StoredCalibration) -> Table {
+/// intervals hold it, and its rank among [`RANK_DRAWS`] thinned draws;
+/// then the task's wall time, steps and warnings on every row.
+fn result_table(spec: &TaskSpec, cal: &StoredCalibration, outcome: &TaskOutcome) -> Table {
     let all = cal.sample.positions(cal.burn_in(), 1, usize::MAX);
     let thinned = cal.draw_positions(RANK_DRAWS);
     let rows = &cal.summary;
@@ -152,4 +153,7 @@ fn result_table(spec: &TaskSpec, cal: &StoredCalibration) -> Table {
         .bool("inside_90", inside90)
         .i64("rank", rank)
         .i64("rank_draws", vec![thinned.len() as i64; n])
+        .f64("seconds", vec![outcome.seconds; n])
+        .i64("steps", vec![outcome.steps as i64; n])
+        .str("warnings", vec![outcome.warnings.join("; "); n])
 }
