@@ -88,6 +88,12 @@ fn study_commands_refuse_what_is_not_a_study() {
     }
     let o = mrbp(&["study", "plan", empty.path().join("s").to_str().unwrap(), "--replicates", "2", "--resume"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    // --seed is the sampler's, --noise-seed the stand's, each + k for task k
+    let seeded = empty.path().join("seeded");
+    let o = mrbp(&["study", "plan", seeded.to_str().unwrap(), "--replicates", "2", "--seed", "10", "--noise-seed", "500"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let task = std::fs::read_to_string(seeded.join("tasks/t001/task.toml")).unwrap();
+    assert!(task.contains("seed = 11\n") && task.contains("seed = 501\n"), "{task}");
     // a design is required
     let o = mrbp(&["study", "plan", empty.path().join("t").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));

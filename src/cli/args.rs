@@ -115,6 +115,10 @@ pub struct StudyPlanArgs {
     /// campaign's stand at one current, --current or 1 A)
     #[arg(long, value_name = "FILE")]
     pub synth_config: Option<PathBuf>,
+    /// Seed of the stand's sensor noise in the first task (task k: + k;
+    /// default: that of the bundled campaign). --seed is the sampler's.
+    #[arg(long, value_name = "SEED")]
+    pub noise_seed: Option<u64>,
     #[command(flatten)]
     pub synth: SynthOptions,
     #[command(flatten)]
@@ -353,6 +357,9 @@ pub struct SynthArgs {
     /// the options below override it
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Seed of the sensor noise (default: that of the bundled campaign)
+    #[arg(long)]
+    pub seed: Option<u64>,
     #[command(flatten)]
     pub options: SynthOptions,
 }
@@ -378,15 +385,12 @@ pub struct SynthOptions {
     /// Displacement sensor noise, standard deviation (m)
     #[arg(long)]
     pub noise_displacement: Option<f64>,
-    /// Seed of the sensor noise (default: that of the bundled campaign)
-    #[arg(long)]
-    pub seed: Option<u64>,
 }
 
 impl SynthOptions {
     /// The settings file `config` (or the bundled campaign's settings) with
-    /// the options applied.
-    pub fn settings(&self, config: Option<&std::path::Path>) -> Result<SynthSettings> {
+    /// the options applied, and the sensor noise's `seed` if given.
+    pub fn settings(&self, config: Option<&std::path::Path>, seed: Option<u64>) -> Result<SynthSettings> {
         let mut s = match config {
             Some(path) => {
                 let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
@@ -404,7 +408,7 @@ impl SynthOptions {
         s.rate_hz = self.rate.unwrap_or(s.rate_hz);
         s.noise_force_n = self.noise_force.unwrap_or(s.noise_force_n);
         s.noise_displacement_m = self.noise_displacement.unwrap_or(s.noise_displacement_m);
-        s.seed = self.seed.unwrap_or(s.seed);
+        s.seed = seed.unwrap_or(s.seed);
         Ok(s)
     }
 }

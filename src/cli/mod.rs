@@ -44,7 +44,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         None => bundled_job(&mut pipeline),
         Some(Command::Check { manifest }) => pipeline.check(&manifest).map(drop),
         Some(Command::Synth(args)) => {
-            let manifest = synth::write_campaign(&args.options.settings(args.config.as_deref())?, &args.out)?;
+            let manifest = synth::write_campaign(&args.options.settings(args.config.as_deref(), args.seed)?, &args.out)?;
             println!("wrote {} virtual runs and campaign.toml to {}", manifest.runs.len(), args.out.display());
             Ok(())
         }
@@ -104,7 +104,7 @@ fn study(pipeline: &mut Pipeline, command: StudyCommand) -> Result<()> {
             }
             let settings = o.settings()?;
             let synth = || -> Result<synth::SynthSettings> {
-                let mut s = args.synth.settings(args.synth_config.as_deref())?;
+                let mut s = args.synth.settings(args.synth_config.as_deref(), args.noise_seed)?;
                 if args.synth_config.is_none() && args.synth.currents.is_none() {
                     s.currents_a = vec![o.current.unwrap_or(1.0)];
                 }
@@ -223,5 +223,25 @@ mod tests {
     #[test]
     fn command_line_is_well_formed() {
         Cli::command().debug_assert();
+    }
+
+    /// No command has two options of one name (flattened option groups
+    /// share ids silently: `study plan` once had two `--seed`).
+    #[test]
+    fn no_command_has_an_option_twice() {
+        fn check(cmd: &clap::Command, path: &str) {
+            let mut seen = std::collections::BTreeSet::new();
+            for arg in cmd.get_arguments() {
+                if let Some(long) = arg.get_long() {
+                    assert!(seen.insert(long.to_string()), "{path}: --{long} twice");
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                check(sub, &format!("{path} {}", sub.get_name()));
+            }
+        }
+        let mut cli = Cli::command();
+        cli.build();
+        check(&cli, "mrbp");
     }
 }
