@@ -355,9 +355,6 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
         if chart.compact { (13, 11, 13, 4, 56, 40, 6) } else { (18, 13, 15, 7, 70, 44, 12) };
     // names on the y axis need room: about 7 px per character
     let y_area = chart.y_names.as_ref().map_or(y_area, |n| y_area.max(12 + 7 * n.iter().map(|s| s.chars().count()).max().unwrap_or(0) as u32));
-
-    // names on the y axis need room: about 7 px per character
-    let y_area = chart.y_names.as_ref().map_or(y_area, |n| y_area.max(12 + 7 * n.iter().map(|s| s.chars().count()).max().unwrap_or(0) as u32));
     let tx = |x: f64| if chart.log_x { x.log10() } else { x };
     let (xr, yr) = axis_ranges(chart);
     let mut c = ChartBuilder::on(area)

@@ -14,16 +14,13 @@
 
 use rand::{Rng, RngExt};
 use rand_distr::{StandardNormal, StudentT};
-use statrs::function::gamma::ln_gamma;
 
 use rayon::prelude::*;
 
 use crate::model::Integrator;
-use crate::posterior::{evenly_spaced, tangent_stiffness, Draw, LikelihoodSettings, NoiseModel, PosteriorSample, RunData};
+use crate::posterior::{evenly_spaced, normal_ln_pdf, student_t_log_constant, tangent_stiffness, Draw, LikelihoodSettings, NoiseModel, PosteriorSample, RunData};
 use crate::predict::model_paths;
 use crate::rng;
-
-const HALF_LN_2PI: f64 = 0.918_938_533_204_672_7;
 
 /// One draw along one run: a term per compared sample (k = 1..n−1).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -42,7 +39,7 @@ pub fn pointwise(run: &RunData, path: &[f64], draw: &Draw, likelihood: &Likeliho
     let sigma = draw.sigma;
     let sigma2 = sigma * sigma;
     let nu = likelihood.student_nu;
-    let t_const = ln_gamma(0.5 * (nu + 1.0)) - ln_gamma(0.5 * nu) - 0.5 * (nu * std::f64::consts::PI).ln();
+    let t_const = student_t_log_constant(nu);
     let student = StudentT::new(nu).ok();
     // errors in variables, as the likelihood has them
     let strain_var = if likelihood.eiv() { run.strain_noise_var } else { 0.0 };
@@ -82,9 +79,9 @@ pub fn pointwise(run: &RunData, path: &[f64], draw: &Draw, likelihood: &Likeliho
                 let var = d + c * c * v / shrink;
                 info += c * c / d;
                 score += c * res / d;
-                (-HALF_LN_2PI - 0.5 * var.ln() - 0.5 * (res - mean).powi(2) / var, d.sqrt() * z + c * offset)
+                (normal_ln_pdf(res - mean, var.sqrt()), d.sqrt() * z + c * offset)
             }
-            NoiseModel::Gaussian => (-HALF_LN_2PI - sigma.ln() - 0.5 * (res / sigma).powi(2), sigma * z),
+            NoiseModel::Gaussian => (normal_ln_pdf(res, sigma), sigma * z),
             NoiseModel::StudentT => {
                 let t = student.as_ref().map_or(z, |t| rng.sample(t));
                 (t_const - sigma.ln() - 0.5 * (nu + 1.0) * (res * res / (nu * sigma2)).ln_1p(), sigma * t)
@@ -93,9 +90,9 @@ pub fn pointwise(run: &RunData, path: &[f64], draw: &Draw, likelihood: &Likeliho
                 let rho = draw.rho;
                 if k == 1 {
                     let s = sigma / (1.0 - rho * rho).max(1e-12).sqrt();
-                    (-HALF_LN_2PI - s.ln() - 0.5 * (res / s).powi(2), s * z)
+                    (normal_ln_pdf(res, s), s * z)
                 } else {
-                    (-HALF_LN_2PI - sigma.ln() - 0.5 * ((res - rho * prev_res) / sigma).powi(2), rho * prev_noise + sigma * z)
+                    (normal_ln_pdf(res - rho * prev_res, sigma), rho * prev_noise + sigma * z)
                 }
             }
         };
@@ -106,7 +103,6 @@ pub fn pointwise(run: &RunData, path: &[f64], draw: &Draw, likelihood: &Likeliho
     }
     out
 }
-
 
 /// The pointwise terms of a thinned set of posterior draws along every run
 /// of a calibration: every chain at each of `steps`.
@@ -213,6 +209,7 @@ pub fn thinned_steps(burn_in: usize, steps: usize, chains: usize, count: usize, 
 mod tests {
     use super::*;
     use crate::model::Params;
+    use crate::posterior::HALF_LN_2PI;
     use nalgebra::{DMatrix, DVector};
 
     /// A short run with two branches and a path that yields (so the tangent

@@ -16,10 +16,9 @@ use serde::{Deserialize, Serialize};
 use crate::data::Run;
 use crate::error::{Error, Result};
 use crate::model::{Integrator, Params, LANES};
-use crate::posterior::{tangent_stiffness, Draw, LikelihoodSettings, NoiseModel, RunData};
+use crate::posterior::{normal_ln_pdf, student_t_log_constant, tangent_stiffness, Draw, LikelihoodSettings, NoiseModel, RunData};
 use crate::rng;
 use crate::sampler::quantile_sorted;
-use statrs::function::gamma::ln_gamma;
 
 /// How the bands are computed.
 #[derive(Clone, Copy, Debug)]
@@ -220,17 +219,15 @@ struct MarginalDensity {
 impl MarginalDensity {
     fn new(settings: &PredictSettings) -> Self {
         let nu = settings.student_nu;
-        let t_const = ln_gamma(0.5 * (nu + 1.0)) - ln_gamma(0.5 * nu) - 0.5 * (nu * std::f64::consts::PI).ln();
+        let t_const = student_t_log_constant(nu);
         MarginalDensity { noise: settings.noise, nu, t_const }
     }
 
     fn ln_pdf(&self, r: f64, d: &Draw) -> f64 {
-        const HALF_LN_2PI: f64 = 0.918_938_533_204_672_7;
         match self.noise {
-            NoiseModel::Gaussian => -HALF_LN_2PI - d.sigma.ln() - 0.5 * (r / d.sigma).powi(2),
+            NoiseModel::Gaussian => normal_ln_pdf(r, d.sigma),
             NoiseModel::Ar1 => {
-                let s = d.sigma / (1.0 - d.rho * d.rho).max(1e-12).sqrt();
-                -HALF_LN_2PI - s.ln() - 0.5 * (r / s).powi(2)
+                normal_ln_pdf(r, d.sigma / (1.0 - d.rho * d.rho).max(1e-12).sqrt())
             }
             NoiseModel::StudentT => self.t_const - d.sigma.ln() - 0.5 * (self.nu + 1.0) * (r * r / (self.nu * d.sigma * d.sigma)).ln_1p(),
         }

@@ -3,6 +3,8 @@
 //! it as the README says (scripts/arviz_check.py, in CI from a virtual
 //! environment with xarray, zarr and ArviZ).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -76,17 +78,5 @@ fn arviz_opens_the_store_and_agrees_with_the_summary() {
         assert!(store.join(group).join("zarr.json").is_file(), "no {group} group in {}", store.display());
     }
 
-    let required = std::env::var("MRBP_ARVIZ_CHECK").is_ok_and(|v| v == "1");
-    let python = std::env::var("MRBP_PYTHON").unwrap_or_else(|_| "python3".into());
-    let has_arviz = Command::new(&python).args(["-c", "import arviz, xarray, zarr, pandas, pyarrow"]).output().is_ok_and(|o| o.status.success());
-    if !has_arviz {
-        assert!(!required, "MRBP_ARVIZ_CHECK=1 but {python} cannot import arviz, xarray, zarr, pandas, pyarrow");
-        eprintln!("ArviZ check skipped: {python} has no ArviZ/xarray/zarr");
-        return;
-    }
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/arviz_check.py");
-    let o = Command::new(&python).arg(&script).arg(&dir).output().unwrap();
-    let said = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    assert!(o.status.success(), "ArviZ check failed:\n{said}");
-    eprintln!("{said}");
+    common::python_check("arviz_check.py", &[&dir], "arviz, xarray, zarr, pandas, pyarrow, matplotlib", "MRBP_ARVIZ_CHECK");
 }

@@ -2,6 +2,8 @@
 //! and on a loopback Dask cluster that loses a worker mid-study
 //! (scripts/dask_loopback_check.py), with the same results.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -64,18 +66,8 @@ fn a_study_runs_here_once_per_task_and_collects_one_dataset() {
     // the same plan on a loopback Dask cluster that loses a worker
     let cluster = root.path().join("cluster");
     plan(&cluster);
-    let required = std::env::var("MRBP_DASK_CHECK").is_ok_and(|v| v == "1");
-    let python = std::env::var("MRBP_PYTHON").unwrap_or_else(|_| "python3".into());
-    let has_dask = Command::new(&python).args(["-c", "import dask.distributed, pandas, pyarrow"]).output().is_ok_and(|o| o.status.success());
-    if !has_dask {
-        assert!(!required, "MRBP_DASK_CHECK=1 but {python} cannot import dask.distributed, pandas, pyarrow");
-        eprintln!("Dask check skipped: {python} has no dask.distributed");
-        return;
-    }
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/dask_loopback_check.py");
-    let o = Command::new(&python).arg(&script).arg(env!("CARGO_BIN_EXE_mrbp")).arg(&local).arg(&cluster).output().unwrap();
-    assert!(o.status.success(), "Dask check failed:\n{}", text(&o));
-    eprintln!("{}", text(&o));
+    let mrbp_path = Path::new(env!("CARGO_BIN_EXE_mrbp"));
+    common::python_check("dask_loopback_check.py", &[mrbp_path, &local, &cluster], "dask.distributed, pandas, pyarrow", "MRBP_DASK_CHECK");
 }
 
 #[test]

@@ -2,6 +2,9 @@
 
 use std::ops::Range;
 
+/// The hysteresis of a reversal used throughout: a tenth of the range.
+pub const REVERSAL_SHARE: f64 = 0.1;
+
 /// Sample ranges between reversals of the displacement `x`.
 ///
 /// A reversal is a running extremum from which `x` has since moved back by

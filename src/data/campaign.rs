@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::branches::loading_branches;
+use super::branches::{loading_branches, REVERSAL_SHARE};
 use super::shear::{Geometry, Shear};
 use super::table::{ColumnMap, Record};
 use crate::error::{Error, Result};
@@ -268,7 +268,7 @@ impl Campaign {
                 check_current(&path, &map, spec, current)?;
             }
             let shear = Shear::from_record(&record, &manifest.geometry, spec.initial_stress_pa);
-            let branches = loading_branches(&record.displacement, 0.1);
+            let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
             runs.push(Run {
                 spec: spec.clone(),
                 path,

@@ -7,7 +7,7 @@ pub mod shear;
 pub mod smooth;
 pub mod table;
 
-pub use branches::loading_branches;
+pub use branches::{loading_branches, REVERSAL_SHARE};
 pub use campaign::{current_tag, same_current, Campaign, Columns, Limits, Manifest, Run, RunSpec};
 pub use shear::{Geometry, Inelastic, Shear};
 pub use smooth::{local_polynomial, noise_variance, smoothed_strain};

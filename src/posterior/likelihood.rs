@@ -162,6 +162,21 @@ impl RunData {
     }
 }
 
+/// ½ ln 2π, the constant of a normal log-density.
+pub const HALF_LN_2PI: f64 = 0.918_938_533_204_672_7;
+
+/// ln N(r; 0, sd²).
+#[inline]
+pub fn normal_ln_pdf(r: f64, sd: f64) -> f64 {
+    -HALF_LN_2PI - sd.ln() - 0.5 * (r / sd).powi(2)
+}
+
+/// ln Γ((ν+1)/2) − ln Γ(ν/2) − ½ ln(νπ), the constant of a Student-t
+/// log-density with ν degrees of freedom.
+pub fn student_t_log_constant(nu: f64) -> f64 {
+    ln_gamma(0.5 * (nu + 1.0)) - ln_gamma(0.5 * nu) - 0.5 * (nu * std::f64::consts::PI).ln()
+}
+
 /// The model's tangent stiffness dτ/dγ between two samples (stress change
 /// `dtau` over strain change `dgamma`), within [0, G], and G where the
 /// strain stands still: what carries the strain's noise into the stress
@@ -225,7 +240,7 @@ impl NoiseModel {
             },
             NoiseModel::StudentT => {
                 let nu = student_nu;
-                st.n * (ln_gamma(0.5 * (nu + 1.0)) - ln_gamma(0.5 * nu) - 0.5 * (nu * std::f64::consts::PI).ln())
+                st.n * student_t_log_constant(nu)
                     - st.n * log_sigma
                     - 0.5 * (nu + 1.0) * st.log_t
             }

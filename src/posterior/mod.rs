@@ -24,7 +24,7 @@ use crate::data::Campaign;
 use crate::model::{Integrator, Params, LANES};
 use crate::sampler::LogDensity;
 pub use layout::{unit_of, Coordinates, Layout};
-pub use likelihood::{tangent_stiffness, LikelihoodSettings, NoiseModel, RecordPart, ResidualStats, RunData};
+pub use likelihood::{normal_ln_pdf, student_t_log_constant, tangent_stiffness, LikelihoodSettings, NoiseModel, RecordPart, ResidualStats, RunData, HALF_LN_2PI};
 pub use parameters::{ModelKind, ParameterModel, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, PosteriorSample, SummaryRow};

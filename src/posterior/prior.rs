@@ -27,25 +27,24 @@ impl Prior {
         }
     }
 
-    /// A draw of θ (truncated log-normal by rejection, which stays cheap
-    /// while the bounds hold a fair share of the mass).
+    /// A draw of θ, by inverting the (truncated) distribution function of
+    /// ln θ at a uniform draw: exact however little mass the bounds hold.
     pub fn draw(&self, rng: &mut impl rand::Rng) -> f64 {
         use rand::RngExt;
+        use statrs::distribution::{ContinuousCDF, Normal};
         let (lower, upper) = self.bounds();
-        match *self {
+        let u: f64 = rng.random();
+        let v = match *self {
             Prior::LogNormal { median, sd_log, .. } => {
-                for _ in 0..100_000 {
-                    let z: f64 = rng.sample(rand_distr::StandardNormal);
-                    let v = median * (sd_log * z).exp();
-                    if v >= lower && v <= upper {
-                        return v;
-                    }
-                }
-                // bounds far in a tail: their geometric middle
-                (lower * upper).sqrt()
+                let normal = Normal::standard();
+                let at = |bound: f64| normal.cdf((bound / median).ln() / sd_log);
+                let (a, b) = (at(lower), at(upper));
+                median * (sd_log * normal.inverse_cdf(a + u * (b - a))).exp()
             }
-            Prior::LogUniform { .. } => (lower.ln() + rng.random::<f64>() * (upper / lower).ln()).exp(),
-        }
+            Prior::LogUniform { .. } => (lower.ln() + u * (upper / lower).ln()).exp(),
+        };
+        // rounding at a bound far in a tail stays inside the support
+        v.clamp(lower, upper)
     }
 
     pub fn bounds(&self) -> (f64, f64) {

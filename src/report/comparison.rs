@@ -9,7 +9,7 @@ use super::Figures;
 use crate::adequacy::{AdequacyRow, Excitation};
 use crate::atomic;
 use crate::compare::Comparison;
-use crate::data::loading_branches;
+use crate::data::{loading_branches, REVERSAL_SHARE};
 use crate::error::Result;
 use crate::model::PARAM_NAMES;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
@@ -37,7 +37,7 @@ impl Entry {
 /// The crank speed of a record (rpm) from its loading branches: each is
 /// half a revolution.
 fn rpm_of(time: &[f64], displacement: &[f64]) -> f64 {
-    let branches = loading_branches(displacement, 0.1);
+    let branches = loading_branches(displacement, REVERSAL_SHARE);
     let mut half: Vec<f64> = branches
         .iter()
         .take(branches.len().saturating_sub(1).max(1))

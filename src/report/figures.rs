@@ -103,46 +103,24 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
     Ok(())
 }
 
-/// The first extreme of the strain: the first reversal, taken once the
-/// strain has come back half-way from it after moving a tenth of the
-/// record's range (noise at rest before the motion, or a record that
-/// starts at an end of the stroke, makes none).
-fn first_extreme(g: &[f64]) -> usize {
-    let n = g.len();
-    if n < 3 {
-        return n.saturating_sub(1);
-    }
-    let start = g[0];
-    let (lo, hi) = g.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
-    let least = 0.1 * (hi - lo);
-    // the direction of the first move of that size
-    let Some(first) = g.iter().position(|v| (v - start).abs() > least) else { return n - 1 };
-    let dir = (g[first] - start).signum();
-    let mut extreme = 0;
-    for k in 1..n {
-        if dir * g[k] > dir * g[extreme] {
-            extreme = k;
-        }
-        let reach = dir * (g[extreme] - start);
-        if reach > least && dir * (g[extreme] - g[k]) > 0.5 * reach {
-            break;
-        }
-    }
-    extreme
-}
-
 /// The first loading: from the start to the first reversal, where the
 /// stress first rises through yield.
 fn first_loading(b: &RunBands) -> std::ops::Range<usize> {
     let n = b.tau_obs.len();
-    0..(first_extreme(&b.gamma_model) + 1).clamp(10.min(n), n)
+    0..(first_reversal_at(b) + 1).clamp(10.min(n), n)
+}
+
+/// The sample of the first reversal of the strain that drove the model,
+/// as the record's loading branches are cut (the last sample if none).
+fn first_reversal_at(b: &RunBands) -> usize {
+    crate::data::loading_branches(&b.gamma_model, crate::data::REVERSAL_SHARE).first().map_or(0, |r| r.end.saturating_sub(1))
 }
 
 /// The samples around the first reversal: from a third of the first
 /// loading before it to as long again after it.
 fn first_reversal(b: &RunBands) -> std::ops::Range<usize> {
     let n = b.tau_obs.len();
-    let extreme = first_extreme(&b.gamma_model);
+    let extreme = first_reversal_at(b);
     let loading = first_loading(b).end;
     extreme.saturating_sub(loading / 3)..(extreme + loading).min(n)
 }

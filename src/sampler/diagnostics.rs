@@ -316,6 +316,13 @@ fn group_chains(chains: &[Vec<f64>], groups: usize) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// Of `available` draws per chain, how many the diagnostics use: the last
+/// ones, an even number, so halves split cleanly and every arrangement
+/// ranks the same draws.
+pub fn analysed_draws(available: usize) -> usize {
+    available / 2 * 2
+}
+
 impl ParameterDiagnostics {
     /// Diagnostics of `[chain][draw]` traces whose chains form `ensembles`
     /// equal groups of consecutive walkers.
@@ -326,9 +333,7 @@ impl ParameterDiagnostics {
     /// own ESS is ~N/τ), while ensembles are independent by construction.
     /// ESS and τ use every walker's chain.
     pub fn of(chains: &[Vec<f64>], ensembles: usize) -> Self {
-        // an even number of draws, so halves split cleanly and every
-        // arrangement below ranks the same draws
-        let n = chains.iter().map(Vec::len).min().unwrap_or(0) / 2 * 2;
+        let n = analysed_draws(chains.iter().map(Vec::len).min().unwrap_or(0));
         let chains: Vec<Vec<f64>> = chains.iter().map(|c| c[c.len() - n..].to_vec()).collect();
         let chains = &chains[..];
         // normal scores of all draws and of the folded draws, made once

@@ -31,6 +31,7 @@ use zarrs::storage::ReadableWritableListableStorage;
 use crate::error::{Error, Result};
 use crate::pointwise::PointwiseDraws;
 use crate::posterior::{unit_of, PosteriorSample};
+use crate::sampler::diagnostics::analysed_draws;
 
 /// Why ArviZ's R̂ of this store is not ours, and how to get ours.
 pub const RHAT_NOTE: &str = "Each chain is one walker of an affine-invariant ensemble. Walkers of an \
@@ -69,9 +70,8 @@ fn build(dir: &Path, sample: &PosteriorSample, pw: &PointwiseDraws, info: &Store
     let store: ReadableWritableListableStorage = Arc::new(FilesystemStore::new(dir)?);
     let chains = sample.chains.chains();
     let walkers = chains / info.ensembles.max(1);
-    // the draws the diagnostics use: after burn-in, an even number
-    let available = sample.chains.steps().saturating_sub(info.burn_in);
-    let n = available / 2 * 2;
+    // the draws the diagnostics use
+    let n = analysed_draws(sample.chains.steps().saturating_sub(info.burn_in));
     let first = sample.chains.steps() - n;
     let mut root = GroupBuilder::new().build(store.clone(), "/")?;
     root.attributes_mut().extend(attrs(&[
@@ -91,20 +91,21 @@ fn build(dir: &Path, sample: &PosteriorSample, pw: &PointwiseDraws, info: &Store
     for group in ["posterior", "sample_stats"] {
         group_with(&store, group, &stats_attrs)?;
         let g = format!("/{group}");
-        put(&store, &format!("{g}/chain"), &[("chain", chains)], data_type::int64(), &chain_coord, &[])?;
-        put(&store, &format!("{g}/draw"), &[("draw", n)], data_type::int64(), &draw_coord, &[])?;
-        put(&store, &format!("{g}/ensemble"), &[("chain", chains)], data_type::int64(), &ensemble, &[])?;
+        put(&store, &format!("{g}/chain"), &[("chain", chains)], &chain_coord, &[])?;
+        put(&store, &format!("{g}/draw"), &[("draw", n)], &draw_coord, &[])?;
+        put(&store, &format!("{g}/ensemble"), &[("chain", chains)], &ensemble, &[])?;
     }
-    let grid = |f: &dyn Fn(usize, usize) -> f64| -> Vec<f64> { (0..chains).flat_map(|c| (first..first + n).map(move |s| (c, s))).map(|(c, s)| f(s, c)).collect() };
+    // (step, chain) of every cell of a chain × draw array, chain-major
+    let cells: Vec<(usize, usize)> = (0..chains).flat_map(|c| (first..first + n).map(move |s| (s, c))).collect();
     for (i, name) in sample.layout.names.iter().enumerate() {
-        let values = grid(&|s, c| sample.chains.at(s, c, i));
+        let values: Vec<f64> = cells.iter().map(|&(s, c)| sample.chains.at(s, c, i)).collect();
         let attrs = [("units", json!(unit_of(name))), ("coordinates", json!("ensemble")), ("long_name", json!(name))];
-        put(&store, &format!("/posterior/{}", node_name(name)), &[("chain", chains), ("draw", n)], data_type::float64(), &values, &attrs)?;
+        put(&store, &format!("/posterior/{}", node_name(name)), &[("chain", chains), ("draw", n)], &values, &attrs)?;
     }
-    let lp = grid(&|s, c| sample.chains.log_prob[s * chains + c]);
-    put(&store, "/sample_stats/lp", &[("chain", chains), ("draw", n)], data_type::float64(), &lp, &[("coordinates", json!("ensemble"))])?;
-    let accepted: Vec<bool> = (0..chains).flat_map(|c| (first..first + n).map(move |s| (s, c))).map(|(s, c)| sample.chains.accepted[s * chains + c]).collect();
-    put(&store, "/sample_stats/accepted", &[("chain", chains), ("draw", n)], data_type::bool(), &accepted, &[("coordinates", json!("ensemble"))])?;
+    let lp: Vec<f64> = cells.iter().map(|&(s, c)| sample.chains.log_prob[s * chains + c]).collect();
+    put(&store, "/sample_stats/lp", &[("chain", chains), ("draw", n)], &lp, &[("coordinates", json!("ensemble"))])?;
+    let accepted: Vec<bool> = cells.iter().map(|&(s, c)| sample.chains.accepted[s * chains + c]).collect();
+    put(&store, "/sample_stats/accepted", &[("chain", chains), ("draw", n)], &accepted, &[("coordinates", json!("ensemble"))])?;
 
     // the observations, their coordinates in every group that has them
     let nobs = pw.observed.len();
@@ -121,54 +122,70 @@ fn build(dir: &Path, sample: &PosteriorSample, pw: &PointwiseDraws, info: &Store
     for group in ["log_likelihood", "posterior_predictive", "observed_data"] {
         group_with(&store, group, if group == "observed_data" { &[] } else { &thinning })?;
         let g = format!("/{group}");
-        put(&store, &format!("{g}/obs"), &[("obs", nobs)], data_type::int64(), &obs, &[])?;
-        put(&store, &format!("{g}/run"), &[("obs", nobs)], data_type::string(), &run_names, &[])?;
-        put(&store, &format!("{g}/time"), &[("obs", nobs)], data_type::float64(), &pw.time, &[("units", json!("s"))])?;
+        put(&store, &format!("{g}/obs"), &[("obs", nobs)], &obs, &[])?;
+        put(&store, &format!("{g}/run"), &[("obs", nobs)], &run_names, &[])?;
+        put(&store, &format!("{g}/time"), &[("obs", nobs)], &pw.time, &[("units", json!("s"))])?;
         if group != "observed_data" {
-            put(&store, &format!("{g}/chain"), &[("chain", chains)], data_type::int64(), &chain_coord, &[])?;
-            put(&store, &format!("{g}/draw"), &[("draw", pw_steps.len())], data_type::int64(), &pw_steps, &[])?;
+            put(&store, &format!("{g}/chain"), &[("chain", chains)], &chain_coord, &[])?;
+            put(&store, &format!("{g}/draw"), &[("draw", pw_steps.len())], &pw_steps, &[])?;
         }
     }
     let coords = json!("run time");
     let dims = [("chain", chains), ("draw", pw_steps.len()), ("obs", nobs)];
-    put(&store, "/log_likelihood/tau", &dims, data_type::float64(), &pw.log_likelihood, &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))])?;
-    let shear = [("coordinates", coords.clone()), ("units", json!("Pa")), ("long_name", json!("shear stress"))];
-    put(&store, "/posterior_predictive/tau", &dims, data_type::float32(), &pw.replicate, &shear)?;
-    put(&store, "/observed_data/tau", &[("obs", nobs)], data_type::float64(), &pw.observed, &shear)?;
+    put(&store, "/log_likelihood/tau", &dims, &pw.log_likelihood, &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))])?;
+    let shear = [("coordinates", coords), ("units", json!("Pa")), ("long_name", json!("shear stress"))];
+    put(&store, "/posterior_predictive/tau", &dims, &pw.replicate, &shear)?;
+    put(&store, "/observed_data/tau", &[("obs", nobs)], &pw.observed, &shear)?;
     Ok(())
 }
 
-/// The element types of the store and their Zarr fill values (which
-/// xarray reads as a storage detail of Zarr v3, not as a mask).
+/// The element types of the store: their Zarr data type and fill value
+/// (which xarray reads as a storage detail of Zarr v3, not as a mask).
 trait Element {
+    fn data_type() -> DataType;
     fn fill() -> FillValueMetadata;
 }
 
 impl Element for f64 {
+    fn data_type() -> DataType {
+        data_type::float64()
+    }
     fn fill() -> FillValueMetadata {
         FillValueMetadata::from(f64::NAN)
     }
 }
 
 impl Element for f32 {
+    fn data_type() -> DataType {
+        data_type::float32()
+    }
     fn fill() -> FillValueMetadata {
         FillValueMetadata::from(f32::NAN)
     }
 }
 
 impl Element for i64 {
+    fn data_type() -> DataType {
+        data_type::int64()
+    }
     fn fill() -> FillValueMetadata {
         FillValueMetadata::from(0i64)
     }
 }
 
 impl Element for bool {
+    fn data_type() -> DataType {
+        data_type::bool()
+    }
     fn fill() -> FillValueMetadata {
         FillValueMetadata::from(false)
     }
 }
 
 impl Element for String {
+    fn data_type() -> DataType {
+        data_type::string()
+    }
     fn fill() -> FillValueMetadata {
         FillValueMetadata::from("")
     }
@@ -188,7 +205,7 @@ fn group_with(store: &ReadableWritableListableStorage, name: &str, pairs: &[(&st
 /// One array over the named dimensions of the given lengths: a single
 /// chunk, or one per chain for the pointwise (chain, draw, obs) arrays,
 /// which keeps the encoding's copies small.
-fn put<'a, T>(store: &ReadableWritableListableStorage, path: &str, dims: &[(&str, usize)], dtype: DataType, values: &'a [T], pairs: &[(&str, Value)]) -> std::result::Result<(), Failure>
+fn put<'a, T>(store: &ReadableWritableListableStorage, path: &str, dims: &[(&str, usize)], values: &'a [T], pairs: &[(&str, Value)]) -> std::result::Result<(), Failure>
 where
     &'a [T]: IntoArrayBytes<'a>,
     T: Element,
@@ -202,7 +219,7 @@ where
     if chunk.len() == 3 {
         chunk[0] = 1;
     }
-    let array = ArrayBuilder::new(shape.clone(), chunk, dtype, fill)
+    let array = ArrayBuilder::new(shape.clone(), chunk, T::data_type(), fill)
         .dimension_names(Some(dims.iter().map(|(d, _)| *d)))
         .attributes(attrs(pairs))
         .build(store.clone(), path)?;

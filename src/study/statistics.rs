@@ -32,6 +32,14 @@ pub struct CoverageRow {
     pub rank_p: f64,
 }
 
+impl CoverageRow {
+    /// The binomial standard error of a share over these tasks at the
+    /// nominal share `p`: how far a correct calibration's share strays.
+    pub fn se_at(&self, p: f64) -> f64 {
+        (p * (1.0 - p) / self.tasks.max(1) as f64).sqrt()
+    }
+}
+
 /// Per coordinate, what the truths of one task say.
 #[derive(Default)]
 pub struct Tally {
@@ -97,8 +105,8 @@ pub fn write(out: &Path, rows: &[CoverageRow]) -> Result<()> {
         .i64("tasks", rows.iter().map(|r| r.tasks as i64).collect())
         .f64("inside_50", col(&|r| r.inside_50))
         .f64("inside_90", col(&|r| r.inside_90))
-        .f64("se_50", col(&|r| (0.25 / r.tasks as f64).sqrt()))
-        .f64("se_90", col(&|r| (0.09 / r.tasks as f64).sqrt()))
+        .f64("se_50", col(&|r| r.se_at(0.5)))
+        .f64("se_90", col(&|r| r.se_at(0.9)))
         .f64("z_mean", col(&|r| r.z_mean))
         .f64("z_sd", col(&|r| r.z_sd))
         .f64("rank_chi2", col(&|r| r.rank_chi2))
