@@ -12,6 +12,7 @@
 //! * [`sampler`]: the ensemble MCMC sampler, generic over a log-density, and
 //!   its diagnostics; knows nothing of the model;
 //! * [`data`]: test campaigns, records, shear quantities (eqs. 1–2);
+//! * [`noise`]: the noise models of the force record, one a file;
 //! * [`synth`]: virtual experiments on a crank-driven stand;
 //! * [`identify`]: the paper's deterministic identification;
 //! * [`posterior`]: the posterior density, its layout, start and samples;
@@ -37,6 +38,7 @@ pub mod fit;
 pub mod interrupt;
 pub mod identify;
 pub mod model;
+pub mod noise;
 pub mod pipeline;
 pub mod plot;
 pub mod posterior;

@@ -4,50 +4,33 @@
 //!
 //! Model band: quantiles over draws of τ_model(t_k; θ_d). Predictive band:
 //! quantiles over draws and noise replicates of τ_model(t_k; θ_d) + e_k,
-//! with e drawn from the fitted noise model of the run (Gaussian, Student-t
-//! or AR(1), simulated along the record so its correlation is kept).
+//! with e a new record's noise from the run's fitted noise model (simulated
+//! along the record, so a correlated noise keeps its correlation).
 
-use rand::RngExt;
-use rand_distr::{StandardNormal, StudentT};
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use serde::{Deserialize, Serialize};
 
-use crate::data::Run;
+use crate::data::{Run, RunData};
 use crate::error::{Error, Result};
-use crate::model::{Integrator, Params, LANES};
-use crate::posterior::{normal_ln_pdf, student_t_log_constant, tangent_stiffness, Draw, LikelihoodSettings, NoiseModel, RunData};
+use crate::model::{tangent_stiffness, Integrator, Params, LANES};
+use crate::noise::{NoiseModel, NoiseSimulator};
+use crate::posterior::Draw;
 use crate::rng;
 use crate::sampler::quantile_sorted;
 
 /// How the bands are computed.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct PredictSettings {
     /// The integrator the likelihood used.
     pub integrator: Integrator,
-    pub noise: NoiseModel,
-    /// Degrees of freedom of Student-t noise.
-    pub student_nu: f64,
+    /// The likelihood's noise model.
+    pub noise: Arc<dyn NoiseModel>,
     /// Noise replicates per draw in the predictive band.
     pub replicates: usize,
     pub seed: u64,
-    /// The strain noise through the tangent stiffness joins the noise of a
-    /// new measurement (the likelihood's errors in variables).
-    pub errors_in_variables: bool,
-}
-
-impl PredictSettings {
-    /// Bands with the likelihood's integrator and noise model.
-    pub fn new(integrator: Integrator, likelihood: &LikelihoodSettings, replicates: usize, seed: u64) -> Self {
-        PredictSettings {
-            integrator,
-            noise: likelihood.noise,
-            student_nu: likelihood.student_nu,
-            replicates,
-            seed,
-            errors_in_variables: likelihood.eiv(),
-        }
-    }
 }
 
 /// Probabilities of the model band and of the predictive band.
@@ -152,44 +135,29 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
     }
     let reps = settings.replicates.max(1);
     let mut rng = rng::stream(settings.seed, &[0x0b5e, run_index as u64]);
-    let student = StudentT::new(settings.student_nu).ok();
-    // one noise state per draw and replicate (AR(1) carries it along time)
-    let mut noise = vec![0.0; kept.len() * reps];
+    let noise = settings.noise.as_ref();
+    let stiff = noise.uses_stiffness(run);
+    // one noise simulator per draw and replicate (a correlated noise
+    // carries its state along time)
+    let mut simulators: Vec<Box<dyn NoiseSimulator>> =
+        kept.iter().flat_map(|(d, _)| (0..reps).map(|_| noise.simulator(run, &d.noise))).collect();
     let mut model = [(); 5].map(|_| vec![0.0; n]);
     let mut predictive = [(); 2].map(|_| vec![0.0; n]);
     let mut at_k = vec![0.0; kept.len()];
     let mut pred_k = vec![0.0; kept.len() * reps];
     let mut log_p = vec![0.0; kept.len()];
     let mut lppd = 0.0;
-    let density = MarginalDensity::new(settings);
-    let strain_var = if settings.errors_in_variables { run.strain_noise_var } else { 0.0 };
     for k in 0..n {
         let dg = if k > 0 { run.gamma[k] - run.gamma[k - 1] } else { 0.0 };
         for (i, (d, path)) in kept.iter().enumerate() {
             let model = path[k] + run.terms_stress(k, d.spring_n_per_m, d.offset_n);
             at_k[i] = model;
-            // errors in variables: σ² + S_k² s_γ², S_k the path's tangent stiffness
-            let d = &if strain_var > 0.0 {
-                let g = d.params.g;
-                let s = if k > 0 { tangent_stiffness(path[k] - path[k - 1], dg, g) } else { g };
-                Draw { sigma: (d.sigma * d.sigma + s * s * strain_var).sqrt(), ..**d }
-            } else {
-                **d
-            };
-            log_p[i] = density.ln_pdf(run.tau[k] - model, d);
+            // the law's tangent stiffness, where the noise model takes it
+            let g = d.params.g;
+            let stiffness = if !stiff { 0.0 } else if k > 0 { tangent_stiffness(path[k] - path[k - 1], dg, g) } else { g };
+            log_p[i] = noise.marginal_ln_pdf(run, run.tau[k] - model, stiffness, &d.noise);
             for r in 0..reps {
-                let z: f64 = match (settings.noise, &student) {
-                    (NoiseModel::StudentT, Some(t)) => rng.sample(t),
-                    _ => rng.sample(StandardNormal),
-                };
-                let e = &mut noise[i * reps + r];
-                *e = match settings.noise {
-                    // stationary start, then the innovations
-                    NoiseModel::Ar1 if k == 0 => d.sigma * z / (1.0 - d.rho * d.rho).max(1e-12).sqrt(),
-                    NoiseModel::Ar1 => d.rho * *e + d.sigma * z,
-                    _ => d.sigma * z,
-                };
-                pred_k[i * reps + r] = model + *e;
+                pred_k[i * reps + r] = model + simulators[i * reps + r].next(stiffness, &mut rng);
             }
         }
         if k > 0 && run.tau[k].is_finite() {
@@ -205,33 +173,6 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
         }
     }
     Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed, lppd })
-}
-
-/// The density of one observation's residual under a draw's noise model,
-/// marginally (AR(1): its stationary spread σ/√(1 − ρ²)).
-struct MarginalDensity {
-    noise: NoiseModel,
-    nu: f64,
-    /// ln Γ((ν+1)/2) − ln Γ(ν/2) − ½ ln(νπ), the Student-t constant.
-    t_const: f64,
-}
-
-impl MarginalDensity {
-    fn new(settings: &PredictSettings) -> Self {
-        let nu = settings.student_nu;
-        let t_const = student_t_log_constant(nu);
-        MarginalDensity { noise: settings.noise, nu, t_const }
-    }
-
-    fn ln_pdf(&self, r: f64, d: &Draw) -> f64 {
-        match self.noise {
-            NoiseModel::Gaussian => normal_ln_pdf(r, d.sigma),
-            NoiseModel::Ar1 => {
-                normal_ln_pdf(r, d.sigma / (1.0 - d.rho * d.rho).max(1e-12).sqrt())
-            }
-            NoiseModel::StudentT => self.t_const - d.sigma.ln() - 0.5 * (self.nu + 1.0) * (r * r / (self.nu * d.sigma * d.sigma)).ln_1p(),
-        }
-    }
 }
 
 /// ln of the mean of exp(v), without overflow.
@@ -353,11 +294,17 @@ pub fn predict_run(
 mod tests {
     use super::*;
     use crate::model::Scheme;
+    use crate::noise::{NoiseKind, NoiseOptions};
 
     fn ramp_run() -> RunData {
         let time: Vec<f64> = (0..400).map(|k| k as f64 * 5e-4).collect();
         let gamma: Vec<f64> = time.iter().map(|t| 0.5 * (1.0 - (2.0 * std::f64::consts::PI * 2.5 * t).cos())).collect();
-        RunData { id: "r".into(), time, gamma, tau: vec![0.0; 400], initial_tau: 0.0, current_a: 1.0, area_m2: 0.05, gap_m: 1e-3, strain_noise_var: 0.0, strain_smoothing_share: 1.0 }
+        RunData::new("r".into(), time, gamma, vec![0.0; 400], 0.0, 1.0, (0.05, 1e-3), (0.0, 1.0))
+    }
+
+    fn settings(integrator: Integrator, noise: NoiseKind, replicates: usize, seed: u64) -> PredictSettings {
+        let noise = noise.model(&NoiseOptions { errors_in_variables: false, ..NoiseOptions::default() });
+        PredictSettings { integrator, noise, replicates, seed }
     }
 
     /// One fixed parameter set: the model band collapses onto the
@@ -370,8 +317,8 @@ mod tests {
         let integ = Integrator { scheme: Scheme::Explicit, substeps: 2, ..Integrator::default() };
         let p = Params::reference_1a();
         let sigma = 500.0;
-        let draws = vec![Draw::of_law(p, sigma); 40];
-        let settings = PredictSettings { integrator: integ, noise: NoiseModel::Gaussian, student_nu: 5.0, replicates: 100, seed: 3, errors_in_variables: false };
+        let draws = vec![Draw::of_law(p, [sigma, 0.0, 0.0, 0.0]); 40];
+        let settings = settings(integ, NoiseKind::Gaussian, 100, 3);
         let b = bands(&run, 0, &draws, &settings, &|| {}).unwrap();
         let truth = integ.run(&p, &run.time, &run.gamma).unwrap().tau;
         for k in (0..400).step_by(37) {
@@ -394,8 +341,8 @@ mod tests {
         let run = ramp_run();
         let integ = Integrator { substeps: 1, ..Integrator::default() };
         let (sigma, rho) = (300.0f64, 0.8f64);
-        let draws = vec![Draw { rho, ..Draw::of_law(Params::reference_1a(), sigma) }; 40];
-        let settings = PredictSettings { integrator: integ, noise: NoiseModel::Ar1, student_nu: 5.0, replicates: 100, seed: 9, errors_in_variables: false };
+        let draws = vec![Draw::of_law(Params::reference_1a(), [sigma, rho, 0.0, 0.0]); 40];
+        let settings = settings(integ, NoiseKind::Ar1, 100, 9);
         let b = bands(&run, 0, &draws, &settings, &|| {}).unwrap();
         let sd = sigma / (1.0 - rho * rho).sqrt();
         for k in [1, 200, 399] {

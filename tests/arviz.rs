@@ -12,7 +12,8 @@ use mrbp::calibrate::CalibrationSettings;
 use mrbp::data::Campaign;
 use mrbp::model::Params;
 use mrbp::pointwise::pointwise_draws;
-use mrbp::posterior::{LikelihoodSettings, NoiseModel, PosteriorSample};
+use mrbp::noise::NoiseKind;
+use mrbp::posterior::{LikelihoodSettings, PosteriorSample};
 use mrbp::sampler::{Chains, LogDensity};
 use mrbp::synth::{write_campaign, SynthSettings};
 
@@ -33,8 +34,8 @@ fn pointwise_terms_sum_to_the_samplers_likelihood() {
     let cases = [
         LikelihoodSettings::default(),
         LikelihoodSettings { errors_in_variables: false, ..LikelihoodSettings::default() },
-        LikelihoodSettings { noise: NoiseModel::StudentT, ..LikelihoodSettings::default() },
-        LikelihoodSettings { noise: NoiseModel::Ar1, ..LikelihoodSettings::default() },
+        LikelihoodSettings { noise: NoiseKind::StudentT, ..LikelihoodSettings::default() },
+        LikelihoodSettings { noise: NoiseKind::Ar1, ..LikelihoodSettings::default() },
     ];
     for likelihood in cases {
         let settings = CalibrationSettings { likelihood: likelihood.clone(), ..CalibrationSettings::default() };
@@ -43,16 +44,17 @@ fn pointwise_terms_sum_to_the_samplers_likelihood() {
         let layout = &posterior.layout;
         // a point near the truth: the reference parameters, σ = 280 Pa, ρ = 0.3
         let mut si = Params::reference_1a().to_array().to_vec();
-        si.extend(layout.runs.iter().map(|_| 280.0));
-        si.extend(layout.rho.clone().map(|_| 0.3));
+        for p in layout.noise_parameters {
+            si.extend(layout.runs.iter().map(|_| if p.name == "sigma" { 280.0 } else { 0.3 }));
+        }
         let x = layout.from_si(&si);
         let total = posterior.log_density(&x) - posterior.log_prior(&x);
         let chains = Chains { dim: x.len(), ensembles: 1, walkers: 1, positions: x.clone(), log_prob: vec![total], accepted: vec![true] };
         let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains);
-        let draws = pointwise_draws(&sample, &posterior.runs, &[0], &integrator, &likelihood, 7);
+        let draws = pointwise_draws(&sample, &posterior.runs, &[0], &integrator, posterior.noise.as_ref(), 7);
         let sum: f64 = draws.log_likelihood.iter().sum();
         let n = draws.observed.len() as f64;
-        let constant = if likelihood.noise == NoiseModel::StudentT { 0.0 } else { -0.5 * n * (2.0 * std::f64::consts::PI).ln() };
+        let constant = if likelihood.noise == NoiseKind::StudentT { 0.0 } else { -0.5 * n * (2.0 * std::f64::consts::PI).ln() };
         assert_eq!(draws.failed, 0);
         assert!(((sum - constant) - total).abs() < 1e-7 * total.abs(), "{:?}: pointwise {} vs likelihood {total}", likelihood.noise, sum - constant);
     }

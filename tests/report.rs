@@ -177,3 +177,17 @@ fn later_stages_reject_a_folder_that_is_not_a_calibration() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("not a folder"));
 }
+
+/// A calibration of a few fixed steps (shorter than the autocorrelation
+/// plots' ten lags) still gets its report, with the sampler's warning
+/// about short chains, never a crash.
+#[test]
+fn a_report_of_very_short_chains_is_written() {
+    let data = tempfile::tempdir().unwrap();
+    let manifest = virtual_campaign(data.path());
+    let out = tempfile::tempdir().unwrap();
+    let o = mrbp(&["run", manifest.to_str().unwrap(), "--out", out.path().to_str().unwrap(), "--substeps", "2", "--steps", "6", "--draws", "20"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(out.path().join("I1.0A/report.html").is_file());
+    assert!(text(&o).contains("run longer"), "{}", text(&o));
+}

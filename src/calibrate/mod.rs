@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::identify::{identify_current, CurrentIdentification};
 use crate::posterior::map::{self, MapEstimate, StepCheck};
 use crate::model::{Integrator, Scheme};
-use crate::posterior::{NoiseModel, Posterior, PosteriorSample};
+use crate::posterior::{Posterior, PosteriorSample};
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
 pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
 
@@ -149,7 +149,7 @@ pub const MEMORY_WARNING: f64 = 0.5;
 /// A warning per run whose MAP residuals are correlated in time while the
 /// noise model takes them as independent.
 fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
-    if posterior.likelihood.noise == NoiseModel::Ar1 {
+    if posterior.noise.models_memory() {
         return Vec::new();
     }
     let Some(rhos) = map::residual_autocorrelation(posterior, &map.x) else {

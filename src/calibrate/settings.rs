@@ -4,6 +4,7 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
@@ -11,6 +12,7 @@ use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::IdentifySettings;
 use crate::model::{Integrator, Scheme, PARAM_NAMES};
+use crate::noise::NoiseModel;
 use crate::posterior::prior::default_priors;
 use crate::posterior::{Coordinates, LikelihoodSettings, ModelKind, ModelTerms, ParameterModel, Posterior, Prior};
 use crate::sampler::{Move, RunControl, SamplerSettings};
@@ -207,6 +209,7 @@ impl CalibrationSettings {
             return Err("sigma_bounds_pa must be 0 < lower < upper".into());
         }
         self.likelihood.check()?;
+        self.noise_model().check()?;
         self.terms.check()?;
         if !(self.reference_current_a > 0.0) {
             return Err("reference_current_a must be positive".into());
@@ -225,6 +228,11 @@ impl CalibrationSettings {
     /// How θ gives the B-P parameters of each run.
     pub fn parameter_model(&self) -> ParameterModel {
         ParameterModel::new(self.model, self.reference_current_a)
+    }
+
+    /// The noise model of the likelihood, with its scales' bounds.
+    pub fn noise_model(&self) -> Arc<dyn NoiseModel> {
+        self.likelihood.noise_model(self.sigma_bounds_pa)
     }
 
     /// The posterior of the runs of `campaign` with these settings.

@@ -8,7 +8,9 @@ use crate::calibrate::CalibrationSettings;
 use crate::error::{Error, Result};
 use crate::identify::IdentifySettings;
 use crate::pipeline::{PredictOptions, SampleRequest};
-use crate::posterior::{ModelKind, NoiseModel, RecordPart};
+use crate::data::RecordPart;
+use crate::noise::NoiseKind;
+use crate::posterior::ModelKind;
 use crate::synth::SynthSettings;
 
 #[derive(Parser, Debug)]
@@ -238,7 +240,7 @@ pub struct SampleOptions {
     pub seed: Option<u64>,
     /// Residual model (default: gaussian)
     #[arg(long, value_enum)]
-    pub noise: Option<NoiseModel>,
+    pub noise: Option<NoiseKind>,
     /// Samples in the likelihood (default: whole-record)
     #[arg(long, value_enum)]
     pub part: Option<RecordPart>,

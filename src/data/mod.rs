@@ -1,13 +1,16 @@
 //! Test campaigns: the manifest, the stand records, the shear quantities
-//! derived from them (paper eqs. 1–2), loading branches and smoothing.
+//! derived from them (paper eqs. 1–2), loading branches, smoothing, and a
+//! run as the model sees it.
 
 pub mod branches;
 pub mod campaign;
+pub mod run_data;
 pub mod shear;
 pub mod smooth;
 pub mod table;
 
 pub use branches::{loading_branches, REVERSAL_SHARE};
+pub use run_data::{RecordPart, RunData};
 pub use campaign::{current_tag, same_current, Campaign, Columns, Limits, Manifest, Run, RunSpec};
 pub use shear::{Geometry, Inelastic, Shear};
 pub use smooth::{local_polynomial, noise_variance, smoothed_strain};

@@ -35,6 +35,19 @@ pub fn flow_stress(p: &Params, rate: f64, z: f64) -> f64 {
     z / (SQRT_3 * log_term.powf(1.0 / (2.0 * p.n)))
 }
 
+/// The law's tangent stiffness dτ/dγ between two samples of a solution
+/// (stress change `dtau` over strain change `dgamma`), within [0, G], and
+/// G where the strain stands still: what carries the strain's noise into
+/// the stress (errors in variables).
+#[inline(always)]
+pub fn tangent_stiffness(dtau: f64, dgamma: f64, g: f64) -> f64 {
+    if dgamma.abs() > 1e-12 {
+        (dtau / dgamma).clamp(0.0, g)
+    } else {
+        g
+    }
+}
+
 /// The flow rule evaluated at one state.
 #[derive(Clone, Copy, Debug)]
 pub struct Flow {

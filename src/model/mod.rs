@@ -14,4 +14,5 @@ pub mod simd;
 pub use current_law::CurrentLaw;
 pub use integrate::{integrate, uses_avx2, IntegrationError, Integrator, LaneStates, Scheme, State, Trajectory};
 pub use lanes::LANES;
+pub use law::tangent_stiffness;
 pub use params::{Params, D0, PARAM_NAMES, PARAM_UNITS, PHYSICAL_RANGE, PLAUSIBLE_RANGE};

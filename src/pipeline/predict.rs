@@ -7,7 +7,8 @@ use super::{Event, Pipeline, PredictOptions};
 use crate::adequacy::{self, AdequacyRow};
 use crate::data::{same_current, Campaign, Run};
 use crate::error::{Error, Result};
-use crate::posterior::{Draw, RecordPart, RunData};
+use crate::data::{RecordPart, RunData};
+use crate::posterior::Draw;
 use crate::pointwise::{pointwise_draws, thinned_steps, POINTWISE_DRAWS};
 use crate::predict::{predict_run, CoverageRow, RunBands};
 use crate::report::{self, CalibrationReport, PredictionReport};
@@ -55,7 +56,7 @@ impl Pipeline<'_> {
         let stride = cal.thin();
         let steps = thinned_steps(cal.burn_in(), chains.steps(), chains.chains(), POINTWISE_DRAWS, stride);
         let integrator = cal.predict_settings(1, seed).integrator;
-        let draws = pointwise_draws(&cal.sample, &runs, &steps, &integrator, likelihood, seed);
+        let draws = pointwise_draws(&cal.sample, &runs, &steps, &integrator, cal.settings.noise_model().as_ref(), seed);
         if draws.failed > 0 {
             self.note(&format!("inference.zarr: {} of {} pointwise draws could not be integrated along every run (their log-likelihood is -inf)", draws.failed, steps.len() * chains.chains()));
         }

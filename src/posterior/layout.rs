@@ -3,20 +3,20 @@
 //!
 //! A point is θ (the parameter model's coordinates), then the terms of
 //! [`ModelTerms`] that are on (the gas-spring stiffness, a force offset per
-//! run), then one noise scale σ per run, then (AR(1) noise only) one lag-one
-//! correlation ρ per run. The sampler walks in ln θ (or
-//! [`Coordinates::SaturationShare`]), the terms as they are, ln σ and
-//! atanh ρ; outputs use θ, the terms, σ, ρ under the names `G` … (or a
-//! law's), `gas_spring_n_per_m`, `force_offset_n_<run>`, `sigma_<run>`,
-//! `rho_<run>`.
+//! run), then the noise model's parameters, one block per parameter with a
+//! coordinate per run (every σ, then every ρ, …). The sampler walks in ln θ
+//! (or [`Coordinates::SaturationShare`]), the terms as they are and each
+//! noise parameter in its [`Transform`]; outputs use θ, the terms and the
+//! noise in SI units under the names `G` … (or a law's),
+//! `gas_spring_n_per_m`, `force_offset_n_<run>`, `sigma_<run>`, `rho_<run>`, ….
 
 use std::ops::Range;
 
 use serde::{Deserialize, Serialize};
 
-use super::likelihood::NoiseModel;
 use super::parameters::ParameterModel;
 use super::terms::ModelTerms;
+use crate::noise::{NoiseModel, NoiseValues, Parameter, Transform, MAX_PARAMETERS};
 
 /// The coordinates the sampler walks θ in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -47,9 +47,9 @@ pub struct Layout {
     /// Everything before the noise: θ and the terms, which the MAP search
     /// fits while it profiles the noise out.
     pub fitted: Range<usize>,
-    pub sigma: Range<usize>,
-    /// Empty unless the noise is AR(1).
-    pub rho: Range<usize>,
+    /// The noise parameters: block p holds parameter p of every run.
+    pub noise: Range<usize>,
+    pub noise_parameters: &'static [Parameter],
     /// Where R1 and D1 sit in θ when they are walked as saturation and share.
     share: Option<(usize, usize)>,
 }
@@ -60,18 +60,19 @@ fn softplus(v: f64) -> f64 {
 }
 
 impl Layout {
-    pub fn new(model: &ParameterModel, runs: &[String], noise: NoiseModel, coordinates: Coordinates, terms: &ModelTerms) -> Layout {
+    pub fn new(model: &ParameterModel, runs: &[String], noise: &dyn NoiseModel, coordinates: Coordinates, terms: &ModelTerms) -> Layout {
         let nt = model.names().len();
         let nr = runs.len();
         let ns = usize::from(terms.gas_spring);
         let no = if terms.force_offset { nr } else { 0 };
         let nf = nt + ns + no;
-        let rho_len = if noise == NoiseModel::Ar1 { nr } else { 0 };
+        let noise_parameters = noise.parameters();
         let mut names: Vec<String> = model.names().iter().map(|s| s.to_string()).collect();
         names.extend(std::iter::repeat_n("gas_spring_n_per_m".to_string(), ns));
         names.extend(runs.iter().take(no).map(|r| format!("force_offset_n_{r}")));
-        names.extend(runs.iter().map(|r| format!("sigma_{r}")));
-        names.extend(runs.iter().take(rho_len).map(|r| format!("rho_{r}")));
+        for p in noise_parameters {
+            names.extend(runs.iter().map(|r| format!("{}_{r}", p.name)));
+        }
         Layout {
             names,
             runs: runs.to_vec(),
@@ -79,13 +80,42 @@ impl Layout {
             spring: nt..nt + ns,
             offset: nt + ns..nf,
             fitted: 0..nf,
-            sigma: nf..nf + nr,
-            rho: nf + nr..nf + nr + rho_len,
+            noise: nf..nf + nr * noise_parameters.len(),
+            noise_parameters,
             share: match coordinates {
                 Coordinates::Log => None,
                 Coordinates::SaturationShare => Some((model.index("R1"), model.index("D1"))),
             },
         }
+    }
+
+    /// The noise parameter at coordinate `i` (in the noise block), and its run.
+    fn noise_at(&self, i: usize) -> (Parameter, usize) {
+        let nr = self.runs.len().max(1);
+        let offset = i - self.noise.start;
+        (self.noise_parameters[offset / nr], offset % nr)
+    }
+
+    /// Run `j`'s noise parameters at `x` (sampler coordinates or SI,
+    /// whichever `x` is), in the model's order.
+    pub fn noise_values(&self, x: &[f64], j: usize) -> NoiseValues {
+        let nr = self.runs.len();
+        let mut v = [0.0; MAX_PARAMETERS];
+        for p in 0..self.noise_parameters.len() {
+            v[p] = x[self.noise.start + p * nr + j];
+        }
+        v
+    }
+
+    /// The noise of a run none of `runs` is, pooled from theirs at `x` (SI):
+    /// each parameter as its [`crate::noise::Pool`] says.
+    pub fn pooled_noise(&self, x: &[f64], runs: &[usize]) -> NoiseValues {
+        let mut v = [0.0; MAX_PARAMETERS];
+        for (p, parameter) in self.noise_parameters.iter().enumerate() {
+            let values: Vec<f64> = runs.iter().map(|&j| x[self.noise.start + p * self.runs.len() + j]).collect();
+            v[p] = parameter.pool.of(&values);
+        }
+        v
     }
 
     /// Names of the sampler's coordinates, for messages.
@@ -94,7 +124,11 @@ impl Layout {
             .names
             .iter()
             .enumerate()
-            .map(|(i, n)| if self.rho.contains(&i) { format!("atanh {n}") } else if self.linear(i) { n.clone() } else { format!("ln {n}") })
+            .map(|(i, n)| match i {
+                _ if self.noise.contains(&i) => self.noise_at(i).0.transform.label(n),
+                _ if self.linear(i) => n.clone(),
+                _ => format!("ln {n}"),
+            })
             .collect();
         if let Some((r1, d1)) = self.share {
             names[r1] = "ln (R1 + D1)".into();
@@ -134,7 +168,7 @@ impl Layout {
         &self.names[self.theta.clone()]
     }
 
-    /// Whether `name` is a noise coordinate (σ or ρ of a run).
+    /// Whether `name` is a noise coordinate (σ, ρ, … of a run).
     pub fn is_noise(&self, name: &str) -> bool {
         self.names.iter().position(|n| n == name).is_some_and(|i| i >= self.fitted.end)
     }
@@ -163,33 +197,28 @@ impl Layout {
         self.runs.iter().position(|r| r == id)
     }
 
-    /// A point in SI units (θ, σ, ρ) from the sampler's coordinates.
+    /// How coordinate `i` (after θ) maps to SI units: `None` as it is.
+    fn transform(&self, i: usize) -> Option<Transform> {
+        if self.noise.contains(&i) {
+            Some(self.noise_at(i).0.transform)
+        } else if self.linear(i) {
+            None
+        } else {
+            Some(Transform::Log)
+        }
+    }
+
+    /// A point in SI units (θ, terms, noise) from the sampler's coordinates.
     pub fn to_si(&self, x: &[f64]) -> Vec<f64> {
         let theta = self.log_theta(x).into_iter().map(f64::exp);
-        let rest = x.iter().enumerate().skip(self.theta.end).map(|(i, v)| {
-            if self.rho.contains(&i) {
-                v.tanh()
-            } else if self.linear(i) {
-                *v
-            } else {
-                v.exp()
-            }
-        });
+        let rest = x.iter().enumerate().skip(self.theta.end).map(|(i, v)| self.transform(i).map_or(*v, |t| t.to_si(*v)));
         theta.chain(rest).collect()
     }
 
     /// The sampler's coordinates of a point in SI units (inverse of [`Self::to_si`]).
     pub fn from_si(&self, si: &[f64]) -> Vec<f64> {
         let log: Vec<f64> = si[self.theta.clone()].iter().map(|v| v.ln()).collect();
-        let rest = si.iter().enumerate().skip(self.theta.end).map(|(i, v)| {
-            if self.rho.contains(&i) {
-                v.atanh()
-            } else if self.linear(i) {
-                *v
-            } else {
-                v.ln()
-            }
-        });
+        let rest = si.iter().enumerate().skip(self.theta.end).map(|(i, v)| self.transform(i).map_or(*v, |t| t.to_coordinate(*v)));
         self.theta_coordinates(&log).into_iter().chain(rest).collect()
     }
 }
@@ -203,24 +232,27 @@ pub fn unit_of(name: &str) -> &'static str {
         "G_field" | "G_zero" => "Pa",
         "saturation_current_a" => "A",
         "gas_spring_n_per_m" => "N/m",
-        _ if name.starts_with("sigma_") => "Pa",
         _ if name.starts_with("force_offset_n_") => "N",
-        _ if name.starts_with("rho_") => "1",
-        _ => "",
+        _ => crate::noise::unit_of(name).unwrap_or(""),
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::noise::{NoiseKind, NoiseOptions};
 
     #[test]
     fn names_ranges_and_maps_agree() {
         let runs = vec!["a".to_string(), "b".to_string()];
-        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1, Coordinates::Log, &ModelTerms::default());
+        let ar1 = NoiseKind::Ar1.model(&NoiseOptions::default());
+        let gaussian = NoiseKind::Gaussian.model(&NoiseOptions::default());
+        let l = Layout::new(&ParameterModel::PerCurrent, &runs, ar1.as_ref(), Coordinates::Log, &ModelTerms::default());
         assert_eq!(l.dim(), 11);
         assert_eq!(&l.names[7..], ["sigma_a", "sigma_b", "rho_a", "rho_b"]);
-        assert_eq!((l.sigma.clone(), l.rho.clone()), (7..9, 9..11));
+        assert_eq!(l.noise, 7..11);
+        assert_eq!(l.coordinate_names()[10], "atanh rho_b");
+        assert_eq!(l.noise_values(&(0..11).map(f64::from).collect::<Vec<_>>(), 1), [8.0, 10.0, 0.0, 0.0]);
         assert!(l.is_noise("rho_b") && !l.is_noise("G") && !l.is_noise("nope"));
         let x: Vec<f64> = (0..11).map(|i| 0.1 * i as f64 - 0.5).collect();
         let si = l.to_si(&x);
@@ -228,12 +260,12 @@ mod tests {
         for (a, b) in l.from_si(&si).iter().zip(&x) {
             assert!((a - b).abs() < 1e-12);
         }
-        let g = Layout::new(&ParameterModel::CurrentLaw { reference_a: 1.0 }, &runs, NoiseModel::Gaussian, Coordinates::Log, &ModelTerms::default());
-        assert_eq!((g.dim(), g.rho.len()), (11, 0));
+        let g = Layout::new(&ParameterModel::CurrentLaw { reference_a: 1.0 }, &runs, gaussian.as_ref(), Coordinates::Log, &ModelTerms::default());
+        assert_eq!((g.dim(), g.noise.len()), (11, 2));
         let terms = ModelTerms { force_offset: true, gas_spring: true, ..ModelTerms::default() };
-        let t = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Gaussian, Coordinates::Log, &terms);
+        let t = Layout::new(&ParameterModel::PerCurrent, &runs, gaussian.as_ref(), Coordinates::Log, &terms);
         assert_eq!(&t.names[7..10], ["gas_spring_n_per_m", "force_offset_n_a", "force_offset_n_b"]);
-        assert_eq!((t.fitted.clone(), t.sigma.clone()), (0..10, 10..12));
+        assert_eq!((t.fitted.clone(), t.noise.clone()), (0..10, 10..12));
         let x: Vec<f64> = (0..12).map(|i| i as f64 - 3.0).collect();
         assert_eq!(t.terms(&x, 1), (4.0, 6.0));
         assert_eq!((t.to_si(&x)[8], t.from_si(&t.to_si(&x))[9]), (5.0, 6.0));
@@ -245,7 +277,7 @@ mod tests {
     #[test]
     fn saturation_share_coordinates_invert_with_unit_jacobian() {
         let runs = vec!["a".to_string()];
-        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Gaussian, Coordinates::SaturationShare, &ModelTerms::default());
+        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseKind::Gaussian.model(&NoiseOptions::default()).as_ref(), Coordinates::SaturationShare, &ModelTerms::default());
         let si = [2e5, 1.2e5, 1.6e5, 3e4, 4e-6, 2e-4, 1.2, 300.0];
         let x = l.from_si(&si);
         assert!((x[2] - (1.9e5f64).ln()).abs() < 1e-12 && (x[3] - (3e4f64 / 1.6e5).ln()).abs() < 1e-12);

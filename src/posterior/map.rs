@@ -9,13 +9,17 @@
 //! four per SIMD batch and runs in parallel, so a Jacobian costs about two
 //! integrations of the records rather than one per coordinate.
 
+use std::sync::Arc;
+
 use nalgebra::{DMatrix, DVector};
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-use super::{tangent_stiffness, Layout, NoiseModel, Posterior, RunData};
+use super::{Layout, Posterior};
+use crate::data::RunData;
 use crate::fit::least_squares;
 use crate::model::{Integrator, Params, LANES};
+use crate::noise::{Profile, Whiten};
 use crate::sampler::LogDensity;
 
 /// The MAP point and the Laplace approximation of θ around it.
@@ -27,9 +31,8 @@ pub struct MapEstimate {
     pub cov: DMatrix<f64>,
     /// The Jacobian of the whitened residuals at the MAP (for the step rule).
     jacobian: DMatrix<f64>,
-    /// The profiled noise scale of every sample of each run (σ, or
-    /// √(σ² + a_k) with errors in variables).
-    sigmas: Vec<Vec<f64>>,
+    /// How each run's residuals are whitened at the profiled noise.
+    whitening: Vec<Arc<dyn Whiten>>,
     pub log_density: f64,
     pub converged: bool,
 }
@@ -113,21 +116,24 @@ fn residuals_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<Vec<f64>>
     out
 }
 
-fn rms(v: &[f64]) -> f64 {
-    (v.iter().map(|r| r * r).sum::<f64>() / v.len().max(1) as f64).sqrt()
-}
+/// The noise model's whitening of each run's residuals.
+type Whitening = [Arc<dyn Whiten>];
 
 /// Whitened residuals at the fitted point `x` (θ and the model terms) from
-/// its run residuals: (τ_obs − τ_model)/σ_run, then (ln θ − centre)/scale
-/// for every log-normal prior and value/sd for every term's. Points outside
-/// the prior support are infeasible.
-fn whiten(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64], residuals: Option<Vec<Vec<f64>>>) -> Option<Vec<f64>> {
+/// its run residuals: each run's as its noise model whitens them (divided
+/// by σ, say), then (ln θ − centre)/scale for every log-normal prior and
+/// value/sd for every term's. Points outside the prior support are
+/// infeasible.
+fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<Vec<Vec<f64>>>) -> Option<Vec<f64>> {
     let log_theta = post.layout.log_theta(x);
     if post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
         return None;
     }
     let res = residuals?;
-    let mut out: Vec<f64> = res.iter().zip(sigmas).flat_map(|(r, s)| r.iter().zip(s).map(|(v, s)| v / s)).collect();
+    let mut out: Vec<f64> = Vec::with_capacity(res.iter().map(Vec::len).sum::<usize>() + log_theta.len());
+    for (r, w) in res.iter().zip(whitening) {
+        w.whiten(r, &mut out);
+    }
     for (prior, v) in post.priors.iter().zip(&log_theta) {
         if let Some((c, s)) = prior.centre() {
             out.push((v - c) / s);
@@ -139,16 +145,16 @@ fn whiten(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64], residuals: Option<Ve
     Some(out)
 }
 
-fn whitened(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64]) -> Option<Vec<f64>> {
+fn whitened(post: &Posterior, whitening: &Whitening, x: &[f64]) -> Option<Vec<f64>> {
     let res = residuals_many(post, std::slice::from_ref(&x.to_vec())).pop().flatten();
-    whiten(post, sigmas, x, res)
+    whiten(post, whitening, x, res)
 }
 
 /// The Jacobian of the whitened residuals at `x` by forward differences,
 /// every point integrated in one batch; a coordinate whose forward point
 /// leaves the prior's support (a MAP at a truncation bound) is
 /// differenced backwards instead.
-fn jacobian(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64]) -> Option<DMatrix<f64>> {
+fn jacobian(post: &Posterior, whitening: &Whitening, x: &[f64]) -> Option<DMatrix<f64>> {
     let n = x.len();
     let displaced = |sign: f64, which: &[usize]| -> Vec<Vec<f64>> {
         which
@@ -164,11 +170,11 @@ fn jacobian(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64]) -> Option<DMatrix<
     };
     let all: Vec<usize> = (0..=n).collect();
     let points = displaced(1.0, &all);
-    let mut white: Vec<Option<Vec<f64>>> = residuals_many(post, &points).into_iter().zip(&points).map(|(r, q)| whiten(post, sigmas, q, r)).collect();
+    let mut white: Vec<Option<Vec<f64>>> = residuals_many(post, &points).into_iter().zip(&points).map(|(r, q)| whiten(post, whitening, q, r)).collect();
     let r0 = white[0].take()?;
     let outside: Vec<usize> = (1..=n).filter(|&j| white[j].is_none()).collect();
     let back_points = displaced(-1.0, &outside);
-    let back: Vec<Option<Vec<f64>>> = residuals_many(post, &back_points).into_iter().zip(&back_points).map(|(r, q)| whiten(post, sigmas, q, r)).collect();
+    let back: Vec<Option<Vec<f64>>> = residuals_many(post, &back_points).into_iter().zip(&back_points).map(|(r, q)| whiten(post, whitening, q, r)).collect();
     let mut jac = DMatrix::zeros(r0.len(), n);
     for j in 1..=n {
         let column: Vec<f64> = match &white[j] {
@@ -187,111 +193,51 @@ fn jacobian(post: &Posterior, sigmas: &[Vec<f64>], x: &[f64]) -> Option<DMatrix<
 }
 
 /// Maximises the posterior over θ from `start` (θ coordinates), with each
-/// run's σ profiled (set to its RMS residual and the fit repeated until σ
-/// settles), by Levenberg-Marquardt on the whitened residuals. Then sets the
-/// noise coordinates from the residuals at the optimum: σ = RMS (AR(1): ρ =
-/// lag-one correlation, σ the innovation sd) and computes the Laplace
-/// covariance (JᵀJ)⁻¹ of θ.
+/// run's noise profiled (fitted to its residuals and the fit repeated until
+/// the noise scales settle), by Levenberg-Marquardt on the whitened
+/// residuals. Then sets the noise coordinates from the residuals at the
+/// optimum and computes the Laplace covariance (JᵀJ)⁻¹ of θ.
 pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
     let nt = post.layout.fitted.len();
     let mut x: Vec<f64> = start[..nt].to_vec();
-    let profile = |x: &[f64]| -> Option<(Vec<f64>, Vec<Vec<f64>>)> { Some(noise_scales(post, x, &residuals_many(post, &[x.to_vec()]).pop()??)) };
-    let (mut run_sigmas, mut sigmas) = profile(&x)?;
+    let whitening_of = |profiles: Vec<Profile>| -> (Vec<f64>, Vec<Arc<dyn Whiten>>) { profiles.into_iter().map(|p| (p.scale, p.whitening)).unzip() };
+    let (mut scales, mut whitening) = whitening_of(profiles(post, &x)?);
     let mut converged = false;
     for _ in 0..4 {
-        let f = |p: &[f64]| whitened(post, &sigmas, p);
-        let j = |p: &[f64]| jacobian(post, &sigmas, p);
+        let f = |p: &[f64]| whitened(post, &whitening, p);
+        let j = |p: &[f64]| jacobian(post, &whitening, p);
         let fit = least_squares(&x, &f, Some(&j));
         let moved = fit.params.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         x = fit.params;
         converged = fit.converged;
-        let (new_run_sigmas, new_sigmas) = profile(&x)?;
-        let sigma_change = new_run_sigmas.iter().zip(&run_sigmas).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
-        (run_sigmas, sigmas) = (new_run_sigmas, new_sigmas);
-        if moved < 1e-6 && sigma_change < 1e-3 {
+        let (new_scales, new_whitening) = whitening_of(profiles(post, &x)?);
+        let scale_change = new_scales.iter().zip(&scales).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
+        (scales, whitening) = (new_scales, new_whitening);
+        if moved < 1e-6 && scale_change < 1e-3 {
             break;
         }
     }
-    let jac = jacobian(post, &sigmas, &x)?;
+    let jac = jacobian(post, &whitening, &x)?;
     let cov = (jac.transpose() * &jac).try_inverse()?;
     let full = with_noise(post, &x)?;
     let log_density = post.log_density(&full);
-    Some(MapEstimate { x: full, cov, jacobian: jac, sigmas, log_density, converged })
+    Some(MapEstimate { x: full, cov, jacobian: jac, whitening, log_density, converged })
 }
 
-/// Each run's noise scale σ and every sample's √(σ² + a_k) from the
-/// residuals `res` at `x`: σ = RMS, or with errors in variables σ² = RMS² −
-/// mean a_k (at least a twentieth of RMS²), a_k = S_k² s_γ² with S_k the
-/// model's tangent stiffness, as the likelihood has it.
-fn noise_scales(post: &Posterior, x: &[f64], res: &[Vec<f64>]) -> (Vec<f64>, Vec<Vec<f64>>) {
-    res.iter()
-        .zip(&post.runs)
-        .map(|(r, run)| {
-            let ms = rms(r).max(1e-9).powi(2);
-            let var = if post.likelihood.eiv() { run.strain_noise_var } else { 0.0 };
-            if var <= 0.0 {
-                return (ms.sqrt(), vec![ms.sqrt(); r.len()]);
-            }
-            let g = post.params_at_current(x, run.current_a).g;
-            // the model stress (with terms) is τ_obs − r; its slope along the drive
-            let fitted: Vec<f64> = r.iter().enumerate().map(|(i, v)| run.tau[i + 1] - v).collect();
-            let a: Vec<f64> = (0..r.len())
-                .map(|i| {
-                    let prev = if i == 0 { run.initial_tau } else { fitted[i - 1] };
-                    let dg = run.gamma[i + 1] - run.gamma[i];
-                    let s = tangent_stiffness(fitted[i] - prev, dg, g);
-                    s * s * var
-                })
-                .collect();
-            // σ² solving Σ w_k = Σ r_k² w_k², w_k = 1/(σ² + a_k) (the
-            // likelihood's maximum), by the fixed point σ² ← σ² Σ r²w²/Σ w
-            // from the moment estimate
-            let mean_a = a.iter().sum::<f64>() / a.len().max(1) as f64;
-            let mut sigma2 = (ms - mean_a).max(0.05 * ms);
-            for _ in 0..50 {
-                let (mut sw, mut srw) = (0.0, 0.0);
-                for (v, ak) in r.iter().zip(&a) {
-                    let w = 1.0 / (sigma2 + ak);
-                    sw += w;
-                    srw += v * v * w * w;
-                }
-                let next = sigma2 * srw / sw;
-                let done = (next / sigma2 - 1.0).abs() < 1e-6;
-                sigma2 = next.max(1e-6 * ms);
-                if done {
-                    break;
-                }
-            }
-            (sigma2.sqrt(), a.iter().map(|a| (sigma2 + a).sqrt()).collect())
-        })
-        .unzip()
+/// Each run's noise fitted to its residuals at the fitted point `x`.
+fn profiles(post: &Posterior, x: &[f64]) -> Option<Vec<Profile>> {
+    let res = residuals_many(post, &[x.to_vec()]).pop()??;
+    Some(res.iter().zip(&post.runs).map(|(r, run)| post.noise.profile(run, r, post.params_at_current(x, run.current_a).g)).collect())
 }
 
 /// θ extended by the noise coordinates that maximise the likelihood of the
-/// residuals at θ: ln σ = ln RMS, or the profiled σ of errors in variables
-/// (AR(1): the innovation sd and atanh of the lag-one correlation).
+/// residuals at θ, in the layout's order (parameter by parameter, each for
+/// every run).
 fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
-    let res = residuals_many(post, &[theta.to_vec()]).pop()??;
-    let (run_sigmas, _) = noise_scales(post, theta, &res);
-    let ar1 = post.likelihood.noise == NoiseModel::Ar1;
+    let profiles = profiles(post, theta)?;
     let mut full = theta.to_vec();
-    let mut rhos = Vec::new();
-    for (r, sigma) in res.iter().zip(&run_sigmas) {
-        let s = if post.likelihood.eiv() { *sigma } else { rms(r).max(1e-9) };
-        let rho = if ar1 {
-            let num: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
-            let den: f64 = r.iter().map(|v| v * v).sum();
-            (num / den).clamp(-0.98, 0.98)
-        } else {
-            0.0
-        };
-        // the most likely σ inside the prior's bounds
-        let (lo, hi) = post.sigma_bounds;
-        full.push(if ar1 { s * (1.0 - rho * rho).sqrt() } else { s }.clamp(lo, hi).ln());
-        rhos.push(rho.atanh());
-    }
-    if ar1 {
-        full.extend(rhos);
+    for p in 0..post.layout.noise_parameters.len() {
+        full.extend(profiles.iter().map(|pr| pr.coordinates[p]));
     }
     Some(full)
 }
@@ -349,8 +295,8 @@ pub fn step_shift_limit(extrapolated: bool) -> f64 {
 fn shift(map: &MapEstimate, post: &Posterior, finer: &Posterior) -> Option<DVector<f64>> {
     let nt = post.layout.fitted.len();
     let theta = &map.x[..nt];
-    let coarse = whitened(post, &map.sigmas, theta)?;
-    let fine = whitened(finer, &map.sigmas, theta)?;
+    let coarse = whitened(post, &map.whitening, theta)?;
+    let fine = whitened(finer, &map.whitening, theta)?;
     let delta = DVector::from_iterator(coarse.len(), fine.iter().zip(&coarse).map(|(f, c)| f - c));
     // the residuals are data minus model: the optimum moves by −(JᵀJ)⁻¹ Jᵀ Δr
     Some(-(&map.cov * (map.jacobian.transpose() * delta)))
@@ -391,8 +337,8 @@ pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, 
 
 /// The Laplace approximation of the whole posterior: a Gaussian around the
 /// MAP with the covariance of θ from the surrogate's Hessian and, for the
-/// noise of each run, the posterior sd of a Gaussian scale from n
-/// residuals: 1/√(2n) for ln σ, 1/√n for atanh ρ (nearly independent of θ).
+/// noise of each run, the sd its noise model gives for n residuals (1/√(2n)
+/// for ln σ, say; nearly independent of θ).
 pub struct Laplace {
     pub mean: Vec<f64>,
     /// Lower Cholesky factor of the covariance (θ block, then the noise).
@@ -407,11 +353,10 @@ impl Laplace {
         // a θ covariance that is not positive definite: a tiny ball instead
         let theta = map.cov.clone().cholesky().map(|c| c.l()).unwrap_or_else(|| DMatrix::identity(nt, nt) * 1e-4);
         chol.view_mut((0, 0), (nt, nt)).copy_from(&theta);
-        for i in nt..d {
-            let rho = l.rho.contains(&i);
-            let run = &post.runs[if rho { i - l.rho.start } else { i - l.sigma.start }];
-            let n = run.compared().max(1) as f64;
-            chol[(i, i)] = if rho { 1.0 / n.sqrt() } else { 1.0 / (2.0 * n).sqrt() };
+        let nr = post.runs.len();
+        for i in l.noise.clone() {
+            let (p, j) = ((i - l.noise.start) / nr, (i - l.noise.start) % nr);
+            chol[(i, i)] = post.noise.laplace_sd(post.runs[j].compared())[p];
         }
         Laplace { mean: map.x.clone(), chol }
     }

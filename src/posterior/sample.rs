@@ -8,24 +8,24 @@
 use super::layout::Layout;
 use super::parameters::ParameterModel;
 use crate::model::Params;
+use crate::noise::NoiseValues;
 use crate::sampler::{Chains, Diagnostics, ParameterDiagnostics};
 
 /// One posterior draw as a run sees it: the B-P parameters, the model
-/// terms (0 where off) and the noise of that run (σ, and ρ for AR(1) noise;
-/// 0 otherwise).
+/// terms (0 where off) and the noise parameters of that run (SI, in the
+/// noise model's order).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Draw {
     pub params: Params,
     pub spring_n_per_m: f64,
     pub offset_n: f64,
-    pub sigma: f64,
-    pub rho: f64,
+    pub noise: NoiseValues,
 }
 
 impl Draw {
-    /// A draw of the B-P law alone: no model terms, white noise of `sigma`.
-    pub fn of_law(params: Params, sigma: f64) -> Self {
-        Draw { params, spring_n_per_m: 0.0, offset_n: 0.0, sigma, rho: 0.0 }
+    /// A draw of the B-P law alone: no model terms, noise `noise`.
+    pub fn of_law(params: Params, noise: NoiseValues) -> Self {
+        Draw { params, spring_n_per_m: 0.0, offset_n: 0.0, noise }
     }
 }
 
@@ -69,40 +69,33 @@ impl PosteriorSample {
     }
 
     /// The draw at one position for run `run` at `current_a`. A run the
-    /// posterior did not see has no noise level of its own: it gets the
-    /// root-mean-square σ (and the mean ρ) of the runs it saw.
+    /// posterior did not see has no noise of its own: it gets that of the
+    /// runs it saw, pooled ([`Self::draw_without`]).
     pub fn draw(&self, step: usize, chain: usize, run: &str, current_a: f64) -> Draw {
         let x = self.chains.point(step, chain);
         match self.layout.run_index(run) {
             Some(j) => {
                 let (spring_n_per_m, offset_n) = self.layout.terms(x, j);
-                Draw {
-                    params: self.params_at(step, chain, current_a),
-                    spring_n_per_m,
-                    offset_n,
-                    sigma: x[self.layout.sigma.start + j],
-                    rho: if self.layout.rho.is_empty() { 0.0 } else { x[self.layout.rho.start + j] },
-                }
+                Draw { params: self.params_at(step, chain, current_a), spring_n_per_m, offset_n, noise: self.layout.noise_values(x, j) }
             }
             None => self.draw_without(step, chain, run, current_a),
         }
     }
 
     /// The draw at one position for run `run` as if the posterior had not
-    /// seen it: the root-mean-square σ (and the mean ρ and force offset) of
-    /// the other runs.
+    /// seen it: the noise of the other runs pooled (the root-mean-square
+    /// σ, the mean ρ, …) and their mean force offset.
     pub fn draw_without(&self, step: usize, chain: usize, run: &str, current_a: f64) -> Draw {
         let x = self.chains.point(step, chain);
-        let others: Vec<usize> = (0..self.layout.runs.len()).filter(|&i| self.layout.runs[i] != run).collect();
-        let mean = |v: &mut dyn Iterator<Item = f64>| {
-            let (sum, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
-            if n == 0 { 0.0 } else { sum / n as f64 }
-        };
         let l = &self.layout;
-        let sigma = mean(&mut others.iter().map(|&i| x[l.sigma.start + i].powi(2))).sqrt();
-        let rho = if l.rho.is_empty() { 0.0 } else { mean(&mut others.iter().map(|&i| x[l.rho.start + i])) };
-        let offset_n = mean(&mut others.iter().map(|&i| l.terms(x, i).1));
-        Draw { params: self.params_at(step, chain, current_a), spring_n_per_m: l.terms(x, 0).0, offset_n, sigma, rho }
+        let others: Vec<usize> = (0..l.runs.len()).filter(|&i| l.runs[i] != run).collect();
+        let offsets: Vec<f64> = others.iter().map(|&i| l.terms(x, i).1).collect();
+        Draw {
+            params: self.params_at(step, chain, current_a),
+            spring_n_per_m: l.terms(x, 0).0,
+            offset_n: crate::noise::Pool::Mean.of(&offsets),
+            noise: l.pooled_noise(x, &others),
+        }
     }
 
     /// The draws at `positions` for one run.
@@ -144,7 +137,7 @@ pub fn evenly_spaced(available: usize, count: usize) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::posterior::NoiseModel;
+    use crate::noise::{NoiseKind, NoiseOptions};
 
     #[test]
     fn evenly_spaced_indices_cover_the_range() {
@@ -156,15 +149,16 @@ mod tests {
     #[test]
     fn draws_take_the_runs_own_noise_or_the_pooled_one() {
         let runs = vec!["a".to_string(), "b".to_string()];
-        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseModel::Ar1, crate::posterior::Coordinates::Log, &Default::default());
+        let ar1 = NoiseKind::Ar1.model(&NoiseOptions::default());
+        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, ar1.as_ref(), crate::posterior::Coordinates::Log, &Default::default());
         let mut point = Params::reference_1a().to_array().to_vec();
         point.extend([3.0, 4.0, 0.2, 0.6]);
         let chains = Chains { dim: 11, ensembles: 1, walkers: 1, positions: point, log_prob: vec![0.0], accepted: vec![false] };
         let sample = PosteriorSample { layout, model: ParameterModel::PerCurrent, chains };
         let own = sample.draw(0, 0, "b", 1.0);
-        assert_eq!((own.sigma, own.rho, own.offset_n), (4.0, 0.6, 0.0));
+        assert_eq!((own.noise, own.offset_n), ([4.0, 0.6, 0.0, 0.0], 0.0));
         assert_eq!(own.params, Params::reference_1a());
         let unseen = sample.draw(0, 0, "c", 1.0);
-        assert!((unseen.sigma - 12.5f64.sqrt()).abs() < 1e-12 && (unseen.rho - 0.4).abs() < 1e-12);
+        assert!((unseen.noise[0] - 12.5f64.sqrt()).abs() < 1e-12 && (unseen.noise[1] - 0.4).abs() < 1e-12);
     }
 }

@@ -219,7 +219,7 @@ pub fn diagnostics(dir: &Path, sample: &PosteriorSample, burn_in: usize, tau: &[
         // autocorrelation averaged over walkers, to a few τ
         let len = traces[0].len();
         let t = tau.get(i).copied().filter(|t| t.is_finite()).unwrap_or(1.0);
-        let lags = ((5.0 * t).ceil() as usize).clamp(10, len.saturating_sub(1).max(1));
+        let lags = ((5.0 * t).ceil() as usize).max(10).min(len.saturating_sub(1).max(1));
         let mut acf = vec![0.0; lags];
         for tr in &traces {
             for (a, r) in acf.iter_mut().zip(crate::sampler::diagnostics::autocorrelation(tr)) {

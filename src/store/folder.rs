@@ -40,7 +40,7 @@ impl StoredCalibration {
         let record = CalibrationRecord::read(&need("calibration.toml")?)?;
         let summary = summary::read(&need("summary.parquet")?)?;
         let model = settings.parameter_model();
-        let layout = Layout::new(&model, &record.runs, settings.likelihood.noise, settings.sampler.coordinates, &settings.terms);
+        let layout = Layout::new(&model, &record.runs, settings.noise_model().as_ref(), settings.sampler.coordinates, &settings.terms);
         let sample = chains::read(&need("chains.parquet")?, &layout, model)?;
         Ok(StoredCalibration { dir: dir.to_path_buf(), settings, record, summary, sample })
     }
@@ -112,7 +112,7 @@ impl StoredCalibration {
     /// Band settings with this calibration's integrator and noise model.
     pub fn predict_settings(&self, replicates: usize, seed: u64) -> PredictSettings {
         let integrator = self.settings.integrator.integrator(self.record.substeps);
-        PredictSettings::new(integrator, &self.settings.likelihood, replicates, seed)
+        PredictSettings { integrator, noise: self.settings.noise_model(), replicates, seed }
     }
 
     pub fn burn_in(&self) -> usize {

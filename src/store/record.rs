@@ -12,7 +12,8 @@ use crate::calibrate::{Calibration, CalibrationSettings};
 use crate::error::{Error, Result};
 use crate::data::Geometry;
 use crate::model::PARAM_NAMES;
-use crate::posterior::{NoiseModel, RecordPart};
+use crate::data::RecordPart;
+use crate::noise::NoiseKind;
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StepRow {
@@ -37,7 +38,7 @@ pub struct CalibrationRecord {
     /// The current the parameters describe (a current law's reference).
     pub current_a: f64,
     pub runs: Vec<String>,
-    pub noise: NoiseModel,
+    pub noise: NoiseKind,
     pub part: RecordPart,
     pub substeps: u32,
     #[serde(default)]

@@ -21,8 +21,9 @@ use rand::RngExt;
 use rand_distr::{ChiSquared, StandardNormal};
 use rayon::prelude::*;
 
+use crate::data::{RecordPart, RunData};
 use crate::posterior::map::{self, Laplace};
-use crate::posterior::{Draw, NoiseModel, Posterior, PosteriorSample, RecordPart, RunData};
+use crate::posterior::{Draw, Posterior, PosteriorSample};
 use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictSettings, RunBands, RunPrediction};
 use crate::sampler::{Chains, Diagnostics, LogDensity, Observer, RunControl, Sampler};
 
@@ -129,7 +130,7 @@ struct Target<'a> {
 impl Target<'_> {
     /// ln 1/p(y_j | θ) for each model path with its draw's model terms for
     /// this run (−∞ where the path failed).
-    fn log_weights(&self, paths: &[Option<Vec<f64>>], draws: &[Draw], noise: NoiseModel, nu: f64) -> Vec<f64> {
+    fn log_weights(&self, paths: &[Option<Vec<f64>>], draws: &[Draw]) -> Vec<f64> {
         let n = self.compared;
         paths
             .iter()
@@ -137,7 +138,7 @@ impl Target<'_> {
             .map(|(p, d)| match p {
                 Some(p) => {
                     let model: Vec<f64> = (0..n).map(|k| p[k] + self.data.terms_stress(k, d.spring_n_per_m, d.offset_n)).collect();
-                    -profile_log_likelihood(noise, &residuals(&self.data.tau[..n], &model), nu)
+                    -self.predict.noise.profile_log_likelihood(&residuals(&self.data.tau[..n], &model))
                 }
                 None => f64::NEG_INFINITY,
             })
@@ -165,7 +166,7 @@ fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &
         run: left_out,
         data: RunData::from_run(left_out, RecordPart::WholeRecord, lik.smooth_strain_ms),
         compared: RunData::from_run(left_out, lik.part, lik.smooth_strain_ms).time.len(),
-        predict: PredictSettings::new(integrator, lik, loo.replicates, loo.seed),
+        predict: PredictSettings { integrator, noise: settings.noise_model(), replicates: loo.replicates, seed: loo.seed },
     };
 
     // 1. the full posterior's draws, reweighted by 1/p(y_j | θ)
@@ -174,7 +175,7 @@ fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &
     let paths = model_paths(&target.data, &params, &integrator, &|| {});
     // the run's own force offset (and the spring) in each full-posterior draw
     let own: Vec<Draw> = positions.iter().map(|&(s, c)| full.sample.draw(s, c, left_out.id(), current)).collect();
-    let reweighted = psis::smooth(&target.log_weights(&paths, &own, lik.noise, lik.student_nu));
+    let reweighted = psis::smooth(&target.log_weights(&paths, &own));
     let mut row = LooRow { coverage: CoverageRow::default(), pareto_k: reweighted.k_hat, pareto_k_laplace: f64::NAN, by: HeldOutBy::Reweighting, max_rhat: f64::NAN };
     if reweighted.k_hat <= psis::K_THRESHOLD {
         let draws: Vec<Draw> = positions.iter().map(|&(s, c)| full.sample.draw_without(s, c, left_out.id(), current)).collect();
@@ -269,56 +270,18 @@ fn log_densities(posterior: &Posterior, points: &[Vec<f64>]) -> Vec<f64> {
 fn unseen_draw(posterior: &Posterior, x: &[f64], current_a: f64) -> Draw {
     let l = &posterior.layout;
     let si = l.to_si(x);
-    let sigmas = &si[l.sigma.clone()];
-    let rhos = &si[l.rho.clone()];
-    let sigma = (sigmas.iter().map(|s| s * s).sum::<f64>() / sigmas.len().max(1) as f64).sqrt();
-    let rho = if rhos.is_empty() { 0.0 } else { rhos.iter().sum::<f64>() / rhos.len() as f64 };
-    let runs = l.sigma.len();
-    let offset_n = (0..runs).map(|j| l.terms(x, j).1).sum::<f64>() / runs.max(1) as f64;
-    Draw { params: posterior.params_at_current(x, current_a), spring_n_per_m: l.terms(x, 0).0, offset_n, sigma, rho }
+    let runs: Vec<usize> = (0..l.runs.len()).collect();
+    let offsets: Vec<f64> = runs.iter().map(|&j| l.terms(x, j).1).collect();
+    Draw {
+        params: posterior.params_at_current(x, current_a),
+        spring_n_per_m: l.terms(x, 0).0,
+        offset_n: crate::noise::Pool::Mean.of(&offsets),
+        noise: l.pooled_noise(&si, &runs),
+    }
 }
 
 fn residuals(obs: &[f64], model: &[f64]) -> Vec<f64> {
     obs.iter().zip(model).skip(1).map(|(o, m)| o - m).collect()
-}
-
-/// ln p(y | θ) of one run with its noise parameters profiled out (set to
-/// their maximum-likelihood values given the residuals `r`): for Gaussian
-/// noise under the log-uniform prior on σ this is the σ-marginal up to a
-/// constant, −(n/2) ln Σr²; for AR(1) and Student-t noise a Laplace-type
-/// approximation of it.
-pub fn profile_log_likelihood(noise: NoiseModel, r: &[f64], student_nu: f64) -> f64 {
-    let n = r.len() as f64;
-    let sum_sq: f64 = r.iter().map(|v| v * v).sum();
-    match noise {
-        NoiseModel::Gaussian => -0.5 * n * (sum_sq / n).ln(),
-        NoiseModel::Ar1 => {
-            let cross: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
-            let lag_sq: f64 = r[..r.len().saturating_sub(1)].iter().map(|v| v * v).sum();
-            let rho = (cross / lag_sq).clamp(-0.99, 0.99);
-            let innov = (sum_sq - r[0] * r[0]) - 2.0 * rho * cross + rho * rho * lag_sq + (1.0 - rho * rho) * r[0] * r[0];
-            -0.5 * n * (innov / n).ln() + 0.5 * (1.0 - rho * rho).ln()
-        }
-        NoiseModel::StudentT => {
-            // the scale by golden-section search on ln s around the RMS
-            let ll = |log_s: f64| {
-                let s2 = (2.0 * log_s).exp();
-                -n * log_s - 0.5 * (student_nu + 1.0) * r.iter().map(|v| (v * v / (student_nu * s2)).ln_1p()).sum::<f64>()
-            };
-            let centre = 0.5 * (sum_sq / n).ln();
-            let (mut a, mut b) = (centre - 3.0, centre + 1.0);
-            let g = 0.5 * (5f64.sqrt() - 1.0);
-            for _ in 0..60 {
-                let (c, d) = (b - g * (b - a), a + g * (b - a));
-                if ll(c) > ll(d) {
-                    b = d;
-                } else {
-                    a = c;
-                }
-            }
-            ll(0.5 * (a + b))
-        }
-    }
 }
 
 /// `count` indices drawn in proportion to `weights` (normalised) by
@@ -347,19 +310,5 @@ mod tests {
     fn systematic_resampling_follows_the_weights() {
         let picks = systematic_resample(&[0.5, 0.0, 0.25, 0.25], 8);
         assert_eq!(picks, vec![0, 0, 0, 0, 2, 2, 3, 3]);
-    }
-
-    /// The Gaussian profile is −(n/2) ln(Σr²/n), and the AR(1) one reduces
-    /// to it for residuals without correlation structure beyond a tiny ρ.
-    #[test]
-    fn profile_likelihoods_agree_where_they_should() {
-        let r: Vec<f64> = (0..200).map(|k| ((k * 7919) % 13) as f64 - 6.0).collect();
-        let g = profile_log_likelihood(NoiseModel::Gaussian, &r, 5.0);
-        let n = r.len() as f64;
-        let direct = -0.5 * n * (r.iter().map(|v| v * v).sum::<f64>() / n).ln();
-        assert!((g - direct).abs() < 1e-9);
-        let t = profile_log_likelihood(NoiseModel::StudentT, &r, 1e6);
-        // ν → ∞: Student-t becomes Gaussian: ll = −n ln s − n/2 at its optimum
-        assert!((t - (g - 0.5 * n)).abs() < 1e-3 * n, "{t} vs {}", g - 0.5 * n);
     }
 }
