@@ -234,14 +234,14 @@ fn calibration() {
         println!(
             "| {name} | {} | {samples} | {:.1} | {:.1} | {} × {chains} | {acceptance:.2} | {:.0} | {:.0} | {:.4} | {:.0} | {:.0} |",
             campaign.runs.len(),
-            cal.seconds(),
+            cal.calibration.seconds(),
             cal.start.seconds,
             d.steps,
             min_bulk,
             d.min_ess(),
             d.max_rhat(),
-            min_bulk / cal.seconds(),
-            evals * samples as f64 * euler_per_interval / cal.sampling_seconds * 1e-6
+            min_bulk / cal.calibration.seconds(),
+            evals * samples as f64 * euler_per_interval / cal.calibration.record.seconds_sampling * 1e-6
         );
     }
     println!();

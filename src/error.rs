@@ -113,3 +113,8 @@ pub fn install_panic_hook() {
         }
     }));
 }
+
+/// A message on one line: its whitespace runs as single spaces.
+pub fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}

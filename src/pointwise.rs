@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use crate::data::RunData;
 use crate::model::Integrator;
 use crate::noise::{stiffness_path, NoiseModel, Pointwise};
-use crate::posterior::{evenly_spaced, Draw, PosteriorSample};
+use crate::posterior::{Draw, PosteriorSample};
 use crate::predict::model_paths;
 use crate::rng;
 
@@ -121,13 +121,3 @@ pub fn pointwise_draws(
 /// How many draws the pointwise groups hold by default: enough for PSIS-LOO,
 /// few enough that a 10 000-sample campaign stays at ~15 MB per group.
 pub const POINTWISE_DRAWS: usize = 192;
-
-/// About `count` draws' worth of steps, evenly spaced from `burn_in` to the
-/// last step and at least `stride` steps apart (nearly independent when
-/// `stride` ≥ τ): at least one step, every chain at each.
-pub fn thinned_steps(burn_in: usize, steps: usize, chains: usize, count: usize, stride: usize) -> Vec<usize> {
-    let available = steps.saturating_sub(burn_in).max(1);
-    let per_chain = count.div_ceil(chains.max(1)).min(available.div_ceil(stride.max(1))).max(1);
-    evenly_spaced(available, per_chain).into_iter().map(|i| (burn_in + i).min(steps.saturating_sub(1))).collect()
-}
-

@@ -127,6 +127,67 @@ impl Default for SynthSettings {
     }
 }
 
+impl SynthSettings {
+    /// Reads a settings file (the `synth.toml` format).
+    pub fn read(path: &Path) -> Result<SynthSettings> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
+        toml::from_str(&text).map_err(|e| Error::input(path, format!("invalid synth settings: {}", e.message())))
+    }
+
+    /// Writes the settings file `synth.toml` into `dir`.
+    fn write(&self, dir: &Path) -> Result<()> {
+        let text = toml::to_string(self).map_err(|e| Error::Compute(e.to_string()))?;
+        atomic::write(&dir.join("synth.toml"), format!("# Settings of `mrbp synth` that made this campaign.\n{text}").as_bytes())
+    }
+}
+
+/// The options that override a virtual stand's settings (`mrbp synth`,
+/// `mrbp study plan`).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct Overrides {
+    /// Coil currents (A), comma separated
+    #[arg(long, value_delimiter = ',')]
+    pub currents: Option<Vec<f64>>,
+    /// Crank speeds (rpm), comma separated
+    #[arg(long, value_delimiter = ',')]
+    pub rpm: Option<Vec<f64>>,
+    /// Crank revolutions per record
+    #[arg(long)]
+    pub cycles: Option<f64>,
+    /// Sampling rate (Hz)
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Force sensor noise, standard deviation (N)
+    #[arg(long)]
+    pub noise_force: Option<f64>,
+    /// Displacement sensor noise, standard deviation (m)
+    #[arg(long)]
+    pub noise_displacement: Option<f64>,
+}
+
+impl Overrides {
+    /// The settings file `config` (or the bundled campaign's settings) with
+    /// these overrides applied, and the sensor noise's `seed` if given.
+    pub fn settings(&self, config: Option<&Path>, seed: Option<u64>) -> Result<SynthSettings> {
+        let mut s = match config {
+            Some(path) => SynthSettings::read(path)?,
+            None => SynthSettings::default(),
+        };
+        if let Some(v) = &self.currents {
+            s.currents_a = v.clone();
+        }
+        if let Some(v) = &self.rpm {
+            s.rpms = v.clone();
+        }
+        s.cycles = self.cycles.unwrap_or(s.cycles);
+        s.rate_hz = self.rate.unwrap_or(s.rate_hz);
+        s.noise_force_n = self.noise_force.unwrap_or(s.noise_force_n);
+        s.noise_displacement_m = self.noise_displacement.unwrap_or(s.noise_displacement_m);
+        s.seed = seed.unwrap_or(s.seed);
+        Ok(s)
+    }
+}
+
 /// Sub-steps per sample for the "true" response, with Richardson
 /// extrapolation (second order): the discretisation error is then below
 /// 0.01 Pa, far below the sensor noise and below what a narrow posterior
@@ -214,7 +275,7 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
                 rec.displacement.iter().map(|x| x * 1e3).collect(),
                 rec.force.iter().map(|f| f * 1e-3).collect(),
             ).with_width(1));
-            atomic::write(&dir.join(&file), csv_text(&rec).as_bytes())?;
+            atomic::write(&dir.join(&file), crate::data::table::csv_text(&rec).as_bytes())?;
             runs.push(RunSpec {
                 id,
                 file: file.into(),
@@ -235,29 +296,9 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     };
     let header = "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
                   # Synthetic data: B-P model + sensor noise, not measurements.\n";
-    let body = toml::to_string(&manifest).map_err(|e| Error::Compute(e.to_string()))?;
-    atomic::write(&dir.join("campaign.toml"), format!("{header}{body}").as_bytes())?;
-    let settings_text = toml::to_string(settings).map_err(|e| Error::Compute(e.to_string()))?;
-    atomic::write(
-        &dir.join("synth.toml"),
-        format!("# Settings of `mrbp synth` that made this campaign.\n{settings_text}").as_bytes(),
-    )?;
+    manifest.write(&dir.join("campaign.toml"), header)?;
+    settings.write(dir)?;
     Ok(manifest)
-}
-
-/// The record as CSV with the default column names; numbers in Rust's
-/// shortest round-trip form, so the file is the same on every machine.
-pub fn csv_text(rec: &Record) -> String {
-    let mut s = String::with_capacity(rec.len() * 64);
-    s.push_str("time_s,displacement_m,force_n,current_a\n");
-    for k in 0..rec.len() {
-        let current = rec.current.as_ref().map(|c| c[k]).unwrap_or(f64::NAN);
-        s.push_str(&format!(
-            "{},{},{},{}\n",
-            rec.time[k], rec.displacement[k], rec.force[k], current
-        ));
-    }
-    s
 }
 
 #[cfg(test)]

@@ -170,7 +170,7 @@ fn default_sampler_agrees_with_a_long_differential_evolution_run() {
     slow.sampler.walkers = 24;
     slow.sampler.steps = 1500;
     let b = calibrate(&campaign, &slow).unwrap();
-    for (i, name) in a.sample.layout.names.iter().enumerate() {
+    for (i, name) in a.calibration.sample.layout.names.iter().enumerate() {
         let (p, q) = (&a.diagnostics.coordinates[i], &b.diagnostics.coordinates[i]);
         let z_mean = (p.mean - q.mean).abs() / (p.mcse_mean.powi(2) + q.mcse_mean.powi(2)).sqrt();
         let se_sd = (p.sd.powi(2) / (2.0 * p.ess_bulk) + q.sd.powi(2) / (2.0 * q.ess_bulk)).sqrt();

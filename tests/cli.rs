@@ -162,3 +162,31 @@ fn bare_command_outside_the_project_prints_help() {
     assert!(stderr(&o).contains("data/campaign.toml"), "{}", stderr(&o));
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing written");
 }
+
+/// Every option of every command has a distinct id and a valid shape.
+#[test]
+fn command_line_is_well_formed() {
+    use clap::CommandFactory;
+    mrbp::cli::Cli::command().debug_assert();
+}
+
+/// No command has two options of one name (flattened option groups share
+/// ids silently: `study plan` once had two `--seed`).
+#[test]
+fn no_command_has_an_option_twice() {
+    use clap::CommandFactory;
+    fn check(cmd: &clap::Command, path: &str) {
+        let mut seen = std::collections::BTreeSet::new();
+        for arg in cmd.get_arguments() {
+            if let Some(long) = arg.get_long() {
+                assert!(seen.insert(long.to_string()), "{path}: --{long} twice");
+            }
+        }
+        for sub in cmd.get_subcommands() {
+            check(sub, &format!("{path} {}", sub.get_name()));
+        }
+    }
+    let mut cli = mrbp::cli::Cli::command();
+    cli.build();
+    check(&cli, "mrbp");
+}

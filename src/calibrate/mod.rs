@@ -1,180 +1,153 @@
 //! One calibration: the runs of one current level (or of several, for the
 //! current law), from the identification through the MAP start and the
-//! step rule ([`start`]) to the posterior sample ([`sample`]).
+//! step rule ([`start`]) to the posterior sample ([`sample`]), and the
+//! calibration itself ([`Calibration`]), the same whether just made or read
+//! from its folder.
+//!
+//! * [`settings`]: what defines a calibration besides the data (the
+//!   `config.toml` format);
+//! * [`record`]: what a calibration did (`calibration.toml`);
+//! * [`sampling`]: one run of the sampler, for a calibration and for each
+//!   held-out calibration of leave-one-out alike.
 
+pub mod record;
+pub mod sampling;
 pub mod settings;
+pub mod start;
 
-use std::path::PathBuf;
-use std::time::Instant;
+use std::path::{Path, PathBuf};
 
-use crate::data::Campaign;
+use crate::data::{Campaign, Geometry, Manifest};
 use crate::error::{Error, Result};
-use crate::identify::{identify_current, CurrentIdentification};
-use crate::posterior::map::{self, MapEstimate, StepCheck};
-use crate::model::{Integrator, Scheme};
-use crate::posterior::{Posterior, PosteriorSample};
+use crate::posterior::map;
+use crate::posterior::{Draws, PosteriorSample, SummaryRow};
+use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
+pub use record::{command_line, CalibrationRecord, StepRow};
+pub use sampling::Sampled;
+pub use start::{start, Start, MEMORY_WARNING};
 pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
 
-/// Where sampling starts: the identification, the MAP, the step chosen and
-/// the posterior with it.
-pub struct Start {
-    /// The current the identification used (the law's nearest to its reference).
-    pub current_a: f64,
-    /// The settings with the walkers and sub-steps filled in.
+/// A calibration: its settings, what it did, its posterior sample and
+/// summary. What `predict`, `report`, `compare`, leave-one-out and studies
+/// start from, whether made by this process or read from its folder
+/// ([`crate::store::folder`]).
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    /// The folder it was written to or read from (empty until written).
+    pub dir: PathBuf,
     pub settings: CalibrationSettings,
-    pub identification: CurrentIdentification,
-    pub map: MapEstimate,
-    pub step_study: Vec<StepCheck>,
-    pub posterior: Posterior,
-    /// What the start found that the user should know (residuals with memory).
-    pub warnings: Vec<String>,
-    pub seconds: f64,
+    pub record: CalibrationRecord,
+    /// One row per coordinate: posterior statistics and diagnostics.
+    pub summary: Vec<SummaryRow>,
+    pub sample: PosteriorSample,
 }
 
-/// Everything a calibration produced: where it started and what it sampled.
-pub struct Calibration {
+/// What calibrating returns: the calibration, where it started and the
+/// sampler's chains in its own coordinates.
+pub struct Calibrated {
+    pub calibration: Calibration,
     pub start: Start,
-    pub campaign: Campaign,
-    /// The sampler's chains, in its unconstrained coordinates.
     pub chains: Chains,
-    /// The same chains in SI units.
-    pub sample: PosteriorSample,
-    /// Diagnostics in SI units, after burn-in.
+    /// Diagnostics in SI units after the burn-in.
     pub diagnostics: Diagnostics,
-    /// Wall time of the sampling (s).
-    pub sampling_seconds: f64,
 }
 
 impl Calibration {
-    /// Wall time of the whole calibration (s).
+    /// Wall time of the whole calibration (s): start and sampling.
     pub fn seconds(&self) -> f64 {
-        self.start.seconds + self.sampling_seconds
+        self.record.seconds_start + self.record.seconds_sampling
+    }
+
+    /// A short name for tables and legends: the folder's name.
+    pub fn label(&self) -> String {
+        self.dir.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_else(|| self.dir.display().to_string())
+    }
+
+    /// The campaign's runs that this calibration used.
+    pub fn campaign(&self) -> Result<Campaign> {
+        Ok(self.used_runs(&self.full_campaign()?))
+    }
+
+    /// The runs of `campaign` this calibration used.
+    pub fn used_runs(&self, campaign: &Campaign) -> Campaign {
+        let runs = &self.record.runs;
+        campaign.filtered(|r| runs.iter().any(|id| id == r.id()))
+    }
+
+    /// Every run of the campaign's manifest (a current law predicts them all).
+    pub fn full_campaign(&self) -> Result<Campaign> {
+        let manifest = PathBuf::from(&self.record.manifest);
+        if !manifest.exists() {
+            return Err(Error::input(
+                self.dir.join("calibration.toml"),
+                format!("the campaign manifest {} it names is not there any more", manifest.display()),
+            ));
+        }
+        let campaign = Campaign::load(&manifest)?;
+        let used = self.used_runs(&campaign);
+        if used.runs.len() != self.record.runs.len() {
+            return Err(Error::input(&manifest, format!("does not hold every run of the calibration in {}: {:?}", self.dir.display(), self.record.runs)));
+        }
+        Ok(campaign)
+    }
+
+    /// The campaign's geometry: from calibration.toml, or (folders written
+    /// before it was stored there) from the manifest it names.
+    pub fn geometry(&self) -> Option<Geometry> {
+        self.record.geometry.or_else(|| Manifest::read(Path::new(&self.record.manifest)).ok().map(|m| m.geometry))
+    }
+
+    pub fn is_current_law(&self) -> bool {
+        self.sample.model.is_current_law()
+    }
+
+    /// The largest R̂ and the smallest bulk or tail ESS of the summary.
+    pub fn max_rhat(&self) -> f64 {
+        self.summary.iter().map(|r| r.r_hat).fold(f64::NAN, f64::max)
+    }
+
+    pub fn min_ess(&self) -> f64 {
+        self.summary.iter().map(|r| r.ess_bulk.min(r.ess_tail)).fold(f64::NAN, f64::min)
+    }
+
+    /// Band settings with this calibration's integrator and noise model.
+    pub fn predict_settings(&self, replicates: usize, seed: u64) -> PredictSettings {
+        let integrator = self.settings.integrator.integrator(self.record.substeps);
+        PredictSettings { integrator, noise: self.settings.noise_model(), replicates, seed }
+    }
+
+    pub fn burn_in(&self) -> usize {
+        self.record.burn_in.min(self.sample.chains.steps().saturating_sub(1))
+    }
+
+    /// The largest integrated autocorrelation time of the summary (steps).
+    pub fn tau_max(&self) -> f64 {
+        self.summary.iter().map(|r| r.tau_int).filter(|t| t.is_finite()).fold(1.0, f64::max)
+    }
+
+    /// Its posterior draws: after the burn-in, thinned by τ_max.
+    pub fn draws(&self) -> Draws {
+        Draws::after(self.burn_in(), self.tau_max())
+    }
+
+    /// `count` of [`Self::draws`] spread evenly over what remains; each as
+    /// the `(step, chain)` it came from.
+    pub fn draw_positions(&self, count: usize) -> Vec<(usize, usize)> {
+        self.draws().positions(&self.sample.chains, count)
     }
 }
 
 /// Calibrates the runs of `campaign` with the default, quiet start and no
 /// observers.
-pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings) -> Result<Calibration> {
+pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings) -> Result<Calibrated> {
     let start = start(campaign, settings, &mut |_| {})?;
     sample(campaign, start, None, &mut [])
 }
 
-/// Identification, MAP and step rule. `log` receives a line per stage.
-pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn FnMut(&str)) -> Result<Start> {
-    let clock = Instant::now();
-    let mut settings = settings.clone();
-    let model = settings.parameter_model();
-    let current_a = model.identification_current(&campaign.currents())?;
-    let identification = identify_current(campaign, current_a, &settings.identify);
-    let integ = settings.integrator.clone();
-    // the MAP search runs on the linearly implicit scheme unless told
-    // otherwise: its likelihood is smooth on any record
-    let search_scheme = if integ.scheme == SchemeChoice::Auto { Scheme::LinearlyImplicit } else { integ.scheme.scheme() };
-    let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
-    let posterior = settings.posterior(campaign, base);
-    // the sampler's settings are checked before minutes of MAP search
-    if settings.sampler.walkers != 0 {
-        let s = &settings.sampler;
-        s.sampler(s.walkers, s.seed).check(posterior.layout.dim())?;
-    }
-    // the identification may be far off (docs/identification.md): also start
-    // from the prior medians and keep the better optimum
-    let from_identification: Vec<f64> = model.start(&identification.params, current_a).iter().map(|v| v.ln()).collect();
-    let medians: Vec<f64> = posterior
-        .priors
-        .iter()
-        .zip(&from_identification)
-        .map(|(p, v)| p.centre().map(|(c, _)| c).unwrap_or(*v))
-        .collect();
-    // θ from either, the model terms (if any) from zero
-    let fitted = posterior.layout.fitted.len();
-    let starts = [from_identification, medians].map(|log| {
-        let mut x = posterior.layout.theta_coordinates(&log);
-        x.resize(fitted, 0.0);
-        x
-    });
-    let map = map::best_map(&posterior, &starts)
-        .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
-    log(&format!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64()));
-    let schemes: Vec<Scheme> = match integ.scheme {
-        SchemeChoice::Auto => vec![Scheme::Explicit, Scheme::LinearlyImplicit],
-        chosen => vec![chosen.scheme()],
-    };
-    let names = posterior.layout.coordinate_names();
-    // each scheme's step, and the Euler steps a log-density costs with it at the MAP
-    let mut candidates = Vec::new();
-    for scheme in schemes {
-        let scheme_base = Integrator { scheme, ..base };
-        let (substeps, at, study) = if integ.substeps == 0 {
-            map::choose_substeps(&posterior.with_integrator(scheme_base), &map, scheme_base, integ.max_rule_substeps)
-        } else {
-            (integ.substeps, map.clone(), vec![])
-        };
-        for s in &study {
-            let (i, v) = s.worst();
-            log(&format!("  step rule ({scheme:?}): {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, names[i]));
-        }
-        let chosen = posterior.with_integrator(Integrator { substeps, ..scheme_base });
-        let work = map::euler_steps(&chosen, &at.x);
-        log(&format!("  {scheme:?} with {substeps} sub-step(s): {work} Euler steps per log-density"));
-        candidates.push((work, chosen, at, study));
-    }
-    // the cheaper scheme at the accuracy the step rule asks for: explicit on
-    // smooth records, linearly implicit where stiffness makes the explicit
-    // one cut its steps (and its likelihood rugged)
-    let (_, posterior, map, step_study) = candidates.into_iter().min_by_key(|c| c.0).expect("at least one scheme");
-    // the MAP with the chosen integrator, from the one found; the curvature
-    // stays the smooth search's
-    let map = match posterior.integrator != base {
-        true => map::refine(&posterior, &map.x).map(|moved| map.curvature_at(moved)).unwrap_or(map),
-        false => map,
-    };
-    settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
-    settings.integrator.substeps = posterior.integrator.substeps;
-    if settings.sampler.walkers == 0 {
-        settings.sampler.walkers = SamplingSettings::walkers_for(posterior.layout.dim());
-    }
-    let warnings = memory_warnings(&posterior, &map);
-    for w in &warnings {
-        log(&format!("  warning: {w}"));
-    }
-    Ok(Start { current_a, settings, identification, map, step_study, posterior, warnings, seconds: clock.elapsed().as_secs_f64() })
-}
-
-/// Lag-1 autocorrelation of the MAP residuals above which independent noise
-/// makes intervals too narrow by more than √3 (AR(1) variance inflation).
-pub const MEMORY_WARNING: f64 = 0.5;
-
-/// A warning per run whose MAP residuals are correlated in time while the
-/// noise model takes them as independent.
-fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
-    if posterior.noise.models_memory() {
-        return Vec::new();
-    }
-    let Some(rhos) = map::residual_autocorrelation(posterior, &map.x) else {
-        return Vec::new();
-    };
-    posterior
-        .runs
-        .iter()
-        .zip(rhos)
-        .filter(|(_, rho)| *rho > MEMORY_WARNING)
-        .map(|(run, rho)| {
-            format!(
-                "{}: the MAP residuals have a lag-1 autocorrelation of {rho:.2}, but the noise model takes them as independent; \
-                 parameter intervals are too narrow by about {:.1}× (see the report's model adequacy section)",
-                run.id,
-                ((1.0 + rho.min(0.999)) / (1.0 - rho.min(0.999))).sqrt()
-            )
-        })
-        .collect()
-}
-
 /// Samples the posterior from `start`: from walkers around the MAP, or from
 /// the checkpoint at `resume_from`. `observers` watch the sampler.
-pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, observers: &mut [&mut dyn Observer]) -> Result<Calibration> {
-    let clock = Instant::now();
+pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, observers: &mut [&mut dyn Observer]) -> Result<Calibrated> {
     let posterior = &start.posterior;
     let s = &start.settings.sampler;
     let sampler_settings = s.sampler(s.walkers, s.seed);
@@ -191,18 +164,14 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
             Sampler::new(posterior, sampler_settings, &init)?
         }
     };
-    // convergence is judged on the SI parameters the outputs report
-    let layout = &posterior.layout;
-    let diagnose = |chains: &Chains| {
-        // burn-in from the sampler's own coordinates, in which τ is estimated
-        let burn_in = if s.burn_in > 0 { s.burn_in } else { Diagnostics::burn_in_rule(chains) };
-        PosteriorSample::from_coordinates(layout, posterior.model, chains).diagnostics(burn_in)
+    let sampled = sampling::run(posterior, &mut sampler, &s.control(), s.burn_in, observers)?;
+    let record = CalibrationRecord::of(campaign, &start, &sampled);
+    let calibration = Calibration {
+        dir: PathBuf::new(),
+        settings: start.settings.clone(),
+        record,
+        summary: SummaryRow::rows(&sampled.sample.layout, &sampled.diagnostics),
+        sample: sampled.sample,
     };
-    sampler.run_until(&s.control(), observers, &diagnose)?;
-    let chains = sampler.chains.clone();
-    let sampling = clock.elapsed().as_secs_f64();
-    let burn_in = if s.burn_in > 0 { s.burn_in } else { Diagnostics::burn_in_rule(&chains) };
-    let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains);
-    let diagnostics = sample.diagnostics(burn_in);
-    Ok(Calibration { start, campaign: campaign.clone(), chains, sample, diagnostics, sampling_seconds: sampling })
+    Ok(Calibrated { calibration, start, chains: sampled.chains, diagnostics: sampled.diagnostics })
 }

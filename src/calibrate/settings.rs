@@ -1,9 +1,10 @@
 //! Settings of a calibration: likelihood, integrator, sampler and priors.
 //! Read from `--config FILE` (TOML, every table optional) and written back
-//! beside the outputs as `config.toml` with the values actually used.
+//! beside the outputs as `config.toml` with the values actually used: this
+//! module owns that format, both ways.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
@@ -12,7 +13,8 @@ use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::IdentifySettings;
 use crate::model::{Integrator, Scheme, PARAM_NAMES};
-use crate::noise::NoiseModel;
+use crate::data::RecordPart;
+use crate::noise::{NoiseKind, NoiseModel};
 use crate::posterior::prior::default_priors;
 use crate::posterior::{Coordinates, LikelihoodSettings, ModelKind, ModelTerms, ParameterModel, Posterior, Prior};
 use crate::sampler::{Move, RunControl, SamplerSettings};
@@ -146,6 +148,78 @@ impl Default for SamplingSettings {
     }
 }
 
+/// The options of `mrbp sample` (and `run`, `study plan`) that override the
+/// settings file, in emcee's words where they exist.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct Overrides {
+    /// Settings file (TOML): priors, likelihood, integrator, sampler; the
+    /// options below override it
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// How the B-P parameters relate to the runs (default: per-current)
+    #[arg(long, value_enum)]
+    pub model: Option<ModelKind>,
+    /// Walkers per ensemble (default: the smallest even number ≥ max(64, 6 × dimension))
+    #[arg(long)]
+    pub walkers: Option<usize>,
+    /// Independent ensembles (default 4)
+    #[arg(long)]
+    pub ensembles: Option<usize>,
+    /// A fixed number of steps (default: until converged, R̂ < 1.01, ESS ≥ 400)
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Seed of the sampler's random streams (default 1); the same seed gives
+    /// the same chains on any number of threads
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Residual model (default: gaussian)
+    #[arg(long, value_enum)]
+    pub noise: Option<NoiseKind>,
+    /// Samples in the likelihood (default: whole-record)
+    #[arg(long, value_enum)]
+    pub part: Option<RecordPart>,
+    /// Take the measured displacement as exact (by default its noise,
+    /// estimated from the record, reaches the stress through the model's
+    /// stiffness: errors in variables, with gaussian noise; docs/calibration.md)
+    #[arg(long)]
+    pub exact_input: bool,
+    /// Integrator sub-steps per sample, at least 1 (default: chosen by the step rule)
+    #[arg(long)]
+    pub substeps: Option<u32>,
+}
+
+impl Overrides {
+    /// The settings file with the options applied, checked.
+    pub fn settings(&self) -> Result<CalibrationSettings> {
+        let mut s = match &self.config {
+            Some(path) => CalibrationSettings::read(path)?,
+            None => CalibrationSettings::default(),
+        };
+        let positive = |v: usize, name: &str| if v == 0 { Err(Error::Usage(format!("{name} must be at least 1"))) } else { Ok(v) };
+        if let Some(v) = self.walkers {
+            s.sampler.walkers = positive(v, "--walkers")?;
+        }
+        if let Some(v) = self.ensembles {
+            s.sampler.ensembles = positive(v, "--ensembles")?;
+        }
+        if let Some(v) = self.steps {
+            s.sampler.steps = positive(v, "--steps")?;
+        }
+        if let Some(v) = self.substeps {
+            s.integrator.substeps = positive(v as usize, "--substeps")? as u32;
+        }
+        s.sampler.seed = self.seed.unwrap_or(s.sampler.seed);
+        s.likelihood.noise = self.noise.unwrap_or(s.likelihood.noise);
+        s.likelihood.part = self.part.unwrap_or(s.likelihood.part);
+        if self.exact_input {
+            s.likelihood.errors_in_variables = false;
+        }
+        s.model = self.model.unwrap_or(s.model);
+        s.check().map_err(Error::Usage)?;
+        Ok(s)
+    }
+}
+
 /// Everything that defines a calibration besides the data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -241,7 +315,11 @@ impl CalibrationSettings {
         Posterior::new(campaign, model, model.priors(&self.priors()), &self.likelihood, self.sigma_bounds_pa, integrator, self.sampler.coordinates, &self.terms)
     }
 
-    pub fn to_toml(&self) -> Result<String> {
-        toml::to_string(self).map_err(|e| Error::Compute(format!("writing settings: {e}")))
+    /// Writes the settings file (`config.toml`: the settings a calibration
+    /// actually used, which `--config` takes back to repeat it).
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let text = toml::to_string(self).map_err(|e| Error::Compute(format!("writing settings: {e}")))?;
+        let header = "# Settings actually used by this calibration; pass back with --config to repeat it.\n";
+        crate::atomic::write(path, format!("{header}{text}").as_bytes())
     }
 }

@@ -1,185 +1,53 @@
-//! What the command line prints: one function per kind of result.
+//! What the command line prints: each event of a stage, its tables from
+//! [`crate::report::text`].
 
-use crate::calibrate::Calibration;
-use crate::data::Campaign;
-use crate::identify::CurrentIdentification;
 use crate::pipeline::Event;
-use crate::posterior::ParameterModel;
-use crate::store::PredictionRecord;
-use crate::validate::LooRow;
+use crate::report::text;
 
 /// Prints what a pipeline stage did.
 pub fn event(e: Event) {
     match e {
         Event::Note(line) => eprintln!("{line}"),
-        Event::Checked(campaign) => campaign_table(campaign),
-        Event::Identified(results) => {
-            identification_table(results);
-        }
+        Event::Checked(campaign) => print!("{}", text::campaign(campaign)),
+        Event::Identified(results) => print!("{}", text::identification(results)),
         Event::Calibrating { what, dir } => println!("\ncalibrating {what} into {}", dir.display()),
-        Event::Calibrated(cal) => calibration_summary(cal),
+        Event::Calibrated(cal) => print!("{}", text::calibration(cal)),
         Event::Predicted { record, dir } => {
-            prediction_table(record);
+            print!("{}", text::prediction(record));
             println!("wrote bands.parquet, coverage.parquet and prediction.toml to {}", dir.display());
         }
-        Event::LeftOneOut { rows, seconds } => loo_table(rows, seconds),
+        Event::LeftOneOut { rows, seconds } => print!("{}", text::leave_one_out(rows, seconds)),
         Event::Wrote(path) => println!("wrote {}", path.display()),
     }
 }
 
-/// `mrbp check`: one line per run.
-fn campaign_table(campaign: &Campaign) {
-    println!("campaign '{}' ({}): {} runs", campaign.name, campaign.manifest_path.display(), campaign.runs.len());
-    println!("{:<16} {:>8} {:>11} {:>13} {:>10} {:>9}", "run", "samples", "duration_s", "peak_force_n", "current_a", "branches");
-    for run in &campaign.runs {
-        let rec = &run.record;
-        let peak = rec.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
-        println!(
-            "{:<16} {:>8} {:>11.3} {:>13.1} {:>10.2} {:>9}",
-            run.id(),
-            rec.len(),
-            rec.time[rec.len() - 1] - rec.time[0],
-            peak,
-            run.spec.current_a,
-            run.branches.len()
-        );
+/// The reports a whole job wrote, and its wall time.
+pub fn reports(reports: &[std::path::PathBuf], clock: std::time::Instant) {
+    println!("\nreports:");
+    for r in reports {
+        println!("  {}", r.display());
     }
+    println!("whole job: {:.0} s", clock.elapsed().as_secs_f64());
 }
 
-/// The identification: one line per run and the combined estimate.
-fn identification_table(results: &[CurrentIdentification]) {
-    for res in results {
-        println!("\nidentification at {} A", res.current_a);
-        println!(
-            "{:<14} {:>9} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>9}",
-            "run", "G", "tau02", "rate02", "R0", "R1", "D1", "m1", "m2", "n", "", "rms_pa"
-        );
-        for (i, r) in res.runs.iter().enumerate() {
-            if let Some(f) = &r.steady {
-                // steady cycles: G, the saturated R + D and n of the flow curve
-                println!(
-                    "{:<14} {:>9.3e} {:>9} {:>8} {:>9} {:>19} {:>9} {:>9} {:>9.3} {:>6} {:>9.1}",
-                    r.run, r.g, "", "", "", format!("R1+D1 {:.3e}", f.z), "", "", f.n, "steady", res.euler_rms[i]
-                );
-                continue;
-            }
-            let (t, g) = r.yield_point.unwrap_or((f64::NAN, f64::NAN));
-            println!(
-                "{:<14} {:>9.3e} {:>9.3e} {:>8.1} {:>9} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9} {:>6} {:>9.1}",
-                r.run, r.g, t, g, "", r.r1, r.d1, r.m1, r.m2, "", "", res.euler_rms[i]
-            );
+/// What collecting a study found, and the coverage of its known truths.
+pub fn study(found: &crate::study::Collected, dir: &std::path::Path) {
+    println!(
+        "collected {} of {} task(s) into {} ({} failed, {} without a result yet)",
+        found.ok,
+        found.tasks,
+        dir.join("collected").display(),
+        found.failed,
+        found.missing.len()
+    );
+    if !found.missing.is_empty() {
+        println!("without a result: {}", found.missing.join(", "));
+    }
+    if let Some(first) = found.coverage.first() {
+        println!("\nagainst the known truths (binomial se at the nominal share: 50 % ± {:.0}, 90 % ± {:.0}):", 100.0 * first.se_at(0.5), 100.0 * first.se_at(0.9));
+        println!("{:<22} {:>6} {:>8} {:>8} {:>8} {:>7} {:>8}", "coordinate", "tasks", "in 50 %", "in 90 %", "mean z", "sd z", "rank p");
+        for r in &found.coverage {
+            println!("{:<22} {:>6} {:>7.0}% {:>7.0}% {:>8.2} {:>7.2} {:>8.3}", r.parameter, r.tasks, 100.0 * r.inside_50, 100.0 * r.inside_90, r.z_mean, r.z_sd, r.rank_p);
         }
-        let p = res.params;
-        println!(
-            "{:<14} {:>9.3e} {:>9} {:>8} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3} {:>6}",
-            "all", p.g, "", "", p.r0, p.r1, p.d1, p.m1, p.m2, p.n, "(SI)"
-        );
-        for w in &res.warnings {
-            println!("  warning: {w}");
-        }
-        for r in &res.runs {
-            for w in &r.warnings {
-                println!("  warning: run {}: {w}", r.run);
-            }
-        }
-    }
-}
-
-/// The posterior summary table and the diagnostics' verdict.
-fn calibration_summary(cal: &Calibration) {
-    let dg = &cal.diagnostics;
-    let at = match cal.start.posterior.model {
-        ParameterModel::CurrentLaw { reference_a } => format!("current law (reference {reference_a} A) from {:?} A", cal.campaign.currents()),
-        ParameterModel::PerCurrent => format!("posterior at {} A", cal.start.current_a),
-    };
-    println!(
-        "\n{at}: {} walkers × {} steps, burn-in {} (τ_max {:.1}), {:?} noise, {} sub-step(s) per sample",
-        cal.chains.chains(),
-        dg.steps,
-        dg.burn_in,
-        dg.tau_max,
-        cal.start.settings.likelihood.noise,
-        cal.start.settings.integrator.substeps
-    );
-    println!(
-        "{:<22} {:>11} {:>10} {:>11} {:>11} {:>11} {:>8} {:>8} {:>7} {:>7} {:>6}",
-        "parameter", "mean", "sd", "q05", "q50", "q95", "ess_bulk", "ess_tail", "ess/s", "r_hat", "tau"
-    );
-    for (name, p) in cal.sample.layout.names.iter().zip(&dg.coordinates) {
-        println!(
-            "{:<22} {:>11.4e} {:>10.3e} {:>11.4e} {:>11.4e} {:>11.4e} {:>8.0} {:>8.0} {:>7.0} {:>7.4} {:>6.1}",
-            name,
-            p.mean,
-            p.sd,
-            p.q05,
-            p.q50,
-            p.q95,
-            p.ess_bulk,
-            p.ess_tail,
-            p.ess_bulk / cal.seconds(),
-            p.r_hat,
-            p.tau_int
-        );
-    }
-    if dg.warnings.is_empty() {
-        println!(
-            "diagnostics: R̂ < 1.01, ESS ≥ {:.0}, chains longer than {} τ, no stuck walkers",
-            cal.start.settings.sampler.min_ess,
-            crate::sampler::diagnostics::MIN_TAU_MULTIPLE
-        );
-    }
-    for w in dg.warnings.iter().chain(&cal.start.warnings) {
-        println!("warning: {w}");
-    }
-    println!(
-        "wall time: {:.1} s (identification, MAP and step rule {:.1} s, sampling {:.1} s)",
-        cal.seconds(),
-        cal.start.seconds,
-        cal.sampling_seconds
-    );
-}
-
-/// The coverage of every predicted run.
-fn prediction_table(record: &PredictionRecord) {
-    let rows = &record.coverage;
-    println!(
-        "\n{} posterior draws (after a burn-in of {} steps, thinned by {} steps) through {} run(s) in {:.1} s",
-        record.draws,
-        record.burn_in,
-        record.thin,
-        rows.len(),
-        record.seconds
-    );
-    println!("{:<16} {:>8} {:>12} {:>12} {:>12} {:>10}", "run", "samples", "in_p95_%", "in_q95_%", "rmse_q50_pa", "");
-    for r in rows {
-        println!(
-            "{:<16} {:>8} {:>12.1} {:>12.1} {:>12.1} {:>10}",
-            r.run,
-            r.samples,
-            100.0 * r.inside_p95,
-            100.0 * r.inside_q95,
-            r.rmse_q50_pa,
-            if r.calibrated { "" } else { "held out" }
-        );
-    }
-}
-
-fn loo_table(rows: &[LooRow], seconds: f64) {
-    println!("\nleave-one-out ({seconds:.1} s):");
-    println!("{:<16} {:>12} {:>12} {:>10} {:>8} {:>10} {:>20} {:>8}", "held out", "in_p95_%", "rmse_q50_pa", "lppd/sample", "k̂", "k̂_laplace", "held-out posterior", "max_R̂");
-    for r in rows {
-        let c = &r.coverage;
-        let or_dash = |v: f64, digits: usize| if v.is_finite() { format!("{v:.digits$}") } else { "–".into() };
-        println!(
-            "{:<16} {:>12.1} {:>12.1} {:>10.3} {:>8.2} {:>10} {:>20} {:>8}",
-            c.run,
-            100.0 * c.inside_p95,
-            c.rmse_q50_pa,
-            c.lppd / c.samples.max(1) as f64,
-            r.pareto_k,
-            or_dash(r.pareto_k_laplace, 2),
-            r.by.label(),
-            or_dash(r.max_rhat, 4)
-        );
     }
 }

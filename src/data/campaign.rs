@@ -2,13 +2,14 @@
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
 use super::branches::{loading_branches, REVERSAL_SHARE};
 use super::shear::{Geometry, Shear};
-use super::table::{ColumnMap, Record};
-use crate::error::{Error, Result};
+use super::table::{ColumnMap, Columns, Limits, Record};
+use crate::error::{one_line, Error, Result};
 
 /// The manifest file as written by the user (contract.md).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -25,61 +26,9 @@ pub struct Manifest {
     pub runs: Vec<RunSpec>,
 }
 
-/// The largest magnitudes a stand record may hold, in SI units after the
-/// column scales (`[limits]` in the manifest). The defaults are far beyond
-/// any damper test (a meganewton, ten metres, ten days, a kiloampere), so a
-/// value past them is a unit or export error, caught with its row.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct Limits {
-    pub force_n: f64,
-    pub displacement_m: f64,
-    pub time_s: f64,
-    pub current_a: f64,
-}
-
-impl Limits {
-    fn is_default(&self) -> bool {
-        *self == Limits::default()
-    }
-}
-
-impl Default for Limits {
-    fn default() -> Self {
-        Limits { force_n: 1e6, displacement_m: 10.0, time_s: 1e6, current_a: 1e3 }
-    }
-}
-
 /// The file's current column may differ from the manifest's current_a by
 /// this much (A) or this share of it, whichever is larger: sensor ripple.
 const CURRENT_AGREEMENT: (f64, f64) = (0.05, 0.05);
-
-/// Column names in the data files and the factors to SI units.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct Columns {
-    pub time: String,
-    pub displacement: String,
-    pub force: String,
-    pub current: String,
-    pub time_scale: f64,
-    pub displacement_scale: f64,
-    pub force_scale: f64,
-}
-
-impl Default for Columns {
-    fn default() -> Self {
-        Columns {
-            time: "time_s".into(),
-            displacement: "displacement_m".into(),
-            force: "force_n".into(),
-            current: "current_a".into(),
-            time_scale: 1.0,
-            displacement_scale: 1.0,
-            force_scale: 1.0,
-        }
-    }
-}
 
 /// One `[[run]]` entry of the manifest.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -138,13 +87,21 @@ pub struct Campaign {
     pub manifest_path: PathBuf,
     pub geometry: Geometry,
     pub columns: Columns,
-    pub runs: Vec<Run>,
+    /// The runs, shared: a campaign filtered to some runs holds the same
+    /// records, not copies.
+    pub runs: Vec<Arc<Run>>,
     /// What loading noticed but did not refuse (files outside the
     /// manifest's folder, runs without motion or force).
     pub notes: Vec<String>,
 }
 
 impl Manifest {
+    /// Writes the manifest to `path`, after the comment lines `header`.
+    pub fn write(&self, path: &Path, header: &str) -> Result<()> {
+        let body = toml::to_string(self).map_err(|e| Error::Compute(format!("writing {}: {e}", path.display())))?;
+        crate::atomic::write(path, format!("{header}{body}").as_bytes())
+    }
+
     /// Reads and checks a manifest without opening the data files.
     pub fn read(path: &Path) -> Result<Manifest> {
         let text = std::fs::read_to_string(path).map_err(|e| {
@@ -269,14 +226,14 @@ impl Campaign {
             }
             let shear = Shear::from_record(&record, &manifest.geometry, spec.initial_stress_pa);
             let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
-            runs.push(Run {
+            runs.push(Arc::new(Run {
                 spec: spec.clone(),
                 path,
                 record,
                 shear,
                 branches,
                 geometry: manifest.geometry,
-            });
+            }));
         }
         for run in &runs {
             notes.extend(run.unusable());
@@ -313,8 +270,12 @@ impl Campaign {
     /// The same campaign restricted to the runs that `keep` accepts.
     pub fn filtered(&self, keep: impl Fn(&Run) -> bool) -> Campaign {
         Campaign {
+            name: self.name.clone(),
+            manifest_path: self.manifest_path.clone(),
+            geometry: self.geometry,
+            columns: self.columns.clone(),
             runs: self.runs.iter().filter(|r| keep(r)).cloned().collect(),
-            ..self.clone()
+            notes: self.notes.clone(),
         }
     }
 
@@ -346,10 +307,6 @@ pub fn current_tag(current_a: f64) -> String {
     } else {
         format!("I{digits}.0A")
     }
-}
-
-pub(crate) fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 #[cfg(test)]

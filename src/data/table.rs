@@ -5,8 +5,61 @@
 
 use std::path::Path;
 
-use super::campaign::{one_line, Limits};
-use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{one_line, Error, Result};
+
+/// Column names in the data files and the factors to SI units.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Columns {
+    pub time: String,
+    pub displacement: String,
+    pub force: String,
+    pub current: String,
+    pub time_scale: f64,
+    pub displacement_scale: f64,
+    pub force_scale: f64,
+}
+
+impl Default for Columns {
+    fn default() -> Self {
+        Columns {
+            time: "time_s".into(),
+            displacement: "displacement_m".into(),
+            force: "force_n".into(),
+            current: "current_a".into(),
+            time_scale: 1.0,
+            displacement_scale: 1.0,
+            force_scale: 1.0,
+        }
+    }
+}
+
+/// The largest magnitudes a stand record may hold, in SI units after the
+/// column scales (`[limits]` in the manifest). The defaults are far beyond
+/// any damper test (a meganewton, ten metres, ten days, a kiloampere), so a
+/// value past them is a unit or export error, caught with its row.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Limits {
+    pub force_n: f64,
+    pub displacement_m: f64,
+    pub time_s: f64,
+    pub current_a: f64,
+}
+
+impl Limits {
+    pub fn is_default(&self) -> bool {
+        *self == Limits::default()
+    }
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits { force_n: 1e6, displacement_m: 10.0, time_s: 1e6, current_a: 1e3 }
+    }
+}
 
 /// One test record: time (s), displacement (m), force (N), and the coil
 /// current (A) if the file has it. Units are SI after the manifest's scales.
@@ -26,6 +79,20 @@ pub struct ColumnMap<'a> {
     pub force: (&'a str, f64),
     /// Optional: read if present.
     pub current: &'a str,
+}
+
+/// The record as CSV with the default column names ([`Columns`]);
+/// numbers in Rust's shortest round-trip form, so the file is the same on
+/// every machine.
+pub fn csv_text(rec: &Record) -> String {
+    let c = Columns::default();
+    let mut s = String::with_capacity(rec.len() * 64);
+    s.push_str(&format!("{},{},{},{}\n", c.time, c.displacement, c.force, c.current));
+    for k in 0..rec.len() {
+        let current = rec.current.as_ref().map(|c| c[k]).unwrap_or(f64::NAN);
+        s.push_str(&format!("{},{},{},{}\n", rec.time[k], rec.displacement[k], rec.force[k], current));
+    }
+    s
 }
 
 /// The fewest samples a record may have: below it there is no loading and

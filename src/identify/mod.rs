@@ -29,6 +29,27 @@ use crate::model::{Integrator, Params, PARAM_NAMES};
 use hardening::{Asymptote, CurveFit, Eq7};
 use yield_stress::YieldFit;
 
+/// The options of `mrbp identify` that override the identification's
+/// defaults.
+#[derive(clap::Args, Debug, Clone)]
+pub struct IdentifyOptions {
+    /// Loading branch of each record to identify from (0: the first, from rest)
+    #[arg(long, default_value_t = IdentifySettings::default().branch)]
+    pub branch: usize,
+    /// Half-width (ms) of the smoothing of τ, γ and their derivatives
+    #[arg(long, default_value_t = IdentifySettings::default().smooth_ms)]
+    pub smooth_ms: f64,
+}
+
+impl IdentifyOptions {
+    pub fn settings(&self) -> crate::Result<IdentifySettings> {
+        if !(self.smooth_ms > 0.0) {
+            return Err(crate::Error::Usage(format!("--smooth-ms must be positive, got {}", self.smooth_ms)));
+        }
+        Ok(IdentifySettings { branch: self.branch, smooth_ms: self.smooth_ms, ..IdentifySettings::default() })
+    }
+}
+
 /// Choices of the identification; the defaults are the documented rules.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -373,29 +394,35 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
             params.to_array()[i]
         ));
     }
-    let mut euler_rms = Vec::new();
-    let mut euler_tau = Vec::new();
-    for run in &group.runs {
-        let sh = &run.shear;
-        let integ = Integrator { max_substeps: 100_000, ..Integrator::default() };
-        let mut tau = vec![0.0; sh.len()];
-        let init = crate::model::State { tau: sh.initial_tau, w: 0.0 };
-        // driven by the strain the calibration uses: smooth, not quantised
-        let gamma = crate::data::smoothed_strain(&sh.time, &sh.gamma, s.drive_smooth_ms);
-        match integ.run_with(&params, &sh.time, &gamma, init, |k, st| tau[k] = st.tau) {
-            Ok(_) => {
-                let ss: f64 = tau.iter().zip(&sh.tau).map(|(m, o)| (m - o).powi(2)).sum();
-                euler_rms.push((ss / sh.len() as f64).sqrt());
-                euler_tau.push(tau);
-            }
-            Err(e) => {
-                warnings.push(format!("Euler solution of run {} failed: {e}", run.id()));
-                euler_rms.push(f64::NAN);
-                euler_tau.push(vec![]);
-            }
-        }
-    }
+    let (euler_rms, euler_tau) = euler_check(&group, &params, s, &mut warnings);
     CurrentIdentification { current_a, runs, yield_fit, raw, params, euler_rms, euler_tau, warnings }
+}
+
+/// The paper's check of the combined estimate: the explicit Euler solution
+/// along every run of `group`, driven by the strain the calibration uses
+/// (smooth, not quantised), and its RMS misfit per run.
+fn euler_check(group: &Campaign, params: &Params, s: &IdentifySettings, warnings: &mut Vec<String>) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let integ = Integrator { max_substeps: 100_000, ..Integrator::default() };
+    group
+        .runs
+        .iter()
+        .map(|run| {
+            let sh = &run.shear;
+            let mut tau = vec![0.0; sh.len()];
+            let init = crate::model::State { tau: sh.initial_tau, w: 0.0 };
+            let gamma = crate::data::smoothed_strain(&sh.time, &sh.gamma, s.drive_smooth_ms);
+            match integ.run_with(params, &sh.time, &gamma, init, |k, st| tau[k] = st.tau) {
+                Ok(_) => {
+                    let ss: f64 = tau.iter().zip(&sh.tau).map(|(m, o)| (m - o).powi(2)).sum();
+                    ((ss / sh.len() as f64).sqrt(), tau)
+                }
+                Err(e) => {
+                    warnings.push(format!("Euler solution of run {} failed: {e}", run.id()));
+                    (f64::NAN, vec![])
+                }
+            }
+        })
+        .unzip()
 }
 
 /// One identification per current level of the campaign, ascending current.

@@ -139,7 +139,7 @@ mod tests {
         let tau = Integrator { substeps: 8, extrapolate: true, max_substeps: 100_000, ..Integrator::default() }.run(&p, &t, &gamma).unwrap().tau;
         let dir = tempfile::tempdir().unwrap();
         let rec = crate::data::Record { time: t, displacement: x, force: tau.iter().map(|v| v * 0.05).collect(), current: None };
-        std::fs::write(dir.path().join("r.csv"), crate::synth::csv_text(&rec).replace(",NaN", ",1")).unwrap();
+        std::fs::write(dir.path().join("r.csv"), crate::data::table::csv_text(&rec).replace(",NaN", ",1")).unwrap();
         let manifest = Manifest {
             name: "t".into(),
             geometry: Geometry { area_m2: 0.05, gap_m: 1e-3 },

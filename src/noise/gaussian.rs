@@ -17,7 +17,7 @@ use std::sync::Arc;
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
-use super::{log_uniform, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform};
+use super::model::{log_uniform, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform};
 use crate::data::RunData;
 use crate::model::{tangent_stiffness, LANES};
 

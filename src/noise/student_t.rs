@@ -7,7 +7,7 @@ use std::sync::Arc;
 use rand::{Rng, RngExt};
 use rand_distr::{StandardNormal, StudentT as StudentTDistribution};
 
-use super::{log_uniform, rms, student_t_log_constant, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform};
+use super::model::{log_uniform, rms, student_t_log_constant, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform};
 use crate::data::RunData;
 use crate::model::LANES;
 

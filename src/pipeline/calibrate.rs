@@ -3,19 +3,17 @@
 use std::path::Path;
 
 use super::{folders, Event, Pipeline, SampleRequest};
-use crate::calibrate::{self, CalibrationSettings};
+use crate::calibrate::{self, Calibration, CalibrationSettings};
 use crate::data::{current_tag, same_current, Campaign};
 use crate::error::{Error, Result};
 use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings};
 use crate::report;
 use crate::sampler::{Checkpointer, Observer};
-use crate::store::{self, CalibrationRecord, StoredCalibration};
+use crate::store;
 
 /// Steps between two checkpoints of the sampler.
 const CHECKPOINT_EVERY: usize = 100;
 
-/// The sampler's checkpoint in a calibration folder.
-pub const CHECKPOINT: &str = "sampler.checkpoint";
 
 /// Checks a checkpoint against the options before any work: readable, the
 /// same sampler (ensembles, walkers where given, moves, seed), and not
@@ -56,7 +54,7 @@ impl Pipeline<'_> {
         folders::prepare(out, "--out", &[campaign], &folders::IDENTIFICATION, force)?;
         campaign.require_usable("the identification")?;
         let results = identify_campaign(campaign, settings);
-        store::identification::write(&out.join("identification.parquet"), &results)?;
+        store::identification::write(&out.join(store::identification::FILE), &results)?;
         report::identification::write(out, campaign, &results)?;
         self.emit(Event::Identified(&results));
         Ok(results)
@@ -65,7 +63,7 @@ impl Pipeline<'_> {
     /// Calibrations of `campaign` as `request` says: one per current level
     /// (in `out`, or `out/I<current>A/` when there are several), or one
     /// current law over the currents not held out. Returns the folders.
-    pub fn sample(&mut self, campaign: &Campaign, out: &Path, request: &SampleRequest) -> Result<Vec<StoredCalibration>> {
+    pub fn sample(&mut self, campaign: &Campaign, out: &Path, request: &SampleRequest) -> Result<Vec<Calibration>> {
         let settings = &request.settings;
         campaign.require_usable("the calibration")?;
         folders::prepare(out, "--out", &[campaign], &[], true)?;
@@ -107,9 +105,9 @@ impl Pipeline<'_> {
     /// chains, summary, settings and record; the files derived from an
     /// earlier calibration there are removed. `what` names the calibration
     /// in messages.
-    pub fn calibrate_into(&mut self, campaign: &Campaign, dir: &Path, request: &SampleRequest, what: &str) -> Result<StoredCalibration> {
+    pub fn calibrate_into(&mut self, campaign: &Campaign, dir: &Path, request: &SampleRequest, what: &str) -> Result<Calibration> {
         let settings = &request.settings;
-        let checkpoint = dir.join(CHECKPOINT);
+        let checkpoint = dir.join(store::folder::CHECKPOINT);
         folders::prepare(dir, "--out", &[campaign], &folders::CALIBRATION, request.force || request.resume)?;
         if request.resume {
             check_resumable(&checkpoint, settings)?;
@@ -117,7 +115,7 @@ impl Pipeline<'_> {
         let resume = request.resume && {
             let found = checkpoint.exists();
             if !found {
-                self.note(&format!("--resume: no {CHECKPOINT} in {} (stopped before sampling began?): starting from scratch", dir.display()));
+                self.note(&format!("--resume: no {} in {} (stopped before sampling began?): starting from scratch", store::folder::CHECKPOINT, dir.display()));
             }
             found
         };
@@ -130,21 +128,18 @@ impl Pipeline<'_> {
         let mut checkpointer = Checkpointer { path: checkpoint.clone(), every: CHECKPOINT_EVERY, stop: crate::interrupt::requested };
         let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
         refs.push(&mut checkpointer);
-        let cal = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)?;
+        let made = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)?;
 
-        let group = campaign.at_current(cal.start.current_a);
-        let identification = std::slice::from_ref(&cal.start.identification);
-        store::identification::write(&dir.join("identification.parquet"), identification)?;
+        let group = campaign.at_current(made.start.current_a);
+        let identification = std::slice::from_ref(&made.start.identification);
+        store::identification::write(&dir.join(store::identification::FILE), identification)?;
         report::identification::write(dir, &group, identification)?;
-        let stored = StoredCalibration::of(dir, &cal);
         folders::clear_derived(dir)?;
-        store::chains::write(&dir.join("chains.parquet"), &cal.sample)?;
-        store::summary::write(&dir.join("summary.parquet"), &stored.summary, &cal.diagnostics, cal.sample.chains.chains())?;
-        store::record::write_config(&dir.join("config.toml"), &cal.start.settings)?;
-        CalibrationRecord::write(&stored.record, &dir.join("calibration.toml"))?;
+        let mut cal = made.calibration;
+        store::folder::write(dir, &mut cal)?;
         // the chains are complete in chains.parquet: the checkpoint has done its job
         let _ = std::fs::remove_file(&checkpoint);
         self.emit(Event::Calibrated(&cal));
-        Ok(stored)
+        Ok(cal)
     }
 }

@@ -2,22 +2,20 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{Event, Pipeline, Prediction};
+use super::{Event, Pipeline};
+use crate::calibrate::Calibration;
 use crate::compare::{self, Comparison};
 use crate::error::{Error, Result};
+use crate::predict::Prediction;
 use crate::report::comparison::Entry;
-use crate::store::{self, StoredCalibration};
+use crate::store;
 
 /// Posterior draws per calibration for differences and figures.
 const DRAWS: usize = 4000;
 
 /// A calibration as a comparison takes it, with its bands if it has them.
-pub(super) fn entry(cal: StoredCalibration, prediction: Option<Prediction>) -> Entry {
-    let (bands, coverage) = match prediction {
-        Some(p) => (Some(p.bands), Some(p.coverage)),
-        None => (None, None),
-    };
-    Entry { label: cal.label(), positions: cal.draw_positions(DRAWS), cal, bands, coverage }
+pub(super) fn entry(cal: Calibration, prediction: Option<Prediction>) -> Entry {
+    Entry { label: cal.label(), positions: cal.draw_positions(DRAWS), cal, prediction }
 }
 
 impl Pipeline<'_> {
@@ -30,16 +28,9 @@ impl Pipeline<'_> {
         }
         let mut entries = Vec::new();
         for d in dirs {
-            let cal = StoredCalibration::open(d)?;
-            let prediction = if d.join("bands.parquet").exists() && d.join("coverage.parquet").exists() {
-                Some(Prediction {
-                    bands: store::bands::read(&d.join("bands.parquet"))?,
-                    coverage: store::coverage::read(&d.join("coverage.parquet"))?,
-                    record: store::prediction::read(&d.join("prediction.toml"))?,
-                })
-            } else {
-                None
-            };
+            let cal = store::folder::read(d)?;
+            // bands made from other chains than the folder's are left out
+            let prediction = store::prediction::read(d)?.filter(|p| p.record.calibration_id == cal.record.calibration_id);
             entries.push(entry(cal, prediction));
         }
         self.compare_entries(entries, out, rpm)

@@ -7,18 +7,19 @@ use std::path::Path;
 
 use crate::data::Campaign;
 use crate::error::{Error, Result};
+use crate::store;
 
 /// The files of a calibration folder derived from its chains: a new
 /// calibration removes them, since they would describe the old one.
 pub const DERIVED: [&str; 8] = [
-    "bands.parquet",
-    "inference.zarr",
-    "coverage.parquet",
-    "adequacy.parquet",
-    "prediction.toml",
-    "loo.parquet",
-    "loo_bands.parquet",
-    "report.html",
+    store::prediction::BANDS,
+    store::inference::FILE,
+    store::prediction::COVERAGE,
+    store::prediction::ADEQUACY,
+    store::prediction::RECORD,
+    store::coverage::LOO,
+    store::coverage::LOO_BANDS,
+    crate::report::html::REPORT,
 ];
 
 /// The report's figures (SVG and PNG) start so; the identification's
@@ -26,10 +27,10 @@ pub const DERIVED: [&str; 8] = [
 const FIGURES: [&str; 7] = ["bands_", "adequacy_", "residuals", "corner", "marginals", "traces", "diagnostics"];
 
 /// The results of `mrbp sample` in a calibration folder.
-pub const CALIBRATION: [&str; 5] = ["chains.parquet", "summary.parquet", "calibration.toml", "config.toml", "identification.parquet"];
+pub const CALIBRATION: [&str; 5] = [store::folder::CHAINS, store::folder::SUMMARY, store::folder::RECORD, store::folder::CONFIG, store::identification::FILE];
 
 /// The results of `mrbp identify`.
-pub const IDENTIFICATION: [&str; 1] = ["identification.parquet"];
+pub const IDENTIFICATION: [&str; 1] = [store::identification::FILE];
 
 /// Makes `out` (named by `option` in messages) ready for results: refuses a
 /// path that is a file or lies under one, a folder that cannot be written, a

@@ -8,24 +8,26 @@
 //! whole job ([`Pipeline::run`]) hands each stage's results to the next in
 //! memory, while still writing every folder as the separate commands would.
 
+pub mod bundled;
 mod calibrate;
 mod compare;
 pub mod folders;
 mod predict;
+mod run;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
+use crate::calibrate::settings::Overrides;
 use crate::calibrate::{Calibration, CalibrationSettings};
-use crate::data::{current_tag, Campaign};
-use crate::error::Result;
+use crate::data::Campaign;
+use crate::error::{Error, Result};
 use crate::identify::CurrentIdentification;
 use crate::posterior::ModelKind;
 use crate::sampler::{Observer, Progress};
-use crate::store::PredictionRecord;
+use crate::predict::PredictionRecord;
 use crate::validate::{LooRow, LooSettings};
 
-pub use calibrate::CHECKPOINT;
-pub use predict::Prediction;
+pub use crate::predict::{PredictOptions, Prediction};
 
 /// What a stage did, for the listener.
 pub enum Event<'a> {
@@ -43,6 +45,39 @@ pub enum Event<'a> {
     Wrote(&'a Path),
 }
 
+/// Which runs to calibrate and how, as the command line says it.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct SampleOptions {
+    #[command(flatten)]
+    pub settings: Overrides,
+    /// Calibrate only the runs at this coil current (A)
+    #[arg(long)]
+    pub current: Option<f64>,
+    /// Leave the runs at these currents (A, comma separated) out of a
+    /// current-law calibration, to predict them
+    #[arg(long, value_delimiter = ',')]
+    pub hold_out_current: Vec<f64>,
+    /// Continue an interrupted run from OUT/sampler.checkpoint (saved every
+    /// 100 steps and at Ctrl-C); the chains equal those of an uninterrupted run
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace the results of an earlier calibration in OUT (and remove
+    /// what was derived from them)
+    #[arg(long)]
+    pub force: bool,
+}
+
+impl SampleOptions {
+    /// The request: the settings file with the options applied, checked.
+    pub fn request(&self) -> Result<SampleRequest> {
+        let settings = self.settings.settings()?;
+        if !self.hold_out_current.is_empty() && settings.model != ModelKind::CurrentLaw {
+            return Err(Error::Usage("--hold-out-current needs --model current-law".into()));
+        }
+        Ok(SampleRequest { settings, current: self.current, hold_out_current: self.hold_out_current.clone(), resume: self.resume, force: self.force })
+    }
+}
+
 /// Which runs to calibrate and how: the settings, and the choices the
 /// command line adds to them.
 #[derive(Clone, Debug)]
@@ -58,19 +93,22 @@ pub struct SampleRequest {
     pub force: bool,
 }
 
-/// How posterior draws are propagated into bands.
-#[derive(Clone, Copy, Debug)]
-pub struct PredictOptions {
-    /// Posterior draws (after burn-in, thinned by τ, spread evenly).
-    pub draws: usize,
-    /// Noise replicates per draw in the predictive band.
-    pub replicates: usize,
-    pub seed: u64,
+/// Leave-one-out validation, as the command line asks for it.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct LooOptions {
+    /// Also calibrate without each run in turn and predict it (warm-started
+    /// from the full calibration)
+    #[arg(long)]
+    pub leave_one_out: bool,
+    /// Sampler steps of each leave-one-out calibration
+    #[arg(long, default_value_t = LooSettings::default().steps)]
+    pub loo_steps: usize,
 }
 
-impl Default for PredictOptions {
-    fn default() -> Self {
-        PredictOptions { draws: 400, replicates: 10, seed: 1 }
+impl LooOptions {
+    /// The sampler steps of each held-out run, if leave-one-out is asked for.
+    pub fn steps(&self) -> Option<usize> {
+        self.leave_one_out.then_some(self.loo_steps)
     }
 }
 
@@ -133,51 +171,6 @@ impl<'a> Pipeline<'a> {
         let campaign = self.load(manifest)?;
         self.emit(Event::Checked(&campaign));
         Ok(campaign)
-    }
-
-    /// The whole job on one campaign: one calibration folder per current in
-    /// `out/I<current>A/` (identification, posterior, bands, leave-one-out,
-    /// report); then, with several currents, the current law in
-    /// `out/current-law…/` and the comparison in `out/comparison/`.
-    /// Returns the reports written.
-    pub fn run(&mut self, manifest: &Path, out: &Path, options: &RunOptions) -> Result<Vec<PathBuf>> {
-        let campaign = self.check(manifest)?;
-        let all = campaign.currents();
-        let currents = match options.sample.current {
-            Some(c) => vec![c],
-            None => all.clone(),
-        };
-        let loo = options.leave_one_out.map(|steps| self.loo_settings(steps, &options.predict));
-        let mut reports = Vec::new();
-        let mut entries = Vec::new();
-        for c in currents {
-            let request = SampleRequest { current: Some(c), ..options.sample.clone() };
-            for cal in self.sample(&campaign, &out.join(current_tag(c)), &request)? {
-                let (report, prediction) = self.predict_and_report(&cal, &campaign, &options.predict, loo.as_ref())?;
-                reports.push(report);
-                entries.push(compare::entry(cal, Some(prediction)));
-            }
-        }
-        if options.sample.current.is_none() && all.len() >= 2 {
-            if options.current_law {
-                // hold out the middle current: the law must predict it
-                let held: Vec<f64> = if all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };
-                let name = match held.first() {
-                    Some(h) => format!("current-law-without-{}", current_tag(*h)),
-                    None => "current-law".to_string(),
-                };
-                let mut settings = options.sample.settings.clone();
-                settings.model = ModelKind::CurrentLaw;
-                let request = SampleRequest { settings, hold_out_current: held, ..options.sample.clone() };
-                for cal in self.sample(&campaign, &out.join(name), &request)? {
-                    let (report, prediction) = self.predict_and_report(&cal, &campaign, &options.predict, None)?;
-                    reports.push(report);
-                    entries.push(compare::entry(cal, Some(prediction)));
-                }
-            }
-            reports.push(self.compare_entries(entries, &out.join("comparison"), None)?);
-        }
-        Ok(reports)
     }
 
     /// Leave-one-out settings with `steps` per held-out run and the bands'

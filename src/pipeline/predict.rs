@@ -4,37 +4,23 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::{Event, Pipeline, PredictOptions};
-use crate::adequacy::{self, AdequacyRow};
-use crate::data::{same_current, Campaign, Run};
+use crate::predict::adequacy::{self, AdequacyRow};
+use crate::calibrate::{command_line, Calibration};
+use crate::data::{same_current, Campaign, RecordPart, Run, RunData};
 use crate::error::{Error, Result};
-use crate::data::{RecordPart, RunData};
+use crate::pointwise::{pointwise_draws, POINTWISE_DRAWS};
 use crate::posterior::Draw;
-use crate::pointwise::{pointwise_draws, thinned_steps, POINTWISE_DRAWS};
-use crate::predict::{predict_run, CoverageRow, RunBands};
+use crate::predict::{predict_run, Prediction, PredictionRecord, RunBands};
 use crate::report::{self, CalibrationReport, PredictionReport};
-use crate::store::inference::StoreInfo;
-use crate::store::{self, command_line, PredictionRecord, StoredCalibration};
-use crate::validate::{leave_one_out, Full, LooRow, LooSettings};
-
-/// What a prediction of a calibration folder made.
-pub struct Prediction {
-    pub bands: Vec<RunBands>,
-    pub coverage: Vec<CoverageRow>,
-    pub record: PredictionRecord,
-}
-
-/// What a leave-one-out study made: coverage and bands of the held-out runs.
-pub struct LeaveOneOut {
-    pub rows: Vec<LooRow>,
-    pub bands: Vec<RunBands>,
-}
+use crate::store::{self, inference::StoreInfo};
+use crate::validate::{leave_one_out, LeaveOneOut, LooRow, LooSettings};
 
 impl Pipeline<'_> {
     /// Posterior draws of `cal` through the integrator along every run of
     /// `campaign` that it should predict (its own runs; every run for a
     /// current law, seen or not): `bands.parquet`, `coverage.parquet`,
     /// `adequacy.parquet` and `prediction.toml` into `out`.
-    pub fn predict(&mut self, cal: &StoredCalibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
+    pub fn predict(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
         let campaign = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
         let prediction = self.predict_runs(cal, &campaign, &|run| cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
         self.write_inference_data(cal, &campaign, out, options.seed)?;
@@ -44,7 +30,7 @@ impl Pipeline<'_> {
     /// `inference.zarr`: the posterior, the pointwise log-likelihood and
     /// replicated records of a thinned set of draws, along the runs the
     /// calibration saw, as ArviZ's InferenceData.
-    fn write_inference_data(&mut self, cal: &StoredCalibration, campaign: &Campaign, out: &Path, seed: u64) -> Result<()> {
+    fn write_inference_data(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, seed: u64) -> Result<()> {
         let likelihood = &cal.settings.likelihood;
         let runs: Vec<RunData> = campaign
             .runs
@@ -53,15 +39,15 @@ impl Pipeline<'_> {
             .map(|run| RunData::from_run(run, likelihood.part, likelihood.smooth_strain_ms))
             .collect();
         let chains = &cal.sample.chains;
-        let stride = cal.thin();
-        let steps = thinned_steps(cal.burn_in(), chains.steps(), chains.chains(), POINTWISE_DRAWS, stride);
+        let stride = cal.draws().thin;
+        let steps = cal.draws().steps(chains, POINTWISE_DRAWS);
         let integrator = cal.predict_settings(1, seed).integrator;
         let draws = pointwise_draws(&cal.sample, &runs, &steps, &integrator, cal.settings.noise_model().as_ref(), seed);
         if draws.failed > 0 {
             self.note(&format!("inference.zarr: {} of {} pointwise draws could not be integrated along every run (their log-likelihood is -inf)", draws.failed, steps.len() * chains.chains()));
         }
         let info = StoreInfo { calibration_id: &cal.record.calibration_id, burn_in: cal.burn_in(), ensembles: chains.ensembles, stride };
-        let path = out.join("inference.zarr");
+        let path = out.join(store::inference::FILE);
         store::inference::write(&path, &cal.sample, &draws, &info)?;
         self.emit(Event::Wrote(&path));
         Ok(())
@@ -73,7 +59,7 @@ impl Pipeline<'_> {
     /// and a report into `out`. No run counts as seen unless `campaign` is
     /// the calibration's own manifest. A per-current calibration predicts
     /// only the runs at its current.
-    pub fn predict_campaign(&mut self, cal: &StoredCalibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<(PathBuf, Prediction)> {
+    pub fn predict_campaign(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<(PathBuf, Prediction)> {
         let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
         let own = canonical(&campaign.manifest_path) == canonical(Path::new(&cal.record.manifest));
         let runs = if cal.is_current_law() {
@@ -107,7 +93,7 @@ impl Pipeline<'_> {
     /// Bands, coverage and adequacy of `campaign`'s runs into `out`; `seen`
     /// tells the runs the calibration saw (their own noise level and force
     /// offset) from those it did not (the others' typical ones).
-    fn predict_runs(&mut self, cal: &StoredCalibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, out: &Path, options: &PredictOptions) -> Result<Prediction> {
+    fn predict_runs(&mut self, cal: &Calibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, out: &Path, options: &PredictOptions) -> Result<Prediction> {
         if options.draws == 0 || options.replicates == 0 {
             return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
         }
@@ -131,17 +117,14 @@ impl Pipeline<'_> {
         }
         bar.finish_and_clear();
         super::folders::prepare(out, "--out", &[campaign], &[], true)?;
-        store::bands::write(&out.join("bands.parquet"), &bands)?;
-        store::coverage::write(&out.join("coverage.parquet"), &coverage)?;
         let geometry = &campaign.geometry;
         let adequacy: Vec<AdequacyRow> = bands.iter().map(|b| adequacy::assess(b, geometry.area_m2, geometry.gap_m)).collect();
-        store::adequacy::write(&out.join("adequacy.parquet"), &adequacy)?;
         let record = PredictionRecord {
             mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
             command: command_line(),
             draws: positions.len(),
             burn_in: cal.burn_in(),
-            thin: cal.thin(),
+            thin: cal.draws().thin,
             noise_replicates: options.replicates,
             seed: options.seed,
             substeps: settings.integrator.substeps,
@@ -149,15 +132,16 @@ impl Pipeline<'_> {
             calibration_id: cal.record.calibration_id.clone(),
             coverage: coverage.clone(),
         };
-        store::prediction::write(&out.join("prediction.toml"), &record)?;
-        self.emit(Event::Predicted { record: &record, dir: out });
-        Ok(Prediction { bands, coverage, record })
+        let prediction = Prediction { bands, coverage, adequacy, record };
+        store::prediction::write(out, &prediction)?;
+        self.emit(Event::Predicted { record: &prediction.record, dir: out });
+        Ok(prediction)
     }
 
     /// The leave-one-out study of `cal` (whose runs are in `campaign`):
     /// `loo.parquet` and `loo_bands.parquet` in its folder. A calibration of
     /// a single run has nothing to leave out: `None`.
-    pub fn leave_one_out(&mut self, cal: &StoredCalibration, campaign: &Campaign, loo: &LooSettings) -> Result<Option<LeaveOneOut>> {
+    pub fn leave_one_out(&mut self, cal: &Calibration, campaign: &Campaign, loo: &LooSettings) -> Result<Option<LeaveOneOut>> {
         if loo.steps < 10 {
             return Err(Error::Usage(format!("--loo-steps must be at least 10, got {}", loo.steps)));
         }
@@ -173,20 +157,19 @@ impl Pipeline<'_> {
             listener(Event::Note(&format!("  leave-one-out: no importance weights can be trusted for {run} (k̂ > 0.7): sampling without it")));
             Pipeline::observers_for(progress)
         };
-        let full = Full { campaign: &campaign, settings: &cal.settings, sample: &cal.sample, burn_in: cal.burn_in(), thin: cal.thin() };
-        let held = leave_one_out(&full, loo, &mut observe)?;
+        let held = leave_one_out(cal, &campaign, loo, &mut observe)?;
         let (bands, rows): (Vec<RunBands>, Vec<LooRow>) = held.into_iter().map(|h| (h.prediction.bands, h.row)).unzip();
-        store::bands::write(&cal.dir.join("loo_bands.parquet"), &bands)?;
-        store::coverage::write_loo(&cal.dir.join("loo.parquet"), &rows)?;
-        self.emit(Event::LeftOneOut { rows: &rows, seconds: clock.elapsed().as_secs_f64() });
-        Ok(Some(LeaveOneOut { rows, bands }))
+        let study = LeaveOneOut { rows, bands };
+        store::coverage::write_leave_one_out(&cal.dir, &study)?;
+        self.emit(Event::LeftOneOut { rows: &study.rows, seconds: clock.elapsed().as_secs_f64() });
+        Ok(Some(study))
     }
 
     /// Bands, leave-one-out (if `loo` is given) and the report of a
     /// calibration just made, from memory.
     pub(super) fn predict_and_report(
         &mut self,
-        cal: &StoredCalibration,
+        cal: &Calibration,
         campaign: &Campaign,
         options: &PredictOptions,
         loo: Option<&LooSettings>,
@@ -203,19 +186,10 @@ impl Pipeline<'_> {
     /// are predicted first if the folder has none, and the leave-one-out
     /// study is run if `loo` is given (else an earlier one is shown).
     pub fn report(&mut self, dir: &Path, options: &PredictOptions, loo: Option<&LooSettings>) -> Result<PathBuf> {
-        let cal = StoredCalibration::open(dir)?;
+        let cal = store::folder::read(dir)?;
         let campaign = cal.full_campaign()?;
-        let files = ["bands.parquet", "coverage.parquet", "prediction.toml"];
-        let stored = match files.iter().all(|f| dir.join(f).exists()) {
-            true => Some(store::prediction::read(&dir.join("prediction.toml"))?),
-            false => None,
-        };
-        let prediction = match stored {
-            Some(record) if record.calibration_id == cal.record.calibration_id => Prediction {
-                bands: store::bands::read(&dir.join("bands.parquet"))?,
-                coverage: store::coverage::read(&dir.join("coverage.parquet"))?,
-                record,
-            },
+        let prediction = match store::prediction::read(dir)? {
+            Some(p) if p.record.calibration_id == cal.record.calibration_id => p,
             Some(_) => {
                 self.note(&format!("the bands in {} come from another calibration than its chains: predicting again", dir.display()));
                 self.predict(&cal, &campaign, dir, options)?
@@ -227,24 +201,13 @@ impl Pipeline<'_> {
         };
         let loo = match loo {
             Some(settings) => self.leave_one_out(&cal, &campaign, settings)?,
-            None if dir.join("loo.parquet").exists() && dir.join("loo_bands.parquet").exists() => Some(LeaveOneOut {
-                rows: store::coverage::read_loo(&dir.join("loo.parquet"))?,
-                bands: store::bands::read(&dir.join("loo_bands.parquet"))?,
-            }),
-            None => None,
+            None => store::coverage::read_leave_one_out(dir)?,
         };
         self.write_report(&cal, &campaign, &prediction, loo.as_ref())
     }
 
-    fn write_report(&mut self, cal: &StoredCalibration, campaign: &Campaign, prediction: &Prediction, loo: Option<&LeaveOneOut>) -> Result<PathBuf> {
-        let path = report::calibration::write(&CalibrationReport {
-            cal,
-            campaign: &cal.used_runs(campaign),
-            bands: &prediction.bands,
-            coverage: &prediction.coverage,
-            prediction: &prediction.record,
-            loo: loo.map(|l| (l.rows.as_slice(), l.bands.as_slice())),
-        })?;
+    fn write_report(&mut self, cal: &Calibration, campaign: &Campaign, prediction: &Prediction, loo: Option<&LeaveOneOut>) -> Result<PathBuf> {
+        let path = report::calibration::write(&CalibrationReport { cal, campaign: &cal.used_runs(campaign), prediction, loo })?;
         self.emit(Event::Wrote(&path));
         Ok(path)
     }

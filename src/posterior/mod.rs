@@ -32,7 +32,7 @@ pub use layout::{unit_of, Coordinates, Layout};
 pub use likelihood::{run_log_likelihood, LikelihoodSettings};
 pub use parameters::{ModelKind, ParameterModel, LAW_NAMES};
 pub use prior::Prior;
-pub use sample::{evenly_spaced, Draw, PosteriorSample, SummaryRow};
+pub use sample::{evenly_spaced, Draw, Draws, PosteriorSample, SummaryRow};
 pub use terms::ModelTerms;
 
 /// The posterior density.

@@ -49,13 +49,6 @@ impl PosteriorSample {
         Diagnostics::compute(&self.chains, Some(burn_in))
     }
 
-    /// `count` positions spread evenly over the steps from `burn_in` on,
-    /// thinned to every `thin`-th step; each as `(step, chain)`.
-    pub fn positions(&self, burn_in: usize, thin: usize, count: usize) -> Vec<(usize, usize)> {
-        let all = self.chains.thinned(burn_in, thin);
-        evenly_spaced(all.len(), count).into_iter().map(|i| all[i]).collect()
-    }
-
     /// The values of coordinate `name` at `positions`.
     pub fn values(&self, name: &str, positions: &[(usize, usize)]) -> Option<Vec<f64>> {
         let i = self.layout.index(name)?;
@@ -122,6 +115,43 @@ impl SummaryRow {
     /// The rows of `diagnostics`, named by `layout`.
     pub fn rows(layout: &Layout, diagnostics: &Diagnostics) -> Vec<SummaryRow> {
         layout.names.iter().zip(&diagnostics.coordinates).map(|(n, d)| SummaryRow { parameter: n.clone(), stats: d.clone() }).collect()
+    }
+}
+
+/// Which draws of a posterior sample a stage takes: every `thin`-th step
+/// from `burn_in` on, each chain. Every stage that uses posterior draws
+/// (bands, pointwise terms, comparisons, figures, leave-one-out, studies)
+/// picks them here.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Draws {
+    pub burn_in: usize,
+    pub thin: usize,
+}
+
+impl Draws {
+    /// The draws after `burn_in`, thinned by ⌈τ⌉ steps (nearly independent;
+    /// every step where τ is not known).
+    pub fn after(burn_in: usize, tau: f64) -> Draws {
+        let thin = if tau.is_finite() { tau.ceil().max(1.0) as usize } else { 1 };
+        Draws { burn_in, thin }
+    }
+
+    /// `count` of them spread evenly over the steps and chains (all if
+    /// fewer), each as `(step, chain)`.
+    pub fn positions(self, chains: &Chains, count: usize) -> Vec<(usize, usize)> {
+        let n = chains.chains();
+        let all: Vec<(usize, usize)> = (self.burn_in..chains.steps()).step_by(self.thin.max(1)).flat_map(|s| (0..n).map(move |c| (s, c))).collect();
+        evenly_spaced(all.len(), count).into_iter().map(|i| all[i]).collect()
+    }
+
+    /// About `count` of them as whole steps (every chain at each, as
+    /// ArviZ's chain × draw grid wants), evenly spaced from the burn-in to
+    /// the last step and at least `thin` steps apart: at least one step.
+    pub fn steps(self, chains: &Chains, count: usize) -> Vec<usize> {
+        let steps = chains.steps();
+        let available = steps.saturating_sub(self.burn_in).max(1);
+        let per_chain = count.div_ceil(chains.chains().max(1)).min(available.div_ceil(self.thin.max(1))).max(1);
+        evenly_spaced(available, per_chain).into_iter().map(|i| (self.burn_in + i).min(steps.saturating_sub(1))).collect()
     }
 }
 

@@ -1,13 +1,13 @@
 //! The "Model adequacy" section of a calibration report: where the
 //! calibrated B-P law does not describe the damper, in numbers, figures and
-//! plain words (see [`crate::adequacy`] for what is measured).
+//! plain words (see [`crate::predict::adequacy`] for what is measured).
 
 use std::path::Path;
 
 use super::figures::loop_band;
 use super::html::{esc, num, Page};
-use super::Figures;
-use crate::adequacy::{self, AdequacyRow};
+use super::figures::Figures;
+use crate::predict::adequacy::{self, AdequacyRow};
 use crate::data::Geometry;
 use crate::error::Result;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
@@ -26,20 +26,15 @@ const REVERSAL_RATIO: f64 = 1.5;
 /// variance is called a missing force.
 const TREND_SHARE: f64 = 0.2;
 
-/// The adequacy of every run, in the order of `bands`.
-pub fn assess(bands: &[RunBands], geometry: &Geometry) -> Vec<AdequacyRow> {
-    bands.iter().map(|b| adequacy::assess(b, geometry.area_m2, geometry.gap_m)).collect()
-}
-
-/// The section: plain-words findings, the table and one figure per run.
-pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], geometry: &Geometry) -> Result<()> {
-    let rows = assess(bands, geometry);
+/// The section: plain-words findings, the table and one figure per run
+/// (`rows` the adequacy of `bands`, in their order).
+pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[AdequacyRow], geometry: &Geometry) -> Result<()> {
     page.section("adequacy", "Model adequacy");
     page.para(
         "Where the calibrated law misses the records, in force (F = τA). The residual is the measured force minus the posterior-median model; \
          reversals are the samples slower than a fifth of the peak speed, where the law times yield.",
     );
-    for finding in findings(&rows) {
+    for finding in findings(rows) {
         page.para(&finding);
     }
     let table: Vec<Vec<String>> = rows
@@ -76,7 +71,7 @@ pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], geometry: &Geome
     );
     page.note("adequacy.parquet in the folder holds these numbers, one row per run.");
     let mut figs = Figures::default();
-    figures(dir, bands, &rows, geometry, &mut figs)?;
+    figures(dir, bands, rows, geometry, &mut figs)?;
     for (stem, caption) in &figs.items {
         page.figure(&dir.join(format!("{stem}.png")), caption)?;
     }
@@ -97,100 +92,118 @@ fn spread(lo: f64, hi: f64, digits: usize) -> String {
 
 /// What the numbers say, as sentences a reader can act on.
 pub fn findings(rows: &[AdequacyRow]) -> Vec<String> {
-    let mut out = Vec::new();
     if rows.is_empty() {
-        return out;
+        return Vec::new();
     }
+    [size(rows), memory(rows), reversals(rows), missing_force(rows), excitation(rows)].into_iter().flatten().collect()
+}
+
+/// The misfit's size and the band's coverage.
+fn size(rows: &[AdequacyRow]) -> Option<String> {
     let (clo, chi) = range(rows.iter().map(|a| 100.0 * a.inside_p95));
     let (slo, shi) = range(rows.iter().map(|a| 100.0 * a.residual_rms_n / a.peak_force_n));
     let (flo, fhi) = range(rows.iter().map(|a| a.residual_rms_n));
-    out.push(format!(
+    Some(format!(
         "Size: the residual force is {} N RMS, {} % of the peak force; the 95 % predictive band holds {} % of the samples.",
         spread(flo, fhi, 3),
         spread(slo, shi, 2),
         spread(clo, chi, 3)
-    ));
+    ))
+}
 
-    let worst = rows.iter().max_by(|a, b| a.lag1_autocorrelation.total_cmp(&b.lag1_autocorrelation)).expect("non-empty");
-    if worst.lag1_autocorrelation > CORRELATED {
-        let (ilo, ihi) = range(rows.iter().map(|a| a.interval_inflation));
-        let (dlo, dhi) = range(rows.iter().map(|a| 1e3 * a.decorrelation_s));
-        out.push(format!(
-            "Memory: the residuals are correlated in time (lag-1 autocorrelation up to {:.2} on {}; they decorrelate after {} ms), \
-             while the noise model takes them as independent. The parameter intervals are therefore too narrow, by a factor of about {} \
-             (√((1 + ρ)/(1 − ρ))): read the posterior sd as a lower bound. The predictive band is set by the residual spread and is \
-             less affected, but its coverage is not evidence that the law is right.",
-            worst.lag1_autocorrelation,
-            esc(&worst.run),
-            spread(dlo, dhi, 2),
-            spread(ilo, ihi, 2)
-        ));
-    } else {
-        out.push(format!(
+/// Whether the residuals remember their past, and what that does to the
+/// intervals.
+fn memory(rows: &[AdequacyRow]) -> Option<String> {
+    let worst = rows.iter().max_by(|a, b| a.lag1_autocorrelation.total_cmp(&b.lag1_autocorrelation))?;
+    if worst.lag1_autocorrelation <= CORRELATED {
+        return Some(format!(
             "Memory: the residuals are close to independent (lag-1 autocorrelation at most {:.2}), as the noise model assumes.",
             worst.lag1_autocorrelation
         ));
     }
+    let (ilo, ihi) = range(rows.iter().map(|a| a.interval_inflation));
+    let (dlo, dhi) = range(rows.iter().map(|a| 1e3 * a.decorrelation_s));
+    Some(format!(
+        "Memory: the residuals are correlated in time (lag-1 autocorrelation up to {:.2} on {}; they decorrelate after {} ms), \
+         while the noise model takes them as independent. The parameter intervals are therefore too narrow, by a factor of about {} \
+         (√((1 + ρ)/(1 − ρ))): read the posterior sd as a lower bound. The predictive band is set by the residual spread and is \
+         less affected, but its coverage is not evidence that the law is right.",
+        worst.lag1_autocorrelation,
+        esc(&worst.run),
+        spread(dlo, dhi, 2),
+        spread(ilo, ihi, 2)
+    ))
+}
 
+/// Runs whose misfit concentrates at the reversals.
+fn reversals(rows: &[AdequacyRow]) -> Option<String> {
     let at_reversal: Vec<&AdequacyRow> = rows.iter().filter(|a| a.reversal_rms_n > REVERSAL_RATIO * a.stroke_rms_n).collect();
-    if !at_reversal.is_empty() {
-        let list: Vec<String> = at_reversal
-            .iter()
-            .map(|a| format!("{} ({} N against {} N, band holds {:.0} % against {:.0} %)", esc(&a.run), num(a.reversal_rms_n, 3), num(a.stroke_rms_n, 3), 100.0 * a.inside_p95_reversal, 100.0 * a.inside_p95_stroke))
-            .collect();
-        out.push(format!(
-            "Reversals: the misfit concentrates where the motion reverses and the fluid yields again — {}. \
-             The law's transition from elastic to plastic flow is timed or shaped differently from the damper's there.",
-            list.join("; ")
-        ));
+    if at_reversal.is_empty() {
+        return None;
     }
+    let list: Vec<String> = at_reversal
+        .iter()
+        .map(|a| format!("{} ({} N against {} N, band holds {:.0} % against {:.0} %)", esc(&a.run), num(a.reversal_rms_n, 3), num(a.stroke_rms_n, 3), 100.0 * a.inside_p95_reversal, 100.0 * a.inside_p95_stroke))
+        .collect();
+    Some(format!(
+        "Reversals: the misfit concentrates where the motion reverses and the fluid yields again — {}. \
+         The law's transition from elastic to plastic flow is timed or shaped differently from the damper's there.",
+        list.join("; ")
+    ))
+}
 
+/// Runs whose residual a force linear in displacement and velocity explains.
+fn missing_force(rows: &[AdequacyRow]) -> Option<String> {
     let trended: Vec<&AdequacyRow> = rows.iter().filter(|a| a.trend_share > TREND_SHARE).collect();
-    if !trended.is_empty() {
-        let list: Vec<String> = trended
-            .iter()
-            .map(|a| {
-                format!(
-                    "{} ({:.0} % of the residual variance: k = {} N/m, c = {} N·s/m, offset {} N)",
-                    esc(&a.run),
-                    100.0 * a.trend_share,
-                    num(a.trend_stiffness_n_per_m, 2),
-                    num(a.trend_damping_n_s_per_m, 2),
-                    num(a.trend_offset_n, 2)
-                )
-            })
-            .collect();
-        out.push(format!(
-            "Missing force: a force linear in displacement and velocity explains much of the residual on {}. A spring (k) is what a gas \
-             accumulator adds, an offset what seal friction or a load-cell zero adds (both are model terms: [terms] in the settings); \
-             a viscous part (c) is flow the law does not carry.",
-            list.join("; ")
-        ));
+    if trended.is_empty() {
+        return None;
     }
+    let list: Vec<String> = trended
+        .iter()
+        .map(|a| {
+            format!(
+                "{} ({:.0} % of the residual variance: k = {} N/m, c = {} N·s/m, offset {} N)",
+                esc(&a.run),
+                100.0 * a.trend_share,
+                num(a.trend_stiffness_n_per_m, 2),
+                num(a.trend_damping_n_s_per_m, 2),
+                num(a.trend_offset_n, 2)
+            )
+        })
+        .collect();
+    Some(format!(
+        "Missing force: a force linear in displacement and velocity explains much of the residual on {}. A spring (k) is what a gas \
+         accumulator adds, an offset what seal friction or a load-cell zero adds (both are model terms: [terms] in the settings); \
+         a viscous part (c) is flow the law does not carry.",
+        list.join("; ")
+    ))
+}
 
+/// Which excitation the law fits worst and best.
+fn excitation(rows: &[AdequacyRow]) -> Option<String> {
     let labels: std::collections::BTreeSet<String> = rows.iter().map(|a| a.excitation.label()).collect();
-    if labels.len() > 1 {
-        // Coverage is near 95 % on every run by construction (each run has
-        // its own noise scale), so compare the misfit itself.
-        let relative = |a: &AdequacyRow| a.residual_rms_n / a.peak_force_n;
-        let worst = rows.iter().max_by(|a, b| relative(a).total_cmp(&relative(b))).expect("non-empty");
-        let best = rows.iter().min_by(|a, b| relative(a).total_cmp(&relative(b))).expect("non-empty");
-        out.push(format!(
-            "Excitation: the law fits {} ({}) worst, {:.1} % of its peak force RMS, and {} ({}) best, {:.1} %. {}",
-            esc(&worst.run),
-            esc(&worst.excitation.label()),
-            100.0 * relative(worst),
-            esc(&best.run),
-            esc(&best.excitation.label()),
-            100.0 * relative(best),
-            if relative(worst) > 1.5 * relative(best) {
-                "One parameter set does not serve these excitations equally: the law's rate and amplitude dependence differs from the damper's."
-            } else {
-                "One parameter set serves these excitations about equally."
-            }
-        ));
+    if labels.len() <= 1 {
+        return None;
     }
-    out
+    // Coverage is near 95 % on every run by construction (each run has its
+    // own noise scale), so compare the misfit itself.
+    let relative = |a: &AdequacyRow| a.residual_rms_n / a.peak_force_n;
+    let worst = rows.iter().max_by(|a, b| relative(a).total_cmp(&relative(b)))?;
+    let best = rows.iter().min_by(|a, b| relative(a).total_cmp(&relative(b)))?;
+    Some(format!(
+        "Excitation: the law fits {} ({}) worst, {:.1} % of its peak force RMS, and {} ({}) best, {:.1} %. {}",
+        esc(&worst.run),
+        esc(&worst.excitation.label()),
+        100.0 * relative(worst),
+        esc(&best.run),
+        esc(&best.excitation.label()),
+        100.0 * relative(best),
+        if relative(worst) > 1.5 * relative(best) {
+            "One parameter set does not serve these excitations equally: the law's rate and amplitude dependence differs from the damper's."
+        } else {
+            "One parameter set serves these excitations about equally."
+        }
+    ))
 }
 
 /// One figure per run: force against velocity with the 95 % predictive

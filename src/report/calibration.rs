@@ -6,16 +6,17 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::html::{esc, num, Mark, Page};
-use super::{adequacy, figures, Figures};
+use super::figures::{self, Figures};
+use super::adequacy;
 use crate::atomic;
 use crate::data::{current_tag, Campaign};
 use crate::error::{Error, Result};
 use crate::model::PARAM_NAMES;
 use crate::posterior::map::step_shift_limit;
-use crate::predict::{CoverageRow, RunBands};
+use crate::calibrate::Calibration;
+use crate::predict::{CoverageRow, Prediction};
 use crate::sampler::diagnostics::MIN_TAU_MULTIPLE;
-use crate::store::{PredictionRecord, StoredCalibration};
-use crate::validate::LooRow;
+use crate::validate::LeaveOneOut;
 
 /// The share of observations a 95 % predictive band should hold for the
 /// report to call it calibrated.
@@ -30,14 +31,13 @@ const PLOT_DRAWS: usize = 2000;
 
 /// Everything the report of one calibration shows.
 pub struct CalibrationReport<'a> {
-    pub cal: &'a StoredCalibration,
+    pub cal: &'a Calibration,
     /// The runs it was calibrated on.
     pub campaign: &'a Campaign,
-    pub bands: &'a [RunBands],
-    pub coverage: &'a [CoverageRow],
-    pub prediction: &'a PredictionRecord,
-    /// The leave-one-out study, where it was run: coverage and bands.
-    pub loo: Option<(&'a [LooRow], &'a [RunBands])>,
+    /// Its bands, coverage and adequacy.
+    pub prediction: &'a Prediction,
+    /// The leave-one-out study, where it was run.
+    pub loo: Option<&'a LeaveOneOut>,
 }
 
 /// Writes the figures and `report.html` into the calibration's folder.
@@ -46,7 +46,7 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
     let dir = &r.cal.dir;
     let (figs, loo_figs) = draw_figures(r)?;
     let mut page = Page::new(&title(r.cal));
-    let checks = verdicts(r.cal, r.coverage);
+    let checks = verdicts(r.cal, &r.prediction.coverage);
     let warned = checks.iter().filter(|c| c.1 == Mark::Warn).count();
     page.raw(&format!(
         "<p>B-P parameters of MR fluid calibrated on {} run(s) at {} by ensemble MCMC. {}</p>",
@@ -68,16 +68,16 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
         page.note(w);
     }
     coverage_section(&mut page, r);
-    adequacy::section(&mut page, dir, r.bands, &r.campaign.geometry)?;
+    adequacy::section(&mut page, dir, &r.prediction.bands, &r.prediction.adequacy, &r.campaign.geometry)?;
     validation_section(&mut page, r, &loo_figs)?;
     figures_section(&mut page, r.cal, &figs)?;
     reproduce_section(&mut page, r);
-    let path = dir.join("report.html");
+    let path = dir.join(super::html::REPORT);
     atomic::write(&path, page.finish().as_bytes())?;
     Ok(path)
 }
 
-fn title(cal: &StoredCalibration) -> String {
+fn title(cal: &Calibration) -> String {
     let rec = &cal.record;
     if cal.is_current_law() {
         format!("mrbp report: {}, current law from {:?} A", rec.campaign, rec.currents)
@@ -86,7 +86,7 @@ fn title(cal: &StoredCalibration) -> String {
     }
 }
 
-fn calibrated_at(cal: &StoredCalibration) -> String {
+fn calibrated_at(cal: &Calibration) -> String {
     if cal.is_current_law() {
         format!("{:?} A as functions of the coil current (reference {} A)", cal.record.currents, cal.settings.reference_current_a)
     } else {
@@ -103,8 +103,8 @@ fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
     let rec = &cal.record;
     let mut figs = Figures::default();
     let geometry = r.campaign.geometry;
-    figures::bands(dir, r.bands, geometry.area_m2, geometry.gap_m, &mut figs)?;
-    figures::residuals(dir, r.bands, &mut figs)?;
+    figures::bands(dir, &r.prediction.bands, geometry.area_m2, geometry.gap_m, &mut figs)?;
+    figures::residuals(dir, &r.prediction.bands, &mut figs)?;
     let positions = cal.draw_positions(PLOT_DRAWS);
     // θ and the noise scales, as long as the matrix stays readable
     let layout = &cal.sample.layout;
@@ -122,7 +122,7 @@ fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
     let tau: Vec<f64> = cal.summary.iter().map(|r| r.tau_int).collect();
     figures::diagnostics(dir, &cal.sample, cal.burn_in(), &tau, &mut figs)?;
     let mut loo_figs = Figures::default();
-    if let Some((_, bands)) = r.loo {
+    if let Some(LeaveOneOut { bands, .. }) = r.loo {
         let loo_dir = dir.join("loo");
         std::fs::create_dir_all(&loo_dir).map_err(|e| Error::output(&loo_dir, e))?;
         figures::bands(&loo_dir, bands, geometry.area_m2, geometry.gap_m, &mut loo_figs)?;
@@ -169,7 +169,7 @@ fn campaign_section(page: &mut Page, r: &CalibrationReport) {
     );
 }
 
-fn identification_section(page: &mut Page, cal: &StoredCalibration) {
+fn identification_section(page: &mut Page, cal: &Calibration) {
     let rec = &cal.record;
     page.section("identification", "Identification and posterior");
     let summary_of = |name: &str| cal.summary.iter().find(|r| r.parameter == name);
@@ -190,7 +190,7 @@ fn identification_section(page: &mut Page, cal: &StoredCalibration) {
     page.table(&["parameter", "identification", "MAP", "posterior median", "90 % credible interval"], &rows);
 }
 
-fn posterior_section(page: &mut Page, cal: &StoredCalibration) {
+fn posterior_section(page: &mut Page, cal: &Calibration) {
     page.section("posterior", "Posterior summary");
     let min_ess = cal.settings.sampler.min_ess;
     let rows: Vec<Vec<String>> = cal
@@ -222,19 +222,19 @@ fn coverage_section(page: &mut Page, r: &CalibrationReport) {
     page.section("coverage", "Predictive coverage");
     page.para(&format!(
         "{} posterior draws (after the burn-in, thinned by {} steps) integrated along each whole record, with {} noise replicates per draw. A calibrated model holds about 95 % of the observations in its 95 % predictive band; the report passes {}–{} %.",
-        r.prediction.draws,
-        r.prediction.thin,
-        r.prediction.noise_replicates,
+        r.prediction.record.draws,
+        r.prediction.record.thin,
+        r.prediction.record.noise_replicates,
         100.0 * COVERAGE_OK.0,
         100.0 * COVERAGE_OK.1
     ));
-    coverage_table(page, r.coverage, false);
+    coverage_table(page, &r.prediction.coverage, false);
 }
 
 fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures) -> Result<()> {
     page.section("validation", "Leave-one-out validation");
     match r.loo {
-        Some((rows, _)) => {
+        Some(LeaveOneOut { rows, .. }) => {
             page.para("Each run predicted by the posterior of the other runs of this calibration only (its noise level taken as the root-mean-square σ of those runs): the honest test of the bands on data the fit has not seen. That posterior is reached by the cheapest way that can be trusted: the full posterior's draws reweighted by Pareto-smoothed importance sampling where the Pareto k̂ of the weights is at most 0.7; else importance sampling from the Laplace approximation of the held-out posterior, if its k̂ is at most 0.7; else ensemble MCMC of the held-out posterior. The log predictive density (mean over the run's samples of ln p(τ_obs | other runs)) scores the held-out prediction as a whole: compare it between model variants (terms, noise models) on the same records; higher is better.");
             let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
             coverage_table(page, &coverage, true);
@@ -262,7 +262,7 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
     Ok(())
 }
 
-fn figures_section(page: &mut Page, cal: &StoredCalibration, figs: &Figures) -> Result<()> {
+fn figures_section(page: &mut Page, cal: &Calibration, figs: &Figures) -> Result<()> {
     page.section("figures", "Figures");
     for (stem, caption) in &figs.items {
         page.figure(&cal.dir.join(format!("{stem}.png")), caption)?;
@@ -285,7 +285,7 @@ fn figures_section(page: &mut Page, cal: &StoredCalibration, figs: &Figures) -> 
 }
 
 fn reproduce_section(page: &mut Page, r: &CalibrationReport) {
-    let (rec, prediction) = (&r.cal.record, r.prediction);
+    let (rec, prediction) = (&r.cal.record, &r.prediction.record);
     page.section("reproduce", "Reproduce");
     page.table(
         &["", ""],
@@ -307,7 +307,7 @@ fn reproduce_section(page: &mut Page, r: &CalibrationReport) {
         ],
     );
     page.para("The settings below (config.toml in the folder) repeat the calibration with `mrbp sample MANIFEST --config config.toml --out DIR`; the same seed gives the same chains bit for bit, on any number of threads.");
-    let config = std::fs::read_to_string(r.cal.dir.join("config.toml")).unwrap_or_default();
+    let config = std::fs::read_to_string(r.cal.dir.join(crate::store::folder::CONFIG)).unwrap_or_default();
     page.pre(&config);
 }
 
@@ -345,7 +345,7 @@ pub(super) fn coverage_table(page: &mut Page, rows: &[CoverageRow], leave_one_ou
 }
 
 /// The report's checks: what, verdict, what was measured.
-fn verdicts(cal: &StoredCalibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, String)> {
+fn verdicts(cal: &Calibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, String)> {
     let s = &cal.summary;
     let max_rhat = cal.max_rhat();
     let min_bulk = s.iter().map(|r| r.ess_bulk).fold(f64::NAN, f64::min);

@@ -4,9 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use super::html::{esc, num, Mark, Page};
-use super::adequacy as report_adequacy;
-use super::Figures;
-use crate::adequacy::{AdequacyRow, Excitation};
+use super::figures::Figures;
+use crate::predict::adequacy::{AdequacyRow, Excitation};
 use crate::atomic;
 use crate::compare::Comparison;
 use crate::data::{loading_branches, REVERSAL_SHARE};
@@ -14,18 +13,19 @@ use crate::error::Result;
 use crate::model::PARAM_NAMES;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 use crate::posterior::unit_of;
-use crate::predict::{CoverageRow, RunBands};
+use crate::predict::{Prediction, RunBands};
 use crate::sampler::quantile;
-use crate::store::{command_line, StoredCalibration};
+use crate::calibrate::Calibration;
+use crate::store::command_line;
 
 /// One calibration in a comparison: its folder, the draws compared, and
 /// its bands and coverage where they were computed.
 pub struct Entry {
     pub label: String,
-    pub cal: StoredCalibration,
+    pub cal: Calibration,
     pub positions: Vec<(usize, usize)>,
-    pub bands: Option<Vec<RunBands>>,
-    pub coverage: Option<Vec<CoverageRow>>,
+    /// Its bands, coverage and adequacy, where they were computed.
+    pub prediction: Option<Prediction>,
 }
 
 impl Entry {
@@ -76,7 +76,7 @@ pub fn write(out: &Path, entries: &[Entry], comparison: &Comparison, rpm: Option
         page.figure(&out.join(format!("{stem}.png")), caption)?;
     }
     reproduce_section(&mut page, entries);
-    let path = out.join("report.html");
+    let path = out.join(super::html::REPORT);
     atomic::write(&path, page.finish().as_bytes())?;
     Ok(path)
 }
@@ -180,7 +180,7 @@ fn law_section(page: &mut Page, entries: &[Entry]) {
         return;
     }
     for law in laws {
-        let Some(cov) = &law.coverage else {
+        let Some(cov) = law.prediction.as_ref().map(|p| &p.coverage) else {
             page.para(&format!("{}: no bands yet (run `mrbp predict` on it).", law.label));
             continue;
         };
@@ -193,7 +193,7 @@ fn law_section(page: &mut Page, entries: &[Entry]) {
             let per_current = entries
                 .iter()
                 .filter(|e| !e.is_law())
-                .find_map(|e| e.coverage.as_ref().and_then(|c| c.iter().find(|x| x.run == r.run)).map(|x| (e.label.clone(), x.clone())));
+                .find_map(|e| e.prediction.as_ref().and_then(|p| p.coverage.iter().find(|x| x.run == r.run)).map(|x| (e.label.clone(), x.clone())));
             let ok = r.inside_p95 >= 0.8;
             table.push(vec![
                 esc(&r.run),
@@ -223,8 +223,8 @@ const SAME_EXCITATION: f64 = 0.1;
 fn adequacy_section(page: &mut Page, entries: &[Entry]) {
     let mut cells: Vec<(f64, AdequacyRow)> = Vec::new();
     for e in entries.iter().filter(|e| !e.is_law()) {
-        if let (Some(bands), Some(geometry)) = (&e.bands, e.cal.geometry()) {
-            cells.extend(report_adequacy::assess(bands, &geometry).into_iter().map(|a| (e.cal.record.current_a, a)));
+        if let Some(p) = &e.prediction {
+            cells.extend(p.adequacy.iter().map(|a| (e.cal.record.current_a, a.clone())));
         }
     }
     if cells.is_empty() {
@@ -358,7 +358,7 @@ fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Figures) 
     let records: Vec<(&Entry, Vec<(&RunBands, f64)>)> = entries
         .iter()
         .filter(|e| !e.is_law())
-        .filter_map(|e| e.bands.as_ref().map(|bands| (e, bands.iter().map(|b| (b, rpm_of(&b.time, &b.displacement))).collect())))
+        .filter_map(|e| e.prediction.as_ref().map(|p| (e, p.bands.iter().map(|b| (b, rpm_of(&b.time, &b.displacement))).collect())))
         .collect();
     let mut speeds: Vec<f64> = records.iter().flat_map(|(_, r)| r.iter().map(|(_, v)| *v)).filter(|v| v.is_finite()).collect();
     if speeds.is_empty() {
@@ -389,7 +389,7 @@ fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Figures) 
 /// The held-out runs of every current law, with their bands.
 fn held_out_figures(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
     for law in entries.iter().filter(|e| e.is_law()) {
-        let (Some(bands), Some(cov)) = (&law.bands, &law.coverage) else { continue };
+        let Some(Prediction { bands, coverage: cov, .. }) = &law.prediction else { continue };
         let held: Vec<&RunBands> = bands.iter().filter(|b| cov.iter().any(|r| r.run == b.run && !r.calibrated)).collect();
         if held.is_empty() {
             continue;

@@ -4,12 +4,23 @@
 
 use std::path::Path;
 
-use super::Figures;
 use crate::error::Result;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
 use crate::posterior::{PosteriorSample, Prior};
 use crate::predict::RunBands;
 use crate::sampler::quantile;
+
+/// Figures written so far: file stem and caption, in report order.
+#[derive(Default)]
+pub struct Figures {
+    pub items: Vec<(String, String)>,
+}
+
+impl Figures {
+    pub fn push(&mut self, stem: &str, caption: &str) {
+        self.items.push((stem.to_string(), caption.to_string()));
+    }
+}
 
 /// At most this many observations are drawn as points per panel (the PNG
 /// would show no more; the SVG stays small).
@@ -78,7 +89,7 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
             c.legend_at = legend_at;
             c
         };
-        let (x_model, v_model) = crate::adequacy::kinematics(b, gap_m);
+        let (x_model, v_model) = crate::predict::adequacy::kinematics(b, gap_m);
         let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
         let x_obs = mm(&b.displacement);
         let tau_gamma = panel(format!("{}: stress against strain", b.run), "shear strain γ (-)", "shear stress τ (kPa)", &b.gamma_model, &b.gamma, 1e-3, LegendAt::Middle);

@@ -8,6 +8,9 @@ use base64::Engine;
 
 use crate::error::{Error, Result};
 
+/// The name of a report in its folder.
+pub const REPORT: &str = "report.html";
+
 /// Escapes text for HTML.
 pub fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")

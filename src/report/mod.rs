@@ -6,6 +6,7 @@
 //! * [`prediction`]: the report of a calibration predicting another campaign;
 //! * [`identification`]: the paper's Figs. 1–5;
 //! * [`adequacy`]: the report's section on where the law misses the records;
+//! * [`text`]: the tables the command line prints;
 //! * [`figures`]: the figures of a calibration report;
 //! * [`html`]: the page writer.
 
@@ -16,18 +17,9 @@ pub mod figures;
 pub mod html;
 pub mod identification;
 pub mod prediction;
+pub mod text;
 
 pub use calibration::{CalibrationReport, COVERAGE_OK, HELD_OUT_OK};
 pub use prediction::PredictionReport;
 
-/// Figures written so far: file stem and caption, in report order.
-#[derive(Default)]
-pub struct Figures {
-    pub items: Vec<(String, String)>,
-}
-
-impl Figures {
-    pub fn push(&mut self, stem: &str, caption: &str) {
-        self.items.push((stem.to_string(), caption.to_string()));
-    }
-}
+pub use figures::Figures;

@@ -6,16 +6,17 @@ use std::path::{Path, PathBuf};
 
 use super::calibration::coverage_table;
 use super::html::{esc, Page};
-use super::{adequacy, figures, Figures};
+use super::figures::{self, Figures};
+use super::adequacy;
 use crate::atomic;
 use crate::data::Campaign;
 use crate::error::Result;
-use crate::pipeline::Prediction;
-use crate::store::StoredCalibration;
+use crate::predict::Prediction;
+use crate::calibrate::Calibration;
 
 /// What the report shows.
 pub struct PredictionReport<'a> {
-    pub cal: &'a StoredCalibration,
+    pub cal: &'a Calibration,
     /// The runs predicted.
     pub campaign: &'a Campaign,
     /// Where the bands and the report go.
@@ -49,14 +50,14 @@ pub fn write(r: &PredictionReport) -> Result<PathBuf> {
     ));
     page.section("coverage", "Coverage");
     coverage_table(&mut page, &p.coverage, false);
-    adequacy::section(&mut page, dir, &p.bands, &geometry)?;
+    adequacy::section(&mut page, dir, &p.bands, &p.adequacy, &geometry)?;
     page.section("figures", "Figures");
     for (stem, caption) in &figs.items {
         page.figure(&dir.join(format!("{stem}.png")), caption)?;
     }
     page.section("reproduce", "Reproduce");
     page.pre(&p.record.command);
-    let path = dir.join("report.html");
+    let path = dir.join(super::html::REPORT);
     atomic::write(&path, page.finish().as_bytes())?;
     Ok(path)
 }

@@ -54,13 +54,6 @@ impl Chains {
         }
     }
 
-    /// The (step, chain) pairs from `burn_in` on, every `thin`-th step, in
-    /// step-major order.
-    pub fn thinned(&self, burn_in: usize, thin: usize) -> Vec<(usize, usize)> {
-        let chains = self.chains();
-        (burn_in..self.steps()).step_by(thin.max(1)).flat_map(|s| (0..chains).map(move |c| (s, c))).collect()
-    }
-
     /// The trace of coordinate `i` of every chain from step `from` on:
     /// `[chain][step]`.
     pub fn traces(&self, i: usize, from: usize) -> Vec<Vec<f64>> {

@@ -12,7 +12,7 @@ use super::diagnostics::Diagnostics;
 use super::moves::Move;
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
-use super::LogDensity;
+use super::density::LogDensity;
 use crate::error::{Error, Result};
 
 /// Walkers proposed and evaluated together in one batch. Fixed, so that the

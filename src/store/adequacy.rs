@@ -1,12 +1,11 @@
 //! `adequacy.parquet`: one row per run, where the calibrated law misses the
-//! record (see [`crate::adequacy`]). Written by `predict` for pandas and
-//! polars users; the report recomputes it from the bands, so nothing reads
-//! it back here.
+//! record (see [`crate::predict::adequacy`]), written by `predict` and read back by
+//! the reports.
 
 use std::path::Path;
 
-use super::parquet::{write_parquet, Table};
-use crate::adequacy::AdequacyRow;
+use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
+use crate::predict::adequacy::{AdequacyRow, Excitation};
 use crate::error::Result;
 
 pub fn write(path: &Path, rows: &[AdequacyRow]) -> Result<()> {
@@ -33,4 +32,36 @@ pub fn write(path: &Path, rows: &[AdequacyRow]) -> Result<()> {
         .f64("inside_p95_reversal", f(|r| r.inside_p95_reversal))
         .f64("inside_p95_stroke", f(|r| r.inside_p95_stroke));
     write_parquet(path, t)
+}
+
+pub fn read(path: &Path) -> Result<Vec<AdequacyRow>> {
+    let df = read_parquet(path)?;
+    let runs = str_column(&df, "run", path)?;
+    let col = |n: &str| f64_column(&df, n, path);
+    let (current, amplitude, frequency, peak_velocity) = (col("current_a")?, col("amplitude_m")?, col("frequency_hz")?, col("peak_velocity_m_s")?);
+    let (peak, rms, lag1, decorrelation, inflation) = (col("peak_force_n")?, col("residual_rms_n")?, col("lag1_autocorrelation")?, col("decorrelation_s")?, col("interval_inflation")?);
+    let (offset, stiffness, damping, share) = (col("trend_offset_n")?, col("trend_stiffness_n_per_m")?, col("trend_damping_n_s_per_m")?, col("trend_share")?);
+    let (reversal, stroke, inside, inside_reversal, inside_stroke) =
+        (col("reversal_rms_n")?, col("stroke_rms_n")?, col("inside_p95")?, col("inside_p95_reversal")?, col("inside_p95_stroke")?);
+    Ok((0..runs.len())
+        .map(|i| AdequacyRow {
+            run: runs[i].clone(),
+            current_a: current[i],
+            excitation: Excitation { amplitude_m: amplitude[i], frequency_hz: frequency[i], peak_velocity_m_s: peak_velocity[i] },
+            peak_force_n: peak[i],
+            residual_rms_n: rms[i],
+            lag1_autocorrelation: lag1[i],
+            decorrelation_s: decorrelation[i],
+            interval_inflation: inflation[i],
+            trend_offset_n: offset[i],
+            trend_stiffness_n_per_m: stiffness[i],
+            trend_damping_n_s_per_m: damping[i],
+            trend_share: share[i],
+            reversal_rms_n: reversal[i],
+            stroke_rms_n: stroke[i],
+            inside_p95: inside[i],
+            inside_p95_reversal: inside_reversal[i],
+            inside_p95_stroke: inside_stroke[i],
+        })
+        .collect())
 }

@@ -7,7 +7,25 @@ use std::path::Path;
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
 use crate::error::{Error, Result};
 use crate::predict::CoverageRow;
-use crate::validate::{HeldOutBy, LooRow};
+use crate::validate::{HeldOutBy, LeaveOneOut, LooRow};
+
+/// The files of a leave-one-out study in a calibration folder.
+pub const LOO: &str = "loo.parquet";
+pub const LOO_BANDS: &str = "loo_bands.parquet";
+
+/// Writes a leave-one-out study into the calibration folder `dir`.
+pub fn write_leave_one_out(dir: &Path, study: &LeaveOneOut) -> Result<()> {
+    super::bands::write(&dir.join(LOO_BANDS), &study.bands)?;
+    write_loo(&dir.join(LOO), &study.rows)
+}
+
+/// The leave-one-out study in `dir`, if it has one.
+pub fn read_leave_one_out(dir: &Path) -> Result<Option<LeaveOneOut>> {
+    if !(dir.join(LOO).exists() && dir.join(LOO_BANDS).exists()) {
+        return Ok(None);
+    }
+    Ok(Some(LeaveOneOut { rows: read_loo(&dir.join(LOO))?, bands: super::bands::read(&dir.join(LOO_BANDS))? }))
+}
 
 pub fn write(path: &Path, rows: &[CoverageRow]) -> Result<()> {
     write_parquet(path, table(rows))
@@ -27,7 +45,7 @@ fn table(rows: &[CoverageRow]) -> Table {
         .f64("lppd", rows.iter().map(|r| r.lppd).collect())
 }
 
-pub fn write_loo(path: &Path, rows: &[LooRow]) -> Result<()> {
+fn write_loo(path: &Path, rows: &[LooRow]) -> Result<()> {
     let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
     let t = table(&coverage)
         .f64("pareto_k", rows.iter().map(|r| r.pareto_k).collect())
@@ -37,7 +55,7 @@ pub fn write_loo(path: &Path, rows: &[LooRow]) -> Result<()> {
     write_parquet(path, t)
 }
 
-pub fn read_loo(path: &Path) -> Result<Vec<LooRow>> {
+fn read_loo(path: &Path) -> Result<Vec<LooRow>> {
     let df = read_parquet(path)?;
     let coverage = read(path)?;
     let k = f64_column(&df, "pareto_k", path)?;

@@ -3,8 +3,32 @@
 
 use std::path::Path;
 
-use super::parquet::{write_parquet, Table};
+use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
 use crate::error::Result;
+
+/// The file's name in a calibration or identification folder.
+pub const FILE: &str = "identification.parquet";
+
+/// One row of the file: a quantity of one run (or "all") at one current,
+/// as identified and before the combined estimate was pulled into the
+/// physical range (`raw_value`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct IdentificationRow {
+    pub run: String,
+    pub current_a: f64,
+    pub parameter: String,
+    pub value: f64,
+    pub raw_value: f64,
+}
+
+pub fn read(path: &Path) -> Result<Vec<IdentificationRow>> {
+    let df = read_parquet(path)?;
+    let (run, parameter) = (str_column(&df, "run", path)?, str_column(&df, "parameter", path)?);
+    let (current, value, raw) = (f64_column(&df, "current_a", path)?, f64_column(&df, "value", path)?, f64_column(&df, "raw_value", path)?);
+    Ok((0..run.len())
+        .map(|i| IdentificationRow { run: run[i].clone(), current_a: current[i], parameter: parameter[i].clone(), value: value[i], raw_value: raw[i] })
+        .collect())
+}
 use crate::identify::CurrentIdentification;
 use crate::model::PARAM_NAMES;
 

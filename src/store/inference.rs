@@ -23,15 +23,18 @@ use std::path::Path;
 use std::sync::Arc;
 
 use serde_json::{json, Map, Value};
-use zarrs::array::{data_type, ArrayBuilder, DataType, FillValueMetadata, IntoArrayBytes};
+use zarrs::array::{data_type, Array, ArrayBuilder, DataType, FillValueMetadata, IntoArrayBytes};
 use zarrs::filesystem::FilesystemStore;
-use zarrs::group::GroupBuilder;
+use zarrs::group::{Group, GroupBuilder};
 use zarrs::storage::ReadableWritableListableStorage;
 
 use crate::error::{Error, Result};
 use crate::pointwise::PointwiseDraws;
 use crate::posterior::{unit_of, PosteriorSample};
 use crate::sampler::diagnostics::analysed_draws;
+
+/// The store's name in a calibration folder.
+pub const FILE: &str = "inference.zarr";
 
 /// Why ArviZ's R̂ of this store is not ours, and how to get ours.
 pub const RHAT_NOTE: &str = "Each chain is one walker of an affine-invariant ensemble. Walkers of an \
@@ -65,6 +68,48 @@ pub fn write(path: &Path, sample: &PosteriorSample, pointwise: &PointwiseDraws, 
 }
 
 type Failure = Box<dyn std::error::Error>;
+
+/// What a store holds, read back: its calibration, the posterior draws by
+/// coordinate name (`[chain][draw]`), and the pointwise log-likelihood
+/// (`[chain][draw][obs]`) with its shape.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stored {
+    pub calibration_id: String,
+    /// The steps of the posterior's draws.
+    pub draws: Vec<i64>,
+    pub posterior: Vec<(String, Vec<f64>)>,
+    pub log_likelihood: Vec<f64>,
+    /// (chains, draws, observations) of the pointwise groups.
+    pub pointwise_shape: (usize, usize, usize),
+}
+
+/// Reads the store at `path` (written by [`write`]).
+pub fn read(path: &Path) -> Result<Stored> {
+    read_store(path).map_err(|e| Error::input(path, format!("not a readable inference.zarr: {e}")))
+}
+
+fn read_store(path: &Path) -> std::result::Result<Stored, Failure> {
+    let store: ReadableWritableListableStorage = Arc::new(FilesystemStore::new(path)?);
+    let root = Group::open(store.clone(), "/")?;
+    let calibration_id = root.attributes().get("calibration_id").and_then(Value::as_str).unwrap_or_default().to_string();
+    let all_f64 = |node: &str| -> std::result::Result<(Vec<u64>, Vec<f64>), Failure> {
+        let a = Array::open(store.clone(), node)?;
+        Ok((a.shape().to_vec(), a.retrieve_array_subset::<Vec<f64>>(&a.subset_all())?))
+    };
+    let draw = Array::open(store.clone(), "/posterior/draw")?;
+    let draws = draw.retrieve_array_subset::<Vec<i64>>(&draw.subset_all())?;
+    let mut posterior = Vec::new();
+    for node in Group::open(store.clone(), "/posterior")?.child_array_paths()? {
+        let a = Array::open(store.clone(), node.as_str())?;
+        if a.dimensionality() == 2 && a.data_type() == &data_type::float64() {
+            let name = a.attributes().get("long_name").and_then(Value::as_str).unwrap_or(node.as_str()).to_string();
+            posterior.push((name, a.retrieve_array_subset::<Vec<f64>>(&a.subset_all())?));
+        }
+    }
+    let (shape, log_likelihood) = all_f64("/log_likelihood/tau")?;
+    let dim = |i: usize| shape.get(i).copied().unwrap_or(0) as usize;
+    Ok(Stored { calibration_id, draws, posterior, log_likelihood, pointwise_shape: (dim(0), dim(1), dim(2)) })
+}
 
 fn build(dir: &Path, sample: &PosteriorSample, pw: &PointwiseDraws, info: &StoreInfo) -> std::result::Result<(), Failure> {
     let store: ReadableWritableListableStorage = Arc::new(FilesystemStore::new(dir)?);

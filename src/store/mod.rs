@@ -7,7 +7,8 @@
 //! | `identification.parquet` | [`identification`] |
 //! | `chains.parquet` | [`chains`] |
 //! | `summary.parquet` | [`summary`] |
-//! | `calibration.toml`, `config.toml` | [`record`] |
+//! | `calibration.toml` | [`record`] |
+//! | `config.toml` | [`crate::calibrate::settings`] (also `--config`) |
 //! | `bands.parquet`, `loo_bands.parquet` | [`bands`] |
 //! | `coverage.parquet`, `loo.parquet` | [`coverage`] |
 //! | `adequacy.parquet` | [`adequacy`] |
@@ -15,8 +16,8 @@
 //! | `comparison.parquet`, `differences.parquet` | [`comparison`] |
 //! | `inference.zarr` (ArviZ) | [`inference`] |
 //!
-//! [`folder`] opens a whole calibration folder; [`parquet`] holds the
-//! table helpers.
+//! [`folder`] writes and reads a whole calibration folder; [`parquet`]
+//! holds the table helpers.
 
 pub mod adequacy;
 pub mod bands;
@@ -31,7 +32,5 @@ pub mod prediction;
 pub mod record;
 pub mod summary;
 
-pub use folder::StoredCalibration;
 pub use parquet::{column_names, f64_column, read_parquet, str_column, write_parquet, Table};
-pub use prediction::PredictionRecord;
-pub use record::{command_line, CalibrationRecord};
+pub use crate::calibrate::command_line;

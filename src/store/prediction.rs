@@ -1,36 +1,47 @@
-//! `prediction.toml`: how `bands.parquet` was made.
+//! A prediction in a folder: `bands.parquet`, `coverage.parquet`,
+//! `adequacy.parquet` and `prediction.toml` (how they were made), written
+//! and read together.
 
 use std::path::Path;
 
-use serde::{Deserialize, Serialize};
-
+use super::{adequacy, bands, coverage};
 use crate::atomic;
 use crate::error::{Error, Result};
-use crate::predict::CoverageRow;
+use crate::predict::{Prediction, PredictionRecord};
 
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct PredictionRecord {
-    pub mrbp_version: String,
-    pub command: String,
-    pub draws: usize,
-    pub burn_in: usize,
-    pub thin: usize,
-    pub noise_replicates: usize,
-    pub seed: u64,
-    pub substeps: u32,
-    pub seconds: f64,
-    /// The calibration the bands came from (its `calibration_id`).
-    #[serde(default)]
-    pub calibration_id: String,
-    pub coverage: Vec<CoverageRow>,
+/// The files of a prediction, by name.
+pub const BANDS: &str = "bands.parquet";
+pub const COVERAGE: &str = "coverage.parquet";
+pub const ADEQUACY: &str = "adequacy.parquet";
+pub const RECORD: &str = "prediction.toml";
+
+/// Writes the prediction's files into `dir`, the record last.
+pub fn write(dir: &Path, p: &Prediction) -> Result<()> {
+    bands::write(&dir.join(BANDS), &p.bands)?;
+    coverage::write(&dir.join(COVERAGE), &p.coverage)?;
+    adequacy::write(&dir.join(ADEQUACY), &p.adequacy)?;
+    write_record(&dir.join(RECORD), &p.record)
 }
 
-pub fn write(path: &Path, rec: &PredictionRecord) -> Result<()> {
+/// The prediction in `dir`, if it has one (all four files).
+pub fn read(dir: &Path) -> Result<Option<Prediction>> {
+    if ![BANDS, COVERAGE, ADEQUACY, RECORD].iter().all(|f| dir.join(f).exists()) {
+        return Ok(None);
+    }
+    Ok(Some(Prediction {
+        bands: bands::read(&dir.join(BANDS))?,
+        coverage: coverage::read(&dir.join(COVERAGE))?,
+        adequacy: adequacy::read(&dir.join(ADEQUACY))?,
+        record: read_record(&dir.join(RECORD))?,
+    }))
+}
+
+pub fn write_record(path: &Path, rec: &PredictionRecord) -> Result<()> {
     let text = toml::to_string(rec).map_err(|e| Error::Compute(format!("writing prediction.toml: {e}")))?;
     atomic::write(path, format!("# How bands.parquet was made (mrbp predict).\n{text}").as_bytes())
 }
 
-pub fn read(path: &Path) -> Result<PredictionRecord> {
+pub fn read_record(path: &Path) -> Result<PredictionRecord> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
     toml::from_str(&text).map_err(|e| Error::input(path, format!("not a prediction record: {}", e.message())))
 }

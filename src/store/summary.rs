@@ -6,9 +6,11 @@ use std::path::Path;
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
 use crate::error::Result;
 use crate::posterior::SummaryRow;
-use crate::sampler::{Diagnostics, ParameterDiagnostics};
+use crate::sampler::ParameterDiagnostics;
 
-pub fn write(path: &Path, rows: &[SummaryRow], diagnostics: &Diagnostics, walkers: usize) -> Result<()> {
+/// The rows of a calibration whose draws run from `burn_in` to `steps`, of
+/// `walkers` chains in all.
+pub fn write(path: &Path, rows: &[SummaryRow], burn_in: usize, steps: usize, walkers: usize) -> Result<()> {
     let col = |f: &dyn Fn(&ParameterDiagnostics) -> f64| rows.iter().map(|r| f(&r.stats)).collect::<Vec<f64>>();
     let n = rows.len();
     write_parquet(
@@ -25,8 +27,8 @@ pub fn write(path: &Path, rows: &[SummaryRow], diagnostics: &Diagnostics, walker
             .f64("r_hat", col(&|p| p.r_hat))
             .f64("tau_int", col(&|p| p.tau_int))
             .f64("mcse_mean", col(&|p| p.mcse_mean))
-            .i64("first_draw", vec![diagnostics.burn_in as i64; n])
-            .i64("last_draw", vec![diagnostics.steps as i64; n])
+            .i64("first_draw", vec![burn_in as i64; n])
+            .i64("last_draw", vec![steps as i64; n])
             .i64("walkers", vec![walkers as i64; n]),
     )
 }

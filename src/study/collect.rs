@@ -8,7 +8,7 @@ use std::path::Path;
 
 use super::statistics::{self, CoverageRow, Tally};
 use super::task::read_outcome;
-use super::{read_record, task_dir, task_ids};
+use super::plan::{read_record, task_dir, task_ids};
 use crate::error::{Error, Result};
 use crate::store::Table;
 

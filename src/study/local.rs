@@ -9,7 +9,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use super::task::read_outcome;
-use super::{task_dir, task_ids};
+use super::plan::{task_dir, task_ids};
 use crate::error::{Error, Result};
 
 /// Runs every task of the study in `dir` that has not ended, `jobs` at a

@@ -13,11 +13,13 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use super::{read_task, task_dir, Source, TaskSpec};
+use super::plan::{read_task, task_dir, Source, TaskSpec};
 use crate::error::{Error, Result};
 use crate::pipeline::{Pipeline, SampleRequest};
 use crate::sampler::quantile;
-use crate::store::{StoredCalibration, Table};
+use crate::calibrate::Calibration;
+use crate::posterior::Draws;
+use crate::store::Table;
 
 /// Posterior draws (thinned by τ) each truth is ranked among.
 pub const RANK_DRAWS: usize = 99;
@@ -97,7 +99,7 @@ pub fn read_outcome(folder: &Path) -> Result<Option<TaskOutcome>> {
 
 /// The task's calibration in `folder/calibration`, resumed from its
 /// checkpoint if an earlier attempt left one.
-fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<StoredCalibration> {
+fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<Calibration> {
     let campaign = match &spec.source {
         Source::Synthetic { synth } => {
             let data = folder.join("data");
@@ -107,7 +109,7 @@ fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<
         Source::Campaign { manifest } => pipeline.load(manifest)?,
     };
     let out = folder.join("calibration");
-    let resume = out.join(crate::pipeline::CHECKPOINT).exists();
+    let resume = out.join(crate::store::folder::CHECKPOINT).exists();
     let request = SampleRequest { settings: spec.settings.clone(), current: spec.current_a, hold_out_current: vec![], resume, force: true };
     let mut folders = pipeline.sample(&campaign, &out, &request)?;
     folders.pop().ok_or_else(|| Error::Compute(format!("task {}: no calibration made", spec.id)))
@@ -117,8 +119,8 @@ fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<
 /// known — z = (mean − truth)/sd, whether the central 50 % and 90 %
 /// intervals hold it, and its rank among [`RANK_DRAWS`] thinned draws;
 /// then the task's wall time, steps and warnings on every row.
-fn result_table(spec: &TaskSpec, cal: &StoredCalibration, outcome: &TaskOutcome) -> Table {
-    let all = cal.sample.positions(cal.burn_in(), 1, usize::MAX);
+fn result_table(spec: &TaskSpec, cal: &Calibration, outcome: &TaskOutcome) -> Table {
+    let all = Draws { burn_in: cal.burn_in(), thin: 1 }.positions(&cal.sample.chains, usize::MAX);
     let thinned = cal.draw_positions(RANK_DRAWS);
     let rows = &cal.summary;
     let truth: Vec<f64> = rows.iter().map(|r| spec.truth.get(&r.parameter).copied().unwrap_or(f64::NAN)).collect();

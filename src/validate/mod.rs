@@ -13,7 +13,7 @@ pub mod psis;
 
 use serde::{Deserialize, Serialize};
 
-use crate::calibrate::CalibrationSettings;
+use crate::calibrate::{sampling, Calibration, CalibrationSettings};
 use crate::data::{Campaign, Run};
 use crate::error::{Error, Result};
 use crate::model::Params;
@@ -22,10 +22,10 @@ use rand_distr::{ChiSquared, StandardNormal};
 use rayon::prelude::*;
 
 use crate::data::{RecordPart, RunData};
-use crate::posterior::map::{self, Laplace};
-use crate::posterior::{Draw, Posterior, PosteriorSample};
-use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictSettings, RunBands, RunPrediction};
-use crate::sampler::{Chains, Diagnostics, LogDensity, Observer, RunControl, Sampler};
+use crate::posterior::map::{self, Laplace, MapEstimate};
+use crate::posterior::{Draw, Draws, Posterior};
+use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictOptions, PredictSettings, RunBands, RunPrediction};
+use crate::sampler::{LogDensity, Observer, RunControl, Sampler};
 
 /// How each held-out posterior is reached and propagated.
 #[derive(Clone, Copy, Debug)]
@@ -42,8 +42,17 @@ pub struct LooSettings {
 
 impl Default for LooSettings {
     fn default() -> Self {
-        LooSettings { steps: 600, weighted_draws: 1000, draws: 400, replicates: 10, seed: 1 }
+        let bands = PredictOptions::default();
+        LooSettings { steps: 600, weighted_draws: 1000, draws: bands.draws, replicates: bands.replicates, seed: bands.seed }
     }
+}
+
+/// What a leave-one-out study made: coverage and bands of the held-out
+/// runs (`loo.parquet`, `loo_bands.parquet`).
+#[derive(Clone, Debug)]
+pub struct LeaveOneOut {
+    pub rows: Vec<LooRow>,
+    pub bands: Vec<RunBands>,
 }
 
 /// One held-out run: how its posterior was reached and what it predicts.
@@ -90,25 +99,21 @@ pub struct LooRow {
     pub max_rhat: f64,
 }
 
-/// The full calibration a leave-one-out study starts from.
-pub struct Full<'a> {
-    /// Its runs.
-    pub campaign: &'a Campaign,
-    /// Its settings, walkers and sub-steps filled in.
-    pub settings: &'a CalibrationSettings,
-    pub sample: &'a PosteriorSample,
-    pub burn_in: usize,
-    /// Steps between draws that are nearly independent.
-    pub thin: usize,
+/// The full calibration a leave-one-out study starts from, with its runs.
+struct Full<'a> {
+    cal: &'a Calibration,
+    campaign: &'a Campaign,
 }
 
-/// Leaves out each run of the full calibration in turn. `observe` makes the
-/// observers of a fresh calibration, told the id of the run left out.
-pub fn leave_one_out(full: &Full, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<Vec<HeldOut>> {
-    if full.campaign.runs.len() < 2 {
+/// Leaves out each run of `cal` (whose runs are `campaign`'s) in turn.
+/// `observe` makes the observers of a fresh calibration, told the id of
+/// the run left out.
+pub fn leave_one_out(cal: &Calibration, campaign: &Campaign, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<Vec<HeldOut>> {
+    if campaign.runs.len() < 2 {
         return Err(Error::Usage("leave-one-out needs a calibration of at least two runs".into()));
     }
-    full.campaign.runs.iter().enumerate().map(|(j, run)| hold_out(full, j, run, loo, observe)).collect()
+    let full = Full { cal, campaign };
+    campaign.runs.iter().enumerate().map(|(j, run)| hold_out(&full, j, run, loo, observe)).collect()
 }
 
 /// Proposals of the importance sampling from the Laplace approximation:
@@ -156,43 +161,63 @@ impl Target<'_> {
     }
 }
 
+/// The held-out posterior of run `j` by the cheapest way that can be
+/// trusted, and its prediction of the run.
 fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<HeldOut> {
-    let settings = full.settings;
+    let settings = &full.cal.settings;
     let lik = &settings.likelihood;
-    let integrator = settings.integrator.integrator(settings.integrator.substeps);
-    let current = left_out.spec.current_a;
     let target = Target {
         j,
         run: left_out,
         data: RunData::from_run(left_out, RecordPart::WholeRecord, lik.smooth_strain_ms),
         compared: RunData::from_run(left_out, lik.part, lik.smooth_strain_ms).time.len(),
-        predict: PredictSettings { integrator, noise: settings.noise_model(), replicates: loo.replicates, seed: loo.seed },
+        predict: full.cal.predict_settings(loo.replicates, loo.seed),
     };
+    let current = left_out.spec.current_a;
+    let sample = &full.cal.sample;
 
     // 1. the full posterior's draws, reweighted by 1/p(y_j | θ)
-    let positions = full.sample.positions(full.burn_in, 1, loo.weighted_draws);
-    let params: Vec<Params> = positions.iter().map(|&(s, c)| full.sample.params_at(s, c, current)).collect();
-    let paths = model_paths(&target.data, &params, &integrator, &|| {});
+    let positions = Draws { burn_in: full.cal.burn_in(), thin: 1 }.positions(&sample.chains, loo.weighted_draws);
+    let params: Vec<Params> = positions.iter().map(|&(s, c)| sample.params_at(s, c, current)).collect();
+    let paths = model_paths(&target.data, &params, &target.predict.integrator, &|| {});
     // the run's own force offset (and the spring) in each full-posterior draw
-    let own: Vec<Draw> = positions.iter().map(|&(s, c)| full.sample.draw(s, c, left_out.id(), current)).collect();
+    let own: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw(s, c, left_out.id(), current)).collect();
     let reweighted = psis::smooth(&target.log_weights(&paths, &own));
     let mut row = LooRow { coverage: CoverageRow::default(), pareto_k: reweighted.k_hat, pareto_k_laplace: f64::NAN, by: HeldOutBy::Reweighting, max_rhat: f64::NAN };
-    if reweighted.k_hat <= psis::K_THRESHOLD {
-        let draws: Vec<Draw> = positions.iter().map(|&(s, c)| full.sample.draw_without(s, c, left_out.id(), current)).collect();
-        let prediction = target.weighted_bands(&draws, &paths, &reweighted.weights, loo.draws)?;
-        row.coverage = prediction.coverage.clone();
-        return Ok(HeldOut { prediction, row });
-    }
+    let prediction = if reweighted.k_hat <= psis::K_THRESHOLD {
+        let draws: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw_without(s, c, left_out.id(), current)).collect();
+        target.weighted_bands(&draws, &paths, &reweighted.weights, loo.draws)?
+    } else {
+        // 2. and 3. need the held-out posterior, from the weighted draws' mean
+        let kept = full.campaign.filtered(|r| r.id() != left_out.id());
+        let posterior = settings.posterior(&kept, target.predict.integrator);
+        let start = weighted_mean_theta(full, &posterior, &positions, &reweighted.weights);
+        let map = map::best_map(&posterior, &[start])
+            .ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the MAP search failed", left_out.id())))?;
+        let (k_hat, by_laplace) = laplace_importance(&target, &posterior, &map, settings.sampler.seed, loo)?;
+        row.pareto_k_laplace = k_hat;
+        match by_laplace {
+            Some(prediction) => {
+                row.by = HeldOutBy::LaplaceImportance;
+                prediction
+            }
+            None => {
+                let (prediction, max_rhat) = sample_afresh(&target, &posterior, &map, settings, loo, observe)?;
+                (row.by, row.max_rhat) = (HeldOutBy::Sampling, max_rhat);
+                prediction
+            }
+        }
+    };
+    row.coverage = prediction.coverage.clone();
+    Ok(HeldOut { prediction, row })
+}
 
-    // 2. importance sampling from the held-out posterior's Laplace
-    //    approximation, around its MAP (found from the weighted draws' mean)
-    let kept = full.campaign.filtered(|r| r.id() != left_out.id());
-    let posterior = settings.posterior(&kept, integrator);
-    let start = weighted_mean_theta(full, &posterior, &positions, &reweighted.weights);
-    let map = map::best_map(&posterior, &[start])
-        .ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the MAP search failed", left_out.id())))?;
-    let laplace = Laplace::new(&posterior, &map);
-    let mut rng = crate::rng::stream(settings.sampler.seed, &[0x1005, j as u64]);
+/// Importance sampling from the held-out posterior's Laplace approximation
+/// around its MAP: the weights' k̂, and the prediction if they can be
+/// trusted.
+fn laplace_importance(target: &Target, posterior: &Posterior, map: &MapEstimate, seed: u64, loo: &LooSettings) -> Result<(f64, Option<RunPrediction>)> {
+    let laplace = Laplace::new(posterior, map);
+    let mut rng = crate::rng::stream(seed, &[0x1005, target.j as u64]);
     let d = posterior.dim();
     let proposals: Vec<Vec<f64>> = (0..loo.weighted_draws)
         .map(|_| {
@@ -201,44 +226,41 @@ fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &
             laplace.point(&z, LAPLACE_SPREAD)
         })
         .collect();
-    let log_p = log_densities(&posterior, &proposals);
+    let log_p = log_densities(posterior, &proposals);
     let log_w: Vec<f64> = proposals.iter().zip(&log_p).map(|(x, lp)| lp - laplace.log_t_density(x, LAPLACE_SPREAD, LAPLACE_DF)).collect();
     let from_laplace = psis::smooth(&log_w);
-    row.pareto_k_laplace = from_laplace.k_hat;
-    if from_laplace.k_hat <= psis::K_THRESHOLD {
-        let draws: Vec<Draw> = proposals.iter().map(|x| unseen_draw(&posterior, x, current)).collect();
-        let params: Vec<Params> = draws.iter().map(|d| d.params).collect();
-        let paths = model_paths(&target.data, &params, &integrator, &|| {});
-        let prediction = target.weighted_bands(&draws, &paths, &from_laplace.weights, loo.draws)?;
-        row.coverage = prediction.coverage.clone();
-        row.by = HeldOutBy::LaplaceImportance;
-        return Ok(HeldOut { prediction, row });
+    if from_laplace.k_hat > psis::K_THRESHOLD {
+        return Ok((from_laplace.k_hat, None));
     }
+    let current = target.run.spec.current_a;
+    let draws: Vec<Draw> = proposals.iter().map(|x| unseen_draw(posterior, x, current)).collect();
+    let params: Vec<Params> = draws.iter().map(|d| d.params).collect();
+    let paths = model_paths(&target.data, &params, &target.predict.integrator, &|| {});
+    Ok((from_laplace.k_hat, Some(target.weighted_bands(&draws, &paths, &from_laplace.weights, loo.draws)?)))
+}
 
-    // 3. the held-out posterior sampled afresh, from walkers around its MAP
+/// The held-out posterior sampled afresh, from walkers around its MAP, on
+/// a random stream of its own: the prediction and the largest R̂.
+fn sample_afresh(
+    target: &Target,
+    posterior: &Posterior,
+    map: &MapEstimate,
+    settings: &CalibrationSettings,
+    loo: &LooSettings,
+    observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>,
+) -> Result<(RunPrediction, f64)> {
     let s = &settings.sampler;
-    let init = map::initial_walkers(&posterior, &map, s.walkers * s.ensembles, s.seed ^ (0x100 + j as u64));
-    let mut observers = observe(left_out.id());
+    let seed = s.seed ^ (0x100 + target.j as u64);
+    let init = map::initial_walkers(posterior, map, s.walkers * s.ensembles, seed);
+    let mut observers = observe(target.run.id());
     let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
-    // a stream of its own for each held-out run
-    let mut sampler = Sampler::new(&posterior, s.sampler(s.walkers, s.seed ^ (0x100 + j as u64)), &init)?;
+    let mut sampler = Sampler::new(posterior, s.sampler(s.walkers, seed), &init)?;
     let control = RunControl { max_steps: loo.steps, until_converged: true, check_every: s.check_every, min_ess: s.min_ess };
-    let layout = &posterior.layout;
-    let diagnose = |chains: &Chains| {
-        let burn_in = Diagnostics::burn_in_rule(chains);
-        PosteriorSample::from_coordinates(layout, posterior.model, chains).diagnostics(burn_in)
-    };
-    sampler.run_until(&control, &mut refs, &diagnose)?;
-    let burn_in = Diagnostics::burn_in_rule(&sampler.chains);
-    let held = PosteriorSample::from_coordinates(layout, posterior.model, &sampler.chains);
-    let diagnostics = held.diagnostics(burn_in);
-    let thin = diagnostics.tau_max.ceil().max(1.0) as usize;
-    let draws = held.draws(&held.positions(burn_in, thin, loo.draws), left_out.id(), current);
-    let prediction = predict_run(left_out, &target.data, j, &draws, &target.predict, false, &|| {})?;
-    row.coverage = prediction.coverage.clone();
-    row.by = HeldOutBy::Sampling;
-    row.max_rhat = diagnostics.max_rhat();
-    Ok(HeldOut { prediction, row })
+    let held = sampling::run(posterior, &mut sampler, &control, 0, &mut refs)?;
+    let positions = held.draws().positions(&held.sample.chains, loo.draws);
+    let draws = held.sample.draws(&positions, target.run.id(), target.run.spec.current_a);
+    let prediction = predict_run(target.run, &target.data, target.j, &draws, &target.predict, false, &|| {})?;
+    Ok((prediction, held.diagnostics.max_rhat()))
 }
 
 /// The weighted mean of the full posterior's draws at `positions`, in the
@@ -246,9 +268,10 @@ fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &
 fn weighted_mean_theta(full: &Full, posterior: &Posterior, positions: &[(usize, usize)], weights: &[f64]) -> Vec<f64> {
     let layout = &posterior.layout;
     let mut mean = vec![0.0; layout.fitted.len()];
+    let sample = &full.cal.sample;
     for (&(step, chain), w) in positions.iter().zip(weights) {
-        let point = full.sample.chains.point(step, chain);
-        let si: Vec<f64> = layout.names.iter().map(|n| full.sample.layout.index(n).map_or(1.0, |k| point[k])).collect();
+        let point = sample.chains.point(step, chain);
+        let si: Vec<f64> = layout.names.iter().map(|n| sample.layout.index(n).map_or(1.0, |k| point[k])).collect();
         for (m, v) in mean.iter_mut().zip(layout.from_si(&si)) {
             *m += w * v;
         }

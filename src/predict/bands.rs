@@ -1,5 +1,5 @@
-//! Posterior propagation: posterior draws of the B-P parameters and of the
-//! noise, each integrated along a run's strain history, give the credible
+//! The bands of one run: posterior draws of the B-P parameters and of the
+//! noise, each integrated along the run's strain history, give the credible
 //! band of the model stress and the predictive band of a new measurement.
 //!
 //! Model band: quantiles over draws of τ_model(t_k; θ_d). Predictive band:
@@ -265,29 +265,6 @@ impl CoverageRow {
             lppd: coverage.lppd,
         }
     }
-}
-
-/// A run's bands and coverage from posterior draws: the whole of what a
-/// prediction says about one run.
-pub struct RunPrediction {
-    pub bands: RunBands,
-    pub coverage: CoverageRow,
-}
-
-/// Integrates `draws` along `run` (driven as `data`) and forms its bands
-/// and coverage; `run_index` keys the noise stream.
-pub fn predict_run(
-    run: &Run,
-    data: &RunData,
-    run_index: usize,
-    draws: &[Draw],
-    settings: &PredictSettings,
-    calibrated: bool,
-    tick: &(dyn Fn() + Sync),
-) -> Result<RunPrediction> {
-    let b = bands(data, run_index, draws, settings, tick)?;
-    let coverage = CoverageRow::of(run, &b, &b.coverage(&data.tau), calibrated);
-    Ok(RunPrediction { bands: RunBands::of(run, data, b), coverage })
 }
 
 #[cfg(test)]

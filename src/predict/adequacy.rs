@@ -21,7 +21,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::predict::RunBands;
+use super::bands::RunBands;
 use crate::sampler::quantile;
 
 /// A sample is "at a reversal" when its speed is below this share of the

@@ -1,0 +1,132 @@
+//! What a calibration did (`calibration.toml`): its campaign and runs, its
+//! start (identification, MAP, step study), the sampler's run, timings and
+//! warnings, and the id that files derived from it carry.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::sampling::Sampled;
+use super::start::Start;
+use crate::data::{Campaign, Geometry, RecordPart};
+use crate::model::PARAM_NAMES;
+use crate::noise::NoiseKind;
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StepRow {
+    pub substeps: u32,
+    pub largest_shift_sd: f64,
+    pub parameter: String,
+}
+
+/// `calibration.toml`, read back by `predict`, `report` and `compare`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CalibrationRecord {
+    pub mrbp_version: String,
+    /// The command line that made it.
+    #[serde(default)]
+    pub command: String,
+    pub campaign: String,
+    /// The coil currents of the runs calibrated on.
+    #[serde(default)]
+    pub currents: Vec<f64>,
+    /// The manifest, as an absolute path where it could be resolved.
+    pub manifest: String,
+    /// The current the parameters describe (a current law's reference).
+    pub current_a: f64,
+    pub runs: Vec<String>,
+    pub noise: NoiseKind,
+    pub part: RecordPart,
+    pub substeps: u32,
+    #[serde(default)]
+    pub seed: u64,
+    pub step_study: Vec<StepRow>,
+    pub identification: BTreeMap<String, f64>,
+    pub map: BTreeMap<String, f64>,
+    pub map_log_density: f64,
+    pub laplace_sd_log: BTreeMap<String, f64>,
+    pub walkers: usize,
+    pub ensembles: usize,
+    pub steps: usize,
+    pub burn_in: usize,
+    pub seconds_start: f64,
+    pub seconds_sampling: f64,
+    /// Bulk ESS per second of the whole calibration's wall time, per
+    /// parameter: what the calibration's cost bought.
+    #[serde(default)]
+    pub ess_bulk_per_second: BTreeMap<String, f64>,
+    /// The sampler's warnings (convergence, stuck walkers).
+    pub warnings: Vec<String>,
+    /// What the start found about the model's fit (residuals with memory).
+    #[serde(default)]
+    pub model_warnings: Vec<String>,
+    /// The campaign's geometry (A, h): what turns the bands into forces.
+    #[serde(default)]
+    pub geometry: Option<Geometry>,
+    /// Names this calibration: files derived from it record it, so a later
+    /// stage can tell them from those of an earlier calibration.
+    #[serde(default)]
+    pub calibration_id: String,
+}
+
+/// A name for a new calibration: when and by which process it was made.
+fn new_calibration_id() -> String {
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    format!("{nanos:x}-{:x}", std::process::id())
+}
+
+
+/// The command line of this process, for the records.
+pub fn command_line() -> String {
+    let mut args = std::env::args();
+    let program = args.next().map(|p| std::path::Path::new(&p).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or(p));
+    program.into_iter().chain(args).collect::<Vec<_>>().join(" ")
+}
+
+impl CalibrationRecord {
+    /// The record of a calibration of `campaign` that started at `start`
+    /// and sampled `sampled`.
+    pub fn of(campaign: &Campaign, start: &Start, sampled: &Sampled) -> CalibrationRecord {
+        let names = &start.posterior.layout.names;
+        let coordinates = start.posterior.layout.coordinate_names();
+        let named = |v: &[f64]| names.iter().zip(v).map(|(n, v)| (n.clone(), *v)).collect();
+        let manifest = std::fs::canonicalize(&campaign.manifest_path).unwrap_or(campaign.manifest_path.clone());
+        CalibrationRecord {
+            mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
+            command: command_line(),
+            campaign: campaign.name.clone(),
+            currents: campaign.currents(),
+            manifest: manifest.display().to_string(),
+            current_a: start.posterior.model.describes_current(start.current_a),
+            runs: campaign.runs.iter().map(|r| r.id().to_string()).collect(),
+            noise: start.settings.likelihood.noise,
+            part: start.settings.likelihood.part,
+            substeps: start.settings.integrator.substeps,
+            seed: start.settings.sampler.seed,
+            step_study: start
+                .step_study
+                .iter()
+                .map(|s| {
+                    let (i, v) = s.worst();
+                    StepRow { substeps: s.substeps, largest_shift_sd: v, parameter: coordinates[i].clone() }
+                })
+                .collect(),
+            identification: PARAM_NAMES.iter().zip(start.identification.params.to_array()).map(|(n, v)| (n.to_string(), v)).collect(),
+            map: named(&start.posterior.layout.to_si(&start.map.x)),
+            map_log_density: start.map.log_density,
+            laplace_sd_log: named(&start.map.log_theta_sd(&start.posterior.layout)),
+            walkers: start.settings.sampler.walkers,
+            ensembles: start.settings.sampler.ensembles,
+            steps: sampled.diagnostics.steps,
+            burn_in: sampled.diagnostics.burn_in,
+            seconds_start: start.seconds,
+            seconds_sampling: sampled.seconds,
+            ess_bulk_per_second: names.iter().zip(&sampled.diagnostics.coordinates).map(|(n, d)| (n.clone(), d.ess_bulk / (start.seconds + sampled.seconds))).collect(),
+            warnings: sampled.diagnostics.warnings.clone(),
+            model_warnings: start.warnings.clone(),
+            geometry: Some(campaign.geometry),
+            calibration_id: new_calibration_id(),
+        }
+    }
+
+}

@@ -1,0 +1,141 @@
+//! Where sampling starts: the identification, the MAP search from it (and
+//! from the prior's centre), the integrator's step and scheme, and what the
+//! MAP's residuals say about the noise model.
+
+use std::time::Instant;
+
+use super::settings::{CalibrationSettings, SamplingSettings, SchemeChoice};
+use crate::data::Campaign;
+use crate::error::{Error, Result};
+use crate::identify::{identify_current, CurrentIdentification};
+use crate::model::{Integrator, Scheme};
+use crate::posterior::map::{self, MapEstimate, StepCheck};
+use crate::posterior::Posterior;
+
+/// Where sampling starts: the identification, the MAP, the step chosen and
+/// the posterior with it.
+pub struct Start {
+    /// The current the identification used (the law's nearest to its reference).
+    pub current_a: f64,
+    /// The settings with the walkers and sub-steps filled in.
+    pub settings: CalibrationSettings,
+    pub identification: CurrentIdentification,
+    pub map: MapEstimate,
+    pub step_study: Vec<StepCheck>,
+    pub posterior: Posterior,
+    /// What the start found that the user should know (residuals with memory).
+    pub warnings: Vec<String>,
+    pub seconds: f64,
+}
+
+/// Identification, MAP and step rule. `log` receives a line per stage.
+pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn FnMut(&str)) -> Result<Start> {
+    let clock = Instant::now();
+    let mut settings = settings.clone();
+    let model = settings.parameter_model();
+    let current_a = model.identification_current(&campaign.currents())?;
+    let identification = identify_current(campaign, current_a, &settings.identify);
+    let integ = settings.integrator.clone();
+    // the MAP search runs on the linearly implicit scheme unless told
+    // otherwise: its likelihood is smooth on any record
+    let search_scheme = if integ.scheme == SchemeChoice::Auto { Scheme::LinearlyImplicit } else { integ.scheme.scheme() };
+    let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
+    let posterior = settings.posterior(campaign, base);
+    // the sampler's settings are checked before minutes of MAP search
+    if settings.sampler.walkers != 0 {
+        let s = &settings.sampler;
+        s.sampler(s.walkers, s.seed).check(posterior.layout.dim())?;
+    }
+    // the identification may be far off (docs/identification.md): also start
+    // from the prior medians and keep the better optimum
+    let from_identification: Vec<f64> = model.start(&identification.params, current_a).iter().map(|v| v.ln()).collect();
+    let medians: Vec<f64> = posterior
+        .priors
+        .iter()
+        .zip(&from_identification)
+        .map(|(p, v)| p.centre().map(|(c, _)| c).unwrap_or(*v))
+        .collect();
+    // θ from either, the model terms (if any) from zero
+    let fitted = posterior.layout.fitted.len();
+    let starts = [from_identification, medians].map(|log| {
+        let mut x = posterior.layout.theta_coordinates(&log);
+        x.resize(fitted, 0.0);
+        x
+    });
+    let map = map::best_map(&posterior, &starts)
+        .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
+    log(&format!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64()));
+    let schemes: Vec<Scheme> = match integ.scheme {
+        SchemeChoice::Auto => vec![Scheme::Explicit, Scheme::LinearlyImplicit],
+        chosen => vec![chosen.scheme()],
+    };
+    let names = posterior.layout.coordinate_names();
+    // each scheme's step, and the Euler steps a log-density costs with it at the MAP
+    let mut candidates = Vec::new();
+    for scheme in schemes {
+        let scheme_base = Integrator { scheme, ..base };
+        let (substeps, at, study) = if integ.substeps == 0 {
+            map::choose_substeps(&posterior.with_integrator(scheme_base), &map, scheme_base, integ.max_rule_substeps)
+        } else {
+            (integ.substeps, map.clone(), vec![])
+        };
+        for s in &study {
+            let (i, v) = s.worst();
+            log(&format!("  step rule ({scheme:?}): {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, names[i]));
+        }
+        let chosen = posterior.with_integrator(Integrator { substeps, ..scheme_base });
+        let work = map::euler_steps(&chosen, &at.x);
+        log(&format!("  {scheme:?} with {substeps} sub-step(s): {work} Euler steps per log-density"));
+        candidates.push((work, chosen, at, study));
+    }
+    // the cheaper scheme at the accuracy the step rule asks for: explicit on
+    // smooth records, linearly implicit where stiffness makes the explicit
+    // one cut its steps (and its likelihood rugged)
+    let (_, posterior, map, step_study) = candidates.into_iter().min_by_key(|c| c.0).expect("at least one scheme");
+    // the MAP with the chosen integrator, from the one found; the curvature
+    // stays the smooth search's
+    let map = match posterior.integrator != base {
+        true => map::refine(&posterior, &map.x).map(|moved| map.curvature_at(moved)).unwrap_or(map),
+        false => map,
+    };
+    settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
+    settings.integrator.substeps = posterior.integrator.substeps;
+    if settings.sampler.walkers == 0 {
+        settings.sampler.walkers = SamplingSettings::walkers_for(posterior.layout.dim());
+    }
+    let warnings = memory_warnings(&posterior, &map);
+    for w in &warnings {
+        log(&format!("  warning: {w}"));
+    }
+    Ok(Start { current_a, settings, identification, map, step_study, posterior, warnings, seconds: clock.elapsed().as_secs_f64() })
+}
+
+/// Lag-1 autocorrelation of the MAP residuals above which independent noise
+/// makes intervals too narrow by more than √3 (AR(1) variance inflation).
+pub const MEMORY_WARNING: f64 = 0.5;
+
+/// A warning per run whose MAP residuals are correlated in time while the
+/// noise model takes them as independent.
+fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
+    if posterior.noise.models_memory() {
+        return Vec::new();
+    }
+    let Some(rhos) = map::residual_autocorrelation(posterior, &map.x) else {
+        return Vec::new();
+    };
+    posterior
+        .runs
+        .iter()
+        .zip(rhos)
+        .filter(|(_, rho)| *rho > MEMORY_WARNING)
+        .map(|(run, rho)| {
+            format!(
+                "{}: the MAP residuals have a lag-1 autocorrelation of {rho:.2}, but the noise model takes them as independent; \
+                 parameter intervals are too narrow by about {:.1}× (see the report's model adequacy section)",
+                run.id,
+                ((1.0 + rho.min(0.999)) / (1.0 - rho.min(0.999))).sqrt()
+            )
+        })
+        .collect()
+}
+

@@ -1,0 +1,56 @@
+//! The whole job on one campaign.
+
+use std::path::{Path, PathBuf};
+
+use super::{compare, Pipeline, RunOptions, SampleRequest};
+use crate::data::current_tag;
+use crate::error::Result;
+use crate::posterior::ModelKind;
+
+impl Pipeline<'_> {
+    /// The whole job on one campaign: one calibration folder per current in
+    /// `out/I<current>A/` (identification, posterior, bands, leave-one-out,
+    /// report); then, with several currents, the current law in
+    /// `out/current-law…/` and the comparison in `out/comparison/`.
+    /// Returns the reports written.
+    pub fn run(&mut self, manifest: &Path, out: &Path, options: &RunOptions) -> Result<Vec<PathBuf>> {
+        let campaign = self.check(manifest)?;
+        let all = campaign.currents();
+        let currents = match options.sample.current {
+            Some(c) => vec![c],
+            None => all.clone(),
+        };
+        let loo = options.leave_one_out.map(|steps| self.loo_settings(steps, &options.predict));
+        let mut reports = Vec::new();
+        let mut entries = Vec::new();
+        for c in currents {
+            let request = SampleRequest { current: Some(c), ..options.sample.clone() };
+            for cal in self.sample(&campaign, &out.join(current_tag(c)), &request)? {
+                let (report, prediction) = self.predict_and_report(&cal, &campaign, &options.predict, loo.as_ref())?;
+                reports.push(report);
+                entries.push(compare::entry(cal, Some(prediction)));
+            }
+        }
+        if options.sample.current.is_none() && all.len() >= 2 {
+            if options.current_law {
+                // hold out the middle current: the law must predict it
+                let held: Vec<f64> = if all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };
+                let name = match held.first() {
+                    Some(h) => format!("current-law-without-{}", current_tag(*h)),
+                    None => "current-law".to_string(),
+                };
+                let mut settings = options.sample.settings.clone();
+                settings.model = ModelKind::CurrentLaw;
+                let request = SampleRequest { settings, hold_out_current: held, ..options.sample.clone() };
+                for cal in self.sample(&campaign, &out.join(name), &request)? {
+                    let (report, prediction) = self.predict_and_report(&cal, &campaign, &options.predict, None)?;
+                    reports.push(report);
+                    entries.push(compare::entry(cal, Some(prediction)));
+                }
+            }
+            reports.push(self.compare_entries(entries, &out.join("comparison"), None)?);
+        }
+        Ok(reports)
+    }
+
+}

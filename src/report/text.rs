@@ -1,0 +1,185 @@
+//! The terminal's tables: what the command line prints of a campaign, an
+//! identification, a calibration, a prediction and a leave-one-out study,
+//! as text.
+
+use std::fmt::Write;
+
+use crate::calibrate::Calibration;
+use crate::data::Campaign;
+use crate::identify::CurrentIdentification;
+use crate::posterior::ParameterModel;
+use crate::predict::PredictionRecord;
+use crate::validate::LooRow;
+
+/// Appends a formatted line to a String.
+macro_rules! row {
+    ($out:expr, $($arg:tt)*) => {
+        writeln!($out, $($arg)*).expect("writing to a String")
+    };
+}
+
+/// `mrbp check`: one line per run.
+pub fn campaign(campaign: &Campaign) -> String {
+    let mut out = String::new();
+    row!(out, "campaign '{}' ({}): {} runs", campaign.name, campaign.manifest_path.display(), campaign.runs.len());
+    row!(out, "{:<16} {:>8} {:>11} {:>13} {:>10} {:>9}", "run", "samples", "duration_s", "peak_force_n", "current_a", "branches");
+    for run in &campaign.runs {
+        let rec = &run.record;
+        let peak = rec.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+        row!(
+            out,
+            "{:<16} {:>8} {:>11.3} {:>13.1} {:>10.2} {:>9}",
+            run.id(),
+            rec.len(),
+            rec.time[rec.len() - 1] - rec.time[0],
+            peak,
+            run.spec.current_a,
+            run.branches.len()
+        );
+    }
+    out
+}
+
+/// The identification: one line per run and the combined estimate.
+pub fn identification(results: &[CurrentIdentification]) -> String {
+    let mut out = String::new();
+    for res in results {
+        row!(out, "\nidentification at {} A", res.current_a);
+        row!(
+            out,
+            "{:<14} {:>9} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>9}",
+            "run", "G", "tau02", "rate02", "R0", "R1", "D1", "m1", "m2", "n", "", "rms_pa"
+        );
+        for (i, r) in res.runs.iter().enumerate() {
+            if let Some(f) = &r.steady {
+                // steady cycles: G, the saturated R + D and n of the flow curve
+                row!(
+            out,
+                    "{:<14} {:>9.3e} {:>9} {:>8} {:>9} {:>19} {:>9} {:>9} {:>9.3} {:>6} {:>9.1}",
+                    r.run, r.g, "", "", "", format!("R1+D1 {:.3e}", f.z), "", "", f.n, "steady", res.euler_rms[i]
+                );
+                continue;
+            }
+            let (t, g) = r.yield_point.unwrap_or((f64::NAN, f64::NAN));
+            row!(
+            out,
+                "{:<14} {:>9.3e} {:>9.3e} {:>8.1} {:>9} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9} {:>6} {:>9.1}",
+                r.run, r.g, t, g, "", r.r1, r.d1, r.m1, r.m2, "", "", res.euler_rms[i]
+            );
+        }
+        let p = res.params;
+        row!(
+            out,
+            "{:<14} {:>9.3e} {:>9} {:>8} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3} {:>6}",
+            "all", p.g, "", "", p.r0, p.r1, p.d1, p.m1, p.m2, p.n, "(SI)"
+        );
+        for w in &res.warnings {
+            row!(out, "  warning: {w}");
+        }
+        for r in &res.runs {
+            for w in &r.warnings {
+                row!(out, "  warning: run {}: {w}", r.run);
+            }
+        }
+    }
+    out
+}
+
+/// The posterior summary table and the diagnostics' verdict.
+pub fn calibration(cal: &Calibration) -> String {
+    let mut out = String::new();
+    let rec = &cal.record;
+    let at = match cal.sample.model {
+        ParameterModel::CurrentLaw { reference_a } => format!("current law (reference {reference_a} A) from {:?} A", rec.currents),
+        ParameterModel::PerCurrent => format!("posterior at {} A", rec.current_a),
+    };
+    let s = &cal.settings;
+    row!(
+        out,
+        "\n{at}: {} walkers × {} steps, burn-in {} (τ_max {:.1}), {:?} noise, {} sub-step(s) per sample",
+        cal.sample.chains.chains(),
+        rec.steps,
+        rec.burn_in,
+        cal.tau_max(),
+        s.likelihood.noise,
+        s.integrator.substeps
+    );
+    row!(
+        out,
+        "{:<22} {:>11} {:>10} {:>11} {:>11} {:>11} {:>8} {:>8} {:>7} {:>7} {:>6}",
+        "parameter", "mean", "sd", "q05", "q50", "q95", "ess_bulk", "ess_tail", "ess/s", "r_hat", "tau"
+    );
+    let seconds = cal.seconds();
+    for p in &cal.summary {
+        row!(
+            out,
+            "{:<22} {:>11.4e} {:>10.3e} {:>11.4e} {:>11.4e} {:>11.4e} {:>8.0} {:>8.0} {:>7.0} {:>7.4} {:>6.1}",
+            p.parameter, p.mean, p.sd, p.q05, p.q50, p.q95, p.ess_bulk, p.ess_tail, p.ess_bulk / seconds, p.r_hat, p.tau_int
+        );
+    }
+    if rec.warnings.is_empty() {
+        row!(
+            out,
+            "diagnostics: R̂ < 1.01, ESS ≥ {:.0}, chains longer than {} τ, no stuck walkers",
+            s.sampler.min_ess,
+            crate::sampler::diagnostics::MIN_TAU_MULTIPLE
+        );
+    }
+    for w in rec.warnings.iter().chain(&rec.model_warnings) {
+        row!(out, "warning: {w}");
+    }
+    row!(out, "wall time: {seconds:.1} s (identification, MAP and step rule {:.1} s, sampling {:.1} s)", rec.seconds_start, rec.seconds_sampling);
+    out
+}
+
+/// The coverage of every predicted run.
+pub fn prediction(record: &PredictionRecord) -> String {
+    let mut out = String::new();
+    let rows = &record.coverage;
+    row!(
+            out,
+        "\n{} posterior draws (after a burn-in of {} steps, thinned by {} steps) through {} run(s) in {:.1} s",
+        record.draws,
+        record.burn_in,
+        record.thin,
+        rows.len(),
+        record.seconds
+    );
+    row!(out, "{:<16} {:>8} {:>12} {:>12} {:>12} {:>10}", "run", "samples", "in_p95_%", "in_q95_%", "rmse_q50_pa", "");
+    for r in rows {
+        row!(
+            out,
+            "{:<16} {:>8} {:>12.1} {:>12.1} {:>12.1} {:>10}",
+            r.run,
+            r.samples,
+            100.0 * r.inside_p95,
+            100.0 * r.inside_q95,
+            r.rmse_q50_pa,
+            if r.calibrated { "" } else { "held out" }
+        );
+    }
+    out
+}
+
+pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
+    let mut out = String::new();
+    row!(out, "\nleave-one-out ({seconds:.1} s):");
+    row!(out, "{:<16} {:>12} {:>12} {:>10} {:>8} {:>10} {:>20} {:>8}", "held out", "in_p95_%", "rmse_q50_pa", "lppd/sample", "k̂", "k̂_laplace", "held-out posterior", "max_R̂");
+    for r in rows {
+        let c = &r.coverage;
+        let or_dash = |v: f64, digits: usize| if v.is_finite() { format!("{v:.digits$}") } else { "–".into() };
+        row!(
+            out,
+            "{:<16} {:>12.1} {:>12.1} {:>10.3} {:>8.2} {:>10} {:>20} {:>8}",
+            c.run,
+            100.0 * c.inside_p95,
+            c.rmse_q50_pa,
+            c.lppd / c.samples.max(1) as f64,
+            r.pareto_k,
+            or_dash(r.pareto_k_laplace, 2),
+            r.by.label(),
+            or_dash(r.max_rhat, 4)
+        );
+    }
+    out
+}
