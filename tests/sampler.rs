@@ -103,6 +103,13 @@ fn correlated_gaussian_10d_independence_mixture() {
     check_gaussian(vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)], 5000);
 }
 
+/// The history move: a Student-t mixture fitted to each ensemble's past
+/// steps, with a little DE.
+#[test]
+fn correlated_gaussian_10d_history_mixture() {
+    check_gaussian(vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 3000);
+}
+
 /// x1 ~ N(1, 1), x2 | x1 ~ N(x1², 0.5²): a banana whose moments are known:
 /// E x2 = 1 + 1 = 2, Var x2 = 0.25 + 4·1·1 + 2·1 = 6.25.
 struct Banana;
@@ -126,6 +133,12 @@ fn rosenbrock_banana_marginal_moments() {
 #[test]
 fn rosenbrock_banana_with_independence_mixture() {
     banana_moments(vec![(Move::independence(), 0.7), (Move::differential_evolution(), 0.3)], 10000);
+}
+
+/// The history move on the banana: its mixture can follow the curve.
+#[test]
+fn rosenbrock_banana_with_history_mixture() {
+    banana_moments(vec![(Move::history(), 0.8), (Move::differential_evolution(), 0.2)], 6000);
 }
 
 fn banana_moments(moves: Vec<(Move, f64)>, steps: usize) {
@@ -182,6 +195,87 @@ fn lognormal_quantiles_with_independence_mixture() {
     check_quantiles(&LogNormal2, &dist, vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
 }
 
+#[test]
+fn lognormal_quantiles_with_history_mixture() {
+    let dist = statrs::distribution::LogNormal::new(0.0, 1.0).unwrap();
+    check_quantiles(&LogNormal2, &dist, vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+}
+
+/// A target bounded by its prior: independent standard normals truncated
+/// to x > 0.5 (most of the mass against the wall, as a posterior piled on
+/// a prior bound); quantiles by the truncated normal's inverse CDF.
+struct Truncated2;
+
+impl LogDensity for Truncated2 {
+    fn dim(&self) -> usize {
+        2
+    }
+    fn log_density(&self, x: &[f64]) -> f64 {
+        if x.iter().any(|v| *v <= 0.5) {
+            return f64::NEG_INFINITY;
+        }
+        x.iter().map(|v| -0.5 * v * v).sum()
+    }
+}
+
+/// N(0, 1) truncated to (0.5, ∞).
+struct TruncatedNormal;
+
+impl TruncatedNormal {
+    fn mass() -> f64 {
+        use statrs::distribution::ContinuousCDF;
+        1.0 - statrs::distribution::Normal::standard().cdf(0.5)
+    }
+}
+
+impl statrs::distribution::Continuous<f64, f64> for TruncatedNormal {
+    fn pdf(&self, x: f64) -> f64 {
+        if x <= 0.5 { 0.0 } else { (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt() / Self::mass() }
+    }
+    fn ln_pdf(&self, x: f64) -> f64 {
+        self.pdf(x).ln()
+    }
+}
+
+impl statrs::statistics::Min<f64> for TruncatedNormal {
+    fn min(&self) -> f64 {
+        0.5
+    }
+}
+
+impl statrs::statistics::Max<f64> for TruncatedNormal {
+    fn max(&self) -> f64 {
+        f64::INFINITY
+    }
+}
+
+impl statrs::distribution::ContinuousCDF<f64, f64> for TruncatedNormal {
+    fn cdf(&self, x: f64) -> f64 {
+        let n = statrs::distribution::Normal::standard();
+        if x <= 0.5 { 0.0 } else { (n.cdf(x) - n.cdf(0.5)) / Self::mass() }
+    }
+    fn inverse_cdf(&self, p: f64) -> f64 {
+        let n = statrs::distribution::Normal::standard();
+        n.inverse_cdf(n.cdf(0.5) + p * Self::mass())
+    }
+}
+
+#[test]
+fn truncated_quantiles_with_independence_mixture() {
+    check_quantiles(&Truncated2, &TruncatedNormal, vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+}
+
+#[test]
+fn truncated_quantiles_with_history_mixture() {
+    check_quantiles(&Truncated2, &TruncatedNormal, vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+}
+
+#[test]
+fn heavy_tailed_quantiles_with_history_mixture() {
+    let dist = statrs::distribution::StudentsT::new(0.0, 1.0, 3.0).unwrap();
+    check_quantiles(&StudentT2, &dist, vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+}
+
 /// A heavy-tailed target: independent Student-t coordinates with ν = 3 in
 /// 2-D, whose tails are far heavier than the ν = 10 proposals of the
 /// independence move; quantiles are those of the t distribution.
@@ -234,7 +328,7 @@ fn small_run(threads: usize, steps: usize) -> Vec<f64> {
         let settings = SamplerSettings {
             walkers: 8,
             ensembles: 3,
-            moves: vec![(Move::Stretch { a: 2.0 }, 0.4), (Move::differential_evolution(), 0.2), (Move::snooker(), 0.2), (Move::independence(), 0.2)],
+            moves: vec![(Move::Stretch { a: 2.0 }, 0.3), (Move::differential_evolution(), 0.2), (Move::snooker(), 0.2), (Move::independence(), 0.1), (Move::history(), 0.2)],
             seed: 42,
         };
         let init = start_ball(2, 24, &[1.0, 1.0], 0.1);
@@ -261,7 +355,8 @@ fn resumed_run_equals_uninterrupted_run() {
     let settings = SamplerSettings {
         walkers: 8,
         ensembles: 2,
-        moves: vec![(Move::Stretch { a: 2.0 }, 0.7), (Move::snooker(), 0.3)],
+        // the history move refits at 64 from the checkpoint's chains, then at 128
+        moves: vec![(Move::Stretch { a: 2.0 }, 0.5), (Move::snooker(), 0.2), (Move::history(), 0.3)],
         seed: 9,
     };
     let init = start_ball(2, 16, &[1.0, 1.0], 0.1);

@@ -35,7 +35,8 @@ impl Sampled {
 pub fn run(posterior: &Posterior, sampler: &mut Sampler<Posterior>, control: &RunControl, burn_in: usize, observers: &mut [&mut dyn Observer]) -> Result<Sampled> {
     let clock = Instant::now();
     let layout = &posterior.layout;
-    let burn_in_of = |chains: &Chains| if burn_in > 0 { burn_in } else { Diagnostics::burn_in_rule(chains) };
+    let adaptive = sampler.adaptive();
+    let burn_in_of = |chains: &Chains| if burn_in > 0 { burn_in } else { Diagnostics::burn_in_rule(chains, adaptive) };
     let diagnose = |chains: &Chains| PosteriorSample::from_coordinates(layout, posterior.model, chains).diagnostics(burn_in_of(chains));
     sampler.run_until(control, observers, &diagnose)?;
     let chains = sampler.chains.clone();

@@ -17,6 +17,7 @@ pub fn event(e: Event) {
             println!("wrote bands.parquet, coverage.parquet and prediction.toml to {}", dir.display());
         }
         Event::LeftOneOut { rows, seconds } => print!("{}", text::leave_one_out(rows, seconds)),
+        Event::Consistency(parameters) => print!("{}", text::consistency(parameters)),
         Event::Wrote(path) => println!("wrote {}", path.display()),
     }
 }

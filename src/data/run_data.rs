@@ -46,6 +46,19 @@ pub struct RunData {
     /// changes sign against the last nonzero one), so a new loading branch
     /// starts there.
     pub reverses: Vec<bool>,
+    /// The sampling interval (s): the median one, and whether every
+    /// interval equals it (to a millionth).
+    pub step_s: f64,
+    pub uniform: bool,
+    /// The resolution of the measured stress (Pa): the step between
+    /// neighbouring values of a quantised force channel (the tenth
+    /// percentile of the gaps between its distinct values; near 0 for a
+    /// continuous one). Quantisation alone is noise of sd step/√12.
+    pub stress_step_pa: f64,
+    /// The excitation's period (s): twice the median time between
+    /// reversals (of the record's loading branches), or twice the record's
+    /// duration if it reverses less than twice.
+    pub period_s: f64,
 }
 
 impl RunData {
@@ -65,7 +78,10 @@ impl RunData {
         let gamma = smoothed_strain(&sh.time, &sh.gamma, smooth_strain_ms);
         let strain_smoothing_share = centre_weight(&sh.time, smooth_strain_ms);
         let strain_noise_var = noise_variance(&sh.gamma, &gamma, strain_smoothing_share);
-        RunData::new(
+        // the period from the loading branches, whose hysteresis ignores the
+        // noise and quantisation steps near a dead centre
+        let turns: Vec<f64> = run.branches.iter().skip(1).map(|b| sh.time[b.start]).collect();
+        let mut data = RunData::new(
             run.id().to_string(),
             sh.time[..end].to_vec(),
             gamma[..end].to_vec(),
@@ -74,7 +90,9 @@ impl RunData {
             run.spec.current_a,
             (run.geometry.area_m2, run.geometry.gap_m),
             (strain_noise_var, strain_smoothing_share),
-        )
+        );
+        data.period_s = period_of(&data.time, &turns);
+        data
     }
 
     /// A run from its series: time (s), the strain that drives the model,
@@ -93,7 +111,11 @@ impl RunData {
         (strain_noise_var, strain_smoothing_share): (f64, f64),
     ) -> RunData {
         let reverses = reversals(&gamma);
-        RunData { id, time, gamma, tau, initial_tau, current_a, area_m2, gap_m, strain_noise_var, strain_smoothing_share, reverses }
+        let (step_s, uniform) = sampling_step(&time);
+        let turns: Vec<f64> = time.iter().zip(&reverses).filter(|(_, r)| **r).map(|(t, _)| *t).collect();
+        let period_s = period_of(&time, &turns);
+        let stress_step_pa = resolution(&tau);
+        RunData { id, time, gamma, tau, initial_tau, current_a, area_m2, gap_m, strain_noise_var, strain_smoothing_share, reverses, step_s, uniform, stress_step_pa, period_s }
     }
 
     /// Residuals compared: every sample after the first.
@@ -108,6 +130,47 @@ impl RunData {
     pub fn terms_stress(&self, k: usize, spring_n_per_m: f64, offset_n: f64) -> f64 {
         (offset_n + spring_n_per_m * self.gamma[k] * self.gap_m) / self.area_m2
     }
+}
+
+/// The median sampling interval of `time`, and whether every interval is
+/// that one to a millionth.
+fn sampling_step(time: &[f64]) -> (f64, bool) {
+    let mut dt: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
+    if dt.is_empty() {
+        return (f64::NAN, false);
+    }
+    dt.sort_by(f64::total_cmp);
+    let median = dt[dt.len() / 2];
+    let uniform = dt[0] >= median * (1.0 - 1e-6) && dt[dt.len() - 1] <= median * (1.0 + 1e-6);
+    (median, uniform)
+}
+
+/// The quantum of a quantised record `v`: the tenth percentile of the gaps
+/// between its distinct values, if nine gaps in ten are whole multiples of
+/// it (to 5 %); 0 for a record that is not quantised.
+fn resolution(v: &[f64]) -> f64 {
+    let mut sorted: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    sorted.sort_by(f64::total_cmp);
+    sorted.dedup();
+    let mut gaps: Vec<f64> = sorted.windows(2).map(|w| w[1] - w[0]).collect();
+    if gaps.is_empty() {
+        return 0.0;
+    }
+    gaps.sort_by(f64::total_cmp);
+    let quantum = gaps[gaps.len() / 10];
+    let whole = gaps.iter().filter(|g| ((*g / quantum) - (*g / quantum).round()).abs() < 0.05).count();
+    if quantum > 0.0 && whole as f64 >= 0.9 * gaps.len() as f64 { quantum } else { 0.0 }
+}
+
+/// Twice the median time between the reversals at `turns`, or twice the
+/// duration of `time`.
+fn period_of(time: &[f64], turns: &[f64]) -> f64 {
+    let mut gaps: Vec<f64> = turns.windows(2).map(|w| w[1] - w[0]).collect();
+    if gaps.is_empty() {
+        return 2.0 * (time.last().copied().unwrap_or(0.0) - time.first().copied().unwrap_or(0.0));
+    }
+    gaps.sort_by(f64::total_cmp);
+    2.0 * gaps[gaps.len() / 2]
 }
 
 /// Where a strain history turns back: the increment at k has the opposite
@@ -128,6 +191,23 @@ fn reversals(gamma: &[f64]) -> Vec<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn step_and_period_of_a_sine() {
+        let time: Vec<f64> = (0..2001).map(|k| k as f64 * 1e-3).collect();
+        let gamma: Vec<f64> = time.iter().map(|t| (2.0 * std::f64::consts::PI * 4.0 * t).sin()).collect();
+        let run = RunData::new("r".into(), time, gamma.clone(), gamma, 0.0, 1.0, (1.0, 1.0), (0.0, 1.0));
+        assert!((run.step_s - 1e-3).abs() < 1e-12 && run.uniform);
+        assert!((run.period_s - 0.25).abs() < 2e-3, "{}", run.period_s);
+    }
+
+    #[test]
+    fn the_resolution_of_a_quantised_record() {
+        let v: Vec<f64> = (0..2000).map(|k| 3.0 * ((k as f64 * 0.37).sin() * 400.0).round()).collect();
+        assert!((resolution(&v) - 3.0).abs() < 1e-9, "{}", resolution(&v));
+        let smooth: Vec<f64> = (0..2000).map(|k| 1200.0 * (k as f64 * 0.0037).sin()).collect();
+        assert_eq!(resolution(&smooth), 0.0);
+    }
 
     #[test]
     fn reversals_are_where_the_direction_changes() {

@@ -38,7 +38,7 @@ impl NoiseModel for Ar1 {
         PARAMETERS
     }
 
-    fn log_prior(&self, coordinates: &[f64]) -> f64 {
+    fn log_prior(&self, _run: &RunData, coordinates: &[f64]) -> f64 {
         if log_uniform(coordinates[0], self.sigma_bounds) == f64::NEG_INFINITY {
             return f64::NEG_INFINITY;
         }
@@ -50,8 +50,8 @@ impl NoiseModel for Ar1 {
         (1.0 - rho * rho).ln()
     }
 
-    fn laplace_sd(&self, compared: usize) -> NoiseValues {
-        let n = compared.max(1) as f64;
+    fn laplace_sd(&self, run: &RunData, _coordinates: &NoiseValues) -> NoiseValues {
+        let n = run.compared().max(1) as f64;
         [1.0 / (2.0 * n).sqrt(), 1.0 / n.sqrt(), 0.0, 0.0]
     }
 
@@ -94,8 +94,8 @@ impl NoiseModel for Ar1 {
         out
     }
 
-    fn simulator(&self, _run: &RunData, values: &NoiseValues) -> Box<dyn NoiseSimulator> {
-        Box::new(Simulator { sigma: values[0], rho: values[1], state: None })
+    fn simulator(&self, _run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator> {
+        Box::new(Simulator { draws: draws.iter().map(|v| (v[0], v[1])).collect(), replicates, state: None })
     }
 
     fn marginal_ln_pdf(&self, _run: &RunData, r: f64, _stiffness: f64, values: &NoiseValues) -> f64 {
@@ -119,7 +119,7 @@ impl NoiseModel for Ar1 {
     }
 
     /// At the lag-one ρ and the innovation variance that maximise it.
-    fn profile_log_likelihood(&self, r: &[f64]) -> f64 {
+    fn profile_log_likelihood(&self, _run: &RunData, r: &[f64]) -> f64 {
         let n = r.len() as f64;
         let sum_sq: f64 = r.iter().map(|v| v * v).sum();
         let cross: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
@@ -172,22 +172,27 @@ impl RunScorer for Scorer {
     }
 }
 
-/// The chain from its stationary start.
+/// The chains from their stationary start.
 struct Simulator {
-    sigma: f64,
-    rho: f64,
-    state: Option<f64>,
+    /// (σ, ρ) of each draw.
+    draws: Vec<(f64, f64)>,
+    replicates: usize,
+    /// The last noise of every path, once started.
+    state: Option<Vec<f64>>,
 }
 
 impl NoiseSimulator for Simulator {
-    fn next(&mut self, _stiffness: f64, rng: &mut dyn Rng) -> f64 {
-        let z: f64 = rng.sample(StandardNormal);
-        let e = match self.state {
-            None => self.sigma * z / (1.0 - self.rho * self.rho).max(1e-12).sqrt(),
-            Some(e) => self.rho * e + self.sigma * z,
-        };
-        self.state = Some(e);
-        e
+    fn next(&mut self, _stiffness: &[f64], rng: &mut dyn Rng, out: &mut [f64]) {
+        for (d, &(sigma, rho)) in self.draws.iter().enumerate() {
+            for p in d * self.replicates..(d + 1) * self.replicates {
+                let z: f64 = rng.sample(StandardNormal);
+                out[p] = match &self.state {
+                    None => sigma * z / (1.0 - rho * rho).max(1e-12).sqrt(),
+                    Some(e) => rho * e[p] + sigma * z,
+                };
+            }
+        }
+        self.state = Some(out.to_vec());
     }
 }
 
@@ -228,17 +233,13 @@ mod tests {
         let m = Ar1::new(&NoiseOptions::default());
         let (sigma, rho) = (300.0f64, 0.8f64);
         let mut rng = crate::rng::stream(9, &[]);
-        let mut ss = 0.0;
         let chains = 20_000;
-        for _ in 0..chains {
-            let mut sim = m.simulator(&run, &[sigma, rho, 0.0, 0.0]);
-            let mut e = 0.0;
-            for _ in 0..300 {
-                e = sim.next(0.0, &mut rng);
-            }
-            ss += e * e;
+        let mut sim = m.simulator(&run, &[[sigma, rho, 0.0, 0.0]], chains);
+        let mut e = vec![0.0; chains];
+        for _ in 0..300 {
+            sim.next(&[0.0], &mut rng, &mut e);
         }
-        let var = ss / chains as f64;
+        let var = e.iter().map(|v| v * v).sum::<f64>() / chains as f64;
         let expected = sigma * sigma / (1.0 - rho * rho);
         assert!((var / expected - 1.0).abs() < 0.04, "{var} vs {expected}");
     }

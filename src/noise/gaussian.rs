@@ -45,12 +45,12 @@ impl NoiseModel for Gaussian {
         PARAMETERS
     }
 
-    fn log_prior(&self, coordinates: &[f64]) -> f64 {
+    fn log_prior(&self, _run: &RunData, coordinates: &[f64]) -> f64 {
         log_uniform(coordinates[0], self.sigma_bounds)
     }
 
-    fn laplace_sd(&self, compared: usize) -> NoiseValues {
-        [1.0 / (2.0 * compared.max(1) as f64).sqrt(), 0.0, 0.0, 0.0]
+    fn laplace_sd(&self, run: &RunData, _coordinates: &NoiseValues) -> NoiseValues {
+        [1.0 / (2.0 * run.compared().max(1) as f64).sqrt(), 0.0, 0.0, 0.0]
     }
 
     fn uses_stiffness(&self, run: &RunData) -> bool {
@@ -103,8 +103,8 @@ impl NoiseModel for Gaussian {
         out
     }
 
-    fn simulator(&self, run: &RunData, values: &NoiseValues) -> Box<dyn NoiseSimulator> {
-        Box::new(Simulator { sigma: values[0], strain_var: self.strain_var(run) })
+    fn simulator(&self, run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator> {
+        Box::new(Simulator { sigma: draws.iter().map(|v| v[0]).collect(), replicates, strain_var: self.strain_var(run) })
     }
 
     fn marginal_ln_pdf(&self, run: &RunData, r: f64, stiffness: f64, values: &NoiseValues) -> f64 {
@@ -133,7 +133,7 @@ impl NoiseModel for Gaussian {
 
     /// Under the log-uniform prior on σ the σ-marginal, up to a constant:
     /// −(n/2) ln Σr² (errors in variables left aside).
-    fn profile_log_likelihood(&self, residuals: &[f64]) -> f64 {
+    fn profile_log_likelihood(&self, _run: &RunData, residuals: &[f64]) -> f64 {
         let n = residuals.len() as f64;
         let sum_sq: f64 = residuals.iter().map(|v| v * v).sum();
         -0.5 * n * (sum_sq / n).ln()
@@ -278,16 +278,23 @@ impl RunScorer for EivScorer<'_> {
     }
 }
 
-/// A new record's noise: N(0, σ² + S_k² s_γ²) at each sample.
+/// New records' noise: N(0, σ² + S_k² s_γ²) at each sample.
 struct Simulator {
-    sigma: f64,
+    /// σ of each draw.
+    sigma: Vec<f64>,
+    replicates: usize,
     strain_var: f64,
 }
 
 impl NoiseSimulator for Simulator {
-    fn next(&mut self, stiffness: f64, rng: &mut dyn Rng) -> f64 {
-        let z: f64 = rng.sample(StandardNormal);
-        sd(self.sigma, stiffness, self.strain_var) * z
+    fn next(&mut self, stiffness: &[f64], rng: &mut dyn Rng, out: &mut [f64]) {
+        for (d, sigma) in self.sigma.iter().enumerate() {
+            let sd = sd(*sigma, stiffness[d], self.strain_var);
+            for e in &mut out[d * self.replicates..(d + 1) * self.replicates] {
+                let z: f64 = rng.sample(StandardNormal);
+                *e = sd * z;
+            }
+        }
     }
 }
 
@@ -328,15 +335,9 @@ mod tests {
         let (s2, sv, v) = (sigma * sigma, run.strain_noise_var, run.strain_noise_var * run.strain_smoothing_share);
         let mut cov = DMatrix::zeros(n, n);
         let mut c = vec![0.0; n];
-        let mut branch = vec![0usize; n];
-        let (mut b, mut dir) = (0usize, 0.0f64);
+        let branch = super::super::testing::branches(&run);
         for k in 1..=n {
             let dg = run.gamma[k] - run.gamma[k - 1];
-            if dg.signum() != dir && dir != 0.0 {
-                b += 1;
-            }
-            dir = dg.signum();
-            branch[k - 1] = b;
             c[k - 1] = tangent_stiffness(path[k] - path[k - 1], dg, g);
             cov[(k - 1, k - 1)] = s2 + c[k - 1] * c[k - 1] * sv;
         }
@@ -351,7 +352,7 @@ mod tests {
         let chol = cov.cholesky().unwrap();
         let log_det: f64 = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
         let direct = -(n as f64) * HALF_LN_2PI - 0.5 * log_det - 0.5 * r.dot(&chol.solve(&r));
-        assert!(b >= 1, "the test run must have two branches");
+        assert!(branch[n - 1] >= 1, "the test run must have two branches");
         let m = model(true);
         let sum = pointwise_sum(&m, &run, &path, [sigma, 0.0, 0.0, 0.0], g);
         assert!((sum - direct).abs() < 1e-8 * direct.abs(), "pointwise {sum} vs {direct}");

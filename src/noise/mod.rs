@@ -22,6 +22,7 @@
 //! option of `--noise` and a value of `[likelihood] noise`).
 
 pub mod ar1;
+pub mod discrepancy;
 pub mod gaussian;
 pub mod model;
 pub mod student_t;
@@ -71,6 +72,10 @@ registry! {
     /// independent model claims far too much certainty.
     #[serde(alias = "Ar1")]
     Ar1 => ar1::Ar1,
+    /// Model discrepancy: a smooth force the law lacks (a Gaussian process
+    /// in time, Matérn kernel, per run its scale and time scale) plus white
+    /// noise; the Kalman filter's exact likelihood.
+    Discrepancy => discrepancy::Discrepancy,
 }
 
 /// The unit of a noise coordinate named `<parameter>_<run>`, if it is one.
@@ -115,6 +120,23 @@ pub(crate) mod testing {
         let ll = scorer.finish();
         assert!(ll.iter().all(|v| *v == ll[0]), "lanes disagree");
         ll[0]
+    }
+
+    /// The loading branch of each compared sample of `run` (0, 1, …), found
+    /// independently of `RunData::reverses`: a new branch where the strain
+    /// increment changes sign.
+    pub fn branches(run: &RunData) -> Vec<usize> {
+        let n = run.compared();
+        let (mut branch, mut b, mut dir) = (vec![0usize; n], 0usize, 0.0f64);
+        for k in 1..=n {
+            let dg = run.gamma[k] - run.gamma[k - 1];
+            if dg.signum() != dir && dir != 0.0 {
+                b += 1;
+            }
+            dir = dg.signum();
+            branch[k - 1] = b;
+        }
+        branch
     }
 
     /// The sum of a model's pointwise terms along `path`.

@@ -6,6 +6,7 @@
 use std::sync::Arc;
 
 use rand::Rng;
+use serde::{Deserialize, Serialize};
 use statrs::function::gamma::ln_gamma;
 
 use crate::data::RunData;
@@ -86,6 +87,33 @@ pub struct Parameter {
     pub pool: Pool,
 }
 
+/// The smoothness of the discrepancy's Matérn kernel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Kernel {
+    /// ν = 1/2: an Ornstein-Uhlenbeck process, continuous but rough.
+    Matern12,
+    /// ν = 3/2: once differentiable, a smooth force.
+    Matern32,
+}
+
+/// The discrepancy model's settings (`[likelihood.discrepancy]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DiscrepancySettings {
+    pub kernel: Kernel,
+    /// The shortest time scale, in sampling intervals.
+    pub time_scale_min_samples: f64,
+    /// The longest time scale, as a share of the excitation's period.
+    pub time_scale_max_period: f64,
+}
+
+impl Default for DiscrepancySettings {
+    fn default() -> Self {
+        DiscrepancySettings { kernel: Kernel::Matern32, time_scale_min_samples: 2.0, time_scale_max_period: 0.25 }
+    }
+}
+
 /// What a noise model is built from: the settings that concern it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NoiseOptions {
@@ -96,11 +124,13 @@ pub struct NoiseOptions {
     /// The measured strain is noisy too (errors in variables), where the
     /// model takes it.
     pub errors_in_variables: bool,
+    /// The discrepancy model's kernel and time-scale bounds.
+    pub discrepancy: DiscrepancySettings,
 }
 
 impl Default for NoiseOptions {
     fn default() -> Self {
-        NoiseOptions { sigma_bounds: (1.0, 1.0e6), student_nu: 5.0, errors_in_variables: true }
+        NoiseOptions { sigma_bounds: (1.0, 1.0e6), student_nu: 5.0, errors_in_variables: true, discrepancy: Default::default() }
     }
 }
 
@@ -116,11 +146,14 @@ pub trait RunScorer {
     fn finish(&mut self) -> [f64; LANES];
 }
 
-/// A new record's noise, sample by sample: one random number per sample.
+/// The noise of new records along a run, sample by sample, for many paths
+/// at once: `replicates` paths for each of several draws.
 pub trait NoiseSimulator {
-    /// The noise at the next sample (from k = 0), where the law's tangent
-    /// stiffness is `stiffness`.
-    fn next(&mut self, stiffness: f64, rng: &mut dyn Rng) -> f64;
+    /// The noise at the next sample (from k = 0) of every path, path
+    /// d × replicates + r being replicate r of draw d, where the law's
+    /// tangent stiffness of draw d is `stiffness[d]`. Random numbers are
+    /// drawn path by path, in that order.
+    fn next(&mut self, stiffness: &[f64], rng: &mut dyn Rng, out: &mut [f64]);
 }
 
 /// Turns one run's residuals (k = 1…) into independent standard ones at
@@ -172,13 +205,13 @@ pub trait NoiseModel: Send + Sync + std::fmt::Debug {
         Ok(())
     }
 
-    /// ln prior density of one run's noise coordinates (Jacobian of the
+    /// ln prior density of the noise coordinates of `run` (Jacobian of the
     /// transform included); −∞ outside the support.
-    fn log_prior(&self, coordinates: &[f64]) -> f64;
+    fn log_prior(&self, run: &RunData, coordinates: &[f64]) -> f64;
 
-    /// Sd of each coordinate in a Gaussian approximation from `compared`
-    /// residuals (the start of sampling).
-    fn laplace_sd(&self, compared: usize) -> NoiseValues;
+    /// Sd of each coordinate of `run` near `coordinates` in a Gaussian
+    /// approximation of its posterior (the start of sampling).
+    fn laplace_sd(&self, run: &RunData, coordinates: &NoiseValues) -> NoiseValues;
 
     /// Whether the model takes the law's tangent stiffness along `run`
     /// (errors in variables: the strain noise reaches the stress through it).
@@ -201,8 +234,9 @@ pub trait NoiseModel: Send + Sync + std::fmt::Debug {
     /// replicate's noise comes from `rng`.
     fn pointwise(&self, run: &RunData, model: &[f64], stiffness: &[f64], values: &NoiseValues, rng: &mut dyn Rng) -> Pointwise;
 
-    /// The noise of a new record with `values` (SI) along `run`.
-    fn simulator(&self, run: &RunData, values: &NoiseValues) -> Box<dyn NoiseSimulator>;
+    /// The noise of new records along `run`: `replicates` of them for each
+    /// draw's noise `draws` (SI).
+    fn simulator(&self, run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator>;
 
     /// ln density of one residual `r` of `run` on its own (marginally over
     /// the others), where the stiffness is `stiffness`.
@@ -212,9 +246,9 @@ pub trait NoiseModel: Send + Sync + std::fmt::Debug {
     /// shear modulus is `g`.
     fn profile(&self, run: &RunData, residuals: &[f64], g: f64) -> Profile;
 
-    /// ln p(residuals) with the noise parameters profiled out (up to a
-    /// constant): the weight of a run in leave-one-out.
-    fn profile_log_likelihood(&self, residuals: &[f64]) -> f64;
+    /// ln p(residuals of `run`) with the noise parameters profiled out (up
+    /// to a constant): the weight of a run in leave-one-out.
+    fn profile_log_likelihood(&self, run: &RunData, residuals: &[f64]) -> f64;
 }
 
 /// The law's tangent stiffness at every sample of a model stress `path`

@@ -45,12 +45,12 @@ impl NoiseModel for StudentT {
         Ok(())
     }
 
-    fn log_prior(&self, coordinates: &[f64]) -> f64 {
+    fn log_prior(&self, _run: &RunData, coordinates: &[f64]) -> f64 {
         log_uniform(coordinates[0], self.sigma_bounds)
     }
 
-    fn laplace_sd(&self, compared: usize) -> NoiseValues {
-        [1.0 / (2.0 * compared.max(1) as f64).sqrt(), 0.0, 0.0, 0.0]
+    fn laplace_sd(&self, run: &RunData, _coordinates: &NoiseValues) -> NoiseValues {
+        [1.0 / (2.0 * run.compared().max(1) as f64).sqrt(), 0.0, 0.0, 0.0]
     }
 
     fn scorer<'a>(&'a self, _run: &'a RunData, coordinates: &[NoiseValues; LANES]) -> Box<dyn RunScorer + 'a> {
@@ -78,8 +78,8 @@ impl NoiseModel for StudentT {
         out
     }
 
-    fn simulator(&self, _run: &RunData, values: &NoiseValues) -> Box<dyn NoiseSimulator> {
-        Box::new(Simulator { sigma: values[0], student: StudentTDistribution::new(self.nu).ok() })
+    fn simulator(&self, _run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator> {
+        Box::new(Simulator { sigma: draws.iter().map(|v| v[0]).collect(), replicates, student: StudentTDistribution::new(self.nu).ok() })
     }
 
     fn marginal_ln_pdf(&self, _run: &RunData, r: f64, _stiffness: f64, values: &NoiseValues) -> f64 {
@@ -97,7 +97,7 @@ impl NoiseModel for StudentT {
 
     /// The likelihood at the scale that maximises it, found by
     /// golden-section search on ln s around the RMS residual.
-    fn profile_log_likelihood(&self, r: &[f64]) -> f64 {
+    fn profile_log_likelihood(&self, _run: &RunData, r: &[f64]) -> f64 {
         let n = r.len() as f64;
         let sum_sq: f64 = r.iter().map(|v| v * v).sum();
         let nu = self.nu;
@@ -146,17 +146,23 @@ impl RunScorer for Scorer<'_> {
 }
 
 struct Simulator {
-    sigma: f64,
+    /// The scale of each draw.
+    sigma: Vec<f64>,
+    replicates: usize,
     student: Option<StudentTDistribution<f64>>,
 }
 
 impl NoiseSimulator for Simulator {
-    fn next(&mut self, _stiffness: f64, rng: &mut dyn Rng) -> f64 {
-        let z: f64 = match &self.student {
-            Some(t) => rng.sample(t),
-            None => rng.sample(StandardNormal),
-        };
-        self.sigma * z
+    fn next(&mut self, _stiffness: &[f64], rng: &mut dyn Rng, out: &mut [f64]) {
+        for (d, sigma) in self.sigma.iter().enumerate() {
+            for e in &mut out[d * self.replicates..(d + 1) * self.replicates] {
+                let z: f64 = match &self.student {
+                    Some(t) => rng.sample(t),
+                    None => rng.sample(StandardNormal),
+                };
+                *e = sigma * z;
+            }
+        }
     }
 }
 
@@ -187,7 +193,8 @@ mod tests {
         let r: Vec<f64> = (0..200).map(|k| ((k * 7919) % 13) as f64 - 6.0).collect();
         let n = r.len() as f64;
         let g = -0.5 * n * (r.iter().map(|v| v * v).sum::<f64>() / n).ln();
-        let t = StudentT::new(&NoiseOptions { student_nu: 1e6, ..NoiseOptions::default() }).profile_log_likelihood(&r);
+        let (run, _) = super::super::testing::run(0.0);
+        let t = StudentT::new(&NoiseOptions { student_nu: 1e6, ..NoiseOptions::default() }).profile_log_likelihood(&run, &r);
         assert!((t - (g - 0.5 * n)).abs() < 1e-3 * n, "{t} vs {}", g - 0.5 * n);
     }
 }

@@ -10,6 +10,7 @@ use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings
 use crate::report;
 use crate::sampler::{Checkpointer, Observer};
 use crate::store;
+use crate::validate::consistency::{consistency, ParameterConsistency};
 
 /// Steps between two checkpoints of the sampler.
 const CHECKPOINT_EVERY: usize = 100;
@@ -96,9 +97,40 @@ impl Pipeline<'_> {
             let dir = if currents.len() > 1 { out.join(current_tag(c)) } else { out.to_path_buf() };
             let group = campaign.at_current(c);
             let what = format!("{} run(s) at {c} A", group.runs.len());
-            folders.push(self.calibrate_into(&group, &dir, request, &what)?);
+            let joint = self.calibrate_into(&group, &dir, request, &what)?;
+            if request.per_run {
+                self.per_run(&group, &joint, request)?;
+            }
+            folders.push(joint);
         }
         Ok(folders)
+    }
+
+    /// Each run of `campaign` calibrated alone as `request` says, into
+    /// `runs/<run>/` of the joint calibration's folder, and the runs'
+    /// consistency with `joint` (`consistency.parquet` there).
+    pub fn per_run(&mut self, campaign: &Campaign, joint: &Calibration, request: &SampleRequest) -> Result<Vec<ParameterConsistency>> {
+        if campaign.runs.len() < 2 {
+            self.note("  --per-run: a single run, nothing to compare it with");
+            return Ok(Vec::new());
+        }
+        let mut alone = Vec::new();
+        for run in &campaign.runs {
+            let id = run.id().to_string();
+            let one = campaign.filtered(|r| r.id() == id);
+            let dir = joint.dir.join(folders::RUNS).join(&id);
+            alone.push((id.clone(), self.calibrate_into(&one, &dir, request, &format!("run {id} alone"))?));
+        }
+        for (id, cal) in &alone {
+            let rhat = cal.max_rhat();
+            if !(rhat < 1.01) {
+                self.note(&format!("  --per-run: {id} alone did not converge (largest R̂ {rhat:.3}): its row in the consistency table is not to be trusted (more --steps, or the history move: docs/calibration.md)"));
+            }
+        }
+        let parameters = consistency(joint, &alone);
+        store::consistency::write(&joint.dir, &parameters)?;
+        self.emit(Event::Consistency(&parameters));
+        Ok(parameters)
     }
 
     /// Calibrates `campaign` into `dir` as `request` says: identification,

@@ -11,7 +11,7 @@ use crate::store;
 
 /// The files of a calibration folder derived from its chains: a new
 /// calibration removes them, since they would describe the old one.
-pub const DERIVED: [&str; 8] = [
+pub const DERIVED: [&str; 10] = [
     store::prediction::BANDS,
     store::inference::FILE,
     store::prediction::COVERAGE,
@@ -20,11 +20,16 @@ pub const DERIVED: [&str; 8] = [
     store::coverage::LOO,
     store::coverage::LOO_BANDS,
     crate::report::html::REPORT,
+    store::consistency::FILE,
+    RUNS,
 ];
+
+/// The sub-folder of the run-alone calibrations (`--per-run`).
+pub const RUNS: &str = "runs";
 
 /// The report's figures (SVG and PNG) start so; the identification's
 /// (`fig1…fig5`), which the calibration itself writes, do not.
-const FIGURES: [&str; 7] = ["bands_", "adequacy_", "residuals", "corner", "marginals", "traces", "diagnostics"];
+const FIGURES: [&str; 8] = ["bands_", "adequacy_", "residuals", "corner", "marginals", "traces", "diagnostics", "consistency"];
 
 /// The results of `mrbp sample` in a calibration folder.
 pub const CALIBRATION: [&str; 5] = [store::folder::CHAINS, store::folder::SUMMARY, store::folder::RECORD, store::folder::CONFIG, store::identification::FILE];

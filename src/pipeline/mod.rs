@@ -25,6 +25,7 @@ use crate::identify::CurrentIdentification;
 use crate::posterior::ModelKind;
 use crate::sampler::{Observer, Progress};
 use crate::predict::PredictionRecord;
+use crate::validate::consistency::ParameterConsistency;
 use crate::validate::{LooRow, LooSettings};
 
 pub use crate::predict::{PredictOptions, Prediction};
@@ -41,6 +42,8 @@ pub enum Event<'a> {
     Calibrated(&'a Calibration),
     Predicted { record: &'a PredictionRecord, dir: &'a Path },
     LeftOneOut { rows: &'a [LooRow], seconds: f64 },
+    /// The runs of a calibration, each calibrated alone, against the joint one.
+    Consistency(&'a [ParameterConsistency]),
     /// A file of results (a report) was written.
     Wrote(&'a Path),
 }
@@ -65,6 +68,11 @@ pub struct SampleOptions {
     /// what was derived from them)
     #[arg(long)]
     pub force: bool,
+    /// Also calibrate each run alone (into OUT/runs/<run>/) and check that
+    /// the runs agree: χ²/ν per parameter, and a between-run layer's
+    /// interval for a new test (consistency.parquet, the report)
+    #[arg(long)]
+    pub per_run: bool,
 }
 
 impl SampleOptions {
@@ -74,7 +82,10 @@ impl SampleOptions {
         if !self.hold_out_current.is_empty() && settings.model != ModelKind::CurrentLaw {
             return Err(Error::Usage("--hold-out-current needs --model current-law".into()));
         }
-        Ok(SampleRequest { settings, current: self.current, hold_out_current: self.hold_out_current.clone(), resume: self.resume, force: self.force })
+        if self.per_run && settings.model == ModelKind::CurrentLaw {
+            return Err(Error::Usage("--per-run calibrates each run alone, which a current law cannot (one run has one current): use the per-current model".into()));
+        }
+        Ok(SampleRequest { settings, current: self.current, hold_out_current: self.hold_out_current.clone(), resume: self.resume, force: self.force, per_run: self.per_run })
     }
 }
 
@@ -91,6 +102,8 @@ pub struct SampleRequest {
     pub resume: bool,
     /// Replace the results of an earlier calibration in the folder.
     pub force: bool,
+    /// Also calibrate each run alone and compare.
+    pub per_run: bool,
 }
 
 /// Leave-one-out validation, as the command line asks for it.

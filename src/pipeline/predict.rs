@@ -207,7 +207,12 @@ impl Pipeline<'_> {
     }
 
     fn write_report(&mut self, cal: &Calibration, campaign: &Campaign, prediction: &Prediction, loo: Option<&LeaveOneOut>) -> Result<PathBuf> {
-        let path = report::calibration::write(&CalibrationReport { cal, campaign: &cal.used_runs(campaign), prediction, loo })?;
+        let consistency = match cal.dir.join(store::consistency::FILE).exists() {
+            true => Some(store::consistency::read(&cal.dir)?),
+            false => None,
+        };
+        let report = CalibrationReport { cal, campaign: &cal.used_runs(campaign), prediction, loo, consistency: consistency.as_deref() };
+        let path = report::calibration::write(&report)?;
         self.emit(Event::Wrote(&path));
         Ok(path)
     }

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::{RecordPart, RunData};
 use crate::model::{tangent_stiffness, Integrator, Params, LANES};
-use crate::noise::{NoiseKind, NoiseModel, NoiseOptions, NoiseValues};
+use crate::noise::{DiscrepancySettings, NoiseKind, NoiseModel, NoiseOptions, NoiseValues};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -34,6 +34,9 @@ pub struct LikelihoodSettings {
     /// (docs/calibration.md). On by default; it applies to the noise models
     /// that take it (the Gaussian one).
     pub errors_in_variables: bool,
+    /// The discrepancy model's kernel and the bounds of its time scale
+    /// (`--noise discrepancy`).
+    pub discrepancy: DiscrepancySettings,
 }
 
 impl Default for LikelihoodSettings {
@@ -44,6 +47,7 @@ impl Default for LikelihoodSettings {
             student_nu: 5.0,
             part: RecordPart::WholeRecord,
             errors_in_variables: true,
+            discrepancy: DiscrepancySettings::default(),
         }
     }
 }
@@ -58,7 +62,12 @@ impl LikelihoodSettings {
 
     /// The noise model, with its scales bounded by `sigma_bounds` (Pa).
     pub fn noise_model(&self, sigma_bounds: (f64, f64)) -> Arc<dyn NoiseModel> {
-        self.noise.model(&NoiseOptions { sigma_bounds, student_nu: self.student_nu, errors_in_variables: self.errors_in_variables })
+        self.noise.model(&NoiseOptions {
+            sigma_bounds,
+            student_nu: self.student_nu,
+            errors_in_variables: self.errors_in_variables,
+            discrepancy: self.discrepancy.clone(),
+        })
     }
 }
 

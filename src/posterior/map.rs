@@ -356,7 +356,7 @@ impl Laplace {
         let nr = post.runs.len();
         for i in l.noise.clone() {
             let (p, j) = ((i - l.noise.start) / nr, (i - l.noise.start) % nr);
-            chol[(i, i)] = post.noise.laplace_sd(post.runs[j].compared())[p];
+            chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p];
         }
         Laplace { mean: map.x.clone(), chol }
     }

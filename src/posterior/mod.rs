@@ -100,8 +100,8 @@ impl Posterior {
         let normal = |v: f64, sd: f64| -0.5 * (v / sd) * (v / sd);
         lp += x[l.spring.clone()].iter().map(|v| normal(*v, self.terms.gas_spring_sd_n_per_m)).sum::<f64>();
         lp += x[l.offset.clone()].iter().map(|v| normal(*v, self.terms.force_offset_sd_n)).sum::<f64>();
-        for j in 0..self.runs.len() {
-            lp += self.noise.log_prior(&l.noise_values(x, j));
+        for (j, run) in self.runs.iter().enumerate() {
+            lp += self.noise.log_prior(run, &l.noise_values(x, j));
         }
         lp
     }

@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::{Run, RunData};
 use crate::error::{Error, Result};
 use crate::model::{tangent_stiffness, Integrator, Params, LANES};
-use crate::noise::{NoiseModel, NoiseSimulator};
+use crate::noise::NoiseModel;
 use crate::posterior::Draw;
 use crate::rng;
 use crate::sampler::quantile_sorted;
@@ -137,27 +137,31 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
     let mut rng = rng::stream(settings.seed, &[0x0b5e, run_index as u64]);
     let noise = settings.noise.as_ref();
     let stiff = noise.uses_stiffness(run);
-    // one noise simulator per draw and replicate (a correlated noise
-    // carries its state along time)
-    let mut simulators: Vec<Box<dyn NoiseSimulator>> =
-        kept.iter().flat_map(|(d, _)| (0..reps).map(|_| noise.simulator(run, &d.noise))).collect();
+    // the noise of every draw's replicates, sample by sample (a correlated
+    // noise carries its state along time)
+    let noise_of: Vec<_> = kept.iter().map(|(d, _)| d.noise).collect();
+    let mut simulator = noise.simulator(run, &noise_of, reps);
     let mut model = [(); 5].map(|_| vec![0.0; n]);
     let mut predictive = [(); 2].map(|_| vec![0.0; n]);
     let mut at_k = vec![0.0; kept.len()];
+    let mut stiffness = vec![0.0; kept.len()];
+    let mut noise_k = vec![0.0; kept.len() * reps];
     let mut pred_k = vec![0.0; kept.len() * reps];
     let mut log_p = vec![0.0; kept.len()];
     let mut lppd = 0.0;
     for k in 0..n {
         let dg = if k > 0 { run.gamma[k] - run.gamma[k - 1] } else { 0.0 };
         for (i, (d, path)) in kept.iter().enumerate() {
-            let model = path[k] + run.terms_stress(k, d.spring_n_per_m, d.offset_n);
-            at_k[i] = model;
+            at_k[i] = path[k] + run.terms_stress(k, d.spring_n_per_m, d.offset_n);
             // the law's tangent stiffness, where the noise model takes it
             let g = d.params.g;
-            let stiffness = if !stiff { 0.0 } else if k > 0 { tangent_stiffness(path[k] - path[k - 1], dg, g) } else { g };
-            log_p[i] = noise.marginal_ln_pdf(run, run.tau[k] - model, stiffness, &d.noise);
+            stiffness[i] = if !stiff { 0.0 } else if k > 0 { tangent_stiffness(path[k] - path[k - 1], dg, g) } else { g };
+            log_p[i] = noise.marginal_ln_pdf(run, run.tau[k] - at_k[i], stiffness[i], &d.noise);
+        }
+        simulator.next(&stiffness, &mut rng, &mut noise_k);
+        for (i, model) in at_k.iter().enumerate() {
             for r in 0..reps {
-                pred_k[i * reps + r] = model + simulators[i * reps + r].next(stiffness, &mut rng);
+                pred_k[i * reps + r] = model + noise_k[i * reps + r];
             }
         }
         if k > 0 && run.tau[k].is_finite() {

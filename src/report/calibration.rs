@@ -16,6 +16,7 @@ use crate::posterior::map::step_shift_limit;
 use crate::calibrate::Calibration;
 use crate::predict::{CoverageRow, Prediction};
 use crate::sampler::diagnostics::MIN_TAU_MULTIPLE;
+use crate::validate::consistency::ParameterConsistency;
 use crate::validate::LeaveOneOut;
 
 /// The share of observations a 95 % predictive band should hold for the
@@ -38,6 +39,8 @@ pub struct CalibrationReport<'a> {
     pub prediction: &'a Prediction,
     /// The leave-one-out study, where it was run.
     pub loo: Option<&'a LeaveOneOut>,
+    /// Each run calibrated alone against this calibration (`--per-run`).
+    pub consistency: Option<&'a [ParameterConsistency]>,
 }
 
 /// Writes the figures and `report.html` into the calibration's folder.
@@ -70,6 +73,7 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
     coverage_section(&mut page, r);
     adequacy::section(&mut page, dir, &r.prediction.bands, &r.prediction.adequacy, &r.campaign.geometry)?;
     validation_section(&mut page, r, &loo_figs)?;
+    consistency_section(&mut page, r)?;
     figures_section(&mut page, r.cal, &figs)?;
     reproduce_section(&mut page, r);
     let path = dir.join(super::html::REPORT);
@@ -258,6 +262,43 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
             }
         }
         None => page.para("Not run for this calibration: `mrbp run MANIFEST --out DIR --leave-one-out` runs it (the bundled job does)."),
+    }
+    Ok(())
+}
+
+fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
+    page.section("consistency", "Consistency across runs");
+    let Some(parameters) = r.consistency.filter(|p| !p.is_empty()) else {
+        page.para("Not run for this calibration: `mrbp sample MANIFEST --out DIR --per-run` also calibrates each run alone and compares them here.");
+        return Ok(());
+    };
+    page.para(&format!(
+        "Each run calibrated alone, beside the joint calibration. For each parameter, χ²/ν of the run-wise posterior means of ln θ about their precision-weighted mean, with their own sds (ν = runs − 1): about 1 when one parameter set describes every run and the intervals are honest; the runs are said to disagree when its p-value is below {}. Where they disagree, the joint interval describes these records, not a new test: the between-run layer (run-level ln θ normal about a population value, with a spread per parameter; docs/calibration.md) gives the interval for a new test of this damper.",
+        crate::validate::consistency::DISAGREE_P
+    ));
+    let rows: Vec<Vec<String>> = parameters
+        .iter()
+        .map(|p| {
+            let interval = |e: &crate::validate::consistency::Estimate| format!("{} – {}", num(e.q05, 4), num(e.q95, 4));
+            vec![
+                esc(&p.parameter),
+                format!("{:.2}", p.chi2_nu),
+                format!("{:.1e}", p.p_value),
+                Mark::of(!p.disagrees()).html().into(),
+                interval(&p.joint),
+                interval(&p.new_test),
+                format!("×{:.2}", p.spread_log.exp()),
+            ]
+        })
+        .collect();
+    page.table(&["parameter", "χ²/ν", "p", "", "joint 90 %", "new test 90 %", "spread between runs"], &rows);
+    for p in parameters.iter().filter(|p| p.disagrees()) {
+        page.note(&p.verdict());
+    }
+    let mut figs = Figures::default();
+    figures::consistency(&r.cal.dir, parameters, &mut figs)?;
+    for (stem, caption) in &figs.items {
+        page.figure(&r.cal.dir.join(format!("{stem}.png")), caption)?;
     }
     Ok(())
 }

@@ -9,6 +9,7 @@ use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
 use crate::posterior::{PosteriorSample, Prior};
 use crate::predict::RunBands;
 use crate::sampler::quantile;
+use crate::validate::consistency::ParameterConsistency;
 
 /// Figures written so far: file stem and caption, in report order.
 #[derive(Default)]
@@ -501,4 +502,41 @@ fn zoomed_marginal(name: &str, values: &[f64], prior: &Prior) -> Chart {
     c.series.push(Series::vlines(None, PALETTE[7], vec![quantile(values, 0.05), quantile(values, 0.95)]).with_width(1));
     c.legend_at = LegendAt::UpperRight;
     c
+}
+
+/// Consistency across runs: per B-P parameter, each run calibrated alone,
+/// the joint calibration and the between-run layer's new test, as medians
+/// with 90 % bars on a log axis.
+pub fn consistency(dir: &Path, parameters: &[ParameterConsistency], figs: &mut Figures) -> Result<()> {
+    let Some(first) = parameters.first() else {
+        return Ok(());
+    };
+    let mut labels: Vec<String> = first.runs.iter().map(|r| r.label.clone()).collect();
+    labels.extend(["joint".to_string(), "new test".to_string()]);
+    let rows = labels.len();
+    let mut panels = Vec::new();
+    for p in parameters {
+        let mut c = Chart::new(format!("{}  (χ²/ν {:.1})", p.parameter, p.chi2_nu), format!("{} ({})", p.parameter, crate::posterior::unit_of(&p.parameter)), "");
+        let estimates = p.runs.iter().chain([&p.joint, &p.new_test]);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (k, e) in estimates.enumerate() {
+            let y = (rows - k) as f64;
+            let color = if k < p.runs.len() { PALETTE[k % 8] } else { GREY };
+            c.series.push(Series::line(None, color, vec![e.q05, e.q95], vec![y, y]).with_width(3));
+            c.series.push(Series::points(None, color, vec![e.q50], vec![y]).with_width(5));
+            (lo, hi) = (lo.min(e.q05), hi.max(e.q95));
+        }
+        if lo > 0.0 && lo < hi {
+            let pad = (hi / lo).powf(0.08);
+            c.x_range = Some((lo / pad, hi * pad));
+            c.log_x = true;
+        }
+        c.y_range = Some((0.4, rows as f64 + 0.6));
+        c.y_names = Some(labels.iter().rev().cloned().collect());
+        c.legend = false;
+        panels.push(c);
+    }
+    plot::save(&Figure::grid(panels, 4), &dir.join("consistency"))?;
+    figs.push("consistency", "Consistency across runs: median (dot) and 90 % interval (bar) of each parameter from each run calibrated alone, from the joint calibration, and the between-run layer's prediction for a new test (grey). χ²/ν in each title: about 1 when one parameter set describes every run.");
+    Ok(())
 }

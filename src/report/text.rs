@@ -9,6 +9,7 @@ use crate::data::Campaign;
 use crate::identify::CurrentIdentification;
 use crate::posterior::ParameterModel;
 use crate::predict::PredictionRecord;
+use crate::validate::consistency::ParameterConsistency;
 use crate::validate::LooRow;
 
 /// Appends a formatted line to a String.
@@ -180,6 +181,39 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
             r.by.label(),
             or_dash(r.max_rhat, 4)
         );
+    }
+    out
+}
+
+/// Each run calibrated alone against the joint calibration: a table of
+/// χ²/ν per parameter, then a verdict per parameter.
+pub fn consistency(parameters: &[ParameterConsistency]) -> String {
+    let mut out = String::new();
+    let Some(first) = parameters.first() else {
+        return out;
+    };
+    row!(out, "\nconsistency across runs (each calibrated alone; χ²/ν about 1 when one parameter set describes every run):");
+    let labels: Vec<&str> = first.runs.iter().map(|r| r.label.as_str()).collect();
+    let mut header = format!("{:<6} {:>9} {:>9}", "", "χ²/ν", "p");
+    for l in &labels {
+        header.push_str(&format!(" {l:>20}"));
+    }
+    header.push_str(&format!(" {:>22} {:>22}", "joint 90 %", "new test 90 %"));
+    row!(out, "{header}");
+    for p in parameters {
+        let mut line = format!("{:<6} {:>9.2} {:>9.1e}", p.parameter, p.chi2_nu, p.p_value);
+        for r in &p.runs {
+            line.push_str(&format!(" {:>20}", format!("{:.3e}±{:.1}%", r.q50, 100.0 * r.sd_log)));
+        }
+        let interval = |e: &crate::validate::consistency::Estimate| format!("{:.3e}–{:.3e}", e.q05, e.q95);
+        line.push_str(&format!(" {:>22} {:>22}", interval(&p.joint), interval(&p.new_test)));
+        row!(out, "{line}");
+    }
+    for p in parameters.iter().filter(|p| p.disagrees()) {
+        row!(out, "  {}", p.verdict());
+    }
+    if parameters.iter().all(|p| !p.disagrees()) {
+        row!(out, "  the runs agree on every parameter within their intervals");
     }
     out
 }

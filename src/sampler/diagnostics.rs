@@ -400,7 +400,7 @@ impl Diagnostics {
     /// τ is estimated on the second half of the chains and the burn-in is
     /// 3 τ_max, at most half the chain.
     pub fn compute(chains: &Chains, burn_in: Option<usize>) -> Diagnostics {
-        let burn_in = burn_in.unwrap_or_else(|| Self::burn_in_rule(chains));
+        let burn_in = burn_in.unwrap_or_else(|| Self::burn_in_rule(chains, false));
         let coordinates: Vec<ParameterDiagnostics> = (0..chains.dim)
             .into_par_iter()
             .map(|i| ParameterDiagnostics::of(&chains.traces(i, burn_in), chains.ensembles))
@@ -409,13 +409,22 @@ impl Diagnostics {
     }
 
     /// The default burn-in: 3 τ_max with τ estimated on the second half of
-    /// the chains, at most half the chain.
-    pub fn burn_in_rule(chains: &Chains) -> usize {
+    /// the chains, at most half the chain. With moves that adapt to the
+    /// history (`adaptive`), also every step before the window that the
+    /// last fit saw: the stages before it proposed from fits to a chain
+    /// that may not have converged yet, which τ, measured at equilibrium,
+    /// does not show.
+    pub fn burn_in_rule(chains: &Chains, adaptive: bool) -> usize {
         let total = chains.steps();
         let tau = (0..chains.dim)
             .map(|i| integrated_time(&chains.traces(i, total / 2)))
             .fold(1.0, f64::max);
-        ((BURN_IN_TAUS * tau).ceil() as usize).min(total / 2)
+        let rule = ((BURN_IN_TAUS * tau).ceil() as usize).min(total / 2);
+        if adaptive {
+            rule.max(super::moves::mixture::last_fit_step(total.saturating_sub(1)) / 2)
+        } else {
+            rule
+        }
     }
 
     /// Builds the run's diagnostics from per-coordinate ones (a caller may

@@ -9,7 +9,8 @@ use rayon::prelude::*;
 use super::chains::Chains;
 use super::checkpoint;
 use super::diagnostics::Diagnostics;
-use super::moves::Move;
+use super::moves::mixture::last_fit_step;
+use super::moves::{Mixture, Move};
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
 use super::density::LogDensity;
@@ -46,11 +47,17 @@ impl RunControl {
     }
 }
 
+/// Index of the stream that seeds an ensemble's mixture fits.
+const FIT_STREAM: u64 = u64::MAX - 2;
+
 /// The sampler: settings, the state, and the history of every step.
 pub struct Sampler<'t, T: LogDensity> {
     target: &'t T,
     pub settings: SamplerSettings,
     pub chains: Chains,
+    /// Each ensemble's mixture fitted to its history, and the step of the
+    /// fit (0: none yet), for [`Move::History`].
+    history: (usize, Vec<Option<Mixture>>),
 }
 
 impl<'t, T: LogDensity> Sampler<'t, T> {
@@ -91,6 +98,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 log_prob,
                 accepted: vec![false; nc],
                 },
+            history: (0, vec![None; settings.ensembles]),
             settings,
         })
     }
@@ -99,13 +107,15 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     pub fn resume(target: &'t T, path: &Path) -> Result<Self> {
         let (settings, chains) = checkpoint::load(path, target.dim())?;
         settings.check(target.dim())?;
-        Ok(Sampler { target, settings, chains })
+        let history = (0, vec![None; settings.ensembles]);
+        Ok(Sampler { target, settings, chains, history })
     }
 
     /// Steps until `control` says stop, telling `observers` what happens;
     /// convergence is judged on the chains as they are.
     pub fn run(&mut self, control: &RunControl, observers: &mut [&mut dyn Observer]) -> Result<()> {
-        self.run_until(control, observers, &|chains| Diagnostics::compute(chains, None))
+        let adaptive = self.adaptive();
+        self.run_until(control, observers, &|chains| Diagnostics::compute(chains, Some(Diagnostics::burn_in_rule(chains, adaptive))))
     }
 
     /// [`Sampler::run`], with convergence judged on `diagnose(chains)`: the
@@ -157,7 +167,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     /// Diagnostics of the chains so far, with the burn-in rule of
     /// [`Diagnostics::compute`].
     pub fn diagnostics(&self) -> Diagnostics {
-        Diagnostics::compute(&self.chains, None)
+        Diagnostics::compute(&self.chains, Some(self.burn_in()))
     }
 
     /// One step of every ensemble: the first half of each ensemble moves
@@ -169,6 +179,8 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let step = self.chains.steps() as u64; // the step being made
         let seed = self.settings.seed;
         let moves: Vec<Move> = (0..ne).map(|e| self.pick_move(e as u64, step)).collect();
+        self.fit_history(step as usize);
+        let history = &self.history.1;
         let mut pos = self.chains.last_positions().to_vec();
         let mut lp = self.chains.last_log_prob().to_vec();
         let mut acc = vec![false; nc];
@@ -192,6 +204,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                         factors[k] = moves[e].propose(
                             &snapshot[c * d..(c + 1) * d],
                             others,
+                            history[e].as_ref(),
                             &mut rng,
                             &mut proposals[k * d..(k + 1) * d],
                         );
@@ -225,6 +238,39 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         self.chains.log_prob.extend_from_slice(&lp);
         self.chains.accepted.extend_from_slice(&acc);
         n_acc
+    }
+
+    /// Whether a move adapts to the ensembles' history.
+    pub fn adaptive(&self) -> bool {
+        self.settings.moves.iter().any(|(m, _)| m.uses_history())
+    }
+
+    /// The burn-in rule of [`Diagnostics::burn_in_rule`] for these chains
+    /// and moves.
+    pub fn burn_in(&self) -> usize {
+        Diagnostics::burn_in_rule(&self.chains, self.adaptive())
+    }
+
+    /// Fits each ensemble's mixture to its history at the last fit step
+    /// before `step` (see [`super::moves::mixture`]), if a move uses it and
+    /// it is not fitted yet: to the walkers' positions over the steps from
+    /// half that step on. A function of the chains and the seed only, so a
+    /// resumed run refits what an uninterrupted one fitted.
+    fn fit_history(&mut self, step: usize) {
+        let at = last_fit_step(step);
+        if at == 0 || at == self.history.0 || !self.adaptive() {
+            return;
+        }
+        let (d, nw, seed) = (self.chains.dim, self.settings.walkers, self.settings.seed);
+        let chains = &self.chains;
+        self.history.1 = (0..self.settings.ensembles)
+            .into_par_iter()
+            .map(|e| {
+                let walkers: Vec<Vec<f64>> = (e * nw..(e + 1) * nw).map(|c| (at / 2..at).flat_map(|s| chains.point(s, c).iter().copied()).collect()).collect();
+                Mixture::fit(&walkers, d, &mut crate::rng::stream(seed, &[e as u64, at as u64, FIT_STREAM]))
+            })
+            .collect();
+        self.history.0 = at;
     }
 
     fn pick_move(&self, ensemble: u64, step: u64) -> Move {

@@ -14,6 +14,7 @@
 //! | `adequacy.parquet` | [`adequacy`] |
 //! | `prediction.toml` | [`prediction`] |
 //! | `comparison.parquet`, `differences.parquet` | [`comparison`] |
+//! | `consistency.parquet` | [`consistency`] |
 //! | `inference.zarr` (ArviZ) | [`inference`] |
 //!
 //! [`folder`] writes and reads a whole calibration folder; [`parquet`]
@@ -23,6 +24,7 @@ pub mod adequacy;
 pub mod bands;
 pub mod chains;
 pub mod comparison;
+pub mod consistency;
 pub mod coverage;
 pub mod folder;
 pub mod identification;

@@ -110,7 +110,7 @@ fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<
     };
     let out = folder.join("calibration");
     let resume = out.join(crate::store::folder::CHECKPOINT).exists();
-    let request = SampleRequest { settings: spec.settings.clone(), current: spec.current_a, hold_out_current: vec![], resume, force: true };
+    let request = SampleRequest { settings: spec.settings.clone(), current: spec.current_a, hold_out_current: vec![], resume, force: true, per_run: false };
     let mut folders = pipeline.sample(&campaign, &out, &request)?;
     folders.pop().ok_or_else(|| Error::Compute(format!("task {}: no calibration made", spec.id)))
 }

@@ -9,6 +9,7 @@
 //! reweighted draws. The held-out run's noise level is not known to that
 //! posterior; the prediction uses the root-mean-square σ of the other runs.
 
+pub mod consistency;
 pub mod psis;
 
 use serde::{Deserialize, Serialize};
@@ -143,7 +144,7 @@ impl Target<'_> {
             .map(|(p, d)| match p {
                 Some(p) => {
                     let model: Vec<f64> = (0..n).map(|k| p[k] + self.data.terms_stress(k, d.spring_n_per_m, d.offset_n)).collect();
-                    -self.predict.noise.profile_log_likelihood(&residuals(&self.data.tau[..n], &model))
+                    -self.predict.noise.profile_log_likelihood(&self.data, &residuals(&self.data.tau[..n], &model))
                 }
                 None => f64::NEG_INFINITY,
             })

@@ -5,8 +5,11 @@
 
 mod differential_evolution;
 mod independence;
+pub mod mixture;
 mod snooker;
 mod stretch;
+
+pub use mixture::Mixture;
 
 use serde::{Deserialize, Serialize};
 
@@ -29,6 +32,12 @@ pub enum Move {
     /// q(x)/q(y). On a posterior close to Gaussian it proposes nearly
     /// independent draws.
     Independence { df: Option<f64>, scale: f64 },
+    /// Independence proposal from a Student-t mixture (`df`; Gaussian
+    /// without) fitted to the ensemble's own positions over the second half
+    /// of its steps, refitted at steps 8, 16, 32, … and fixed in between,
+    /// blended with the complementary half's fit ([`mixture`]); factor
+    /// q(x)/q(y). Before the first fit, [`Move::Independence`].
+    History { df: Option<f64> },
 }
 
 impl Default for Move {
@@ -50,11 +59,15 @@ impl Move {
         Move::Independence { df: Some(10.0), scale: 1.0 }
     }
 
+    pub fn history() -> Self {
+        Move::History { df: Some(10.0) }
+    }
+
     /// Smallest complementary half the move can work with.
     pub fn min_complement(&self) -> usize {
         match self {
             Move::Stretch { .. } => 1,
-            Move::DifferentialEvolution { .. } | Move::Independence { .. } => 2,
+            Move::DifferentialEvolution { .. } | Move::Independence { .. } | Move::History { .. } => 2,
             Move::Snooker { .. } => 3,
         }
     }
@@ -65,7 +78,7 @@ impl Move {
             Move::DifferentialEvolution { gamma0: Some(g), .. } if !(g > 0.0) => Err(format!("DE gamma0 = {g} must be positive")),
             Move::DifferentialEvolution { sigma, .. } if !(sigma >= 0.0) => Err(format!("DE sigma = {sigma} must be non-negative")),
             Move::Snooker { gamma } if !(gamma > 0.0) => Err(format!("snooker gamma = {gamma} must be positive")),
-            Move::Independence { df: Some(df), .. } if !(df > 0.0) => Err(format!("independence df = {df} must be positive")),
+            Move::Independence { df: Some(df), .. } | Move::History { df: Some(df) } if !(df > 0.0) => Err(format!("independence df = {df} must be positive")),
             Move::Independence { scale, .. } if !(scale > 0.0 && scale.is_finite()) => {
                 Err(format!("independence scale = {scale} must be positive"))
             }
@@ -73,11 +86,21 @@ impl Move {
         }
     }
 
+    /// Whether the move proposes from a fit to the ensemble's history.
+    pub fn uses_history(&self) -> bool {
+        matches!(self, Move::History { .. })
+    }
+
     /// Writes the proposal for walker position `x` into `y`, with the other
     /// half of the ensemble `others` (points of `x.len()` coordinates one
-    /// after another), and returns ln of the proposal's correction factor.
-    pub fn propose(&self, x: &[f64], others: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+    /// after another) and the mixture fitted to the ensemble's history, if
+    /// there is one yet; returns ln of the proposal's correction factor.
+    pub fn propose(&self, x: &[f64], others: &[f64], history: Option<&Mixture>, rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
         match *self {
+            Move::History { df } => match history {
+                Some(m) => mixture::propose(m, df, x, others, rng, y),
+                None => independence::propose(df, 1.0, x, others, rng, y),
+            },
             Move::Stretch { a } => stretch::propose(a, x, others, rng, y),
             Move::DifferentialEvolution { gamma0, sigma } => differential_evolution::propose(gamma0, sigma, x, others, rng, y),
             Move::Snooker { gamma } => snooker::propose(gamma, x, others, rng, y),

@@ -1,0 +1,403 @@
+//! An independence proposal from a Student-t mixture fitted to the
+//! ensemble's own recent history.
+//!
+//! The complementary half of an ensemble is a few dozen points: in twenty
+//! dimensions it pins down a covariance poorly, and not a skew or a curve
+//! at all. The ensemble's last steps hold thousands of points of the same
+//! distribution. At steps 8, 16, 32, … (a doubling schedule, so adaptation
+//! diminishes) each ensemble fits a Gaussian mixture by EM to its walkers'
+//! positions over the second half of the steps so far — the number of
+//! components (one to [`MAX_COMPONENTS`]) chosen by held-out likelihood —
+//! and proposes from
+//! the same mixture with Student-t components until the next fit. Between
+//! fits the proposal is fixed, so each stretch is an exact
+//! Metropolis-Hastings independence sampler (factor q(x)/q(y)); each fit
+//! depends on the stored chains only, so a resumed run refits the same.
+
+use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
+use rand::RngExt;
+use rand_distr::{ChiSquared, StandardNormal};
+
+/// The most components a fit may have.
+pub const MAX_COMPONENTS: usize = 4;
+
+/// The held-out log-likelihood per point a further component must add.
+pub const MIN_GAIN: f64 = 0.02;
+
+/// The most points a fit uses (evenly thinned beyond).
+const MAX_POINTS: usize = 4000;
+
+/// The proposal's components are the fitted ones widened by this factor:
+/// an independence proposal must not be lighter than the target in any
+/// direction, or a walker that reaches such a tail stays there.
+const SPREAD: f64 = 1.15;
+
+/// Share of each variance added to a covariance's diagonal: keeps a
+/// component of few points positive definite.
+const RIDGE: f64 = 1e-6;
+
+/// The steps at which the proposal is fitted anew: 8, 16, 32, …
+pub fn is_fit_step(step: usize) -> bool {
+    step >= 8 && step.is_power_of_two()
+}
+
+/// The last fit step at or before `step` (0: none yet).
+pub fn last_fit_step(step: usize) -> usize {
+    if step < 8 {
+        0
+    } else {
+        1usize << (usize::BITS - 1 - step.leading_zeros())
+    }
+}
+
+/// One component: weight, mean and Cholesky factor of its covariance.
+#[derive(Clone, Debug)]
+struct Component {
+    log_weight: f64,
+    mean: DVector<f64>,
+    chol: Cholesky<f64, Dyn>,
+    /// ln |Σ|^{1/2}.
+    half_log_det: f64,
+}
+
+/// A fitted mixture, used with Student-t components of `df` degrees of
+/// freedom (Gaussian without).
+#[derive(Clone, Debug)]
+pub struct Mixture {
+    components: Vec<Component>,
+}
+
+impl Mixture {
+    /// Fits a mixture to the walkers' positions `walkers` (per walker, its
+    /// points of `d` coordinates one after another, in time order): EM from
+    /// k-means++ starts drawn from `rng`. A walker's repeated position (a
+    /// rejected proposal) counts once, or clusters of copies would pass for
+    /// components. The number of components is the one whose fit to the
+    /// even walkers predicts the odd ones best (held-out log-likelihood,
+    /// by more than [`MIN_GAIN`] nat per point for each added component);
+    /// it is then fitted to all. `None` if the points cannot carry even one
+    /// full-covariance component.
+    pub fn fit(walkers: &[Vec<f64>], d: usize, rng: &mut impl rand::Rng) -> Option<Mixture> {
+        let distinct = |w: &Vec<f64>| -> Vec<DVector<f64>> {
+            let mut out: Vec<DVector<f64>> = Vec::new();
+            for p in w.chunks_exact(d) {
+                if out.last().is_none_or(|last| last.as_slice() != p) {
+                    out.push(DVector::from_column_slice(p));
+                }
+            }
+            out
+        };
+        let per: Vec<Vec<DVector<f64>>> = walkers.iter().map(distinct).collect();
+        let thin = |v: Vec<DVector<f64>>| -> Vec<DVector<f64>> {
+            let stride = v.len().div_ceil(MAX_POINTS).max(1);
+            v.into_iter().step_by(stride).collect()
+        };
+        let all = thin(per.iter().flatten().cloned().collect());
+        if all.len() < 2 * d + 2 {
+            return None;
+        }
+        let train = thin(per.iter().step_by(2).flatten().cloned().collect());
+        let test = thin(per.iter().skip(1).step_by(2).flatten().cloned().collect());
+        let mut k_best = 1;
+        let mut score_best = f64::NEG_INFINITY;
+        for k in 1..=MAX_COMPONENTS {
+            // each component needs several points per coordinate
+            if train.len() < 5 * d * k || test.is_empty() {
+                break;
+            }
+            let Some((_, m)) = em(&train, k, rng) else { break };
+            let score = test.iter().map(|p| m.log_q(None, p.as_slice())).sum::<f64>() / test.len() as f64;
+            if score > score_best + if k == 1 { 0.0 } else { MIN_GAIN } {
+                (k_best, score_best) = (k, score);
+            } else {
+                break;
+            }
+        }
+        let (_, m) = em(&all, k_best, rng).or_else(|| em(&all, 1, rng))?;
+        Some(m.widened(SPREAD))
+    }
+
+    /// The mixture with every component's spread multiplied by `factor`.
+    fn widened(self, factor: f64) -> Mixture {
+        let components = self
+            .components
+            .into_iter()
+            .filter_map(|c| {
+                let l = c.chol.l();
+                let cov = &l * l.transpose() * (factor * factor);
+                let d = c.mean.len() as f64;
+                Some(Component { half_log_det: c.half_log_det + d * factor.ln(), chol: cov.cholesky()?, ..c })
+            })
+            .collect();
+        Mixture { components }
+    }
+
+    /// ln q(v) up to a constant shared by every component: Student-t
+    /// components with `df` degrees of freedom, or Gaussian.
+    pub fn log_q(&self, df: Option<f64>, v: &[f64]) -> f64 {
+        let d = v.len() as f64;
+        let terms: Vec<f64> = self
+            .components
+            .iter()
+            .map(|c| {
+                let r = DVector::from_column_slice(v) - &c.mean;
+                let m = c.chol.l().solve_lower_triangular(&r).map_or(f64::INFINITY, |z| z.norm_squared());
+                let kernel = match df {
+                    Some(nu) => -0.5 * (nu + d) * (m / nu).ln_1p(),
+                    None => -0.5 * m,
+                };
+                c.log_weight - c.half_log_det + kernel
+            })
+            .collect();
+        log_sum_exp(&terms)
+    }
+
+    /// A draw: a component by weight, then its Student-t (or Gaussian).
+    pub fn draw(&self, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]) {
+        let u: f64 = rng.random();
+        let mut acc = 0.0;
+        let mut pick = &self.components[self.components.len() - 1];
+        for c in &self.components {
+            acc += c.log_weight.exp();
+            if u < acc {
+                pick = c;
+                break;
+            }
+        }
+        let d = y.len();
+        let z = DVector::from_fn(d, |_, _| rng.sample::<f64, _>(StandardNormal));
+        let w = match df {
+            Some(nu) => (nu / rng.sample::<f64, _>(ChiSquared::new(nu).expect("df checked positive"))).sqrt(),
+            None => 1.0,
+        };
+        let step = pick.chol.l() * z * w;
+        for i in 0..d {
+            y[i] = pick.mean[i] + step[i];
+        }
+    }
+
+    /// One component: the mean and covariance of `points` (each of `d`
+    /// coordinates), or their variances alone where the covariance is
+    /// singular or the points too few.
+    fn of_points(points: &[f64], d: usize) -> Option<Mixture> {
+        let n = points.len() / d;
+        if n < 2 {
+            return None;
+        }
+        let x: Vec<DVector<f64>> = points.chunks_exact(d).map(DVector::from_column_slice).collect();
+        let mean = x.iter().fold(DVector::zeros(d), |a, p| a + p) / n as f64;
+        let cov = x.iter().fold(DMatrix::zeros(d, d), |a, p| {
+            let v = p - &mean;
+            a + &v * v.transpose()
+        }) / (n as f64 - 1.0);
+        let c = if n > d { component(1.0, mean.clone(), cov.clone()) } else { None };
+        let c = c.or_else(|| component(1.0, mean, DMatrix::from_diagonal(&cov.diagonal())))?;
+        Some(Mixture { components: vec![c] })
+    }
+
+    /// `share` of this mixture and the rest of `other`.
+    fn blend(&self, other: Mixture, share: f64) -> Mixture {
+        let scaled = |m: &Mixture, w: f64| m.components.iter().map(move |c| Component { log_weight: c.log_weight + w.ln(), ..c.clone() }).collect::<Vec<_>>();
+        let mut components = scaled(self, share);
+        components.extend(scaled(&other, 1.0 - share));
+        Mixture { components }
+    }
+
+    /// The number of components.
+    pub fn len(&self) -> usize {
+        self.components.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.components.is_empty()
+    }
+}
+
+/// The history fit's share of the proposal; the rest is the complementary
+/// half's own fit (a defensive mixture: while the ensemble still expands
+/// or moves, its current spread keeps the proposal from being narrower
+/// than the target).
+pub const HISTORY_SHARE: f64 = 0.7;
+
+/// The proposal: y from the history's mixture blended with the
+/// complementary half's fit `others`; factor q(x)/q(y).
+pub fn propose(history: &Mixture, df: Option<f64>, x: &[f64], others: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+    let q = match Mixture::of_points(others, x.len()) {
+        Some(current) => history.blend(current, HISTORY_SHARE),
+        None => history.clone(),
+    };
+    q.draw(df, rng, y);
+    q.log_q(df, x) - q.log_q(df, y)
+}
+
+fn log_sum_exp(v: &[f64]) -> f64 {
+    let m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if !m.is_finite() {
+        return m;
+    }
+    m + v.iter().map(|t| (t - m).exp()).sum::<f64>().ln()
+}
+
+/// A component of weight `w`, mean `mean` and covariance `cov` (ridged).
+fn component(w: f64, mean: DVector<f64>, mut cov: DMatrix<f64>) -> Option<Component> {
+    let d = mean.len();
+    for i in 0..d {
+        cov[(i, i)] *= 1.0 + RIDGE;
+        if !(cov[(i, i)] > 0.0) {
+            return None;
+        }
+    }
+    let chol = cov.cholesky()?;
+    let half_log_det = chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
+    Some(Component { log_weight: w.ln(), mean, chol, half_log_det })
+}
+
+/// EM for a k-component Gaussian mixture from a k-means++ start; the
+/// log-likelihood (up to −n d/2 ln 2π) and the mixture.
+fn em(x: &[DVector<f64>], k: usize, rng: &mut impl rand::Rng) -> Option<(f64, Mixture)> {
+    let (n, d) = (x.len(), x[0].len());
+    // k-means++ seeds
+    let mut centres = vec![x[rng.random_range(0..n)].clone()];
+    while centres.len() < k {
+        let dist: Vec<f64> = x.iter().map(|p| centres.iter().map(|c| (p - c).norm_squared()).fold(f64::INFINITY, f64::min)).collect();
+        let total: f64 = dist.iter().sum();
+        let mut u = rng.random::<f64>() * total;
+        let mut pick = n - 1;
+        for (i, w) in dist.iter().enumerate() {
+            if u < *w {
+                pick = i;
+                break;
+            }
+            u -= w;
+        }
+        centres.push(x[pick].clone());
+    }
+    // hard assignment to the nearest seed, then EM
+    let mut resp = vec![vec![0.0; k]; n];
+    for (i, p) in x.iter().enumerate() {
+        let j = (0..k).min_by(|&a, &b| (p - &centres[a]).norm_squared().total_cmp(&(p - &centres[b]).norm_squared())).unwrap_or(0);
+        resp[i][j] = 1.0;
+    }
+    let mut ll = f64::NEG_INFINITY;
+    let mut mixture = None;
+    for _ in 0..60 {
+        // M step
+        let mut comps = Vec::with_capacity(k);
+        for j in 0..k {
+            let nj: f64 = resp.iter().map(|r| r[j]).sum();
+            if nj < (d + 2) as f64 {
+                return None;
+            }
+            let mean = x.iter().zip(&resp).fold(DVector::zeros(d), |acc, (p, r)| acc + p * r[j]) / nj;
+            let mut cov = DMatrix::zeros(d, d);
+            for (p, r) in x.iter().zip(&resp) {
+                let v = p - &mean;
+                cov += &v * v.transpose() * r[j];
+            }
+            comps.push(component(nj / n as f64, mean, cov / nj)?);
+        }
+        let m = Mixture { components: comps };
+        // E step
+        let mut new_ll = 0.0;
+        for (p, r) in x.iter().zip(resp.iter_mut()) {
+            let t: Vec<f64> = m
+                .components
+                .iter()
+                .map(|c| {
+                    let z = c.chol.l().solve_lower_triangular(&(p - &c.mean)).map_or(f64::INFINITY, |z| z.norm_squared());
+                    c.log_weight - c.half_log_det - 0.5 * z
+                })
+                .collect();
+            let total = log_sum_exp(&t);
+            new_ll += total;
+            for (rj, tj) in r.iter_mut().zip(&t) {
+                *rj = (tj - total).exp();
+            }
+        }
+        let done = (new_ll - ll).abs() < 1e-6 * new_ll.abs().max(1.0);
+        ll = new_ll;
+        mixture = Some(m);
+        if done || k == 1 {
+            break;
+        }
+    }
+    mixture.map(|m| (ll, m))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `points` split among 8 walkers, as the sampler hands them over.
+    fn walkers(points: &[f64], d: usize) -> Vec<Vec<f64>> {
+        let n = points.len() / d;
+        (0..8).map(|w| (w..n).step_by(8).flat_map(|i| points[i * d..(i + 1) * d].to_vec()).collect()).collect()
+    }
+
+    fn two_blobs(n: usize) -> Vec<f64> {
+        let mut rng = crate::rng::stream(3, &[]);
+        (0..n)
+            .flat_map(|i| {
+                let centre = if i % 3 == 0 { [6.0, 0.0] } else { [0.0, 0.0] };
+                let z: [f64; 2] = std::array::from_fn(|_| rng.sample(StandardNormal));
+                [centre[0] + z[0], centre[1] + 0.5 * z[1]]
+            })
+            .collect()
+    }
+
+    /// Two separated clusters: BIC picks two components, with the clusters'
+    /// weights (1/3, 2/3) within 0.03 (a binomial sd of 0.01 for 2000 points).
+    #[test]
+    fn em_finds_two_clusters() {
+        let pts = two_blobs(2000);
+        let m = Mixture::fit(&walkers(&pts, 2), 2, &mut crate::rng::stream(4, &[])).unwrap();
+        assert_eq!(m.len(), 2);
+        let mut w: Vec<f64> = m.components.iter().map(|c| c.log_weight.exp()).collect();
+        w.sort_by(f64::total_cmp);
+        assert!((w[0] - 1.0 / 3.0).abs() < 0.03 && (w[1] - 2.0 / 3.0).abs() < 0.03, "{w:?}");
+    }
+
+    /// The log density is that of the mixture of normalised Student-t
+    /// components, up to one constant: the difference between two points
+    /// equals that of a direct computation with statrs' 1-D Student-t.
+    #[test]
+    fn log_q_is_the_mixture_density() {
+        use statrs::distribution::{Continuous, StudentsT};
+        let pts: Vec<f64> = two_blobs(3000).chunks(2).map(|p| p[0]).collect();
+        let m = Mixture::fit(&walkers(&pts, 1), 1, &mut crate::rng::stream(5, &[])).unwrap();
+        let direct = |v: f64| {
+            m.components
+                .iter()
+                .map(|c| {
+                    let s = c.chol.l()[(0, 0)];
+                    c.log_weight.exp() * StudentsT::new(c.mean[0], s, 7.0).unwrap().pdf(v)
+                })
+                .sum::<f64>()
+                .ln()
+        };
+        let (a, b) = (0.3, 5.1);
+        let ours = m.log_q(Some(7.0), &[a]) - m.log_q(Some(7.0), &[b]);
+        assert!((ours - (direct(a) - direct(b))).abs() < 1e-10, "{ours} vs {}", direct(a) - direct(b));
+    }
+
+    /// One Gaussian, its walkers' points repeated (rejections): one
+    /// component.
+    #[test]
+    fn a_gaussian_with_repeated_points_is_one_component() {
+        let mut rng = crate::rng::stream(6, &[]);
+        let pts: Vec<f64> = (0..3000).flat_map(|i| {
+            let z: [f64; 3] = std::array::from_fn(|_| rng.sample(StandardNormal));
+            // every point three times in a row, as a walker that stays
+            let _ = i;
+            [z, z, z].concat()
+        }).collect();
+        let m = Mixture::fit(&walkers(&pts, 3), 3, &mut crate::rng::stream(7, &[])).unwrap();
+        assert_eq!(m.len(), 1);
+    }
+
+    #[test]
+    fn the_schedule_doubles() {
+        assert!(!is_fit_step(4) && is_fit_step(8) && !is_fit_step(12) && is_fit_step(16) && is_fit_step(1024));
+        assert_eq!((last_fit_step(7), last_fit_step(8), last_fit_step(31), last_fit_step(32)), (0, 8, 16, 32));
+    }
+}
