@@ -87,3 +87,16 @@ fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
     let i = runs.iter().position(|r| r == "I1.00_25mm_0.25Hz").unwrap();
     assert!((amp[i] - 0.025).abs() < 0.002 && (freq[i] - 0.25).abs() < 0.01, "{} m, {} Hz", amp[i], freq[i]);
 }
+
+/// The force channel of the measured records is quantised: 2.942 N steps
+/// (58.84 Pa over the 0.05 m² area, read off the CSVs' distinct values by
+/// hand). Every run's resolution is found, the floor of the discrepancy
+/// model's scales.
+#[test]
+fn the_force_quantum_of_every_measured_run_is_found() {
+    let campaign = Campaign::load(&manifest()).unwrap();
+    for run in &campaign.runs {
+        let data = mrbp::data::RunData::from_run(run, mrbp::data::RecordPart::WholeRecord, 2.0);
+        assert!((data.stress_step_pa - 58.84).abs() < 0.01, "{}: {}", run.id(), data.stress_step_pa);
+    }
+}

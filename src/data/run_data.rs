@@ -146,8 +146,10 @@ fn sampling_step(time: &[f64]) -> (f64, bool) {
 }
 
 /// The quantum of a quantised record `v`: the tenth percentile of the gaps
-/// between its distinct values, if nine gaps in ten are whole multiples of
-/// it (to 5 %); 0 for a record that is not quantised.
+/// between its distinct values, if three gaps in four are whole multiples
+/// of it (to 5 %); 0 for a record that is not quantised. (On the measured
+/// records 88–98 % of the gaps are; on a smooth record about 10 %, the
+/// share of the unit interval the 5 % tolerance covers.)
 fn resolution(v: &[f64]) -> f64 {
     let mut sorted: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
     sorted.sort_by(f64::total_cmp);
@@ -159,7 +161,7 @@ fn resolution(v: &[f64]) -> f64 {
     gaps.sort_by(f64::total_cmp);
     let quantum = gaps[gaps.len() / 10];
     let whole = gaps.iter().filter(|g| ((*g / quantum) - (*g / quantum).round()).abs() < 0.05).count();
-    if quantum > 0.0 && whole as f64 >= 0.9 * gaps.len() as f64 { quantum } else { 0.0 }
+    if quantum > 0.0 && whole as f64 >= 0.75 * gaps.len() as f64 { quantum } else { 0.0 }
 }
 
 /// Twice the median time between the reversals at `turns`, or twice the
