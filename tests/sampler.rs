@@ -404,7 +404,7 @@ fn stuck_walker_is_detected() {
     for step in 0..s.chains.steps() {
         s.chains.accepted[step * nc + 3] = false;
     }
-    let diag = Diagnostics::compute(&s.chains, Some(50));
+    let diag = Diagnostics::compute(&s.chains, 50);
     assert_eq!(diag.stuck, vec![3]);
     assert!(diag.warnings.iter().any(|w| w.contains("stuck")));
 }

@@ -51,9 +51,9 @@ pub struct RunData {
     pub step_s: f64,
     pub uniform: bool,
     /// The resolution of the measured stress (Pa): the step between
-    /// neighbouring values of a quantised force channel (the tenth
-    /// percentile of the gaps between its distinct values; near 0 for a
-    /// continuous one). Quantisation alone is noise of sd step/√12.
+    /// neighbouring values of a quantised force channel (see
+    /// `resolution`; 0 for one that is not quantised). Quantisation alone
+    /// is noise of sd step/√12.
     pub stress_step_pa: f64,
     /// The excitation's period (s): twice the median time between
     /// reversals (of the record's loading branches), or twice the record's

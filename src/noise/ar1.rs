@@ -95,7 +95,7 @@ impl NoiseModel for Ar1 {
     }
 
     fn simulator(&self, _run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator> {
-        Box::new(Simulator { draws: draws.iter().map(|v| (v[0], v[1])).collect(), replicates, state: None })
+        Box::new(Simulator { draws: draws.iter().map(|v| (v[0], v[1])).collect(), replicates, state: Vec::new() })
     }
 
     fn marginal_ln_pdf(&self, _run: &RunData, r: f64, _stiffness: f64, values: &NoiseValues) -> f64 {
@@ -177,8 +177,8 @@ struct Simulator {
     /// (σ, ρ) of each draw.
     draws: Vec<(f64, f64)>,
     replicates: usize,
-    /// The last noise of every path, once started.
-    state: Option<Vec<f64>>,
+    /// The last noise of every path (empty before the first sample).
+    state: Vec<f64>,
 }
 
 impl NoiseSimulator for Simulator {
@@ -186,13 +186,14 @@ impl NoiseSimulator for Simulator {
         for (d, &(sigma, rho)) in self.draws.iter().enumerate() {
             for p in d * self.replicates..(d + 1) * self.replicates {
                 let z: f64 = rng.sample(StandardNormal);
-                out[p] = match &self.state {
+                out[p] = match self.state.get(p) {
                     None => sigma * z / (1.0 - rho * rho).max(1e-12).sqrt(),
-                    Some(e) => rho * e[p] + sigma * z,
+                    Some(e) => rho * e + sigma * z,
                 };
             }
         }
-        self.state = Some(out.to_vec());
+        self.state.clear();
+        self.state.extend_from_slice(out);
     }
 }
 

@@ -202,10 +202,17 @@ impl Filter {
     }
 }
 
+/// The variance of the strain error's offset drawn afresh where sample k of
+/// `run` begins a loading branch (the first compared sample, or a
+/// reversal), with errors in variables of variance `strain_var`.
+#[inline(always)]
+fn branch_start(run: &RunData, k: usize, strain_var: f64) -> Option<f64> {
+    (strain_var > 0.0 && (k == 1 || run.reverses[k])).then(|| strain_var * run.strain_smoothing_share)
+}
+
 /// The filter's innovations along a run: for each sample k ≥ 1 of the
 /// residuals `r` (indexed from k = 1) the innovation and its variance.
 fn filter_run(run: &RunData, process: &Process, sigma: f64, strain_var: f64, stiffness: Option<&[f64]>, r: &[f64], mut visit: impl FnMut(usize, f64, f64)) {
-    let v_branch = strain_var * run.strain_smoothing_share;
     let mut f = Filter::start(process);
     let mut step = *process;
     for (i, &res) in r.iter().enumerate() {
@@ -214,8 +221,7 @@ fn filter_run(run: &RunData, process: &Process, sigma: f64, strain_var: f64, sti
             step.step(run.time[k] - run.time[k - 1]);
         }
         let c = stiffness.map_or(0.0, |s| s[k]);
-        let branch = (strain_var > 0.0 && (k == 1 || run.reverses[k])).then_some(v_branch);
-        f.predict(&step, branch);
+        f.predict(&step, branch_start(run, k, strain_var));
         let (v, s) = f.update(res, c, sigma * sigma + c * c * strain_var);
         visit(k, v, s);
     }
@@ -445,7 +451,7 @@ impl RunScorer for Scorer<'_> {
     #[inline]
     fn push(&mut self, k: usize, residual: &[f64; LANES], stiffness: &[f64; LANES]) {
         let run = self.run;
-        let branch = (self.strain_var > 0.0 && (k == 1 || run.reverses[k])).then_some(self.strain_var * run.strain_smoothing_share);
+        let branch = branch_start(run, k, self.strain_var);
         let dt = run.time[k] - run.time[k - 1];
         for l in 0..LANES {
             if !run.uniform {

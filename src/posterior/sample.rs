@@ -46,7 +46,7 @@ impl PosteriorSample {
 
     /// Diagnostics of every coordinate in SI units after `burn_in` steps.
     pub fn diagnostics(&self, burn_in: usize) -> Diagnostics {
-        Diagnostics::compute(&self.chains, Some(burn_in))
+        Diagnostics::compute(&self.chains, burn_in)
     }
 
     /// The values of coordinate `name` at `positions`.

@@ -396,11 +396,9 @@ pub struct Diagnostics {
 }
 
 impl Diagnostics {
-    /// Diagnostics after discarding `burn_in` draws, or by the default rule:
-    /// τ is estimated on the second half of the chains and the burn-in is
-    /// 3 τ_max, at most half the chain.
-    pub fn compute(chains: &Chains, burn_in: Option<usize>) -> Diagnostics {
-        let burn_in = burn_in.unwrap_or_else(|| Self::burn_in_rule(chains, false));
+    /// Diagnostics after discarding `burn_in` draws (e.g. by
+    /// [`Self::burn_in_rule`]).
+    pub fn compute(chains: &Chains, burn_in: usize) -> Diagnostics {
         let coordinates: Vec<ParameterDiagnostics> = (0..chains.dim)
             .into_par_iter()
             .map(|i| ParameterDiagnostics::of(&chains.traces(i, burn_in), chains.ensembles))

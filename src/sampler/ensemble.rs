@@ -115,7 +115,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     /// convergence is judged on the chains as they are.
     pub fn run(&mut self, control: &RunControl, observers: &mut [&mut dyn Observer]) -> Result<()> {
         let adaptive = self.adaptive();
-        self.run_until(control, observers, &|chains| Diagnostics::compute(chains, Some(Diagnostics::burn_in_rule(chains, adaptive))))
+        self.run_until(control, observers, &|chains| Diagnostics::compute(chains, Diagnostics::burn_in_rule(chains, adaptive)))
     }
 
     /// [`Sampler::run`], with convergence judged on `diagnose(chains)`: the
@@ -165,9 +165,9 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     }
 
     /// Diagnostics of the chains so far, with the burn-in rule of
-    /// [`Diagnostics::compute`].
+    /// [`Sampler::burn_in`].
     pub fn diagnostics(&self) -> Diagnostics {
-        Diagnostics::compute(&self.chains, Some(self.burn_in()))
+        Diagnostics::compute(&self.chains, self.burn_in())
     }
 
     /// One step of every ensemble: the first half of each ensemble moves

@@ -19,16 +19,16 @@ use super::point;
 const RIDGE: f64 = 1e-9;
 
 /// The fitted proposal: mean, Cholesky factor of the scaled covariance.
-struct Fitted {
-    mean: DVector<f64>,
-    chol: Cholesky<f64, Dyn>,
+pub(super) struct Fitted {
+    pub(super) mean: DVector<f64>,
+    pub(super) chol: Cholesky<f64, Dyn>,
 }
 
 impl Fitted {
     /// Mean and covariance (scaled by `scale`²) of the points in `others`;
     /// with fewer points than coordinates, or a singular covariance, only
     /// its diagonal.
-    fn of(others: &[f64], d: usize, scale: f64) -> Option<Fitted> {
+    pub(super) fn of(others: &[f64], d: usize, scale: f64) -> Option<Fitted> {
         let n = others.len() / d;
         let mean = DVector::from_fn(d, |i, _| (0..n).map(|j| point(others, d, j)[i]).sum::<f64>() / n as f64);
         let mut cov = DMatrix::zeros(d, d);

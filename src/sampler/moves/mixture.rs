@@ -36,12 +36,8 @@ const SPREAD: f64 = 1.15;
 /// component of few points positive definite.
 const RIDGE: f64 = 1e-6;
 
-/// The steps at which the proposal is fitted anew: 8, 16, 32, …
-pub fn is_fit_step(step: usize) -> bool {
-    step >= 8 && step.is_power_of_two()
-}
-
-/// The last fit step at or before `step` (0: none yet).
+/// The last step at or before `step` at which the proposal is fitted anew
+/// (8, 16, 32, …; 0: none yet).
 pub fn last_fit_step(step: usize) -> usize {
     if step < 8 {
         0
@@ -177,39 +173,14 @@ impl Mixture {
     }
 
     /// One component: the mean and covariance of `points` (each of `d`
-    /// coordinates), or their variances alone where the covariance is
-    /// singular or the points too few.
+    /// coordinates), as the independence move fits the complementary half.
     fn of_points(points: &[f64], d: usize) -> Option<Mixture> {
-        let n = points.len() / d;
-        if n < 2 {
+        if points.len() < 2 * d {
             return None;
         }
-        let x: Vec<DVector<f64>> = points.chunks_exact(d).map(DVector::from_column_slice).collect();
-        let mean = x.iter().fold(DVector::zeros(d), |a, p| a + p) / n as f64;
-        let cov = x.iter().fold(DMatrix::zeros(d, d), |a, p| {
-            let v = p - &mean;
-            a + &v * v.transpose()
-        }) / (n as f64 - 1.0);
-        let c = if n > d { component(1.0, mean.clone(), cov.clone()) } else { None };
-        let c = c.or_else(|| component(1.0, mean, DMatrix::from_diagonal(&cov.diagonal())))?;
-        Some(Mixture { components: vec![c] })
-    }
-
-    /// `share` of this mixture and the rest of `other`.
-    fn blend(&self, other: Mixture, share: f64) -> Mixture {
-        let scaled = |m: &Mixture, w: f64| m.components.iter().map(move |c| Component { log_weight: c.log_weight + w.ln(), ..c.clone() }).collect::<Vec<_>>();
-        let mut components = scaled(self, share);
-        components.extend(scaled(&other, 1.0 - share));
-        Mixture { components }
-    }
-
-    /// The number of components.
-    pub fn len(&self) -> usize {
-        self.components.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.components.is_empty()
+        let f = super::independence::Fitted::of(points, d, 1.0)?;
+        let half_log_det = f.chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
+        Some(Mixture { components: vec![Component { log_weight: 0.0, mean: f.mean, chol: f.chol, half_log_det }] })
     }
 }
 
@@ -219,15 +190,21 @@ impl Mixture {
 /// than the target).
 pub const HISTORY_SHARE: f64 = 0.7;
 
-/// The proposal: y from the history's mixture blended with the
-/// complementary half's fit `others`; factor q(x)/q(y).
+/// The proposal: y from the history's mixture (share [`HISTORY_SHARE`])
+/// or from the complementary half's fit `others`; factor q(x)/q(y) of the
+/// two together.
 pub fn propose(history: &Mixture, df: Option<f64>, x: &[f64], others: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
-    let q = match Mixture::of_points(others, x.len()) {
-        Some(current) => history.blend(current, HISTORY_SHARE),
-        None => history.clone(),
+    let Some(current) = Mixture::of_points(others, x.len()) else {
+        history.draw(df, rng, y);
+        return history.log_q(df, x) - history.log_q(df, y);
     };
-    q.draw(df, rng, y);
-    q.log_q(df, x) - q.log_q(df, y)
+    if rng.random::<f64>() < HISTORY_SHARE {
+        history.draw(df, rng, y);
+    } else {
+        current.draw(df, rng, y);
+    }
+    let q = |v: &[f64]| log_sum_exp(&[HISTORY_SHARE.ln() + history.log_q(df, v), (1.0 - HISTORY_SHARE).ln() + current.log_q(df, v)]);
+    q(x) - q(y)
 }
 
 fn log_sum_exp(v: &[f64]) -> f64 {
@@ -351,7 +328,7 @@ mod tests {
     fn em_finds_two_clusters() {
         let pts = two_blobs(2000);
         let m = Mixture::fit(&walkers(&pts, 2), 2, &mut crate::rng::stream(4, &[])).unwrap();
-        assert_eq!(m.len(), 2);
+        assert_eq!(m.components.len(), 2);
         let mut w: Vec<f64> = m.components.iter().map(|c| c.log_weight.exp()).collect();
         w.sort_by(f64::total_cmp);
         assert!((w[0] - 1.0 / 3.0).abs() < 0.03 && (w[1] - 2.0 / 3.0).abs() < 0.03, "{w:?}");
@@ -392,12 +369,12 @@ mod tests {
             [z, z, z].concat()
         }).collect();
         let m = Mixture::fit(&walkers(&pts, 3), 3, &mut crate::rng::stream(7, &[])).unwrap();
-        assert_eq!(m.len(), 1);
+        assert_eq!(m.components.len(), 1);
     }
 
     #[test]
     fn the_schedule_doubles() {
-        assert!(!is_fit_step(4) && is_fit_step(8) && !is_fit_step(12) && is_fit_step(16) && is_fit_step(1024));
-        assert_eq!((last_fit_step(7), last_fit_step(8), last_fit_step(31), last_fit_step(32)), (0, 8, 16, 32));
+        assert_eq!((last_fit_step(4), last_fit_step(7), last_fit_step(8), last_fit_step(12)), (0, 0, 8, 8));
+        assert_eq!((last_fit_step(16), last_fit_step(31), last_fit_step(32), last_fit_step(1024)), (16, 16, 32, 1024));
     }
 }
