@@ -207,7 +207,7 @@ impl Filter {
 /// reversal), with errors in variables of variance `strain_var`.
 #[inline(always)]
 fn branch_start(run: &RunData, k: usize, strain_var: f64) -> Option<f64> {
-    (strain_var > 0.0 && (k == 1 || run.reverses[k])).then(|| strain_var * run.strain_smoothing_share)
+    (strain_var > 0.0 && (k == 1 || run.reverses[k])).then_some(strain_var * run.strain_smoothing_share)
 }
 
 /// The filter's innovations along a run: for each sample k ≥ 1 of the
