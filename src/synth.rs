@@ -16,6 +16,7 @@ use crate::data::{Columns, Geometry, Manifest, Record, RunSpec};
 use crate::error::{Error, Result};
 use crate::atomic;
 use crate::model::{CurrentLaw, Integrator, Params};
+use crate::noise::Kernel;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 
 /// Crank-slider kinematics of the test stand.
@@ -47,6 +48,15 @@ impl Crank {
         let theta = 2.0 * PI * rpm / 60.0 * t;
         let (r, l) = (self.radius_m, self.rod_m);
         r * (1.0 - theta.cos()) + l - (l * l - (r * theta.sin()).powi(2)).sqrt()
+    }
+
+    /// Piston velocity (m/s) at time `t`, the derivative of
+    /// [`Self::displacement`]: ẋ = ω r sin θ (1 + r cos θ / √(L² − r² sin² θ)).
+    pub fn velocity(&self, rpm: f64, t: f64) -> f64 {
+        let omega = 2.0 * PI * rpm / 60.0;
+        let (sin, cos) = (omega * t).sin_cos();
+        let (r, l) = (self.radius_m, self.rod_m);
+        omega * r * sin * (1.0 + r * cos / (l * l - (r * sin).powi(2)).sqrt())
     }
 
     /// Mean |γ̇| over a cycle (1/s): the nominal shear rate of the paper.
@@ -104,6 +114,63 @@ pub struct SynthSettings {
     /// Standard deviation of the displacement sensor noise (m).
     pub noise_displacement_m: f64,
     pub seed: u64,
+    /// A force the B-P law does not carry, added to every record (none by
+    /// default): to see what a calibration makes of a law that is not the
+    /// whole truth.
+    #[serde(default, skip_serializing_if = "ExtraForce::is_none")]
+    pub extra_force: ExtraForce,
+}
+
+/// The virtual stand's force beyond the B-P law (`[extra_force]`): a
+/// smooth random force — a path of the discrepancy model's own process
+/// (`--noise discrepancy`), so its scale and time scale are known truths —
+/// and a velocity-proportional force, which no noise model of mrbp has.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExtraForce {
+    /// Standard deviation of the smooth force (N): one value for every run,
+    /// or one per crank speed (in the order of `rpms`); empty or 0: none.
+    pub smooth_sd_n: Vec<f64>,
+    /// Its time scale ℓ (s), as `smooth_sd_n`: the Matérn kernel's, as the
+    /// discrepancy model defines it.
+    pub smooth_time_s: Vec<f64>,
+    /// Its kernel.
+    pub kernel: Kernel,
+    /// A viscous force c ẋ (N s/m) on the exact piston velocity.
+    pub viscous_n_s_per_m: f64,
+}
+
+impl ExtraForce {
+    fn is_none(&self) -> bool {
+        self.smooth_sd_n.iter().all(|s| *s == 0.0) && self.viscous_n_s_per_m == 0.0
+    }
+
+    /// The smooth force's (scale (N), time scale (s)) on the run at crank
+    /// speed number `i` of `n`; None where it has none.
+    pub fn smooth(&self, i: usize, n: usize) -> Result<Option<(f64, f64)>> {
+        let pick = |v: &[f64], what: &str| -> Result<f64> {
+            match v.len() {
+                1 => Ok(v[0]),
+                len if len == n => Ok(v[i]),
+                len => Err(Error::Usage(format!("extra force: {what} has {len} values for {n} crank speeds (give one, or one per speed)"))),
+            }
+        };
+        if self.smooth_sd_n.is_empty() {
+            return Ok(None);
+        }
+        let sd = pick(&self.smooth_sd_n, "smooth_sd_n")?;
+        if sd == 0.0 {
+            return Ok(None);
+        }
+        if self.smooth_time_s.is_empty() {
+            return Err(Error::Usage("extra force: a smooth force needs its time scale (smooth_time_s, --smooth-force-time)".into()));
+        }
+        let ell = pick(&self.smooth_time_s, "smooth_time_s")?;
+        if !(sd > 0.0 && sd.is_finite() && ell > 0.0 && ell.is_finite()) {
+            return Err(Error::Usage(format!("extra force: the smooth force's scale ({sd} N) and time scale ({ell} s) must be positive")));
+        }
+        Ok(Some((sd, ell)))
+    }
 }
 
 impl Default for SynthSettings {
@@ -123,6 +190,7 @@ impl Default for SynthSettings {
             noise_force_n: 15.0,
             noise_displacement_m: 2.0e-6,
             seed: 20_261_122,
+            extra_force: ExtraForce::default(),
         }
     }
 }
@@ -163,6 +231,16 @@ pub struct Overrides {
     /// Displacement sensor noise, standard deviation (m)
     #[arg(long)]
     pub noise_displacement: Option<f64>,
+    /// A smooth force the law lacks: its standard deviation (N), one value
+    /// or one per crank speed (a path of the discrepancy model's process)
+    #[arg(long, value_delimiter = ',', value_name = "N")]
+    pub smooth_force: Option<Vec<f64>>,
+    /// The smooth force's time scale (s), one value or one per crank speed
+    #[arg(long, value_delimiter = ',', value_name = "SECONDS")]
+    pub smooth_force_time: Option<Vec<f64>>,
+    /// A viscous force the law lacks, c times the piston velocity (N s/m)
+    #[arg(long, value_name = "N_S_PER_M")]
+    pub viscous_force: Option<f64>,
 }
 
 impl Overrides {
@@ -184,6 +262,13 @@ impl Overrides {
         s.noise_force_n = self.noise_force.unwrap_or(s.noise_force_n);
         s.noise_displacement_m = self.noise_displacement.unwrap_or(s.noise_displacement_m);
         s.seed = seed.unwrap_or(s.seed);
+        if let Some(v) = &self.smooth_force {
+            s.extra_force.smooth_sd_n = v.clone();
+        }
+        if let Some(v) = &self.smooth_force_time {
+            s.extra_force.smooth_time_s = v.clone();
+        }
+        s.extra_force.viscous_n_s_per_m = self.viscous_force.unwrap_or(s.extra_force.viscous_n_s_per_m);
         Ok(s)
     }
 }
@@ -194,13 +279,18 @@ impl Overrides {
 /// could notice.
 const TRUTH_SUBSTEPS: u32 = 16;
 
+/// The random stream of a record's extra force, beside its sensor noise's.
+const EXTRA_FORCE_STREAM: u64 = 0xe7f;
+
 /// One virtual record: `cycles` crank revolutions at `rpm` with parameters
-/// `p`, noise from the stream `(seed, stream)`.
+/// `p`, noise from the stream `(seed, stream)`, and the extra force with
+/// the smooth force `smooth` (scale (N), time scale (s)).
 pub fn virtual_record(
     settings: &SynthSettings,
     p: &Params,
     rpm: f64,
     current_a: f64,
+    smooth: Option<(f64, f64)>,
     stream: u64,
 ) -> Result<Record> {
     let duration = settings.cycles * 60.0 / rpm;
@@ -230,6 +320,17 @@ pub fn virtual_record(
         force.push(tau * settings.geometry.area_m2 + force_noise.sample(&mut rng));
         displacement.push(x + disp_noise.sample(&mut rng));
     }
+    // the extra force from a stream of its own: records without it are
+    // those of earlier versions, bit for bit
+    if let Some((sd, ell)) = smooth {
+        let mut rng = crate::rng::stream(settings.seed, &[stream, EXTRA_FORCE_STREAM]);
+        let path = crate::noise::discrepancy::sample_path(settings.extra_force.kernel, sd, ell, &time, &mut rng);
+        force.iter_mut().zip(path).for_each(|(f, d)| *f += d);
+    }
+    let c = settings.extra_force.viscous_n_s_per_m;
+    if c != 0.0 {
+        force.iter_mut().zip(&time).for_each(|(f, &t)| *f += c * settings.crank.velocity(rpm, t));
+    }
     Ok(Record {
         current: Some(vec![current_a; time.len()]),
         time,
@@ -250,6 +351,12 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     if settings.rate_hz <= 0.0 || settings.cycles <= 0.0 || settings.rpms.iter().any(|r| *r <= 0.0) {
         return Err(Error::Usage("rate, cycles and rpm must be positive".into()));
     }
+    for i in 0..settings.rpms.len() {
+        settings.extra_force.smooth(i, settings.rpms.len())?;
+    }
+    if !settings.extra_force.viscous_n_s_per_m.is_finite() {
+        return Err(Error::Usage("extra force: the viscous coefficient must be finite".into()));
+    }
     std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
     let mut runs = Vec::new();
     let mut panels = Vec::new();
@@ -267,7 +374,8 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
         for (i, &rpm) in settings.rpms.iter().enumerate() {
             let id = run_id(current, rpm);
             let file = format!("{id}.csv");
-            let rec = virtual_record(settings, &p, rpm, current, stream)?;
+            let smooth = settings.extra_force.smooth(i, settings.rpms.len())?;
+            let rec = virtual_record(settings, &p, rpm, current, smooth, stream)?;
             stream += 1;
             chart.series.push(Series::line(
                 Some(format!("{rpm} rpm")),
@@ -294,8 +402,13 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
         limits: Default::default(),
         runs,
     };
-    let header = "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
-                  # Synthetic data: B-P model + sensor noise, not measurements.\n";
+    let header = if settings.extra_force.is_none() {
+        "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
+         # Synthetic data: B-P model + sensor noise, not measurements.\n"
+    } else {
+        "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
+         # Synthetic data: B-P model + a force the law lacks ([extra_force]) + sensor noise, not measurements.\n"
+    };
     manifest.write(&dir.join("campaign.toml"), header)?;
     settings.write(dir)?;
     Ok(manifest)
@@ -315,5 +428,67 @@ mod tests {
         let top = c.displacement(100.0, 0.3); // half a revolution
         assert!((top - 2.0 * c.radius_m).abs() < 1e-12);
         assert!((c.nominal_shear_rate(100.0, 1e-3) - 45.0).abs() < 1e-9);
+    }
+
+    /// The velocity is the displacement's derivative: a central difference
+    /// of step 1e-6 s agrees to 1e-7 m/s (its error is ẍ⃛ h²/6 ≈ 1e-10).
+    #[test]
+    fn crank_velocity_is_the_derivative_of_the_displacement() {
+        let c = Crank::default();
+        for t in [0.0, 0.013, 0.1, 0.2999, 0.41, 0.77] {
+            let h = 1e-6;
+            let numeric = (c.displacement(200.0, t + h) - c.displacement(200.0, t - h)) / (2.0 * h);
+            assert!((c.velocity(200.0, t) - numeric).abs() < 1e-7, "t {t}: {} vs {numeric}", c.velocity(200.0, t));
+        }
+    }
+
+    fn small_stand() -> SynthSettings {
+        SynthSettings { rpms: vec![400.0], currents_a: vec![1.0], cycles: 1.0, rate_hz: 2000.0, ..SynthSettings::default() }
+    }
+
+    /// The extra force adds to the record and nothing else: the same seed
+    /// gives the same sensor noise; a viscous force adds exactly c ẋ; a
+    /// smooth force adds a path whose scale is the one asked (its sample sd
+    /// over 300 samples with ℓ = 5 ms, about 40 independent stretches,
+    /// within 40 %).
+    #[test]
+    fn the_extra_force_adds_to_the_law_and_noise() {
+        let base = small_stand();
+        let p = base.law.law().params_at(1.0);
+        let plain = virtual_record(&base, &p, 400.0, 1.0, None, 0).unwrap();
+        let viscous = SynthSettings { extra_force: ExtraForce { viscous_n_s_per_m: 500.0, ..ExtraForce::default() }, ..base.clone() };
+        let rec = virtual_record(&viscous, &p, 400.0, 1.0, None, 0).unwrap();
+        assert_eq!(rec.displacement, plain.displacement);
+        for k in 0..rec.time.len() {
+            let added = rec.force[k] - plain.force[k];
+            let expected = 500.0 * base.crank.velocity(400.0, rec.time[k]);
+            assert!((added - expected).abs() < 1e-9, "sample {k}: {added} vs {expected}");
+        }
+        let rec = virtual_record(&base, &p, 400.0, 1.0, Some((80.0, 0.005)), 0).unwrap();
+        let added: Vec<f64> = rec.force.iter().zip(&plain.force).map(|(a, b)| a - b).collect();
+        let mean = added.iter().sum::<f64>() / added.len() as f64;
+        let sd = (added.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / added.len() as f64).sqrt();
+        assert!((sd / 80.0 - 1.0).abs() < 0.4, "sd {sd}");
+        // smooth: neighbours nearly equal (ℓ is 10 samples)
+        let lag1 = added.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum::<f64>() / (sd * sd * added.len() as f64);
+        assert!(lag1 > 0.9, "lag-1 correlation {lag1}");
+    }
+
+    /// A smooth force given for some crank speeds but not all is refused
+    /// before anything is written.
+    #[test]
+    fn an_extra_force_of_the_wrong_length_is_refused() {
+        let dir = std::env::temp_dir().join(format!("mrbp-synth-extra-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut s = SynthSettings { rpms: vec![100.0, 200.0, 400.0], ..small_stand() };
+        s.extra_force.smooth_sd_n = vec![10.0, 20.0];
+        s.extra_force.smooth_time_s = vec![0.01];
+        let e = write_campaign(&s, &dir).unwrap_err().to_string();
+        assert!(e.contains("2 values for 3 crank speeds"), "{e}");
+        s.extra_force.smooth_sd_n = vec![10.0];
+        s.extra_force.smooth_time_s = vec![];
+        let e = write_campaign(&s, &dir).unwrap_err().to_string();
+        assert!(e.contains("needs its time scale"), "{e}");
+        assert!(!dir.exists());
     }
 }

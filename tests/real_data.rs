@@ -49,7 +49,8 @@ fn identification_gives_a_usable_start_at_every_current() {
 /// force on every run: measured 7–12 %), and the report must not hide what
 /// the law misses: the residuals of these records are correlated in time
 /// (lag-1 autocorrelation 0.92–0.99), so the memory warning is in
-/// calibration.toml and the report, and adequacy.parquet says so per run.
+/// calibration.toml and the report (with the noise model that takes it),
+/// and adequacy.parquet says so per run.
 #[test]
 fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
     let out = tempfile::tempdir().unwrap();
@@ -64,6 +65,8 @@ fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
     let (m, d, c) = (manifest(), dir.to_str().unwrap().to_string(), config.to_str().unwrap().to_string());
     let printed = run(&["sample", m.to_str().unwrap(), "--current", "1.0", "--config", &c, "--out", &d]);
     assert!(printed.contains("lag-1 autocorrelation"), "{printed}");
+    // and says in one line what models it
+    assert!(printed.contains("`--noise discrepancy` models this memory"), "{printed}");
     run(&["report", &d]);
 
     let record = std::fs::read_to_string(dir.join("calibration.toml")).unwrap();

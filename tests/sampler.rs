@@ -408,3 +408,56 @@ fn stuck_walker_is_detected() {
     assert_eq!(diag.stuck, vec![3]);
     assert!(diag.warnings.iter().any(|w| w.contains("stuck")));
 }
+
+/// Two unit normals in 3-d, centred at 0 and at (20, 20, 20) with weight
+/// e^−`minor` (log-density: the log of their sum; a barrier of over 100
+/// nats between them).
+struct TwoModes {
+    minor: f64,
+}
+
+impl LogDensity for TwoModes {
+    fn dim(&self) -> usize {
+        3
+    }
+    fn log_density(&self, x: &[f64]) -> f64 {
+        let a = -0.5 * x.iter().map(|v| v * v).sum::<f64>();
+        let b = -self.minor - 0.5 * x.iter().map(|v| (v - 20.0).powi(2)).sum::<f64>();
+        a.max(b) + (-(a - b).abs()).exp().ln_1p()
+    }
+}
+
+/// Ensembles 2 and 3 start in the mode with e^−40 of the mass, which no
+/// move leaves: at step 32 they are drawn afresh from ensemble 0's or 1's
+/// spread, and the run converges on the main mode (mean 0 within 5 MCSE,
+/// R̂ < 1.01); the burn-in starts after the redraw and the redraws are the
+/// ones replayed from the chains. With equal modes the split start is left
+/// alone (no redraw: each ensemble holds half the mass) and R̂ says so.
+#[test]
+fn an_ensemble_stranded_in_a_negligible_mode_is_drawn_afresh() {
+    use mrbp::sampler::stranded;
+    let start = |chains: usize| -> Vec<Vec<f64>> {
+        let low = start_ball(3, chains / 2, &[0.0; 3], 1.0);
+        let high = start_ball(3, chains / 2, &[20.0; 3], 1.0);
+        low.into_iter().chain(high).collect()
+    };
+    let settings = SamplerSettings { walkers: 32, ensembles: 4, moves: vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)], seed: 3 };
+    let target = TwoModes { minor: 40.0 };
+    let mut s = Sampler::new(&target, settings.clone(), &start(128)).unwrap();
+    s.run(&RunControl { until_converged: true, check_every: 100, min_ess: 400.0, ..RunControl::fixed(4000) }, &mut []).unwrap();
+    let redraws = stranded::history(&s.chains);
+    assert_eq!(redraws.iter().map(|r| (r.step, r.ensemble)).collect::<Vec<_>>(), vec![(32, 2), (32, 3)], "{redraws:?}");
+    assert!(redraws.iter().all(|r| r.from < 2 && (r.gap - 40.0).abs() < 5.0), "{redraws:?}");
+    let diag = s.diagnostics();
+    assert!(diag.burn_in >= 32, "burn-in {}", diag.burn_in);
+    assert!(diag.converged(400.0), "{:?}", diag.warnings);
+    for c in &diag.coordinates {
+        assert!(c.mean.abs() < Z * c.mcse_mean, "mean {} ± {}", c.mean, c.mcse_mean);
+    }
+
+    let equal = TwoModes { minor: 0.0 };
+    let mut s = Sampler::new(&equal, settings, &start(128)).unwrap();
+    s.run(&RunControl::fixed(300), &mut []).unwrap();
+    assert!(stranded::history(&s.chains).is_empty());
+    assert!(s.diagnostics().max_rhat() > 1.5, "two modes, one per half of the ensembles: R̂ must say so");
+}

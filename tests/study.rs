@@ -116,3 +116,39 @@ fn the_slurm_array_script_runs_the_task_of_its_index() {
     let o = element("3");
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
 }
+
+/// SBC with the discrepancy model draws every run's discrepancy from its
+/// prior: the stand's smooth force per crank speed (scale in N = σ_δ ×
+/// area, time scale within [2 Δt, ¼ period]) and the truths of
+/// discrepancy_sd_<run> and discrepancy_time_<run> beside θ and σ.
+#[test]
+fn sbc_with_the_discrepancy_model_draws_each_runs_discrepancy() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("sbc");
+    let o = mrbp(&["study", "plan", dir.to_str().unwrap(), "--sbc", "4", "--noise", "discrepancy", "--rpm", "100,400", "--rate", "1000"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let mut times = Vec::new();
+    for k in 0..4 {
+        let spec: toml::Value = toml::from_str(&std::fs::read_to_string(dir.join(format!("tasks/t00{k}/task.toml"))).unwrap()).unwrap();
+        let synth = &spec["source"]["synth"];
+        let area = synth["geometry"]["area_m2"].as_float().unwrap();
+        let extra = &synth["extra_force"];
+        let sd: Vec<f64> = extra["smooth_sd_n"].as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+        let ell: Vec<f64> = extra["smooth_time_s"].as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+        assert_eq!((sd.len(), ell.len()), (2, 2));
+        assert_eq!(extra["viscous_n_s_per_m"].as_float(), Some(0.0));
+        for (i, rpm) in [100.0, 400.0].iter().enumerate() {
+            let run = format!("I1.0_{rpm:.0}rpm");
+            let truth = &spec["truth"];
+            assert_eq!(truth[&format!("discrepancy_sd_{run}")].as_float().unwrap(), sd[i] / area);
+            assert_eq!(truth[&format!("discrepancy_time_{run}")].as_float().unwrap(), ell[i]);
+            assert!((1.0..=1e6).contains(&(sd[i] / area)), "σ_δ {}", sd[i] / area);
+            assert!(ell[i] >= 2e-3 && ell[i] <= 0.25 * 60.0 / rpm, "ℓ {} at {rpm} rpm", ell[i]);
+            times.push(ell[i]);
+        }
+    }
+    // drawn, not one value copied
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    assert_eq!(times.len(), 8);
+}

@@ -42,6 +42,7 @@ pub fn run(posterior: &Posterior, sampler: &mut Sampler<Posterior>, control: &Ru
     let chains = sampler.chains.clone();
     let seconds = clock.elapsed().as_secs_f64();
     let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains);
-    let diagnostics = sample.diagnostics(burn_in_of(&chains));
+    let mut diagnostics = sample.diagnostics(burn_in_of(&chains));
+    diagnostics.warnings.extend(crate::sampler::stranded::history(&chains).iter().map(|r| r.message()));
     Ok(Sampled { chains, sample, diagnostics, seconds })
 }

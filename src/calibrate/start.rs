@@ -114,27 +114,35 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
 /// makes intervals too narrow by more than √3 (AR(1) variance inflation).
 pub const MEMORY_WARNING: f64 = 0.5;
 
-/// A warning per run whose MAP residuals are correlated in time while the
-/// noise model takes them as independent.
+/// A warning per run whose MAP residuals, whitened as the noise model
+/// whitens them, are still correlated in time: the model reads them as
+/// more independent evidence than they are.
 fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
-    if posterior.noise.models_memory() {
-        return Vec::new();
-    }
-    let Some(rhos) = map::residual_autocorrelation(posterior, &map.x) else {
+    let Some(rhos) = map::whitened_autocorrelation(posterior, map) else {
         return Vec::new();
     };
+    let models_memory = posterior.noise.models_memory();
     posterior
         .runs
         .iter()
         .zip(rhos)
         .filter(|(_, rho)| *rho > MEMORY_WARNING)
         .map(|(run, rho)| {
-            format!(
-                "{}: the MAP residuals have a lag-1 autocorrelation of {rho:.2}, but the noise model takes them as independent; \
-                 parameter intervals are too narrow by about {:.1}× (see the report's model adequacy section)",
-                run.id,
-                ((1.0 + rho.min(0.999)) / (1.0 - rho.min(0.999))).sqrt()
-            )
+            let factor = ((1.0 + rho.min(0.999)) / (1.0 - rho.min(0.999))).sqrt();
+            if models_memory {
+                format!(
+                    "{}: the noise model's whitened MAP residuals (one-step-ahead innovations) keep a lag-1 autocorrelation of {rho:.2}: \
+                     memory it does not explain; parameter intervals are too narrow by about {factor:.1}× (see the report's model adequacy section)",
+                    run.id
+                )
+            } else {
+                format!(
+                    "{}: the MAP residuals have a lag-1 autocorrelation of {rho:.2}, but the noise model takes them as independent; \
+                     parameter intervals are too narrow by about {factor:.1}× (see the report's model adequacy section); \
+                     `--noise discrepancy` models this memory as a force the law lacks (docs/calibration.md, \"Model discrepancy\")",
+                    run.id
+                )
+            }
         })
         .collect()
 }

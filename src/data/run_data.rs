@@ -56,8 +56,8 @@ pub struct RunData {
     /// is noise of sd step/√12.
     pub stress_step_pa: f64,
     /// The excitation's period (s): twice the median time between
-    /// reversals (of the record's loading branches), or twice the record's
-    /// duration if it reverses less than twice.
+    /// reversals (of the record's loading branches); with one reversal,
+    /// twice the longer stroke; with none, twice the record's duration.
     pub period_s: f64,
 }
 
@@ -164,12 +164,16 @@ fn resolution(v: &[f64]) -> f64 {
     if quantum > 0.0 && whole as f64 >= 0.75 * gaps.len() as f64 { quantum } else { 0.0 }
 }
 
-/// Twice the median time between the reversals at `turns`, or twice the
-/// duration of `time`.
+/// Twice the median time between the reversals at `turns`; with one
+/// reversal, twice the longer of the strokes before and after it (one
+/// cycle from rest: its duration); with none, twice the duration of `time`.
 fn period_of(time: &[f64], turns: &[f64]) -> f64 {
+    let (start, end) = (time.first().copied().unwrap_or(0.0), time.last().copied().unwrap_or(0.0));
     let mut gaps: Vec<f64> = turns.windows(2).map(|w| w[1] - w[0]).collect();
-    if gaps.is_empty() {
-        return 2.0 * (time.last().copied().unwrap_or(0.0) - time.first().copied().unwrap_or(0.0));
+    match turns {
+        [] => return 2.0 * (end - start),
+        [turn] => return 2.0 * (turn - start).max(end - turn),
+        _ => {}
     }
     gaps.sort_by(f64::total_cmp);
     2.0 * gaps[gaps.len() / 2]
@@ -201,6 +205,12 @@ mod tests {
         let run = RunData::new("r".into(), time, gamma.clone(), gamma, 0.0, 1.0, (1.0, 1.0), (0.0, 1.0));
         assert!((run.step_s - 1e-3).abs() < 1e-12 && run.uniform);
         assert!((run.period_s - 0.25).abs() < 2e-3, "{}", run.period_s);
+        // one cycle from rest (one reversal): its duration, to two sampling
+        // intervals (the reversal is marked a sample after the extreme)
+        let one: Vec<f64> = (0..301).map(|k| 1.0 - (2.0 * std::f64::consts::PI * k as f64 / 300.0).cos()).collect();
+        let time: Vec<f64> = (0..301).map(|k| k as f64 * 1e-3).collect();
+        let run = RunData::new("r".into(), time, one.clone(), one, 0.0, 1.0, (1.0, 1.0), (0.0, 1.0));
+        assert!((run.period_s - 0.3).abs() < 2.5e-3, "{}", run.period_s);
     }
 
     #[test]

@@ -88,12 +88,13 @@ pub struct Parameter {
 }
 
 /// The smoothness of the discrepancy's Matérn kernel.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Kernel {
     /// ν = 1/2: an Ornstein-Uhlenbeck process, continuous but rough.
     Matern12,
     /// ν = 3/2: once differentiable, a smooth force.
+    #[default]
     Matern32,
 }
 
@@ -195,6 +196,18 @@ pub struct Pointwise {
     pub replicate: Vec<f64>,
 }
 
+/// What a noise model makes of one run's residuals at fixed noise values,
+/// where it models a force the law lacks: E[δ(t_k) | every residual] and
+/// its sd (Pa) — that force as the data show it — and the standardised
+/// one-step-ahead innovations, the memory the model leaves (white if it
+/// describes the residuals); each for k = 1…n−1.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Explained {
+    pub mean: Vec<f64>,
+    pub sd: Vec<f64>,
+    pub innovations: Vec<f64>,
+}
+
 /// A model of the residuals τ_obs − τ_model of a run.
 pub trait NoiseModel: Send + Sync + std::fmt::Debug {
     /// The parameters of one run, in the order of their coordinates.
@@ -219,10 +232,17 @@ pub trait NoiseModel: Send + Sync + std::fmt::Debug {
         false
     }
 
-    /// Whether the model takes residuals correlated in time (then the
-    /// residual-memory warning is moot).
+    /// Whether the model takes residuals correlated in time (the
+    /// residual-memory warning then looks at what it leaves).
     fn models_memory(&self) -> bool {
         false
+    }
+
+    /// [`Explained`] for `run`'s residuals `r` (k = 1…) with noise `values`
+    /// (SI) and the law's tangent stiffness `stiffness` (from k = 0); None
+    /// for a model without a force of its own.
+    fn explain(&self, _run: &RunData, _r: &[f64], _stiffness: &[f64], _values: &NoiseValues) -> Option<Explained> {
+        None
     }
 
     /// A scorer of `run` for [`LANES`] points with these noise coordinates.

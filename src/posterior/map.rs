@@ -242,11 +242,23 @@ fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
     Some(full)
 }
 
-/// Lag-1 autocorrelation of every run's residuals at `x` (`None` where an
-/// integration fails): what tells independent noise from a misfit with memory.
-pub fn residual_autocorrelation(post: &Posterior, x: &[f64]) -> Option<Vec<f64>> {
-    let res = residuals_many(post, &[x.to_vec()]).pop()??;
-    Some(res.iter().map(|r| crate::sampler::diagnostics::autocorrelation(r).get(1).copied().unwrap_or(f64::NAN)).collect())
+/// Lag-1 autocorrelation of every run's residuals at the MAP, whitened as
+/// its noise model whitens them (`None` where an integration fails): the
+/// memory the noise model leaves unexplained. For independent noise that
+/// is the residuals' own memory (divided by σ); for a model of memory,
+/// what its one-step-ahead innovations keep.
+pub fn whitened_autocorrelation(post: &Posterior, map: &MapEstimate) -> Option<Vec<f64>> {
+    let res = residuals_many(post, std::slice::from_ref(&map.x)).pop()??;
+    Some(
+        res.iter()
+            .zip(&map.whitening)
+            .map(|(r, w)| {
+                let mut white = Vec::with_capacity(r.len());
+                w.whiten(r, &mut white);
+                crate::sampler::diagnostics::autocorrelation(&white).get(1).copied().unwrap_or(f64::NAN)
+            })
+            .collect(),
+    )
 }
 
 /// The best MAP from several starts (θ coordinates), by log-density.

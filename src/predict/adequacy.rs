@@ -96,8 +96,13 @@ pub struct AdequacyRow {
     pub lag1_autocorrelation: f64,
     /// First lag at which the residual's autocorrelation falls below 1/e, s.
     pub decorrelation_s: f64,
-    /// √((1 + ρ)/(1 − ρ)) with ρ the lag-1 autocorrelation (floored at 0):
-    /// how much too narrow intervals from independent noise are.
+    /// Lag-1 autocorrelation of the noise model's standardised one-step-
+    /// ahead innovations, where it models a force of its own (the
+    /// discrepancy model; NaN otherwise): the memory it leaves.
+    pub innovation_lag1: f64,
+    /// √((1 + ρ)/(1 − ρ)) with ρ the lag-1 autocorrelation (floored at 0)
+    /// of the residual, or of the innovations where the noise model has
+    /// them: how much too narrow the parameter intervals are.
     pub interval_inflation: f64,
     /// Least-squares r ≈ a + k·(x − x̄) + c·v: a (N), k (N/m), c (N·s/m).
     pub trend_offset_n: f64,
@@ -226,7 +231,11 @@ pub fn assess(b: &RunBands, area_m2: f64, gap_m: f64) -> AdequacyRow {
     let rho = acf.get(1).copied().unwrap_or(f64::NAN);
     let dt = if time.len() > 1 { (time[time.len() - 1] - time[0]) / (time.len() - 1) as f64 } else { f64::NAN };
     let decorrelation_s = acf.iter().position(|c| *c < (-1.0f64).exp()).map_or(f64::NAN, |lag| lag as f64 * dt);
-    let rho_pos = rho.clamp(0.0, 0.999);
+    let innovation_lag1 = b.discrepancy.as_ref().map_or(f64::NAN, |d| {
+        let w: Vec<f64> = d[2].iter().copied().filter(|v| v.is_finite()).collect();
+        autocorrelation(&w, 2).get(1).copied().unwrap_or(f64::NAN)
+    });
+    let rho_pos = if innovation_lag1.is_finite() { innovation_lag1 } else { rho }.clamp(0.0, 0.999);
     let (a, k, c, r2) = if r.len() >= 4 { trend(&r, &x, &v) } else { (f64::NAN, f64::NAN, f64::NAN, f64::NAN) };
     let force: Vec<f64> = b.force.iter().map(|f| f.abs()).filter(|f| f.is_finite()).collect();
     let part = |want: bool| rms(r.iter().zip(&at_reversal).filter(|(_, &rev)| rev == want).map(|(r, _)| *r));
@@ -239,6 +248,7 @@ pub fn assess(b: &RunBands, area_m2: f64, gap_m: f64) -> AdequacyRow {
         residual_rms_n: rms(r.iter().copied()),
         lag1_autocorrelation: rho,
         decorrelation_s,
+        innovation_lag1,
         interval_inflation: ((1.0 + rho_pos) / (1.0 - rho_pos)).sqrt(),
         trend_offset_n: a,
         trend_stiffness_n_per_m: k,
@@ -278,6 +288,7 @@ mod tests {
             predictive: [vec![-half_band_n / area; n], vec![half_band_n / area; n]],
             displacement: x,
             force: vec![100.0; n],
+            discrepancy: None,
             time,
         }
     }

@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::{Run, RunData};
 use crate::error::{Error, Result};
 use crate::model::{tangent_stiffness, Integrator, Params, LANES};
-use crate::noise::NoiseModel;
+use crate::noise::{Explained, NoiseModel, NoiseValues};
 use crate::posterior::Draw;
 use crate::rng;
 use crate::sampler::quantile_sorted;
@@ -52,6 +52,10 @@ pub struct Bands {
     /// p(τ_obs,k | draw d), over the samples after the first (nat): the
     /// score of held-out predictions (higher is better).
     pub lppd: f64,
+    /// What the noise model makes of the residuals about the median model
+    /// (q50) at the draws' median noise, where it models a force of its
+    /// own (the discrepancy model).
+    pub explained: Option<Explained>,
 }
 
 /// How well the bands hold the observations of one run (samples after the
@@ -176,7 +180,24 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
             band[k] = quantile_sorted(&pred_k, p);
         }
     }
-    Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed, lppd })
+    let explained = explain_median(run, kept, &model[2], noise);
+    Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed, lppd, explained })
+}
+
+/// [`NoiseModel::explain`] at the median: the residuals about the median
+/// model stress `median`, the stiffness along it with the draws' median G,
+/// each noise value the draws' median.
+fn explain_median(run: &RunData, kept: &[(&Draw, &[f64])], median: &[f64], noise: &dyn NoiseModel) -> Option<Explained> {
+    let median_of = |v: Vec<f64>| {
+        let mut v = v;
+        v.sort_unstable_by(f64::total_cmp);
+        quantile_sorted(&v, 0.5)
+    };
+    let values: NoiseValues = std::array::from_fn(|p| median_of(kept.iter().map(|(d, _)| d.noise[p]).collect()));
+    let g = median_of(kept.iter().map(|(d, _)| d.params.g).collect());
+    let stiffness = crate::noise::stiffness_path(run, median, g);
+    let residuals: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - median[k]).collect();
+    noise.explain(run, &residuals, &stiffness, &values)
 }
 
 /// ln of the mean of exp(v), without overflow.
@@ -206,6 +227,10 @@ pub struct RunBands {
     pub predictive: [Vec<f64>; 2],
     pub displacement: Vec<f64>,
     pub force: Vec<f64>,
+    /// Where the noise model has a force of its own (the discrepancy
+    /// model), per sample (NaN at the first): the smoothed discrepancy and
+    /// its sd (Pa), and the standardised one-step-ahead innovation.
+    pub discrepancy: Option<[Vec<f64>; 3]>,
 }
 
 impl RunBands {
@@ -223,6 +248,7 @@ impl RunBands {
             predictive: bands.predictive,
             displacement: run.record.displacement[..n].to_vec(),
             force: run.record.force[..n].to_vec(),
+            discrepancy: bands.explained.map(|e| [e.mean, e.sd, e.innovations].map(|v| std::iter::once(f64::NAN).chain(v).collect())),
         }
     }
 }
@@ -341,6 +367,7 @@ mod tests {
             draws: 1,
             failed: 0,
             lppd: 0.0,
+            explained: None,
         };
         let c = b.coverage(&[9.0, 0.5, 2.0, -0.5, -3.0]);
         assert_eq!(c.samples, 4);

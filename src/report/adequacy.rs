@@ -45,7 +45,10 @@ pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[Adequacy
                 esc(&a.excitation.label()),
                 num(a.peak_force_n, 3),
                 format!("{} ({:.1} %)", num(a.residual_rms_n, 3), 100.0 * a.residual_rms_n / a.peak_force_n),
-                format!("{:.2}", a.lag1_autocorrelation),
+                match a.innovation_lag1.is_finite() {
+                    true => format!("{:.2} ({:.2})", a.lag1_autocorrelation, a.innovation_lag1),
+                    false => format!("{:.2}", a.lag1_autocorrelation),
+                },
                 format!("{:.1}", a.interval_inflation),
                 format!("{} / {}", num(a.reversal_rms_n, 3), num(a.stroke_rms_n, 3)),
                 format!("{:.0} / {:.0} / {:.0}", 100.0 * a.inside_p95, 100.0 * a.inside_p95_reversal, 100.0 * a.inside_p95_stroke),
@@ -60,7 +63,7 @@ pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[Adequacy
             "excitation",
             "peak force (N)",
             "residual RMS (N)",
-            "lag-1 ρ",
+            if rows.iter().any(|a| a.innovation_lag1.is_finite()) { "lag-1 ρ (of the innovations)" } else { "lag-1 ρ" },
             "intervals too narrow by ×",
             "RMS reversal / stroke (N)",
             "inside 95 % predictive: all / reversal / stroke (%)",
@@ -115,6 +118,9 @@ fn size(rows: &[AdequacyRow]) -> Option<String> {
 /// intervals.
 fn memory(rows: &[AdequacyRow]) -> Option<String> {
     let worst = rows.iter().max_by(|a, b| a.lag1_autocorrelation.total_cmp(&b.lag1_autocorrelation))?;
+    if rows.iter().all(|a| a.innovation_lag1.is_finite()) {
+        return Some(left_memory(rows, worst));
+    }
     if worst.lag1_autocorrelation <= CORRELATED {
         return Some(format!(
             "Memory: the residuals are close to independent (lag-1 autocorrelation at most {:.2}), as the noise model assumes.",
@@ -133,6 +139,34 @@ fn memory(rows: &[AdequacyRow]) -> Option<String> {
         spread(dlo, dhi, 2),
         spread(ilo, ihi, 2)
     ))
+}
+
+/// Memory with a noise model that has a force of its own: what the
+/// residuals carry, and what its innovations leave.
+fn left_memory(rows: &[AdequacyRow], worst: &AdequacyRow) -> String {
+    let left = rows.iter().max_by(|a, b| a.innovation_lag1.total_cmp(&b.innovation_lag1)).unwrap_or(worst);
+    let carried = format!(
+        "Memory: the residuals about the median model are correlated in time (lag-1 autocorrelation up to {:.2} on {}), \
+         and the noise model takes that as a force the law lacks (the discrepancy, drawn below with its band).",
+        worst.lag1_autocorrelation,
+        esc(&worst.run)
+    );
+    if left.innovation_lag1 <= CORRELATED {
+        format!(
+            "{carried} What it leaves, its one-step-ahead innovations, is close to independent (lag-1 autocorrelation at most {:.2}): \
+         the intervals account for the memory.",
+            left.innovation_lag1
+        )
+    } else {
+        let (ilo, ihi) = range(rows.iter().map(|a| a.interval_inflation));
+        format!(
+            "{carried} Its one-step-ahead innovations still remember (lag-1 autocorrelation up to {:.2} on {}): memory it does not \
+             explain, so the intervals are too narrow by a factor of about {} (√((1 + ρ)/(1 − ρ)) of the innovations).",
+            left.innovation_lag1,
+            esc(&left.run),
+            spread(ilo, ihi, 2)
+        )
+    }
 }
 
 /// Runs whose misfit concentrates at the reversals.
@@ -247,21 +281,54 @@ fn figures(dir: &Path, bands: &[RunBands], rows: &[AdequacyRow], geometry: &Geom
         acf_chart.series.push(Series::line(Some("residual".into()), PALETTE[0], lag_s, acf).with_width(2));
         acf_chart.series.push(Series::dashed(Some("independent noise (95 %)".into()), GREY, vec![0.0, end], vec![white, white]));
         acf_chart.series.push(Series::dashed(None, GREY, vec![0.0, end], vec![-white, -white]));
+        let mut panels = vec![loop_fv, vs_x, vs_v];
+        if let Some([mean, sd, innovation]) = &b.discrepancy {
+            let w: Vec<f64> = innovation.iter().copied().filter(|v| v.is_finite()).collect();
+            let acf_w = adequacy::autocorrelation(&w, lags);
+            let lag_w: Vec<f64> = (0..acf_w.len()).map(|k| k as f64 * dt).collect();
+            acf_chart.series.push(Series::line(Some("innovations".into()), PALETTE[3], lag_w, acf_w).with_width(2));
+            panels.push(discrepancy_panel(b, &residual, mean, sd, area));
+        }
         acf_chart.legend_at = LegendAt::UpperRight;
+        panels.push(acf_chart);
 
         let stem = format!("adequacy_{}", b.run);
-        plot::save(&Figure::grid(vec![loop_fv, vs_x, vs_v, acf_chart], 2), &dir.join(&stem))?;
+        plot::save(&Figure::grid(panels, 2), &dir.join(&stem))?;
         figs.push(
             &stem,
             &format!(
                 "{} ({}, {} A): force–velocity loop with the 95 % predictive band; the residual force against displacement (a slope is a \
-                 missing spring) and against velocity (spikes near v = 0 are yield timing); its autocorrelation over one cycle against the \
+                 missing spring) and against velocity (spikes near v = 0 are yield timing);{} its autocorrelation over one cycle against the \
                  band of independent noise.",
                 b.run,
                 a.excitation.label(),
-                b.current_a
+                b.current_a,
+                if b.discrepancy.is_some() {
+                    " the discrepancy the noise model finds in it over time (its posterior mean given the whole record, with a 90 % band, \
+                     at the median model and noise), and the autocorrelation of the residual and of the model's one-step-ahead innovations:"
+                } else {
+                    ""
+                }
             ),
         );
     }
     Ok(())
+}
+
+/// The residual force over time with the discrepancy the noise model finds
+/// in it: its smoothed mean and a 90 % band (± 1.645 sd), in N.
+fn discrepancy_panel(b: &RunBands, residual: &[f64], mean: &[f64], sd: &[f64], area: f64) -> Chart {
+    // from the second sample (the first is the fixed initial state)
+    let at: Vec<usize> = (1..b.time.len()).step_by(b.time.len().div_ceil(1500).max(1)).filter(|&k| mean[k].is_finite()).collect();
+    let of = |f: &dyn Fn(usize) -> f64| -> Vec<f64> { at.iter().map(|&k| f(k)).collect() };
+    let t = of(&|k| b.time[k]);
+    let mut c = Chart::new(format!("{}: discrepancy over time", b.run), "time t (s)", "force (N)");
+    c.series.push(Series::points(Some("residual".into()), plot::BLACK_, t.clone(), of(&|k| residual[k])).with_width(1));
+    c.series.push(
+        Series::band(Some("discrepancy, 90 %".into()), PALETTE[3], t.clone(), of(&|k| (mean[k] - 1.645 * sd[k]) * area), of(&|k| (mean[k] + 1.645 * sd[k]) * area))
+            .with_opacity(0.3),
+    );
+    c.series.push(Series::line(Some("discrepancy".into()), PALETTE[3], t, of(&|k| mean[k] * area)).with_width(2));
+    c.legend_at = LegendAt::UpperRight;
+    c
 }

@@ -411,13 +411,17 @@ impl Diagnostics {
     /// history (`adaptive`), also every step before the window that the
     /// last fit saw: the stages before it proposed from fits to a chain
     /// that may not have converged yet, which τ, measured at equilibrium,
-    /// does not show.
+    /// does not show. After a stranded ensemble was drawn afresh
+    /// ([`super::stranded`]), the rule counts from that step.
     pub fn burn_in_rule(chains: &Chains, adaptive: bool) -> usize {
         let total = chains.steps();
         let tau = (0..chains.dim)
             .map(|i| integrated_time(&chains.traces(i, total / 2)))
             .fold(1.0, f64::max);
-        let rule = ((BURN_IN_TAUS * tau).ceil() as usize).min(total / 2);
+        let taus = (BURN_IN_TAUS * tau).ceil() as usize;
+        // after an ensemble was drawn afresh, the rule counts from there
+        let redrawn = super::stranded::last_step(chains);
+        let rule = (taus.min(total / 2)).max(redrawn + taus.min(total.saturating_sub(redrawn) / 2));
         if adaptive {
             rule.max(super::moves::mixture::last_fit_step(total.saturating_sub(1)) / 2)
         } else {

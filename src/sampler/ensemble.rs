@@ -13,6 +13,7 @@ use super::moves::mixture::last_fit_step;
 use super::moves::{Mixture, Move};
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
+use super::stranded;
 use super::density::LogDensity;
 use crate::error::{Error, Result};
 
@@ -183,6 +184,9 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let history = &self.history.1;
         let mut pos = self.chains.last_positions().to_vec();
         let mut lp = self.chains.last_log_prob().to_vec();
+        for redraw in stranded::decide(&self.chains, step as usize) {
+            self.redraw(&redraw, &mut pos, &mut lp);
+        }
         let mut acc = vec![false; nc];
         let half = nw / 2;
         for h in 0..2 {
@@ -238,6 +242,29 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         self.chains.log_prob.extend_from_slice(&lp);
         self.chains.accepted.extend_from_slice(&acc);
         n_acc
+    }
+
+    /// Draws the walkers of a stranded ensemble afresh ([`stranded`]); a
+    /// draw where the log-density is −∞ takes the position of the same
+    /// walker of the ensemble drawn from.
+    fn redraw(&self, redraw: &stranded::Redraw, pos: &mut [f64], lp: &mut [f64]) {
+        let (d, nw) = (self.chains.dim, self.settings.walkers);
+        let fresh = stranded::positions(&self.chains, redraw, self.settings.seed);
+        if fresh.is_empty() {
+            return;
+        }
+        let mut fresh_lp = vec![0.0; nw];
+        evaluate(self.target, &fresh, &mut fresh_lp);
+        for w in 0..nw {
+            let (c, source) = (redraw.ensemble * nw + w, redraw.from * nw + w);
+            if fresh_lp[w] > f64::NEG_INFINITY {
+                pos[c * d..(c + 1) * d].copy_from_slice(&fresh[w * d..(w + 1) * d]);
+                lp[c] = fresh_lp[w];
+            } else {
+                pos.copy_within(source * d..(source + 1) * d, c * d);
+                lp[c] = lp[source];
+            }
+        }
     }
 
     /// Whether a move adapts to the ensembles' history.

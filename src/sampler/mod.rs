@@ -8,7 +8,8 @@
 //! * [`chains`]: the history of a run;
 //! * [`observer`]: progress, diagnostics lines and checkpoints beside the
 //!   loop; [`checkpoint`]: the state on disk;
-//! * [`diagnostics`]: autocorrelation time, R̂, ESS, MCSE, acceptance.
+//! * [`diagnostics`]: autocorrelation time, R̂, ESS, MCSE, acceptance;
+//! * [`stranded`]: an ensemble left in a mode of negligible mass, drawn afresh.
 //!
 //! Randomness is counter-based ([`crate::rng::stream`]): the draws of walker
 //! w of ensemble e at step s depend on (seed, e, s, w) only, so the chains are
@@ -23,6 +24,7 @@ pub mod ensemble;
 pub mod moves;
 pub mod observer;
 pub mod settings;
+pub mod stranded;
 
 pub use chains::Chains;
 pub use density::LogDensity;

@@ -104,6 +104,15 @@ impl Observer for Progress {
         let Some(bar) = &self.bar else { return Ok(()) };
         self.accepted += state.accepted;
         bar.set_position(state.step as u64);
+        // the step just made started from a stranded ensemble drawn afresh
+        for redraw in super::stranded::decide(state.chains, state.step) {
+            let line = format!("  step {}: {}", state.step, redraw.message());
+            if bar.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                bar.println(line);
+            }
+        }
         if state.step.is_multiple_of(ACCEPTANCE_WINDOW) {
             let rate = self.accepted as f64 / (ACCEPTANCE_WINDOW * state.chains.chains()) as f64;
             bar.set_message(format!("acceptance {rate:.2}{}", self.status));

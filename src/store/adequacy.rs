@@ -10,7 +10,7 @@ use crate::error::Result;
 
 pub fn write(path: &Path, rows: &[AdequacyRow]) -> Result<()> {
     let f = |get: fn(&AdequacyRow) -> f64| rows.iter().map(get).collect::<Vec<f64>>();
-    let t = Table::new()
+    let mut t = Table::new()
         .str("run", rows.iter().map(|r| r.run.clone()).collect())
         .f64("current_a", f(|r| r.current_a))
         .str("excitation", rows.iter().map(|r| r.excitation.label()).collect())
@@ -31,6 +31,9 @@ pub fn write(path: &Path, rows: &[AdequacyRow]) -> Result<()> {
         .f64("inside_p95", f(|r| r.inside_p95))
         .f64("inside_p95_reversal", f(|r| r.inside_p95_reversal))
         .f64("inside_p95_stroke", f(|r| r.inside_p95_stroke));
+    if rows.iter().any(|r| r.innovation_lag1.is_finite()) {
+        t = t.f64("innovation_lag1", f(|r| r.innovation_lag1));
+    }
     write_parquet(path, t)
 }
 
@@ -41,6 +44,7 @@ pub fn read(path: &Path) -> Result<Vec<AdequacyRow>> {
     let (current, amplitude, frequency, peak_velocity) = (col("current_a")?, col("amplitude_m")?, col("frequency_hz")?, col("peak_velocity_m_s")?);
     let (peak, rms, lag1, decorrelation, inflation) = (col("peak_force_n")?, col("residual_rms_n")?, col("lag1_autocorrelation")?, col("decorrelation_s")?, col("interval_inflation")?);
     let (offset, stiffness, damping, share) = (col("trend_offset_n")?, col("trend_stiffness_n_per_m")?, col("trend_damping_n_s_per_m")?, col("trend_share")?);
+    let innovation = if super::parquet::column_names(&df).iter().any(|c| c == "innovation_lag1") { col("innovation_lag1")? } else { vec![f64::NAN; runs.len()] };
     let (reversal, stroke, inside, inside_reversal, inside_stroke) =
         (col("reversal_rms_n")?, col("stroke_rms_n")?, col("inside_p95")?, col("inside_p95_reversal")?, col("inside_p95_stroke")?);
     Ok((0..runs.len())
@@ -52,6 +56,7 @@ pub fn read(path: &Path) -> Result<Vec<AdequacyRow>> {
             residual_rms_n: rms[i],
             lag1_autocorrelation: lag1[i],
             decorrelation_s: decorrelation[i],
+            innovation_lag1: innovation[i],
             interval_inflation: inflation[i],
             trend_offset_n: offset[i],
             trend_stiffness_n_per_m: stiffness[i],

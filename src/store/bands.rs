@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
+use super::parquet::{column_names, f64_column, read_parquet, str_column, write_parquet, Table};
 use crate::error::Result;
 use crate::predict::RunBands;
 
@@ -12,25 +12,27 @@ pub fn write(path: &Path, runs: &[RunBands]) -> Result<()> {
     let col = |f: &dyn Fn(&RunBands) -> &[f64]| runs.iter().flat_map(|b| f(b).iter().copied()).collect::<Vec<f64>>();
     let per_sample = |f: &dyn Fn(&RunBands) -> f64| runs.iter().flat_map(|b| std::iter::repeat_n(f(b), b.time.len())).collect::<Vec<f64>>();
     let names = runs.iter().flat_map(|b| std::iter::repeat_n(b.run.clone(), b.time.len())).collect();
-    write_parquet(
-        path,
-        Table::new()
-            .str("run", names)
-            .f64("current_a", per_sample(&|b| b.current_a))
-            .f64("time_s", col(&|b| &b.time))
-            .f64("gamma", col(&|b| &b.gamma))
-            .f64("gamma_model", col(&|b| &b.gamma_model))
-            .f64("tau_obs", col(&|b| &b.tau_obs))
-            .f64("q025", col(&|b| &b.model[0]))
-            .f64("q25", col(&|b| &b.model[1]))
-            .f64("q50", col(&|b| &b.model[2]))
-            .f64("q75", col(&|b| &b.model[3]))
-            .f64("q975", col(&|b| &b.model[4]))
-            .f64("p025", col(&|b| &b.predictive[0]))
-            .f64("p975", col(&|b| &b.predictive[1]))
-            .f64("displacement_m", col(&|b| &b.displacement))
-            .f64("force_n", col(&|b| &b.force)),
-    )
+    let mut table = Table::new()
+        .str("run", names)
+        .f64("current_a", per_sample(&|b| b.current_a))
+        .f64("time_s", col(&|b| &b.time))
+        .f64("gamma", col(&|b| &b.gamma))
+        .f64("gamma_model", col(&|b| &b.gamma_model))
+        .f64("tau_obs", col(&|b| &b.tau_obs))
+        .f64("q025", col(&|b| &b.model[0]))
+        .f64("q25", col(&|b| &b.model[1]))
+        .f64("q50", col(&|b| &b.model[2]))
+        .f64("q75", col(&|b| &b.model[3]))
+        .f64("q975", col(&|b| &b.model[4]))
+        .f64("p025", col(&|b| &b.predictive[0]))
+        .f64("p975", col(&|b| &b.predictive[1]))
+        .f64("displacement_m", col(&|b| &b.displacement))
+        .f64("force_n", col(&|b| &b.force));
+    if runs.iter().any(|b| b.discrepancy.is_some()) {
+        let part = |i: usize| runs.iter().flat_map(|b| b.discrepancy.as_ref().map_or_else(|| vec![f64::NAN; b.time.len()], |d| d[i].clone())).collect::<Vec<f64>>();
+        table = table.f64("discrepancy_pa", part(0)).f64("discrepancy_sd_pa", part(1)).f64("innovation", part(2));
+    }
+    write_parquet(path, table)
 }
 
 /// Reads the bands of every run back, in file order.
@@ -43,6 +45,10 @@ pub fn read(path: &Path) -> Result<Vec<RunBands>> {
     let q = [col("q025")?, col("q25")?, col("q50")?, col("q75")?, col("q975")?];
     let p = [col("p025")?, col("p975")?];
     let (disp, force) = (col("displacement_m")?, col("force_n")?);
+    let discrepancy = match column_names(&df).iter().any(|c| c == "discrepancy_pa") {
+        true => Some([col("discrepancy_pa")?, col("discrepancy_sd_pa")?, col("innovation")?]),
+        false => None,
+    };
     let mut out: Vec<RunBands> = Vec::new();
     let mut start = 0;
     for i in 1..=run.len() {
@@ -59,6 +65,7 @@ pub fn read(path: &Path) -> Result<Vec<RunBands>> {
                 predictive: p.clone().map(|c| c[r.clone()].to_vec()),
                 displacement: disp[r.clone()].to_vec(),
                 force: force[r.clone()].to_vec(),
+                discrepancy: discrepancy.as_ref().map(|d| d.clone().map(|c| c[r.clone()].to_vec())),
             });
             start = i;
         }

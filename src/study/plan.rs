@@ -10,7 +10,8 @@ use serde::{Deserialize, Serialize};
 use crate::calibrate::CalibrationSettings;
 use crate::error::{Error, Result};
 use crate::model::{Params, PARAM_NAMES};
-use crate::synth::{run_id, StandLaw, SynthSettings};
+use crate::noise::{discrepancy::Discrepancy, NoiseKind, NoiseOptions};
+use crate::synth::{run_id, ExtraForce, StandLaw, SynthSettings};
 
 
 /// Where a task's records come from.
@@ -18,7 +19,7 @@ use crate::synth::{run_id, StandLaw, SynthSettings};
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Source {
     /// A virtual campaign, made by the task from these settings.
-    Synthetic { synth: SynthSettings },
+    Synthetic { synth: Box<SynthSettings> },
     /// A campaign on disk.
     Campaign { manifest: PathBuf },
 }
@@ -179,7 +180,7 @@ fn tasks_of(name: &str, design: &Design, settings: &CalibrationSettings) -> Resu
         if synth.currents_a.len() != 1 {
             return Err(Error::Usage(format!("a virtual study calibrates one current; --currents gives {:?}", synth.currents_a)));
         }
-        Ok(TaskSpec { id: id(k, n), study: name.into(), truth: truth_of(&synth, current), source: Source::Synthetic { synth }, current_a: Some(current), settings })
+        Ok(TaskSpec { id: id(k, n), study: name.into(), truth: truth_of(&synth, current)?, source: Source::Synthetic { synth: Box::new(synth) }, current_a: Some(current), settings })
     };
     match design {
         Design::Replicates { n, synth } => (0..*n)
@@ -188,6 +189,9 @@ fn tasks_of(name: &str, design: &Design, settings: &CalibrationSettings) -> Resu
         Design::Sbc { n, synth } => {
             let priors = settings.priors();
             let (s_lo, s_hi) = settings.sigma_bounds_pa;
+            let discrepancy = (settings.likelihood.noise == NoiseKind::Discrepancy).then(|| {
+                Discrepancy::new(&NoiseOptions { sigma_bounds: settings.sigma_bounds_pa, discrepancy: settings.likelihood.discrepancy.clone(), ..NoiseOptions::default() })
+            });
             (0..*n)
                 .map(|k| {
                     // θ and σ from the prior the calibration uses, as SBC requires
@@ -197,7 +201,23 @@ fn tasks_of(name: &str, design: &Design, settings: &CalibrationSettings) -> Resu
                     let current = synth.currents_a.first().copied().unwrap_or(1.0);
                     // the stand's law passes through θ at the task's current
                     let law = StandLaw { at_1a: at_reference(&synth.law, Params::from_array(theta), current), ..synth.law };
-                    let s = SynthSettings { law, noise_force_n: sigma * synth.geometry.area_m2, seed: synth.seed + k as u64, ..synth.clone() };
+                    let mut s = SynthSettings { law, noise_force_n: sigma * synth.geometry.area_m2, seed: synth.seed + k as u64, ..synth.clone() };
+                    if let Some(model) = &discrepancy {
+                        // each run's discrepancy from its prior: a path of the
+                        // model's own process, its scale and time scale drawn
+                        let area = synth.geometry.area_m2;
+                        let (sd, ell): (Vec<f64>, Vec<f64>) = synth
+                            .rpms
+                            .iter()
+                            .map(|rpm| {
+                                let (lo, hi) = model.scale_bounds_at(0.0);
+                                let sd = crate::posterior::Prior::LogUniform { lower: lo, upper: hi }.draw(&mut rng);
+                                let (lo, hi) = model.time_bounds_at(1.0 / synth.rate_hz, 60.0 / rpm);
+                                (sd * area, crate::posterior::Prior::LogUniform { lower: lo, upper: hi }.draw(&mut rng))
+                            })
+                            .unzip();
+                        s.extra_force = ExtraForce { smooth_sd_n: sd, smooth_time_s: ell, kernel: settings.likelihood.discrepancy.kernel, viscous_n_s_per_m: 0.0 };
+                    }
                     synthetic(k, *n, s, seeded(k))
                 })
                 .collect()
@@ -232,14 +252,22 @@ fn at_reference(law: &StandLaw, theta: Params, current: f64) -> Params {
 }
 
 /// The true coordinates of a virtual campaign at `current`: the B-P
-/// parameters, and every run's noise level σ = force noise / area.
-fn truth_of(synth: &SynthSettings, current: f64) -> BTreeMap<String, f64> {
+/// parameters, every run's noise level σ = force noise / area, and where
+/// the stand adds a smooth force and nothing else beyond the law, every
+/// run's discrepancy scale (Pa) and time scale (s).
+fn truth_of(synth: &SynthSettings, current: f64) -> Result<BTreeMap<String, f64>> {
     let params = synth.law.law().params_at(current).to_array();
     let mut truth: BTreeMap<String, f64> = PARAM_NAMES.iter().zip(params).map(|(n, v)| (n.to_string(), v)).collect();
-    for rpm in &synth.rpms {
-        truth.insert(format!("sigma_{}", run_id(current, *rpm)), synth.noise_force_n / synth.geometry.area_m2);
+    let extra = &synth.extra_force;
+    for (i, rpm) in synth.rpms.iter().enumerate() {
+        let run = run_id(current, *rpm);
+        truth.insert(format!("sigma_{run}"), synth.noise_force_n / synth.geometry.area_m2);
+        if let (Some((sd, ell)), 0.0) = (extra.smooth(i, synth.rpms.len())?, extra.viscous_n_s_per_m) {
+            truth.insert(format!("discrepancy_sd_{run}"), sd / synth.geometry.area_m2);
+            truth.insert(format!("discrepancy_time_{run}"), ell);
+        }
     }
-    truth
+    Ok(truth)
 }
 
 /// The task ids of the study in `dir`, in order.
