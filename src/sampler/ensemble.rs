@@ -184,7 +184,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let history = &self.history.1;
         let mut pos = self.chains.last_positions().to_vec();
         let mut lp = self.chains.last_log_prob().to_vec();
-        for redraw in stranded::decide(&self.chains, step as usize) {
+        for redraw in stranded::due(&self.chains, step as usize) {
             self.redraw(&redraw, &mut pos, &mut lp);
         }
         let mut acc = vec![false; nc];

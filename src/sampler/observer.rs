@@ -105,7 +105,7 @@ impl Observer for Progress {
         self.accepted += state.accepted;
         bar.set_position(state.step as u64);
         // the step just made started from a stranded ensemble drawn afresh
-        for redraw in super::stranded::decide(state.chains, state.step) {
+        for redraw in super::stranded::due(state.chains, state.step) {
             let line = format!("  step {}: {}", state.step, redraw.message());
             if bar.is_hidden() {
                 eprintln!("{line}");

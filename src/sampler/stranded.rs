@@ -15,6 +15,12 @@
 //! starts again there. Ensembles in one mode differ by a fraction of a nat,
 //! so a run without stranded ensembles is not touched, bit for bit.
 //!
+//! It is a repair of the start (a start that straddles basins, which the
+//! ensembles may still be climbing out of at the first checks), so it acts
+//! early only: at the checks up to step [`LAST_CHECK`]. A posterior on
+//! which the ensembles keep parting after that is not one a normal of the
+//! best ensemble describes; R̂ then says so.
+//!
 //! The decision is a function of the stored positions and the seed alone:
 //! it is replayed from the chains (for the burn-in, the report, a resumed
 //! run) and does not depend on the number of threads.
@@ -28,8 +34,12 @@ use super::chains::Chains;
 /// ensemble is taken as stranded.
 pub const GAP_NATS: f64 = 20.0;
 
-/// The first step that checks; later checks at its doublings.
+/// The first step that checks; later checks at its doublings, up to
+/// [`LAST_CHECK`].
 const FIRST_CHECK: usize = 32;
+
+/// The last step that may check.
+pub const LAST_CHECK: usize = 256;
 
 /// Index of the stream that draws redrawn walkers.
 const REDRAW_STREAM: u64 = u64::MAX - 3;
@@ -56,15 +66,24 @@ impl Redraw {
     }
 }
 
-/// Whether the step `step` starts with a check.
-pub fn is_check(step: usize) -> bool {
-    step >= FIRST_CHECK && step.is_power_of_two()
+/// Whether the step `step` may start with a check.
+fn is_check(step: usize) -> bool {
+    (FIRST_CHECK..=LAST_CHECK).contains(&step) && step.is_power_of_two()
 }
 
-/// The ensembles to draw afresh before step `step`, judged on the positions
-/// of the step before.
-pub fn decide(chains: &Chains, step: usize) -> Vec<Redraw> {
-    if !is_check(step) || chains.ensembles < 2 || step > chains.steps() {
+/// The ensembles to draw afresh before step `step` (none unless it is a
+/// check).
+pub fn due(chains: &Chains, step: usize) -> Vec<Redraw> {
+    if !is_check(step) {
+        return Vec::new();
+    }
+    decide(chains, step)
+}
+
+/// The ensembles stranded before step `step`, judged on the positions of
+/// the step before.
+fn decide(chains: &Chains, step: usize) -> Vec<Redraw> {
+    if chains.ensembles < 2 || step > chains.steps() {
         return Vec::new();
     }
     let mass: Vec<f64> = (0..chains.ensembles).map(|e| fit(chains, step - 1, e).map_or(f64::NEG_INFINITY, |f| f.2)).collect();
@@ -123,6 +142,8 @@ fn fit(chains: &Chains, step: usize, e: usize) -> Option<(DVector<f64>, DMatrix<
     }
     let l = cov.cholesky()?.l();
     let log_det = 2.0 * l.diagonal().iter().map(|v| v.ln()).sum::<f64>();
+    // the mean (the Laplace estimate): walkers stuck far down count, and
+    // redrawing their ensemble frees them
     let mean_lp = (0..nw).map(|w| chains.log_prob[step * chains.chains() + e * nw + w]).sum::<f64>() / nw as f64;
     Some((mean, l, mean_lp + 0.5 * log_det))
 }
@@ -157,7 +178,7 @@ mod tests {
     #[test]
     fn an_ensemble_far_below_the_others_is_redrawn_from_the_best() {
         let c = chains(&[0.0, 10.0, 0.1], &[-5.0, -60.0, -5.5]);
-        let r = decide(&c, 32);
+        let r = due(&c, 32);
         assert_eq!(r.len(), 1);
         assert_eq!((r[0].ensemble, r[0].from, r[0].step), (1, 0, 32));
         // equal spreads: the gap is the log-densities' difference
@@ -168,7 +189,9 @@ mod tests {
         let mean: f64 = x.iter().step_by(2).sum::<f64>() / 40.0;
         assert!(mean.abs() < 0.5, "{mean}");
         // a run whose ensembles agree, or steps between checks, keep theirs
-        assert!(decide(&chains(&[0.0, 10.0], &[-5.0, -20.0]), 32).is_empty());
-        assert!(decide(&c, 33).is_empty() && decide(&c, 31).is_empty());
+        assert!(due(&chains(&[0.0, 10.0], &[-5.0, -20.0]), 32).is_empty());
+        assert!(due(&c, 33).is_empty() && due(&c, 31).is_empty());
+        // no checks after step 256
+        assert!(is_check(256) && !is_check(512));
     }
 }
