@@ -100,6 +100,21 @@ pub fn least_squares(start: &[f64], residuals: &Residuals, jacobian: Option<&Jac
     }
 }
 
+/// The point of [a, b] where `f` is least, by `iterations` golden-section
+/// steps (f unimodal there; each step shrinks the interval by 0.618).
+pub fn golden_section(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64, iterations: usize) -> f64 {
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..iterations {
+        let (c, d) = (b - g * (b - a), a + g * (b - a));
+        if f(c) < f(d) {
+            b = d;
+        } else {
+            a = c;
+        }
+    }
+    0.5 * (a + b)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

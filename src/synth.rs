@@ -402,14 +402,12 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
         limits: Default::default(),
         runs,
     };
-    let header = if settings.extra_force.is_none() {
+    let extra = if settings.extra_force.is_none() { "" } else { " + a force the law lacks ([extra_force])" };
+    let header = format!(
         "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
-         # Synthetic data: B-P model + sensor noise, not measurements.\n"
-    } else {
-        "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
-         # Synthetic data: B-P model + a force the law lacks ([extra_force]) + sensor noise, not measurements.\n"
-    };
-    manifest.write(&dir.join("campaign.toml"), header)?;
+         # Synthetic data: B-P model{extra} + sensor noise, not measurements.\n"
+    );
+    manifest.write(&dir.join("campaign.toml"), &header)?;
     settings.write(dir)?;
     Ok(manifest)
 }

@@ -93,17 +93,13 @@ impl Discrepancy {
 /// (the virtual stand's known discrepancy, `mrbp synth`).
 pub fn sample_path(kernel: Kernel, sd: f64, ell: f64, time: &[f64], rng: &mut impl Rng) -> Vec<f64> {
     let mut process = Process::new(kernel, sd, ell, 0.0);
-    let [p00, _, p11] = process.stationary();
     let mut z = || -> f64 { rng.sample(StandardNormal) };
-    let mut state = [p00.sqrt() * z(), p11.sqrt() * z()];
+    let mut state = process.draw_start(z(), z());
     let mut path = Vec::with_capacity(time.len());
     for (k, t) in time.iter().enumerate() {
         if k > 0 {
             process.step(t - time[k - 1]);
-            let [[a, b], [c, d]] = process.phi;
-            let [l00, l10, l11] = process.noise_factor();
-            let (z0, z1) = (z(), z());
-            state = [a * state[0] + b * state[1] + l00 * z0, c * state[0] + d * state[1] + l10 * z0 + l11 * z1];
+            state = process.advance(process.noise_factor(), state, z(), z());
         }
         path.push(state[0]);
     }
@@ -161,6 +157,22 @@ impl Process {
         let l00 = q00.max(0.0).sqrt();
         let l10 = if l00 > 0.0 { q01 / l00 } else { 0.0 };
         [l00, l10, (q11 - l10 * l10).max(0.0).sqrt()]
+    }
+
+    /// A draw of (δ, δ′) from the stationary state, given two standard
+    /// normals.
+    fn draw_start(&self, z0: f64, z1: f64) -> [f64; 2] {
+        let [p00, _, p11] = self.stationary();
+        [p00.sqrt() * z0, p11.sqrt() * z1]
+    }
+
+    /// (δ, δ′) one step on from `x`, given two standard normals and the
+    /// Cholesky factor `l` of Q ([`Self::noise_factor`], computed once per
+    /// step by a caller that advances many paths).
+    #[inline(always)]
+    fn advance(&self, l: [f64; 3], x: [f64; 2], z0: f64, z1: f64) -> [f64; 2] {
+        let [[a, b], [c, d]] = self.phi;
+        [a * x[0] + b * x[1] + l[0] * z0, c * x[0] + d * x[1] + l[1] * z0 + l[2] * z1]
     }
 
     /// The stationary covariance (p00, p01, p11).
@@ -526,7 +538,7 @@ fn fit(run: &RunData, kernel: Kernel, r: &[f64], time_bounds: (f64, f64), sigma_
         for i in 0..3 {
             let w = widths[i] / (1 << pass) as f64;
             let (a, b) = ((x[i] - w).max(bounds[i].0), (x[i] + w).min(bounds[i].1));
-            x[i] = golden(
+            x[i] = crate::fit::golden_section(
                 |v| {
                     let mut y = x;
                     y[i] = v;
@@ -534,24 +546,11 @@ fn fit(run: &RunData, kernel: Kernel, r: &[f64], time_bounds: (f64, f64), sigma_
                 },
                 a,
                 b,
+                24,
             );
         }
     }
     Fit { sigma: x[0].exp(), sd: x[1].exp(), ell: x[2].exp(), log_likelihood: -0.5 * minus_two_ll(&x) }
-}
-
-/// The minimum of `f` on [a, b] by golden sections (24 of them).
-fn golden(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    for _ in 0..24 {
-        let (c, d) = (b - g * (b - a), a + g * (b - a));
-        if f(c) < f(d) {
-            b = d;
-        } else {
-            a = c;
-        }
-    }
-    0.5 * (a + b)
 }
 
 /// The filter of each lane: ln L = −½ Σ (ln S_k + v_k²/S_k), up to −n/2 ln 2π.
@@ -628,21 +627,13 @@ impl NoiseSimulator for Simulator {
             if k > 0 && !self.uniform {
                 process.step(self.time[k] - self.time[k - 1]);
             }
-            let [p00, _, p11] = process.stationary();
-            let [l00, l10, l11] = process.noise_factor();
-            let [[a, b], [c, dd]] = process.phi;
+            let factor = process.noise_factor();
             let white = (self.sigma[d] * self.sigma[d] + stiffness[d] * stiffness[d] * self.strain_var).sqrt();
             for p in d * self.replicates..(d + 1) * self.replicates {
                 let z: [f64; 4] = std::array::from_fn(|_| rng.sample(StandardNormal));
                 let s = &mut self.state[p];
-                if k == 0 {
-                    s[0] = p00.sqrt() * z[0];
-                    s[1] = p11.sqrt() * z[1];
-                } else {
-                    let (x0, x1) = (s[0], s[1]);
-                    s[0] = a * x0 + b * x1 + l00 * z[0];
-                    s[1] = c * x0 + dd * x1 + l10 * z[0] + l11 * z[1];
-                }
+                let [x0, x1] = if k == 0 { process.draw_start(z[0], z[1]) } else { process.advance(factor, [s[0], s[1]], z[0], z[1]) };
+                (s[0], s[1]) = (x0, x1);
                 if new_branch {
                     s[2] = self.v_branch.sqrt() * z[3];
                 }
@@ -676,6 +667,45 @@ mod tests {
         }
     }
 
+    /// The noise and stiffness of the dense comparisons.
+    const SIGMA: f64 = 120.0;
+    const SD: f64 = 400.0;
+    const ELL: f64 = 0.006;
+    const G: f64 = 5e6;
+
+    /// A run's residuals about `path` and their dense covariance, built
+    /// directly from the definitions: the kernel K of δ, white noise
+    /// σ² + S_k² s_γ² on the diagonal, and v S_i S_j within each branch
+    /// (the branch's strain offset) — the independent computation the
+    /// filter and the smoother are checked against.
+    struct Dense {
+        k_delta: DMatrix<f64>,
+        cov: DMatrix<f64>,
+        r: DVector<f64>,
+        stiffness: Vec<f64>,
+    }
+
+    impl Dense {
+        fn of(kernel_kind: Kernel, run: &RunData, path: &[f64], strain_var: f64) -> Dense {
+            let n = run.compared();
+            let stiffness = super::super::model::stiffness_path(run, path, G);
+            let v = strain_var * run.strain_smoothing_share;
+            let k_delta = DMatrix::from_fn(n, n, |i, j| kernel(kernel_kind, SD, ELL, run.time[i + 1] - run.time[j + 1]));
+            let mut cov = k_delta.clone();
+            let branch = super::super::testing::branches(run);
+            for i in 0..n {
+                cov[(i, i)] += SIGMA * SIGMA + stiffness[i + 1] * stiffness[i + 1] * strain_var;
+                for j in 0..n {
+                    if branch[i] == branch[j] {
+                        cov[(i, j)] += v * stiffness[i + 1] * stiffness[j + 1];
+                    }
+                }
+            }
+            let r = DVector::from_fn(n, |i, _| run.tau[i + 1] - path[i + 1]);
+            Dense { k_delta, cov, r, stiffness }
+        }
+    }
+
     /// The scorer and the pointwise terms both equal the multivariate
     /// normal density of the residuals with the dense covariance
     /// K + σ² I (+ the errors-in-variables terms D + v c cᵀ per branch), by
@@ -684,23 +714,10 @@ mod tests {
     fn the_filter_is_the_dense_gaussian_process() {
         for (kernel_kind, strain_var) in [(Kernel::Matern32, 0.0), (Kernel::Matern12, 0.0), (Kernel::Matern32, 1e-8), (Kernel::Matern12, 1e-8)] {
             let (run, path) = run(strain_var);
-            let (sigma, sd, ell, g) = (120.0f64, 400.0f64, 0.006f64, 5e6);
+            let (sigma, sd, ell, g) = (SIGMA, SD, ELL, G);
             let n = run.compared();
-            let stiffness = super::super::model::stiffness_path(&run, &path, g);
-            let v = strain_var * run.strain_smoothing_share;
-            let mut cov = DMatrix::from_fn(n, n, |i, j| kernel(kernel_kind, sd, ell, run.time[i + 1] - run.time[j + 1]));
-            let branch = super::super::testing::branches(&run);
-            for k in 1..=n {
-                cov[(k - 1, k - 1)] += sigma * sigma + stiffness[k] * stiffness[k] * strain_var;
-            }
-            for i in 0..n {
-                for j in 0..n {
-                    if branch[i] == branch[j] {
-                        cov[(i, j)] += v * stiffness[i + 1] * stiffness[j + 1];
-                    }
-                }
-            }
-            let r = DVector::from_fn(n, |i, _| run.tau[i + 1] - path[i + 1]);
+            let d = Dense::of(kernel_kind, &run, &path, strain_var);
+            let (cov, r) = (d.cov, d.r);
             let chol = cov.cholesky().unwrap();
             let log_det: f64 = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
             let direct = -(n as f64) * HALF_LN_2PI - 0.5 * log_det - 0.5 * r.dot(&chol.solve(&r));
@@ -720,22 +737,9 @@ mod tests {
     fn the_smoother_is_the_dense_conditional() {
         for (kernel_kind, strain_var) in [(Kernel::Matern32, 0.0), (Kernel::Matern12, 0.0), (Kernel::Matern32, 1e-8), (Kernel::Matern12, 1e-8)] {
             let (run, path) = run(strain_var);
-            let (sigma, sd, ell, g) = (120.0f64, 400.0f64, 0.006f64, 5e6);
+            let (sigma, sd, ell) = (SIGMA, SD, ELL);
             let n = run.compared();
-            let stiffness = super::super::model::stiffness_path(&run, &path, g);
-            let v = strain_var * run.strain_smoothing_share;
-            let k_delta = DMatrix::from_fn(n, n, |i, j| kernel(kernel_kind, sd, ell, run.time[i + 1] - run.time[j + 1]));
-            let mut cov = k_delta.clone();
-            let branch = super::super::testing::branches(&run);
-            for i in 0..n {
-                cov[(i, i)] += sigma * sigma + stiffness[i + 1] * stiffness[i + 1] * strain_var;
-                for j in 0..n {
-                    if branch[i] == branch[j] {
-                        cov[(i, j)] += v * stiffness[i + 1] * stiffness[j + 1];
-                    }
-                }
-            }
-            let r = DVector::from_fn(n, |i, _| run.tau[i + 1] - path[i + 1]);
+            let Dense { k_delta, cov, r, stiffness } = Dense::of(kernel_kind, &run, &path, strain_var);
             let chol = cov.cholesky().unwrap();
             let mean = &k_delta * chol.solve(&r);
             let var = &k_delta - &k_delta * chol.solve(&k_delta);

@@ -106,17 +106,7 @@ impl NoiseModel for StudentT {
             -n * log_s - 0.5 * (nu + 1.0) * r.iter().map(|v| (v * v / (nu * s2)).ln_1p()).sum::<f64>()
         };
         let centre = 0.5 * (sum_sq / n).ln();
-        let (mut a, mut b) = (centre - 3.0, centre + 1.0);
-        let g = 0.5 * (5f64.sqrt() - 1.0);
-        for _ in 0..60 {
-            let (c, d) = (b - g * (b - a), a + g * (b - a));
-            if ll(c) > ll(d) {
-                b = d;
-            } else {
-                a = c;
-            }
-        }
-        ll(0.5 * (a + b))
+        ll(crate::fit::golden_section(|log_s| -ll(log_s), centre - 3.0, centre + 1.0, 60))
     }
 }
 

@@ -188,11 +188,7 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
 /// model stress `median`, the stiffness along it with the draws' median G,
 /// each noise value the draws' median.
 fn explain_median(run: &RunData, kept: &[(&Draw, &[f64])], median: &[f64], noise: &dyn NoiseModel) -> Option<Explained> {
-    let median_of = |v: Vec<f64>| {
-        let mut v = v;
-        v.sort_unstable_by(f64::total_cmp);
-        quantile_sorted(&v, 0.5)
-    };
+    let median_of = |v: Vec<f64>| crate::sampler::quantile(&v, 0.5);
     let values: NoiseValues = std::array::from_fn(|p| median_of(kept.iter().map(|(d, _)| d.noise[p]).collect()));
     let g = median_of(kept.iter().map(|(d, _)| d.params.g).collect());
     let stiffness = crate::noise::stiffness_path(run, median, g);

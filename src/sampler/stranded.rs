@@ -2,9 +2,9 @@
 //!
 //! Every move proposes from the walker's own ensemble, so an ensemble that
 //! starts in a separate mode of the posterior stays there for good, and the
-//! run never converges (R̂ between ensembles stays high). At the steps 32,
-//! 64, 128, … each ensemble's share of the posterior mass is estimated from
-//! its walkers by the Laplace approximation,
+//! run never converges (R̂ between ensembles stays high). At steps 32, 64,
+//! 128 and 256 each ensemble's share of the posterior mass is estimated
+//! from its walkers by the Laplace approximation,
 //!
 //! ln Z_e ≈ mean ln p + ½ ln det Σ_e  (+ terms alike for every ensemble),
 //!
