@@ -30,6 +30,9 @@ pub enum Error {
     /// Stopped by Ctrl-C or SIGTERM after saving what can be resumed.
     #[error("{0}")]
     Interrupted(String),
+    /// A folder another process is writing: try again when it has ended.
+    #[error("{0}")]
+    Busy(String),
 }
 
 fn row_text(row: &Option<usize>) -> String {
@@ -76,11 +79,11 @@ impl Error {
         }
     }
 
-    /// Exit status of the command line: 2 for bad input or usage, 130 when
-    /// interrupted, 1 otherwise.
+    /// Exit status of the command line: 2 for bad input or usage and for a
+    /// folder another process is writing, 130 when interrupted, 1 otherwise.
     pub fn exit_code(&self) -> i32 {
         match self {
-            Error::Input { .. } | Error::Usage(_) => 2,
+            Error::Input { .. } | Error::Usage(_) | Error::Busy(_) => 2,
             Error::Compute(_) | Error::Output { .. } => 1,
             Error::Interrupted(_) => crate::interrupt::EXIT_STATUS,
         }

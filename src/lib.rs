@@ -5,9 +5,9 @@
 //! this list; docs/architecture.md says more):
 //!
 //! * [`model`], [`fit`], [`interrupt`], [`rng`], [`error`], [`atomic`],
-//!   [`plot`]: the B-P law (paper eqs. 3–4), its current law and its Euler
-//!   integrators; least squares, Ctrl-C, random streams, errors and exit
-//!   codes, atomic file writing, figures;
+//!   [`lock`], [`plot`]: the B-P law (paper eqs. 3–4), its current law and
+//!   its Euler integrators; least squares, Ctrl-C, random streams, errors
+//!   and exit codes, atomic file writing, one writer per folder, figures;
 //! * [`data`]: test campaigns, records, shear quantities (eqs. 1–2), a run
 //!   as the model sees it;
 //! * [`sampler`]: the ensemble MCMC sampler, generic over a log-density, and
@@ -36,6 +36,7 @@ pub mod data;
 pub mod error;
 pub mod fit;
 pub mod interrupt;
+pub mod lock;
 pub mod identify;
 pub mod model;
 pub mod noise;

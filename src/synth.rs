@@ -358,6 +358,10 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
         return Err(Error::Usage("extra force: the viscous coefficient must be finite".into()));
     }
     std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    let _held = crate::lock::write(dir)?;
+    crate::atomic::clean_leftovers(dir)?;
+    // the manifest says the campaign is whole: it goes first, comes back last
+    crate::atomic::remove(&dir.join("campaign.toml"))?;
     let mut runs = Vec::new();
     let mut panels = Vec::new();
     let mut stream = 0u64;
@@ -407,8 +411,8 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
         "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
          # Synthetic data: B-P model{extra} + sensor noise, not measurements.\n"
     );
-    manifest.write(&dir.join("campaign.toml"), &header)?;
     settings.write(dir)?;
+    manifest.write(&dir.join("campaign.toml"), &header)?;
     Ok(manifest)
 }
 

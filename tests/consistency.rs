@@ -56,7 +56,11 @@ fn per_run_calibrations_find_the_run_with_another_g() {
     assert_eq!(column_names(&table), ["parameter", "kind", "label", "mean_log", "sd_log", "q05", "q50", "q95", "chi2_nu", "p_value", "spread_log"]);
     // 7 parameters × (3 runs + joint + new test)
     assert_eq!(table.height(), 35);
-    let parameters = mrbp::store::consistency::read(&out).unwrap();
+    let joint = mrbp::store::record::read(&out.join("calibration.toml")).unwrap();
+    let parameters = mrbp::store::consistency::read(&out, &joint.calibration_id).unwrap();
+    // the table names the calibrations it compared, and is refused for another
+    let stale = mrbp::store::consistency::read(&out, "another").unwrap_err().to_string();
+    assert!(stale.contains("consistency.parquet: stale") && stale.contains("--per-run"), "{stale}");
     let g = parameters.iter().find(|p| p.parameter == "G").unwrap();
     assert!(g.disagrees() && g.chi2_nu > 50.0, "G: χ²/ν {}", g.chi2_nu);
     assert_eq!(g.runs_held(), 3, "new test {:?} vs {:?}", g.new_test, g.runs);

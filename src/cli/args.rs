@@ -55,6 +55,12 @@ pub enum Command {
         /// The campaign manifest (TOML)
         manifest: PathBuf,
     },
+    /// Whether the results in DIR (and the folders under it) are complete:
+    /// one line per folder; exit 2 if any is incomplete, stale or being written
+    Status {
+        /// A results folder (`reports/<name>`, a calibration, a comparison)
+        dir: PathBuf,
+    },
     /// Virtual experiments: stand records from the B-P model, in the campaign format
     Synth {
         /// Output folder for the manifest and the records

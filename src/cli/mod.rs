@@ -45,6 +45,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         }
         None => pipeline.bundled().map(|reports| print::reports(&reports, clock)),
         Some(Command::Check { manifest }) => pipeline.check(&manifest).map(drop),
+        Some(Command::Status { dir }) => status(&dir),
         Some(Command::Synth { out, config, seed, options }) => {
             let manifest = crate::synth::write_campaign(&options.settings(config.as_deref(), seed)?, &out)?;
             println!("wrote {} virtual runs and campaign.toml to {}", manifest.runs.len(), out.display());
@@ -81,6 +82,24 @@ fn dispatch(cli: Cli) -> Result<()> {
         }
         Some(Command::Study(command)) => study(&mut pipeline, command),
         Some(Command::Compare { dirs, out, rpm }) => pipeline.compare(&dirs, out.as_deref().unwrap_or(Path::new("comparison")), rpm).map(drop),
+    }
+}
+
+/// `mrbp status DIR`: one line per results folder; an error if any is not
+/// complete.
+fn status(dir: &Path) -> Result<()> {
+    if !dir.is_dir() {
+        return Err(Error::input(dir, "not a folder"));
+    }
+    let found = crate::store::status::status(dir)?;
+    if found.is_empty() {
+        return Err(Error::input(dir, "no mrbp results here (no calibration, prediction, comparison or virtual campaign)"));
+    }
+    print::status(&found);
+    let bad = found.iter().filter(|f| !f.complete()).count();
+    match bad {
+        0 => Ok(()),
+        _ => Err(Error::Usage(format!("{bad} of {} folder(s) in {} not complete (see above)", found.len(), dir.display()))),
     }
 }
 

@@ -32,6 +32,21 @@ pub fn reports(reports: &[std::path::PathBuf], clock: std::time::Instant) {
 }
 
 /// What collecting a study found, and the coverage of its known truths.
+/// The state of results folders (`mrbp status`).
+pub fn status(found: &[crate::store::status::FolderStatus]) {
+    for f in found {
+        let state = match (&f.writer, f.problems.is_empty()) {
+            (Some(pid), _) => format!("being written (process {pid})"),
+            (None, true) => "complete".to_string(),
+            (None, false) => "NOT COMPLETE".to_string(),
+        };
+        println!("{:<12} {:<22} {}", f.kind.label(), state, f.dir.display());
+        for p in &f.problems {
+            println!("    {p}");
+        }
+    }
+}
+
 pub fn study(found: &crate::study::Collected, dir: &std::path::Path) {
     println!(
         "collected {} of {} task(s) into {} ({} failed, {} without a result yet)",

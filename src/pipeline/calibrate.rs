@@ -52,10 +52,10 @@ impl Pipeline<'_> {
     /// `identification.parquet` and Figs. 1–5 in `out` (an earlier
     /// identification there is replaced only if `force`).
     pub fn identify(&mut self, campaign: &Campaign, out: &Path, settings: &IdentifySettings, force: bool) -> Result<Vec<CurrentIdentification>> {
-        folders::prepare(out, "--out", &[campaign], &folders::IDENTIFICATION, force)?;
+        self.prepare(out, "--out", &[campaign], &folders::IDENTIFICATION, force)?;
         campaign.require_usable("the identification")?;
         let results = identify_campaign(campaign, settings);
-        store::identification::write(&out.join(store::identification::FILE), &results)?;
+        store::identification::write(&out.join(store::identification::FILE), &results, None)?;
         report::identification::write(out, campaign, &results)?;
         self.emit(Event::Identified(&results));
         Ok(results)
@@ -67,7 +67,7 @@ impl Pipeline<'_> {
     pub fn sample(&mut self, campaign: &Campaign, out: &Path, request: &SampleRequest) -> Result<Vec<Calibration>> {
         let settings = &request.settings;
         campaign.require_usable("the calibration")?;
-        folders::prepare(out, "--out", &[campaign], &[], true)?;
+        self.prepare(out, "--out", &[campaign], &[], true)?;
         if settings.parameter_model().is_current_law() {
             let held = &request.hold_out_current;
             if let Some(h) = held.iter().find(|h| !campaign.has_current(**h)) {
@@ -128,7 +128,8 @@ impl Pipeline<'_> {
             }
         }
         let parameters = consistency(joint, &alone);
-        store::consistency::write(&joint.dir, &parameters)?;
+        let ids: Vec<(String, String)> = alone.iter().map(|(run, cal)| (run.clone(), cal.record.calibration_id.clone())).collect();
+        store::consistency::write(&joint.dir, &parameters, &joint.record.calibration_id, &ids)?;
         self.emit(Event::Consistency(&parameters));
         Ok(parameters)
     }
@@ -140,7 +141,7 @@ impl Pipeline<'_> {
     pub fn calibrate_into(&mut self, campaign: &Campaign, dir: &Path, request: &SampleRequest, what: &str) -> Result<Calibration> {
         let settings = &request.settings;
         let checkpoint = dir.join(store::folder::CHECKPOINT);
-        folders::prepare(dir, "--out", &[campaign], &folders::CALIBRATION, request.force || request.resume)?;
+        self.prepare(dir, "--out", &[campaign], &folders::CALIBRATION, request.force || request.resume)?;
         if request.resume {
             check_resumable(&checkpoint, settings)?;
         }
@@ -162,12 +163,15 @@ impl Pipeline<'_> {
         refs.push(&mut checkpointer);
         let made = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)?;
 
-        let group = campaign.at_current(made.start.current_a);
-        let identification = std::slice::from_ref(&made.start.identification);
-        store::identification::write(&dir.join(store::identification::FILE), identification)?;
-        report::identification::write(dir, &group, identification)?;
+        // the folder's earlier calibration is incomplete from here on
+        // (no calibration.toml) until the new one is whole
+        store::folder::retire(dir)?;
         folders::clear_derived(dir)?;
+        let group = campaign.at_current(made.start.current_a);
         let mut cal = made.calibration;
+        let identification = std::slice::from_ref(&made.start.identification);
+        store::identification::write(&dir.join(store::identification::FILE), identification, Some(&cal.record.calibration_id))?;
+        report::identification::write(dir, &group, identification)?;
         store::folder::write(dir, &mut cal)?;
         // the chains are complete in chains.parquet: the checkpoint has done its job
         let _ = std::fs::remove_file(&checkpoint);

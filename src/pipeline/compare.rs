@@ -9,6 +9,7 @@ use crate::error::{Error, Result};
 use crate::predict::Prediction;
 use crate::report::comparison::Entry;
 use crate::store;
+use crate::store::comparison::{Compared, ComparisonRecord};
 
 /// Posterior draws per calibration for differences and figures.
 const DRAWS: usize = 4000;
@@ -28,6 +29,7 @@ impl Pipeline<'_> {
         }
         let mut entries = Vec::new();
         for d in dirs {
+            let _reading = crate::lock::read(d)?;
             let cal = store::folder::read(d)?;
             // bands made from other chains than the folder's are left out
             let prediction = store::prediction::read(d)?.filter(|p| p.record.calibration_id == cal.record.calibration_id);
@@ -44,7 +46,12 @@ impl Pipeline<'_> {
                 entries[i].label = entries[i].cal.dir.display().to_string();
             }
         }
-        super::folders::prepare(out, "--out", &[], &[], true)?;
+        self.prepare(out, "--out", &[], &[], true)?;
+        let record = ComparisonRecord {
+            mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
+            command: crate::calibrate::command_line(),
+            compared: entries.iter().map(|e| Compared::new(&e.label, &e.cal.dir, &e.cal.record.calibration_id, out)).collect(),
+        };
         let tables: Vec<compare::Entry> = entries
             .iter()
             .map(|e| compare::Entry {
@@ -56,8 +63,10 @@ impl Pipeline<'_> {
             })
             .collect();
         let comparison = Comparison::of(&tables);
-        store::comparison::write(out, &comparison)?;
+        store::comparison::retire(out)?;
+        store::comparison::write(out, &comparison, &store::comparison::ids_text(&record))?;
         let path = crate::report::comparison::write(out, &entries, &comparison, rpm)?;
+        store::comparison::write_record(out, &record)?;
         self.emit(Event::Wrote(&path));
         Ok(path)
     }

@@ -1,12 +1,14 @@
 //! Output folders: where results may go, and what a new calibration makes
 //! stale. Every stage that writes a folder asks [`prepare`] first, so a bad
 //! `--out` is one clear line (exit 2) before any work, never a raw OS error
-//! after minutes of sampling.
+//! after minutes of sampling, and holds the folder ([`crate::lock`]) until
+//! the command ends.
 
 use std::path::Path;
 
 use crate::data::Campaign;
 use crate::error::{Error, Result};
+use crate::lock::Writing;
 use crate::store;
 
 /// The files of a calibration folder derived from its chains: a new
@@ -25,7 +27,7 @@ pub const DERIVED: [&str; 10] = [
 ];
 
 /// The sub-folder of the run-alone calibrations (`--per-run`).
-pub const RUNS: &str = "runs";
+pub const RUNS: &str = store::consistency::RUNS;
 
 /// The report's figures (SVG and PNG) start so; the identification's
 /// (`fig1…fig5`), which the calibration itself writes, do not.
@@ -39,9 +41,11 @@ pub const IDENTIFICATION: [&str; 1] = [store::identification::FILE];
 
 /// Makes `out` (named by `option` in messages) ready for results: refuses a
 /// path that is a file or lies under one, a folder that cannot be written, a
-/// campaign's own folder (`inputs`), and — unless `force` — a folder that
-/// already holds any of `results`, listing them.
-pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str], force: bool) -> Result<()> {
+/// campaign's own folder (`inputs`), a folder another process writes, and —
+/// unless `force` — a folder that already holds any of `results`, listing
+/// them. Holds the folder while the returned value lives, and removes what
+/// killed writes left there.
+pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str], force: bool) -> Result<Writing> {
     let shown = out.display();
     if out.is_file() {
         return Err(Error::Usage(format!("{option} {shown}: this is a file, not a folder")));
@@ -60,6 +64,8 @@ pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str],
     }
     std::fs::create_dir_all(out).map_err(|e| Error::Usage(format!("{option} {shown}: cannot create this folder ({})", reason(&e))))?;
     tempfile::NamedTempFile::new_in(out).map_err(|e| Error::Usage(format!("{option} {shown}: cannot write in this folder ({})", reason(&e))))?;
+    let held = crate::lock::write(out)?;
+    crate::atomic::clean_leftovers(out)?;
     let present: Vec<&str> = results.iter().copied().filter(|f| out.join(f).exists()).collect();
     if !present.is_empty() && !force {
         return Err(Error::Usage(format!(
@@ -67,7 +73,7 @@ pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str],
             present.join(", ")
         )));
     }
-    Ok(())
+    Ok(held)
 }
 
 /// Removes the files derived from an earlier calibration in `dir`.
@@ -77,16 +83,10 @@ pub fn clear_derived(dir: &Path) -> Result<()> {
     for entry in listed.flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
         if DERIVED.contains(&name.as_str()) || figure(&name) {
-            let path = entry.path();
-            let removed = if path.is_dir() { std::fs::remove_dir_all(&path) } else { std::fs::remove_file(&path) };
-            removed.map_err(|e| Error::output(&path, e))?;
+            crate::atomic::remove(&entry.path())?;
         }
     }
-    let loo = dir.join("loo");
-    if loo.is_dir() {
-        std::fs::remove_dir_all(&loo).map_err(|e| Error::output(&loo, e))?;
-    }
-    Ok(())
+    crate::atomic::remove(&dir.join("loo"))
 }
 
 fn reason(e: &std::io::Error) -> String {

@@ -142,11 +142,22 @@ pub struct Pipeline<'a> {
     listener: &'a mut dyn FnMut(Event<'_>),
     /// Progress bars on the terminal while sampling and predicting.
     pub progress: bool,
+    /// The folders the stages have written, held until the pipeline ends:
+    /// no other process writes them, nor reads them half-written.
+    held: Vec<crate::lock::Writing>,
 }
 
 impl<'a> Pipeline<'a> {
     pub fn new(listener: &'a mut dyn FnMut(Event<'_>), progress: bool) -> Self {
-        Pipeline { listener, progress }
+        Pipeline { listener, progress, held: Vec::new() }
+    }
+
+    /// [`folders::prepare`]: `out` made ready for results and held until
+    /// the pipeline ends.
+    fn prepare(&mut self, out: &Path, option: &str, inputs: &[&Campaign], results: &[&str], force: bool) -> Result<()> {
+        let held = folders::prepare(out, option, inputs, results, force)?;
+        self.held.push(held);
+        Ok(())
     }
 
     fn emit(&mut self, event: Event<'_>) {

@@ -21,6 +21,7 @@ impl Pipeline<'_> {
     /// current law, seen or not): `bands.parquet`, `coverage.parquet`,
     /// `adequacy.parquet` and `prediction.toml` into `out`.
     pub fn predict(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
+        self.prepare(out, "--out", &[campaign], &[], true)?;
         let campaign = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
         let prediction = self.predict_runs(cal, &campaign, &|run| cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
         self.write_inference_data(cal, &campaign, out, options.seed)?;
@@ -60,6 +61,7 @@ impl Pipeline<'_> {
     /// the calibration's own manifest. A per-current calibration predicts
     /// only the runs at its current.
     pub fn predict_campaign(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<(PathBuf, Prediction)> {
+        self.prepare(out, "--out", &[campaign], &[], true)?;
         let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
         let own = canonical(&campaign.manifest_path) == canonical(Path::new(&cal.record.manifest));
         let runs = if cal.is_current_law() {
@@ -116,7 +118,6 @@ impl Pipeline<'_> {
             coverage.push(p.coverage);
         }
         bar.finish_and_clear();
-        super::folders::prepare(out, "--out", &[campaign], &[], true)?;
         let geometry = &campaign.geometry;
         let adequacy: Vec<AdequacyRow> = bands.iter().map(|b| adequacy::assess(b, geometry.area_m2, geometry.gap_m)).collect();
         let record = PredictionRecord {
@@ -160,7 +161,8 @@ impl Pipeline<'_> {
         let held = leave_one_out(cal, &campaign, loo, &mut observe)?;
         let (bands, rows): (Vec<RunBands>, Vec<LooRow>) = held.into_iter().map(|h| (h.prediction.bands, h.row)).unzip();
         let study = LeaveOneOut { rows, bands };
-        store::coverage::write_leave_one_out(&cal.dir, &study)?;
+        self.prepare(&cal.dir, "--out", &[], &[], true)?;
+        store::coverage::write_leave_one_out(&cal.dir, &study, &cal.record.calibration_id)?;
         self.emit(Event::LeftOneOut { rows: &study.rows, seconds: clock.elapsed().as_secs_f64() });
         Ok(Some(study))
     }
@@ -186,6 +188,7 @@ impl Pipeline<'_> {
     /// are predicted first if the folder has none, and the leave-one-out
     /// study is run if `loo` is given (else an earlier one is shown).
     pub fn report(&mut self, dir: &Path, options: &PredictOptions, loo: Option<&LooSettings>) -> Result<PathBuf> {
+        self.prepare(dir, "DIR", &[], &[], true)?;
         let cal = store::folder::read(dir)?;
         let campaign = cal.full_campaign()?;
         let prediction = match store::prediction::read(dir)? {
@@ -201,14 +204,14 @@ impl Pipeline<'_> {
         };
         let loo = match loo {
             Some(settings) => self.leave_one_out(&cal, &campaign, settings)?,
-            None => store::coverage::read_leave_one_out(dir)?,
+            None => store::coverage::read_leave_one_out(dir, &cal.record.calibration_id)?,
         };
         self.write_report(&cal, &campaign, &prediction, loo.as_ref())
     }
 
     fn write_report(&mut self, cal: &Calibration, campaign: &Campaign, prediction: &Prediction, loo: Option<&LeaveOneOut>) -> Result<PathBuf> {
         let consistency = match cal.dir.join(store::consistency::FILE).exists() {
-            true => Some(store::consistency::read(&cal.dir)?),
+            true => Some(store::consistency::read(&cal.dir, &cal.record.calibration_id)?),
             false => None,
         };
         let report = CalibrationReport { cal, campaign: &cal.used_runs(campaign), prediction, loo, consistency: consistency.as_deref() };

@@ -21,6 +21,22 @@ impl Pipeline<'_> {
             None => all.clone(),
         };
         let loo = options.leave_one_out.map(|steps| self.loo_settings(steps, &options.predict));
+        let several = options.sample.current.is_none() && all.len() >= 2;
+        let held: Vec<f64> = if several && all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };
+        let law = match held.first() {
+            Some(h) => format!("current-law-without-{}", current_tag(*h)),
+            None => "current-law".to_string(),
+        };
+        // every folder of the job is held from the start: another command
+        // cannot slip into one of them half-way through
+        let mut folders: Vec<PathBuf> = currents.iter().map(|c| out.join(current_tag(*c))).collect();
+        if several {
+            folders.extend(options.current_law.then(|| out.join(&law)));
+            folders.push(out.join("comparison"));
+        }
+        for dir in &folders {
+            self.prepare(dir, "--out", &[&campaign], &[], true)?;
+        }
         let mut reports = Vec::new();
         let mut entries = Vec::new();
         for c in currents {
@@ -31,14 +47,10 @@ impl Pipeline<'_> {
                 entries.push(compare::entry(cal, Some(prediction)));
             }
         }
-        if options.sample.current.is_none() && all.len() >= 2 {
+        if several {
             if options.current_law {
                 // hold out the middle current: the law must predict it
-                let held: Vec<f64> = if all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };
-                let name = match held.first() {
-                    Some(h) => format!("current-law-without-{}", current_tag(*h)),
-                    None => "current-law".to_string(),
-                };
+                let name = law;
                 let mut settings = options.sample.settings.clone();
                 settings.model = ModelKind::CurrentLaw;
                 let request = SampleRequest { settings, hold_out_current: held, ..options.sample.clone() };

@@ -47,8 +47,11 @@ pub struct CalibrationReport<'a> {
 /// Returns the report's path.
 pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
     let dir = &r.cal.dir;
+    // no report until the new one is whole
+    atomic::remove(&dir.join(super::html::REPORT))?;
     let (figs, loo_figs) = draw_figures(r)?;
     let mut page = Page::new(&title(r.cal));
+    page.derived_from(&r.cal.record.calibration_id);
     let checks = verdicts(r.cal, &r.prediction.coverage);
     let warned = checks.iter().filter(|c| c.1 == Mark::Warn).count();
     page.raw(&format!(

@@ -55,6 +55,7 @@ fn rpm_of(time: &[f64], displacement: &[f64]) -> f64 {
 /// (whose tables are `comparison`) into `out`. `rpm` picks the runs whose
 /// bands are overlaid.
 pub fn write(out: &Path, entries: &[Entry], comparison: &Comparison, rpm: Option<f64>) -> Result<PathBuf> {
+    atomic::remove(&out.join(super::html::REPORT))?;
     let mut figs = Figures::default();
     forest(out, entries, &mut figs)?;
     against_current(out, entries, &mut figs)?;
@@ -62,6 +63,9 @@ pub fn write(out: &Path, entries: &[Entry], comparison: &Comparison, rpm: Option
     held_out_figures(out, entries, &mut figs)?;
 
     let mut page = Page::new(&format!("mrbp comparison of {} calibrations", entries.len()));
+    for e in entries {
+        page.derived_from(&e.cal.record.calibration_id);
+    }
     calibrations_section(&mut page, entries);
     parameters_section(&mut page, entries);
     differences_section(&mut page, comparison);

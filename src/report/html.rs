@@ -7,9 +7,10 @@ use std::path::Path;
 use base64::Engine;
 
 use crate::error::{Error, Result};
+use crate::store::status::CALIBRATION_ID_META;
 
 /// The name of a report in its folder.
-pub const REPORT: &str = "report.html";
+pub const REPORT: &str = crate::store::status::REPORT;
 
 /// Escapes text for HTML.
 pub fn esc(s: &str) -> String {
@@ -44,6 +45,7 @@ pub struct Page {
     title: String,
     nav: Vec<(String, String)>,
     body: String,
+    derived_from: Vec<String>,
 }
 
 const STYLE: &str = "body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1180px;margin:2em auto;padding:0 1em;color:#1b1b1b;line-height:1.45}\
@@ -57,7 +59,13 @@ nav a{margin-right:1em}pre{background:#f6f6f6;padding:.8em;overflow-x:auto;font-
 
 impl Page {
     pub fn new(title: &str) -> Page {
-        Page { title: title.to_string(), nav: Vec::new(), body: String::new() }
+        Page { title: title.to_string(), nav: Vec::new(), body: String::new(), derived_from: Vec::new() }
+    }
+
+    /// Names a calibration the page was made from (a `mrbp-calibration-id`
+    /// meta tag: `mrbp status` checks it against the folder's calibration).
+    pub fn derived_from(&mut self, calibration_id: &str) {
+        self.derived_from.push(calibration_id.to_string());
     }
 
     /// Starts a section with an anchor listed in the navigation bar.
@@ -121,8 +129,9 @@ impl Page {
         let _ = write!(
             html,
             "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
-             <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\
+             <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">{}\
              <title>{}</title><style>{STYLE}</style></head><body>\n<h1>{}</h1>\n<nav>",
+            self.derived_from.iter().map(|id| format!("<meta name=\"{CALIBRATION_ID_META}\" content=\"{}\">", esc(id))).collect::<String>(),
             esc(&self.title),
             esc(&self.title)
         );

@@ -28,6 +28,7 @@ pub struct PredictionReport<'a> {
 pub fn write(r: &PredictionReport) -> Result<PathBuf> {
     let (cal, dir, p) = (r.cal, r.dir, r.prediction);
     let geometry = r.campaign.geometry;
+    atomic::remove(&dir.join(super::html::REPORT))?;
     let mut figs = Figures::default();
     figures::bands(dir, &p.bands, geometry.area_m2, geometry.gap_m, &mut figs)?;
     figures::residuals(dir, &p.bands, &mut figs)?;
@@ -37,6 +38,7 @@ pub fn write(r: &PredictionReport) -> Result<PathBuf> {
         format!("the calibration at {} A", cal.record.current_a)
     };
     let mut page = Page::new(&format!("mrbp prediction: {} by {}", r.campaign.name, what));
+    page.derived_from(&cal.record.calibration_id);
     let unseen = p.coverage.iter().filter(|c| !c.calibrated).count();
     page.para(&format!(
         "{} run(s) of the campaign {} ({}) predicted by {what} in {} ({} posterior draws, {} noise replicates each); {unseen} of them \

@@ -8,9 +8,11 @@ use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table}
 use crate::predict::adequacy::{AdequacyRow, Excitation};
 use crate::error::Result;
 
-pub fn write(path: &Path, rows: &[AdequacyRow]) -> Result<()> {
+/// Writes the adequacy of a prediction from calibration `id`.
+pub fn write(path: &Path, rows: &[AdequacyRow], id: &str) -> Result<()> {
     let f = |get: fn(&AdequacyRow) -> f64| rows.iter().map(get).collect::<Vec<f64>>();
     let mut t = Table::new()
+        .derived_from(id)
         .str("run", rows.iter().map(|r| r.run.clone()).collect())
         .f64("current_a", f(|r| r.current_a))
         .str("excitation", rows.iter().map(|r| r.excitation.label()).collect())

@@ -7,12 +7,13 @@ use super::parquet::{column_names, f64_column, read_parquet, str_column, write_p
 use crate::error::Result;
 use crate::predict::RunBands;
 
-/// Writes the bands of every run.
-pub fn write(path: &Path, runs: &[RunBands]) -> Result<()> {
+/// Writes the bands of every run, derived from calibration `id`.
+pub fn write(path: &Path, runs: &[RunBands], id: &str) -> Result<()> {
     let col = |f: &dyn Fn(&RunBands) -> &[f64]| runs.iter().flat_map(|b| f(b).iter().copied()).collect::<Vec<f64>>();
     let per_sample = |f: &dyn Fn(&RunBands) -> f64| runs.iter().flat_map(|b| std::iter::repeat_n(f(b), b.time.len())).collect::<Vec<f64>>();
     let names = runs.iter().flat_map(|b| std::iter::repeat_n(b.run.clone(), b.time.len())).collect();
     let mut table = Table::new()
+        .derived_from(id)
         .str("run", names)
         .f64("current_a", per_sample(&|b| b.current_a))
         .f64("time_s", col(&|b| &b.time))

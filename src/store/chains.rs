@@ -11,7 +11,8 @@ use crate::sampler::Chains;
 
 const BOOKKEEPING: [&str; 5] = ["ensemble", "chain", "draw", "log_prob", "accepted"];
 
-pub fn write(path: &Path, sample: &PosteriorSample) -> Result<()> {
+/// Writes the chains of calibration `id`.
+pub fn write(path: &Path, sample: &PosteriorSample, id: &str) -> Result<()> {
     let ch = &sample.chains;
     let (nc, steps) = (ch.chains(), ch.steps());
     let rows = nc * steps;
@@ -26,6 +27,7 @@ pub fn write(path: &Path, sample: &PosteriorSample) -> Result<()> {
         t = t.f64(name, col);
     }
     let t = t
+        .derived_from(id)
         .f64("log_prob", order().map(|(s, c)| ch.log_prob[s * nc + c]).collect())
         .bool("accepted", order().map(|(s, c)| ch.accepted[s * nc + c]).collect());
     write_parquet(path, t)

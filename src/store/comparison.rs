@@ -1,22 +1,112 @@
 //! `comparison.parquet` (every calibration's summary, one row per
-//! parameter) and `differences.parquet` (every pair and parameter).
+//! parameter) and `differences.parquet` (every pair and parameter), and
+//! `comparison.toml`, the record of what was compared: which folders, and
+//! which calibration each held. The record is removed first and written
+//! last, so a comparison folder with it is complete.
 
-use std::path::Path;
+use std::path::{Component, Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
 
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
 use crate::compare::{Comparison, ComparisonRow, Difference, DifferenceRow};
-use crate::error::Result;
+use crate::error::{Error, Result};
+
+/// The record of a comparison.
+pub const RECORD: &str = "comparison.toml";
+
+/// What a comparison compared.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ComparisonRecord {
+    pub mrbp_version: String,
+    pub command: String,
+    pub compared: Vec<Compared>,
+}
+
+/// One calibration compared: its label in the tables, its folder (relative
+/// to the comparison's folder where they share a root) and its calibration.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Compared {
+    pub label: String,
+    pub folder: String,
+    pub calibration_id: String,
+}
+
+impl Compared {
+    /// A calibration in `folder`, as seen from the comparison in `out`.
+    pub fn new(label: &str, folder: &Path, calibration_id: &str, out: &Path) -> Compared {
+        Compared { label: label.to_string(), folder: relative(folder, out).display().to_string(), calibration_id: calibration_id.to_string() }
+    }
+
+    /// Its folder, from the comparison's folder `out` (`out/../x` as `x`).
+    pub fn folder_from(&self, out: &Path) -> PathBuf {
+        let mut path = PathBuf::new();
+        for part in out.join(&self.folder).components() {
+            match part {
+                Component::ParentDir if matches!(path.components().next_back(), Some(Component::Normal(_))) => {
+                    path.pop();
+                }
+                other => path.push(other),
+            }
+        }
+        path
+    }
+}
+
+/// `target` as a path from `base` (both made absolute); `target` itself
+/// when they share no root.
+fn relative(target: &Path, base: &Path) -> PathBuf {
+    let (Ok(t), Ok(b)) = (std::fs::canonicalize(target), std::fs::canonicalize(base)) else {
+        return std::path::absolute(target).unwrap_or_else(|_| target.to_path_buf());
+    };
+    let (t, b): (Vec<Component>, Vec<Component>) = (t.components().collect(), b.components().collect());
+    let common = t.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    if common <= 1 {
+        return t.iter().collect();
+    }
+    let mut path: PathBuf = b[common..].iter().map(|_| Component::ParentDir).collect();
+    path.extend(&t[common..]);
+    path
+}
+
+/// Makes the comparison in `dir` incomplete, before its files are replaced.
+pub fn retire(dir: &Path) -> Result<()> {
+    crate::atomic::remove(&dir.join(RECORD))
+}
+
+/// Writes the record, last: the comparison in `dir` is complete.
+pub fn write_record(dir: &Path, record: &ComparisonRecord) -> Result<()> {
+    let text = toml::to_string(record).map_err(|e| Error::Compute(format!("writing {RECORD}: {e}")))?;
+    crate::atomic::write(&dir.join(RECORD), format!("# What this comparison compared (mrbp compare).\n{text}").as_bytes())
+}
+
+/// The record of the comparison in `dir`.
+pub fn read_record(dir: &Path) -> Result<ComparisonRecord> {
+    let path = dir.join(RECORD);
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
+    toml::from_str(&text).map_err(|e| Error::input(&path, format!("not a comparison record: {}", e.message())))
+}
+
+/// The calibrations of `record` as the tables' metadata names them.
+pub fn ids_text(record: &ComparisonRecord) -> String {
+    record.compared.iter().map(|c| format!("{}={}", c.label, c.calibration_id)).collect::<Vec<_>>().join(",")
+}
 
 /// The files of a comparison folder.
 pub const SUMMARIES: &str = "comparison.parquet";
 pub const DIFFERENCES: &str = "differences.parquet";
+/// The metadata key naming the calibrations compared.
+pub const CALIBRATION_IDS: &str = "mrbp.calibration_ids";
 
-pub fn write(dir: &Path, c: &Comparison) -> Result<()> {
+/// Writes the comparison's tables into `dir`; `ids` (`label=calibration
+/// id`, …) names the calibrations compared, in each file's metadata.
+pub fn write(dir: &Path, c: &Comparison, ids: &str) -> Result<()> {
     let rows = &c.rows;
     let col = |f: &dyn Fn(&crate::compare::ComparisonRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
     write_parquet(
         &dir.join(SUMMARIES),
         Table::new()
+            .meta(CALIBRATION_IDS, ids)
             .str("calibration", rows.iter().map(|r| r.calibration.clone()).collect())
             .f64("current_a", col(&|r| r.current_a))
             .str("parameter", rows.iter().map(|r| r.parameter.clone()).collect())
@@ -31,6 +121,7 @@ pub fn write(dir: &Path, c: &Comparison) -> Result<()> {
     write_parquet(
         &dir.join(DIFFERENCES),
         Table::new()
+            .meta(CALIBRATION_IDS, ids)
             .str("calibration_a", d.iter().map(|r| r.a.clone()).collect())
             .str("calibration_b", d.iter().map(|r| r.b.clone()).collect())
             .str("parameter", d.iter().map(|r| r.parameter.clone()).collect())

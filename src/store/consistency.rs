@@ -15,7 +15,10 @@ pub const FILE: &str = "consistency.parquet";
 /// The kind of an estimate's row.
 const RUN: &str = "run";
 
-pub fn write(dir: &Path, parameters: &[ParameterConsistency]) -> Result<()> {
+/// Writes the consistency of the runs of calibration `id` (the joint one),
+/// each calibrated alone (`alone`: run and calibration id), into its folder.
+pub fn write(dir: &Path, parameters: &[ParameterConsistency], id: &str, alone: &[(String, String)]) -> Result<()> {
+    let alone: Vec<String> = alone.iter().map(|(run, id)| format!("{run}={id}")).collect();
     let rows: Vec<(&ParameterConsistency, &str, &Estimate)> = parameters
         .iter()
         .flat_map(|p| p.runs.iter().map(move |r| (p, RUN, r)).chain([(p, JOINT, &p.joint), (p, NEW_TEST, &p.new_test)]))
@@ -24,6 +27,8 @@ pub fn write(dir: &Path, parameters: &[ParameterConsistency]) -> Result<()> {
     write_parquet(
         &dir.join(FILE),
         Table::new()
+            .derived_from(id)
+            .meta(RUN_IDS, &alone.join(","))
             .str("parameter", rows.iter().map(|r| r.0.parameter.clone()).collect())
             .str("kind", rows.iter().map(|r| r.1.to_string()).collect())
             .str("label", rows.iter().map(|r| r.2.label.clone()).collect())
@@ -38,8 +43,29 @@ pub fn write(dir: &Path, parameters: &[ParameterConsistency]) -> Result<()> {
     )
 }
 
-pub fn read(dir: &Path) -> Result<Vec<ParameterConsistency>> {
+/// The sub-folder of the run-alone calibrations (`--per-run`).
+pub const RUNS: &str = "runs";
+
+/// The metadata key naming the run-alone calibrations (`run=id,…`).
+pub const RUN_IDS: &str = "mrbp.run_calibration_ids";
+
+/// The consistency of the runs of calibration `id` in its folder `dir`;
+/// one derived from another calibration, or from run-alone calibrations
+/// since redone, is refused.
+pub fn read(dir: &Path, id: &str) -> Result<Vec<ParameterConsistency>> {
     let path = dir.join(FILE);
+    let rebuild = "mrbp sample MANIFEST --out DIR --per-run --force";
+    super::check_derived(&path, id, rebuild)?;
+    if let Some(alone) = super::parquet_meta(&path, RUN_IDS)? {
+        for pair in alone.split(',').filter(|p| !p.is_empty()) {
+            let (run, made) = pair.split_once('=').unwrap_or((pair, ""));
+            let record = dir.join(RUNS).join(run).join(super::folder::RECORD);
+            let now = super::record::read(&record).map(|r| r.calibration_id).unwrap_or_default();
+            if now != made {
+                return Err(Error::input(&path, format!("stale: run {run} has been calibrated alone again since (or its folder is incomplete); rebuild it with `{rebuild}`")));
+            }
+        }
+    }
     let df = read_parquet(&path)?;
     let s = |n: &str| str_column(&df, n, &path);
     let f = |n: &str| f64_column(&df, n, &path);

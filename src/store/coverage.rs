@@ -13,22 +13,33 @@ use crate::validate::{HeldOutBy, LeaveOneOut, LooRow};
 pub const LOO: &str = "loo.parquet";
 pub const LOO_BANDS: &str = "loo_bands.parquet";
 
-/// Writes a leave-one-out study into the calibration folder `dir`.
-pub fn write_leave_one_out(dir: &Path, study: &LeaveOneOut) -> Result<()> {
-    super::bands::write(&dir.join(LOO_BANDS), &study.bands)?;
-    write_loo(&dir.join(LOO), &study.rows)
+/// The command that makes a leave-one-out study afresh, for messages.
+const REBUILD_LOO: &str = "mrbp report DIR --leave-one-out";
+
+/// Writes a leave-one-out study of calibration `id` into its folder `dir`:
+/// `loo.parquet`, which says the study is complete, goes first and comes
+/// back last.
+pub fn write_leave_one_out(dir: &Path, study: &LeaveOneOut, id: &str) -> Result<()> {
+    crate::atomic::remove(&dir.join(LOO))?;
+    super::bands::write(&dir.join(LOO_BANDS), &study.bands, id)?;
+    write_loo(&dir.join(LOO), &study.rows, id)
 }
 
-/// The leave-one-out study in `dir`, if it has one.
-pub fn read_leave_one_out(dir: &Path) -> Result<Option<LeaveOneOut>> {
+/// The leave-one-out study of calibration `id` in `dir`, if it has a
+/// complete one; one derived from another calibration is refused.
+pub fn read_leave_one_out(dir: &Path, id: &str) -> Result<Option<LeaveOneOut>> {
     if !(dir.join(LOO).exists() && dir.join(LOO_BANDS).exists()) {
         return Ok(None);
+    }
+    for file in [LOO, LOO_BANDS] {
+        super::check_derived(&dir.join(file), id, REBUILD_LOO)?;
     }
     Ok(Some(LeaveOneOut { rows: read_loo(&dir.join(LOO))?, bands: super::bands::read(&dir.join(LOO_BANDS))? }))
 }
 
-pub fn write(path: &Path, rows: &[CoverageRow]) -> Result<()> {
-    write_parquet(path, table(rows))
+/// Writes the coverage of a prediction from calibration `id`.
+pub fn write(path: &Path, rows: &[CoverageRow], id: &str) -> Result<()> {
+    write_parquet(path, table(rows).derived_from(id))
 }
 
 fn table(rows: &[CoverageRow]) -> Table {
@@ -45,9 +56,10 @@ fn table(rows: &[CoverageRow]) -> Table {
         .f64("lppd", rows.iter().map(|r| r.lppd).collect())
 }
 
-fn write_loo(path: &Path, rows: &[LooRow]) -> Result<()> {
+fn write_loo(path: &Path, rows: &[LooRow], id: &str) -> Result<()> {
     let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
     let t = table(&coverage)
+        .derived_from(id)
         .f64("pareto_k", rows.iter().map(|r| r.pareto_k).collect())
         .f64("pareto_k_laplace", rows.iter().map(|r| r.pareto_k_laplace).collect())
         .str("held_out_by", rows.iter().map(|r| r.by.label().to_string()).collect())

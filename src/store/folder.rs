@@ -17,11 +17,23 @@ pub const CONFIG: &str = "config.toml";
 /// The sampler's checkpoint, while a calibration runs or after it was stopped.
 pub const CHECKPOINT: &str = "sampler.checkpoint";
 
+/// The command that rebuilds a calibration folder, for messages.
+pub const REBUILD: &str = "mrbp sample MANIFEST --out DIR --force (--resume continues from a checkpoint)";
+
 /// Reads the calibration in `dir`; every missing or malformed file is a
-/// clear input error.
+/// clear input error, and so is a folder another process is writing, a
+/// calibration interrupted while being written, and files of two
+/// calibrations side by side.
 pub fn read(dir: &Path) -> Result<Calibration> {
     if !dir.is_dir() {
         return Err(Error::input(dir, "not a folder (expected the output folder of `mrbp sample` or `mrbp run`)"));
+    }
+    let _reading = crate::lock::read(dir)?;
+    if !dir.join(RECORD).exists() && [CHAINS, SUMMARY, CONFIG].iter().any(|f| dir.join(f).exists()) {
+        return Err(Error::input(
+            dir.join(RECORD),
+            format!("missing: the calibration in this folder is incomplete (stopped while its files were written); make it again with `{REBUILD}`"),
+        ));
     }
     let need = |name: &str| {
         let p = dir.join(name);
@@ -33,6 +45,9 @@ pub fn read(dir: &Path) -> Result<Calibration> {
     };
     let settings = CalibrationSettings::read(&need(CONFIG)?)?;
     let record = record::read(&need(RECORD)?)?;
+    for file in [CHAINS, SUMMARY] {
+        super::check_derived(&need(file)?, &record.calibration_id, REBUILD)?;
+    }
     let summary = summary::read(&need(SUMMARY)?)?;
     let model = settings.parameter_model();
     let layout = Layout::new(&model, &record.runs, settings.noise_model().as_ref(), settings.sampler.coordinates, &settings.terms);
@@ -40,11 +55,20 @@ pub fn read(dir: &Path) -> Result<Calibration> {
     Ok(Calibration { dir: dir.to_path_buf(), settings, record, summary, sample })
 }
 
-/// Writes `cal` into `dir` (chains, summary, settings, then the record)
-/// and makes `dir` its folder.
+/// Makes the calibration in `dir` incomplete, before its files are
+/// replaced: `calibration.toml`, which says a calibration folder is
+/// complete, goes first.
+pub fn retire(dir: &Path) -> Result<()> {
+    crate::atomic::remove(&dir.join(RECORD))
+}
+
+/// Writes `cal` into `dir` (chains, summary, settings, then the record,
+/// which makes the folder complete again) and makes `dir` its folder.
 pub fn write(dir: &Path, cal: &mut Calibration) -> Result<()> {
-    chains::write(&dir.join(CHAINS), &cal.sample)?;
-    summary::write(&dir.join(SUMMARY), &cal.summary, cal.record.burn_in, cal.record.steps, cal.sample.chains.chains())?;
+    retire(dir)?;
+    let id = &cal.record.calibration_id;
+    chains::write(&dir.join(CHAINS), &cal.sample, id)?;
+    summary::write(&dir.join(SUMMARY), &cal.summary, cal.record.burn_in, cal.record.steps, cal.sample.chains.chains(), id)?;
     cal.settings.write(&dir.join(CONFIG))?;
     record::write(&dir.join(RECORD), &cal.record)?;
     cal.dir = dir.to_path_buf();

@@ -33,8 +33,9 @@ use crate::identify::CurrentIdentification;
 use crate::model::PARAM_NAMES;
 
 /// Writes `identification.parquet` with one row per run and quantity plus
-/// the combined estimate (`run` = "all") per current.
-pub fn write(path: &Path, results: &[CurrentIdentification]) -> Result<()> {
+/// the combined estimate (`run` = "all") per current; `id` names the
+/// calibration it started, if any.
+pub fn write(path: &Path, results: &[CurrentIdentification], id: Option<&str>) -> Result<()> {
     let (mut run, mut current, mut parameter, mut value, mut raw) = (vec![], vec![], vec![], vec![], vec![]);
     let mut push = |r: &str, c: f64, p: &str, v: f64, rv: f64| {
         run.push(r.to_string());
@@ -71,9 +72,13 @@ pub fn write(path: &Path, results: &[CurrentIdentification]) -> Result<()> {
         }
         push("all", c, "eq6_rms_log", res.yield_fit.rms_log, res.yield_fit.rms_log);
     }
+    let table = match id {
+        Some(id) => Table::new().derived_from(id),
+        None => Table::new(),
+    };
     write_parquet(
         path,
-        Table::new()
+        table
             .str("run", run)
             .f64("current_a", current)
             .str("parameter", parameter)

@@ -56,15 +56,9 @@ pub struct StoreInfo<'a> {
 /// store is built beside it and renamed into place.
 pub fn write(path: &Path, sample: &PosteriorSample, pointwise: &PointwiseDraws, info: &StoreInfo) -> Result<()> {
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let tmp = tempfile::Builder::new().prefix(".mrbp-").suffix(".zarr.tmp").tempdir_in(parent).map_err(|e| Error::output(parent, e))?;
+    let tmp = tempfile::Builder::new().prefix(crate::atomic::TEMPORARY).suffix(".zarr.tmp").tempdir_in(parent).map_err(|e| Error::output(parent, e))?;
     build(tmp.path(), sample, pointwise, info).map_err(|e| Error::output(path, e))?;
-    if path.exists() {
-        std::fs::remove_dir_all(path).map_err(|e| Error::output(path, e))?;
-    }
-    std::fs::rename(tmp.path(), path).map_err(|e| Error::output(path, e))?;
-    // the temporary directory is gone; nothing left to clean
-    std::mem::forget(tmp);
-    Ok(())
+    crate::atomic::replace_dir(&tmp.keep(), path)
 }
 
 type Failure = Box<dyn std::error::Error>;
@@ -81,6 +75,15 @@ pub struct Stored {
     pub log_likelihood: Vec<f64>,
     /// (chains, draws, observations) of the pointwise groups.
     pub pointwise_shape: (usize, usize, usize),
+}
+
+/// The calibration the store at `path` was derived from (its root's
+/// `calibration_id` attribute).
+pub fn calibration_id(path: &Path) -> Result<String> {
+    let meta = path.join("zarr.json");
+    let text = std::fs::read_to_string(&meta).map_err(|e| Error::input(&meta, format!("cannot read: {e}")))?;
+    let json: Value = serde_json::from_str(&text).map_err(|e| Error::input(&meta, format!("not a Zarr group: {e}")))?;
+    Ok(json.pointer("/attributes/calibration_id").and_then(Value::as_str).unwrap_or_default().to_string())
 }
 
 /// Reads the store at `path` (written by [`write`]).

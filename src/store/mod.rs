@@ -32,7 +32,8 @@ pub mod inference;
 pub mod parquet;
 pub mod prediction;
 pub mod record;
+pub mod status;
 pub mod summary;
 
-pub use parquet::{column_names, f64_column, read_parquet, str_column, write_parquet, Table};
+pub use parquet::{check_derived, column_names, f64_column, parquet_meta, read_parquet, str_column, write_parquet, Table, CALIBRATION_ID};
 pub use crate::calibrate::command_line;

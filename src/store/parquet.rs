@@ -7,10 +7,16 @@ use polars::prelude::*;
 use crate::atomic;
 use crate::error::{Error, Result};
 
-/// A table built column by column; each column a name and its values.
+/// The key of a derived table's file-level metadata naming the calibration
+/// it was derived from (`pyarrow.parquet.read_schema(path).metadata`).
+pub const CALIBRATION_ID: &str = "mrbp.calibration_id";
+
+/// A table built column by column; each column a name and its values; and
+/// file-level key-value metadata.
 #[derive(Default)]
 pub struct Table {
     columns: Vec<Column>,
+    metadata: Vec<(String, String)>,
 }
 
 impl Table {
@@ -38,6 +44,17 @@ impl Table {
         self
     }
 
+    /// A key-value pair of the file's metadata.
+    pub fn meta(mut self, key: &str, value: &str) -> Self {
+        self.metadata.push((key.to_string(), value.to_string()));
+        self
+    }
+
+    /// Names the calibration the table was derived from.
+    pub fn derived_from(self, calibration_id: &str) -> Self {
+        self.meta(CALIBRATION_ID, calibration_id)
+    }
+
     pub fn into_frame(self) -> Result<DataFrame> {
         DataFrame::new_infer_height(self.columns).map_err(|e| Error::Compute(format!("building a table: {e}")))
     }
@@ -45,10 +62,12 @@ impl Table {
 
 /// Writes a table to `path` as Parquet (zstd-compressed), atomically.
 pub fn write_parquet(path: &Path, table: Table) -> Result<()> {
+    let metadata = (!table.metadata.is_empty()).then(|| KeyValueMetadata::from_static(table.metadata.clone()));
     let mut df = table.into_frame()?;
     atomic::write_with(path, |file| {
         ParquetWriter::new(file)
             .with_compression(ParquetCompression::Zstd(None))
+            .with_key_value_metadata(metadata)
             .finish(&mut df)
             .map(|_| ())
             .map_err(|e| Error::output(path, e))
@@ -61,6 +80,31 @@ pub fn read_parquet(path: &Path) -> Result<DataFrame> {
     crate::error::guard_foreign(|| ParquetReader::new(file).finish())
         .ok_or_else(|| Error::input(path, "not a readable Parquet file (damaged: its decoder failed)"))?
         .map_err(|e| Error::input(path, format!("not a readable Parquet file: {e}")))
+}
+
+/// The value of `key` in the file-level metadata of the Parquet file at
+/// `path`, if it has one.
+pub fn parquet_meta(path: &Path, key: &str) -> Result<Option<String>> {
+    let file = std::fs::File::open(path).map_err(|e| Error::input(path, format!("cannot open: {e}")))?;
+    let mut reader = ParquetReader::new(file);
+    let metadata = crate::error::guard_foreign(|| reader.get_metadata().cloned())
+        .ok_or_else(|| Error::input(path, "not a readable Parquet file (damaged: its decoder failed)"))?
+        .map_err(|e| Error::input(path, format!("not a readable Parquet file: {e}")))?;
+    let pairs = metadata.key_value_metadata.as_deref().unwrap_or_default();
+    Ok(pairs.iter().find(|kv| kv.key == key).and_then(|kv| kv.value.clone()))
+}
+
+/// Checks that the table at `path` was derived from calibration `id`; a file
+/// without the mark (written before mrbp marked its files) passes.
+/// `rebuild` is the command that makes it afresh.
+pub fn check_derived(path: &Path, id: &str, rebuild: &str) -> Result<()> {
+    match parquet_meta(path, CALIBRATION_ID)? {
+        Some(found) if found != id => Err(Error::input(
+            path,
+            format!("stale: derived from calibration {found}, not from {id}, the one this folder holds; rebuild it with `{rebuild}`"),
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// A float column of a table read back, with a clear error naming `path`.

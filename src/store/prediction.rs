@@ -15,24 +15,32 @@ pub const COVERAGE: &str = "coverage.parquet";
 pub const ADEQUACY: &str = "adequacy.parquet";
 pub const RECORD: &str = "prediction.toml";
 
-/// Writes the prediction's files into `dir`, the record last.
+/// Writes the prediction's files into `dir`: the record, which says the
+/// prediction is complete, goes first and comes back last.
 pub fn write(dir: &Path, p: &Prediction) -> Result<()> {
-    bands::write(&dir.join(BANDS), &p.bands)?;
-    coverage::write(&dir.join(COVERAGE), &p.coverage)?;
-    adequacy::write(&dir.join(ADEQUACY), &p.adequacy)?;
+    let id = &p.record.calibration_id;
+    atomic::remove(&dir.join(RECORD))?;
+    bands::write(&dir.join(BANDS), &p.bands, id)?;
+    coverage::write(&dir.join(COVERAGE), &p.coverage, id)?;
+    adequacy::write(&dir.join(ADEQUACY), &p.adequacy, id)?;
     write_record(&dir.join(RECORD), &p.record)
 }
 
-/// The prediction in `dir`, if it has one (all four files).
+/// The prediction in `dir`, if it has a complete one (all four files);
+/// tables from another calibration than its record's are refused.
 pub fn read(dir: &Path) -> Result<Option<Prediction>> {
     if ![BANDS, COVERAGE, ADEQUACY, RECORD].iter().all(|f| dir.join(f).exists()) {
         return Ok(None);
+    }
+    let record = read_record(&dir.join(RECORD))?;
+    for file in [BANDS, COVERAGE, ADEQUACY] {
+        super::check_derived(&dir.join(file), &record.calibration_id, "mrbp predict DIR")?;
     }
     Ok(Some(Prediction {
         bands: bands::read(&dir.join(BANDS))?,
         coverage: coverage::read(&dir.join(COVERAGE))?,
         adequacy: adequacy::read(&dir.join(ADEQUACY))?,
-        record: read_record(&dir.join(RECORD))?,
+        record,
     }))
 }
 

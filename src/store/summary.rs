@@ -9,13 +9,14 @@ use crate::posterior::SummaryRow;
 use crate::sampler::ParameterDiagnostics;
 
 /// The rows of a calibration whose draws run from `burn_in` to `steps`, of
-/// `walkers` chains in all.
-pub fn write(path: &Path, rows: &[SummaryRow], burn_in: usize, steps: usize, walkers: usize) -> Result<()> {
+/// `walkers` chains in all, of calibration `id`.
+pub fn write(path: &Path, rows: &[SummaryRow], burn_in: usize, steps: usize, walkers: usize, id: &str) -> Result<()> {
     let col = |f: &dyn Fn(&ParameterDiagnostics) -> f64| rows.iter().map(|r| f(&r.stats)).collect::<Vec<f64>>();
     let n = rows.len();
     write_parquet(
         path,
         Table::new()
+            .derived_from(id)
             .str("parameter", rows.iter().map(|r| r.parameter.clone()).collect())
             .f64("mean", col(&|p| p.mean))
             .f64("sd", col(&|p| p.sd))

@@ -33,6 +33,9 @@ pub fn collect(dir: &Path) -> Result<Collected> {
     let record = read_record(dir)?;
     let ids = task_ids(dir)?;
     let out = dir.join("collected");
+    std::fs::create_dir_all(&out).map_err(|e| Error::output(&out, e))?;
+    // one collection at a time
+    let _held = crate::lock::write(&out)?;
     let results = out.join("results").join(format!("study={}", record.name));
     if results.exists() {
         std::fs::remove_dir_all(&results).map_err(|e| Error::output(&results, e))?;

@@ -1,8 +1,8 @@
 //! One task of a study: a calibration into its own folder, idempotent and
 //! safe to hand to several processes at once.
 //!
-//! The task holds an exclusive lock on `tasks/<id>/.lock` while it runs
-//! (released by the operating system if the process dies), so a worker that
+//! The task holds its folder `tasks/<id>/` ([`crate::lock`], released by
+//! the operating system if the process dies) while it runs, so a worker that
 //! takes over a task from a lost one waits for a straggler instead of
 //! writing beside it. A task whose `status.toml` exists is done and is
 //! skipped; an interrupted one resumes from its sampler checkpoint, which
@@ -46,9 +46,7 @@ pub struct TaskOutcome {
 pub fn run_task(pipeline: &mut Pipeline, dir: &Path, id: &str) -> Result<(TaskOutcome, bool)> {
     let spec = read_task(dir, id)?;
     let folder = task_dir(dir, id);
-    let lock_path = folder.join(".lock");
-    let lock = std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(&lock_path).map_err(|e| Error::output(&lock_path, e))?;
-    lock.lock().map_err(|e| Error::output(&lock_path, e))?;
+    let _held = crate::lock::write_waiting(&folder)?;
     if let Some(done) = read_outcome(&folder)? {
         return Ok((done, false));
     }

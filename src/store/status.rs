@@ -1,0 +1,261 @@
+//! Whether the results in a folder are whole: `mrbp status`. A folder is
+//! *complete* when it has its record (`calibration.toml`, `prediction.toml`,
+//! `comparison.toml`, `campaign.toml` — each written last and removed first)
+//! and every file in it was derived from the calibration(s) that record
+//! names; *incomplete* when a command stopped while writing it; *stale* when
+//! a file comes from another calibration than the folder holds, or a
+//! comparison from calibrations since redone; *busy* while another process
+//! writes it. Each finding names the file and the command that rebuilds it.
+
+use std::path::{Path, PathBuf};
+
+use super::{comparison, consistency, coverage, folder, identification, parquet_meta, prediction, record, CALIBRATION_ID};
+use crate::error::Result;
+
+/// The report of a folder (written by [`crate::report`]).
+pub const REPORT: &str = "report.html";
+
+/// The meta tag of a report naming a calibration it was made from.
+pub const CALIBRATION_ID_META: &str = "mrbp-calibration-id";
+
+/// The calibration ids a report names (none for a report made before
+/// reports named them).
+pub fn report_ids(html: &str) -> Vec<String> {
+    let tag = format!("<meta name=\"{CALIBRATION_ID_META}\" content=\"");
+    html.match_indices(&tag).filter_map(|(at, _)| html[at + tag.len()..].split('"').next().map(str::to_string)).collect()
+}
+
+/// What a folder holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Calibration,
+    Prediction,
+    Comparison,
+    Campaign,
+}
+
+impl Kind {
+    pub fn label(self) -> &'static str {
+        match self {
+            Kind::Calibration => "calibration",
+            Kind::Prediction => "prediction",
+            Kind::Comparison => "comparison",
+            Kind::Campaign => "campaign",
+        }
+    }
+}
+
+/// The state of one results folder.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FolderStatus {
+    pub dir: PathBuf,
+    pub kind: Kind,
+    /// The process writing it now, if one is.
+    pub writer: Option<String>,
+    /// What is wrong, one line each (empty: complete).
+    pub problems: Vec<String>,
+}
+
+impl FolderStatus {
+    pub fn complete(&self) -> bool {
+        self.writer.is_none() && self.problems.is_empty()
+    }
+}
+
+/// The results folders in and under `dir`, each with its state, in path
+/// order.
+pub fn status(dir: &Path) -> Result<Vec<FolderStatus>> {
+    let mut found = Vec::new();
+    walk(dir, &mut found, 0);
+    Ok(found)
+}
+
+fn walk(dir: &Path, found: &mut Vec<FolderStatus>, depth: usize) {
+    if let Some(kind) = kind_of(dir) {
+        let writer = crate::lock::writer(dir);
+        let problems = if writer.is_some() { Vec::new() } else { check(dir, kind) };
+        found.push(FolderStatus { dir: dir.to_path_buf(), kind, writer, problems });
+    }
+    if depth >= 6 {
+        return;
+    }
+    let Ok(listed) = std::fs::read_dir(dir) else { return };
+    let mut subs: Vec<PathBuf> = listed
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_dir())
+        .filter(|p| p.file_name().is_some_and(|n| !n.to_string_lossy().starts_with('.') && !n.to_string_lossy().ends_with(".zarr")))
+        .collect();
+    subs.sort();
+    for sub in subs {
+        walk(&sub, found, depth + 1);
+    }
+}
+
+fn kind_of(dir: &Path) -> Option<Kind> {
+    let has = |f: &str| dir.join(f).exists();
+    if [folder::RECORD, folder::CHAINS, folder::SUMMARY, folder::CONFIG].iter().any(|f| has(f)) {
+        Some(Kind::Calibration)
+    } else if [comparison::RECORD, comparison::SUMMARIES, comparison::DIFFERENCES].iter().any(|f| has(f)) {
+        Some(Kind::Comparison)
+    } else if [prediction::RECORD, prediction::BANDS, prediction::COVERAGE, prediction::ADEQUACY].iter().any(|f| has(f)) {
+        Some(Kind::Prediction)
+    } else if has("synth.toml") {
+        Some(Kind::Campaign)
+    } else {
+        None
+    }
+}
+
+fn check(dir: &Path, kind: Kind) -> Vec<String> {
+    let mut problems = Vec::new();
+    match kind {
+        Kind::Calibration => check_calibration(dir, &mut problems),
+        Kind::Prediction => check_prediction(dir, None, "mrbp predict CALIBRATION --campaign MANIFEST --out DIR", &mut problems),
+        Kind::Comparison => check_comparison(dir, &mut problems),
+        Kind::Campaign => {
+            if !dir.join("campaign.toml").exists() {
+                problems.push("campaign.toml missing: `mrbp synth` stopped while writing this campaign; make it again with `mrbp synth --out DIR`".into());
+            }
+        }
+    }
+    problems
+}
+
+/// The id a derived table names, if it names one.
+fn table_id(path: &Path, key: &str) -> Result<Option<String>, String> {
+    parquet_meta(path, key).map_err(|e| e.to_string())
+}
+
+fn check_table(path: &Path, id: &str, rebuild: &str, problems: &mut Vec<String>) {
+    if !path.exists() {
+        return;
+    }
+    match table_id(path, CALIBRATION_ID) {
+        Err(e) => problems.push(e),
+        Ok(Some(found)) if found != id => problems.push(stale(path, &found, id, rebuild)),
+        Ok(_) => {}
+    }
+}
+
+fn stale(path: &Path, found: &str, id: &str, rebuild: &str) -> String {
+    format!("{}: stale (from calibration {found}, the folder holds {id}); rebuild: `{rebuild}`", name(path))
+}
+
+fn name(path: &Path) -> String {
+    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
+    let record_path = dir.join(folder::RECORD);
+    if !record_path.exists() {
+        problems.push(format!("{}: missing, the calibration is incomplete (stopped while written); rebuild: `{}`", folder::RECORD, folder::REBUILD));
+        return;
+    }
+    let id = match record::read(&record_path) {
+        Ok(r) => r.calibration_id,
+        Err(e) => return problems.push(e.to_string()),
+    };
+    for file in [folder::CHAINS, folder::SUMMARY, folder::CONFIG] {
+        if !dir.join(file).exists() {
+            problems.push(format!("{file}: missing; rebuild: `{}`", folder::REBUILD));
+        }
+    }
+    for file in [folder::CHAINS, folder::SUMMARY, identification::FILE] {
+        check_table(&dir.join(file), &id, folder::REBUILD, problems);
+    }
+    check_prediction(dir, Some(&id), "mrbp predict DIR", problems);
+    let zarr = dir.join(super::inference::FILE);
+    if zarr.exists() {
+        match super::inference::calibration_id(&zarr) {
+            Ok(found) if found != id => problems.push(stale(&zarr, &found, &id, "mrbp predict DIR")),
+            Ok(_) => {}
+            Err(e) => problems.push(e.to_string()),
+        }
+    }
+    let (loo, loo_bands) = (dir.join(coverage::LOO), dir.join(coverage::LOO_BANDS));
+    if loo_bands.exists() && !loo.exists() {
+        problems.push(format!("{}: missing, the leave-one-out study is incomplete; rebuild: `mrbp report DIR --leave-one-out`", coverage::LOO));
+    }
+    if loo.exists() {
+        if let Err(e) = coverage::read_leave_one_out(dir, &id) {
+            problems.push(e.to_string());
+        }
+    }
+    if dir.join(consistency::FILE).exists() {
+        if let Err(e) = consistency::read(dir, &id) {
+            problems.push(e.to_string());
+        }
+    }
+    check_report(dir, std::slice::from_ref(&id), "mrbp report DIR", problems);
+}
+
+fn check_prediction(dir: &Path, calibration: Option<&str>, rebuild: &str, problems: &mut Vec<String>) {
+    let files = [prediction::BANDS, prediction::COVERAGE, prediction::ADEQUACY];
+    let record_path = dir.join(prediction::RECORD);
+    if !record_path.exists() {
+        if files.iter().any(|f| dir.join(f).exists()) {
+            problems.push(format!("{}: missing, the bands are incomplete (stopped while written); rebuild: `{rebuild}`", prediction::RECORD));
+        }
+        return;
+    }
+    let made_from = match prediction::read_record(&record_path) {
+        Ok(r) => r.calibration_id,
+        Err(e) => return problems.push(e.to_string()),
+    };
+    if let Some(id) = calibration {
+        if made_from != id {
+            return problems.push(stale(&record_path, &made_from, id, rebuild));
+        }
+    }
+    for file in files {
+        if !dir.join(file).exists() {
+            problems.push(format!("{file}: missing; rebuild: `{rebuild}`"));
+        }
+        check_table(&dir.join(file), &made_from, rebuild, problems);
+    }
+    if calibration.is_none() {
+        check_report(dir, std::slice::from_ref(&made_from), rebuild, problems);
+    }
+}
+
+/// A report naming other calibrations than `ids` is stale.
+fn check_report(dir: &Path, ids: &[String], rebuild: &str, problems: &mut Vec<String>) {
+    let path = dir.join(REPORT);
+    let Ok(html) = std::fs::read_to_string(&path) else { return };
+    let named = report_ids(&html);
+    if !named.is_empty() && named != ids {
+        problems.push(format!("{}: stale (made from calibration(s) {}, the folder holds {}); rebuild: `{rebuild}`", name(&path), named.join(", "), ids.join(", ")));
+    }
+}
+
+fn check_comparison(dir: &Path, problems: &mut Vec<String>) {
+    let rebuild = "mrbp compare DIR DIR … --out OUT";
+    if !dir.join(comparison::RECORD).exists() {
+        return problems.push(format!("{}: missing, the comparison is incomplete (stopped while written, or made before comparisons were recorded); rebuild: `{rebuild}`", comparison::RECORD));
+    }
+    let record = match comparison::read_record(dir) {
+        Ok(r) => r,
+        Err(e) => return problems.push(e.to_string()),
+    };
+    for c in &record.compared {
+        let cal = c.folder_from(dir);
+        let now = record::read(&cal.join(folder::RECORD)).map(|r| r.calibration_id);
+        match now {
+            Ok(now) if now == c.calibration_id => {}
+            Ok(now) => problems.push(format!("{}: calibrated again since this comparison (calibration {} then, {now} now); rebuild: `{rebuild}`", cal.display(), c.calibration_id)),
+            Err(_) => problems.push(format!("{}: no complete calibration there any more (it held {}); rebuild: `{rebuild}`", cal.display(), c.calibration_id)),
+        }
+    }
+    let ids = comparison::ids_text(&record);
+    for file in [comparison::SUMMARIES, comparison::DIFFERENCES] {
+        let path = dir.join(file);
+        match table_id(&path, comparison::CALIBRATION_IDS) {
+            Err(e) => problems.push(e),
+            Ok(Some(found)) if found != ids => problems.push(format!("{file}: stale (compares {found}, the record {ids}); rebuild: `{rebuild}`")),
+            Ok(_) => {}
+        }
+    }
+    let ids: Vec<String> = record.compared.iter().map(|c| c.calibration_id.clone()).collect();
+    check_report(dir, &ids, rebuild, problems);
+}
