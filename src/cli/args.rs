@@ -115,6 +115,26 @@ pub enum Command {
         #[command(flatten)]
         options: PredictOptions,
     },
+    /// The force of a calibrated damper along an excitation of your own
+    /// (no measured force needed): model and predictive bands
+    Simulate {
+        /// A calibration folder (per-current: at its current; a current law:
+        /// at any current near the calibrated ones)
+        dir: PathBuf,
+        /// The excitation: CSV or Parquet with time_s, displacement_m and
+        /// optionally current_a (SI units)
+        #[arg(long, value_name = "FILE")]
+        input: PathBuf,
+        /// The coil current (A), if the file has no current_a column
+        #[arg(long)]
+        current: Option<f64>,
+        /// Where to write simulation.parquet and the figure (default:
+        /// DIR/simulation-<input file name>)
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[command(flatten)]
+        options: PredictOptions,
+    },
     /// Plots and the HTML report from what is in DIR
     Report {
         /// A calibration folder (of `mrbp sample` or `mrbp run`)

@@ -206,6 +206,7 @@ impl Campaign {
             displacement: (&c.displacement, c.displacement_scale),
             force: (&c.force, c.force_scale),
             current: &c.current,
+            force_required: true,
         };
         let mut runs = Vec::with_capacity(manifest.runs.len());
         let mut notes = Vec::new();

@@ -79,6 +79,9 @@ pub struct ColumnMap<'a> {
     pub force: (&'a str, f64),
     /// Optional: read if present.
     pub current: &'a str,
+    /// Whether a file without the force column is refused; else its force
+    /// is NaN (an excitation to simulate).
+    pub force_required: bool,
 }
 
 /// The record as CSV with the default column names ([`Columns`]);
@@ -226,11 +229,15 @@ fn read_csv(path: &Path, columns: &ColumnMap) -> Result<Record> {
             ));
         }
     }
-    let required = [columns.time, columns.displacement, columns.force];
-    let mut index = [0usize; 3];
+    let required = [columns.time, columns.displacement];
+    let mut index = [0usize; 2];
     for (slot, (name, _)) in index.iter_mut().zip(required) {
         *slot = find(name).ok_or_else(|| missing_column(path, name))?;
     }
+    let force_index = match find(columns.force.0) {
+        None if columns.force_required => return Err(missing_column(path, columns.force.0)),
+        found => found,
+    };
     let current_index = find(columns.current);
 
     let mut rec = Record {
@@ -249,7 +256,10 @@ fn read_csv(path: &Path, columns: &ColumnMap) -> Result<Record> {
         rec.time.push(cell(index[0], columns.time.0)? * columns.time.1);
         rec.displacement
             .push(cell(index[1], columns.displacement.0)? * columns.displacement.1);
-        rec.force.push(cell(index[2], columns.force.0)? * columns.force.1);
+        rec.force.push(match force_index {
+            Some(fi) => cell(fi, columns.force.0)? * columns.force.1,
+            None => f64::NAN,
+        });
         if let (Some(ci), Some(cur)) = (current_index, rec.current.as_mut()) {
             cur.push(cell(ci, columns.current)?);
         }
@@ -287,10 +297,15 @@ fn read_parquet(path: &Path, columns: &ColumnMap) -> Result<Record> {
             })
             .collect()
     };
+    let time = column(columns.time.0, columns.time.1)?;
+    let force = match df.column(columns.force.0) {
+        Err(_) if !columns.force_required => vec![f64::NAN; time.len()],
+        _ => column(columns.force.0, columns.force.1)?,
+    };
     Ok(Record {
-        time: column(columns.time.0, columns.time.1)?,
+        time,
         displacement: column(columns.displacement.0, columns.displacement.1)?,
-        force: column(columns.force.0, columns.force.1)?,
+        force,
         current: if df.column(columns.current).is_ok() {
             Some(column(columns.current, 1.0)?)
         } else {

@@ -14,6 +14,7 @@ mod compare;
 pub mod folders;
 mod predict;
 mod run;
+mod simulate;
 
 use std::path::Path;
 

@@ -23,8 +23,9 @@ impl Pipeline<'_> {
     pub fn predict(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
         self.prepare(out, "--out", &[campaign], &[], true)?;
         let campaign = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
-        let prediction = self.predict_runs(cal, &campaign, &|run| cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
+        let (prediction, failed) = self.predict_runs(cal, &campaign, &|run| cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
         self.write_inference_data(cal, &campaign, out, options.seed)?;
+        unpredicted(&failed, out)?;
         Ok(prediction)
     }
 
@@ -86,16 +87,20 @@ impl Pipeline<'_> {
             }
             kept
         };
-        let prediction = self.predict_runs(cal, &runs, &|run| own && cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
-        let path = report::prediction::write(&PredictionReport { cal, campaign: &runs, dir: out, prediction: &prediction })?;
+        let (prediction, failed) = self.predict_runs(cal, &runs, &|run| own && cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
+        let predicted = runs.filtered(|r| !failed.iter().any(|(id, _)| id == r.id()));
+        let path = report::prediction::write(&PredictionReport { cal, campaign: &predicted, dir: out, prediction: &prediction })?;
         self.emit(Event::Wrote(&path));
+        unpredicted(&failed, out)?;
         Ok((path, prediction))
     }
 
     /// Bands, coverage and adequacy of `campaign`'s runs into `out`; `seen`
     /// tells the runs the calibration saw (their own noise level and force
-    /// offset) from those it did not (the others' typical ones).
-    fn predict_runs(&mut self, cal: &Calibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, out: &Path, options: &PredictOptions) -> Result<Prediction> {
+    /// offset) from those it did not (the others' typical ones). A run that
+    /// cannot be predicted (no draw integrates along it) is left out, with
+    /// why, and the others are written; if none can be, nothing is.
+    fn predict_runs(&mut self, cal: &Calibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, out: &Path, options: &PredictOptions) -> Result<(Prediction, Vec<(String, String)>)> {
         if options.draws == 0 || options.replicates == 0 {
             return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
         }
@@ -105,6 +110,7 @@ impl Pipeline<'_> {
         let bar = self.bar((positions.len() * campaign.runs.len()) as u64);
         let mut bands = Vec::new();
         let mut coverage = Vec::new();
+        let mut failed = Vec::new();
         for (j, run) in campaign.runs.iter().enumerate() {
             let data = RunData::from_run(run, RecordPart::WholeRecord, cal.settings.likelihood.smooth_strain_ms);
             let calibrated = seen(run);
@@ -113,11 +119,20 @@ impl Pipeline<'_> {
                 true => cal.sample.draws(&positions, id, current),
                 false => positions.iter().map(|&(s, c)| cal.sample.draw_without(s, c, id, current)).collect(),
             };
-            let p = predict_run(run, &data, j, &draws, &settings, calibrated, &|| bar.inc(1))?;
-            bands.push(p.bands);
-            coverage.push(p.coverage);
+            match predict_run(run, &data, j, &draws, &settings, calibrated, &|| bar.inc(1)) {
+                Ok(p) => {
+                    bands.push(p.bands);
+                    coverage.push(p.coverage);
+                }
+                Err(Error::Compute(why)) => failed.push((id.to_string(), why)),
+                Err(e) => return Err(e),
+            }
         }
         bar.finish_and_clear();
+        if bands.is_empty() {
+            let whys: Vec<String> = failed.iter().map(|(_, why)| why.clone()).collect();
+            return Err(Error::Compute(format!("no run could be predicted: {}", whys.join("; "))));
+        }
         let geometry = &campaign.geometry;
         let adequacy: Vec<AdequacyRow> = bands.iter().map(|b| adequacy::assess(b, geometry.area_m2, geometry.gap_m)).collect();
         let record = PredictionRecord {
@@ -136,7 +151,7 @@ impl Pipeline<'_> {
         let prediction = Prediction { bands, coverage, adequacy, record };
         store::prediction::write(out, &prediction)?;
         self.emit(Event::Predicted { record: &prediction.record, dir: out });
-        Ok(prediction)
+        Ok((prediction, failed))
     }
 
     /// The leave-one-out study of `cal` (whose runs are in `campaign`):
@@ -221,7 +236,7 @@ impl Pipeline<'_> {
     }
 
     /// A progress bar of `len` steps, hidden unless progress is wanted.
-    fn bar(&self, len: u64) -> indicatif::ProgressBar {
+    pub(super) fn bar(&self, len: u64) -> indicatif::ProgressBar {
         if !self.progress {
             return indicatif::ProgressBar::hidden();
         }
@@ -229,4 +244,21 @@ impl Pipeline<'_> {
         bar.set_style(indicatif::ProgressStyle::with_template("predicting {bar:30} {pos}/{len} run draws  ETA {eta}").expect("valid template"));
         bar
     }
+}
+
+/// The runs a prediction left out, as the error that ends the command
+/// (exit 1) once the others are written into `out`.
+fn unpredicted(failed: &[(String, String)], out: &Path) -> Result<()> {
+    if failed.is_empty() {
+        return Ok(());
+    }
+    let which: Vec<&str> = failed.iter().map(|(id, _)| id.as_str()).collect();
+    let whys: Vec<&str> = failed.iter().map(|(_, why)| why.as_str()).collect();
+    Err(Error::Compute(format!(
+        "{} run(s) could not be predicted ({}): {}; the other runs' bands are in {}",
+        failed.len(),
+        which.join(", "),
+        whys.join("; "),
+        out.display()
+    )))
 }

@@ -180,7 +180,9 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
             band[k] = quantile_sorted(&pred_k, p);
         }
     }
-    let explained = explain_median(run, kept, &model[2], noise);
+    // no measured force (a simulated excitation): nothing to explain
+    let measured = run.tau.iter().all(|t| t.is_finite());
+    let explained = if measured { explain_median(run, kept, &model[2], noise) } else { None };
     Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed, lppd, explained })
 }
 

@@ -32,9 +32,9 @@ const CORNER_POINTS: usize = 600;
 
 /// At most this many vertices per band or line drawn over a record: a
 /// panel is ~500 px wide, so more add file size, not detail.
-const MAX_VERTICES: usize = 2500;
+pub(crate) const MAX_VERTICES: usize = 2500;
 
-fn every(n: usize, max: usize) -> usize {
+pub(crate) fn every(n: usize, max: usize) -> usize {
     n.div_ceil(max.max(1)).max(1)
 }
 

@@ -32,6 +32,7 @@ pub mod inference;
 pub mod parquet;
 pub mod prediction;
 pub mod record;
+pub mod simulation;
 pub mod status;
 pub mod summary;
 

@@ -9,7 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{comparison, consistency, coverage, folder, identification, parquet_meta, prediction, record, CALIBRATION_ID};
+use super::{comparison, consistency, coverage, folder, identification, parquet_meta, prediction, record, simulation, CALIBRATION_ID};
 use crate::error::Result;
 
 /// The report of a folder (written by [`crate::report`]).
@@ -31,6 +31,7 @@ pub enum Kind {
     Calibration,
     Prediction,
     Comparison,
+    Simulation,
     Campaign,
 }
 
@@ -40,6 +41,7 @@ impl Kind {
             Kind::Calibration => "calibration",
             Kind::Prediction => "prediction",
             Kind::Comparison => "comparison",
+            Kind::Simulation => "simulation",
             Kind::Campaign => "campaign",
         }
     }
@@ -100,6 +102,8 @@ fn kind_of(dir: &Path) -> Option<Kind> {
         Some(Kind::Comparison)
     } else if [prediction::RECORD, prediction::BANDS, prediction::COVERAGE, prediction::ADEQUACY].iter().any(|f| has(f)) {
         Some(Kind::Prediction)
+    } else if [simulation::RECORD, simulation::FILE].iter().any(|f| has(f)) {
+        Some(Kind::Simulation)
     } else if has("synth.toml") {
         Some(Kind::Campaign)
     } else {
@@ -111,7 +115,8 @@ fn check(dir: &Path, kind: Kind) -> Vec<String> {
     let mut problems = Vec::new();
     match kind {
         Kind::Calibration => check_calibration(dir, &mut problems),
-        Kind::Prediction => check_prediction(dir, None, "mrbp predict CALIBRATION --campaign MANIFEST --out DIR", &mut problems),
+        Kind::Prediction => check_prediction(dir, enclosing(dir).as_deref(), "mrbp predict CALIBRATION --campaign MANIFEST --out DIR", &mut problems),
+        Kind::Simulation => check_simulation(dir, &mut problems),
         Kind::Comparison => check_comparison(dir, &mut problems),
         Kind::Campaign => {
             if !dir.join("campaign.toml").exists() {
@@ -120,6 +125,28 @@ fn check(dir: &Path, kind: Kind) -> Vec<String> {
         }
     }
     problems
+}
+
+/// The calibration of the folder that holds `dir`, if `dir` lies in a
+/// calibration folder (a prediction or simulation made into it).
+fn enclosing(dir: &Path) -> Option<String> {
+    let parent = dir.parent()?;
+    record::read(&parent.join(folder::RECORD)).ok().map(|r| r.calibration_id)
+}
+
+fn check_simulation(dir: &Path, problems: &mut Vec<String>) {
+    let rebuild = "mrbp simulate CALIBRATION --input FILE --out DIR";
+    if !dir.join(simulation::RECORD).exists() {
+        return problems.push(format!("{}: missing, the simulation is incomplete (stopped while written); rebuild: `{rebuild}`", simulation::RECORD));
+    }
+    match simulation::read(dir) {
+        Err(e) => problems.push(e.to_string()),
+        Ok(s) => {
+            if let Some(id) = enclosing(dir).filter(|id| *id != s.record.calibration_id) {
+                problems.push(stale(&dir.join(simulation::FILE), &s.record.calibration_id, &id, rebuild));
+            }
+        }
+    }
 }
 
 /// The id a derived table names, if it names one.

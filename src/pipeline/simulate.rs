@@ -1,0 +1,146 @@
+//! A calibrated damper driven by an excitation of the user's own: the
+//! force and its bands along a displacement history that has no measured
+//! force (`mrbp simulate`).
+
+use std::path::Path;
+use std::time::Instant;
+
+use super::{Event, Pipeline, PredictOptions};
+use crate::calibrate::{command_line, Calibration};
+use crate::data::table::ColumnMap;
+use crate::data::{loading_branches, same_current, Columns, Limits, Record, RecordPart, Run, RunData, RunSpec, Shear, REVERSAL_SHARE};
+use crate::error::{Error, Result};
+use crate::predict::bands;
+use crate::store::simulation::{Simulation, SimulationRecord};
+
+/// How far a current-law simulation may reach beyond the calibrated
+/// currents before it is refused (share of the calibrated span).
+const EXTRAPOLATION_LIMIT: f64 = 0.5;
+
+impl Pipeline<'_> {
+    /// Posterior draws of `cal` along the displacement history in `input`
+    /// (CSV or Parquet, `time_s`, `displacement_m` and optionally
+    /// `current_a`; a force column, if any, is ignored) at `current` (else
+    /// the file's current, else the calibration's own): the model and
+    /// predictive bands of the stress and of the force into `out`
+    /// (`simulation.parquet`, `simulation.toml`, a figure).
+    pub fn simulate(&mut self, cal: &Calibration, input: &Path, current: Option<f64>, out: &Path, options: &PredictOptions) -> Result<Simulation> {
+        if options.draws == 0 || options.replicates == 0 {
+            return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
+        }
+        let c = Columns::default();
+        let map = ColumnMap { time: (&c.time, 1.0), displacement: (&c.displacement, 1.0), force: (&c.force, 1.0), current: &c.current, force_required: false };
+        let mut record = Record::read(input, &map)?;
+        record.check_limits(input, &map, &Limits::default())?;
+        record.force = vec![f64::NAN; record.len()];
+        let current_a = self.simulated_current(cal, input, &record, current)?;
+        let extrapolated = self.check_current(cal, current_a)?;
+        let geometry = match cal.record.geometry {
+            Some(g) => g,
+            None => cal.full_campaign()?.geometry,
+        };
+        let id = input.file_stem().map_or_else(|| "input".to_string(), |s| s.to_string_lossy().into_owned());
+        let shear = Shear::from_record(&record, &geometry, None);
+        let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
+        let spec = RunSpec { id: id.clone(), file: input.to_path_buf(), current_a, shear_rate: None, initial_stress_pa: None };
+        let run = Run { spec, path: input.to_path_buf(), record, shear, branches, geometry };
+        self.prepare(out, "--out", &[], &[], true)?;
+        let clock = Instant::now();
+        let data = RunData::from_run(&run, RecordPart::WholeRecord, cal.settings.likelihood.smooth_strain_ms);
+        let positions = cal.draw_positions(options.draws);
+        // a new test: the typical noise level and force offset of the runs seen
+        let draws: Vec<_> = positions.iter().map(|&(s, c)| cal.sample.draw_without(s, c, &id, current_a)).collect();
+        let settings = cal.predict_settings(options.replicates, options.seed);
+        let bar = self.bar(draws.len() as u64);
+        let b = bands(&data, 0, &draws, &settings, &|| bar.inc(1))?;
+        bar.finish_and_clear();
+        let record = SimulationRecord {
+            mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
+            command: command_line(),
+            input: input.display().to_string(),
+            current_a,
+            area_m2: geometry.area_m2,
+            draws: b.draws,
+            failed_draws: b.failed,
+            noise_replicates: options.replicates,
+            seed: options.seed,
+            seconds: clock.elapsed().as_secs_f64(),
+            calibration_id: cal.record.calibration_id.clone(),
+            extrapolated,
+        };
+        if b.failed > 0 {
+            self.note(&format!("{} of {} posterior draws could not be integrated along {} (left out of the bands)", b.failed, b.failed + b.draws, input.display()));
+        }
+        let simulation = Simulation { time: data.time.clone(), displacement: run.record.displacement.clone(), gamma_model: data.gamma.clone(), model: b.model, predictive: b.predictive, record };
+        crate::report::simulation::write(out, &simulation, &cal.label())?;
+        crate::store::simulation::write(out, &simulation)?;
+        let path = out.join(crate::store::simulation::FILE);
+        self.emit(Event::Wrote(&path));
+        Ok(simulation)
+    }
+
+    /// The current to simulate at: the option, else the file's (which must
+    /// hold still), else a per-current calibration's own.
+    fn simulated_current(&mut self, cal: &Calibration, input: &Path, record: &Record, current: Option<f64>) -> Result<f64> {
+        let column = Columns::default().current;
+        let from_file = match &record.current {
+            None => None,
+            Some(values) => {
+                let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+                let mid = 0.5 * (lo + hi);
+                if !same_current(lo, mid) || !same_current(hi, mid) {
+                    return Err(Error::input_at(
+                        input,
+                        None,
+                        Some(&column),
+                        format!("the current changes within the record ({lo} to {hi} A): mrbp simulates one current per record so far; split the record where the current steps"),
+                    ));
+                }
+                Some(mid)
+            }
+        };
+        match (current, from_file) {
+            (Some(c), Some(f)) if !same_current(c, f) => Err(Error::Usage(format!("--current {c} disagrees with the {f} A of the column {column} in {}", input.display()))),
+            (Some(c), _) => Ok(c),
+            (None, Some(f)) => Ok(f),
+            (None, None) if cal.is_current_law() => Err(Error::Usage(format!(
+                "{} has no {column} column: give the current to simulate with --current (the law was calibrated at {:?} A)",
+                input.display(),
+                cal.record.currents
+            ))),
+            (None, None) => Ok(cal.record.current_a),
+        }
+    }
+
+    /// Refuses a current the calibration does not cover; returns whether a
+    /// current law extrapolates to it (with a note).
+    fn check_current(&mut self, cal: &Calibration, current_a: f64) -> Result<bool> {
+        if !(current_a.is_finite() && current_a >= 0.0) {
+            return Err(Error::Usage(format!("the current must be a finite number ≥ 0 A, got {current_a}")));
+        }
+        if !cal.is_current_law() {
+            let own = cal.record.current_a;
+            if !same_current(current_a, own) {
+                return Err(Error::Usage(format!(
+                    "the calibration in {} is at {own} A and cannot simulate {current_a} A; a current law (mrbp sample --model current-law) simulates other currents",
+                    cal.dir.display()
+                )));
+            }
+            return Ok(false);
+        }
+        let (lo, hi) = cal.record.currents.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)));
+        let reach = EXTRAPOLATION_LIMIT * (hi - lo);
+        if current_a < lo - reach || current_a > hi + reach {
+            return Err(Error::Usage(format!(
+                "{current_a} A is far outside the currents the law was calibrated at ({lo}–{hi} A; it may reach {:.3}–{:.3} A): calibrate at currents around it",
+                (lo - reach).max(0.0),
+                hi + reach
+            )));
+        }
+        let outside = current_a < lo - 1e-9 || current_a > hi + 1e-9;
+        if outside {
+            self.note(&format!("{current_a} A is outside the calibrated currents {lo}–{hi} A: the current law extrapolates (simulation.toml says so)"));
+        }
+        Ok(outside)
+    }
+}

@@ -1,0 +1,92 @@
+//! `simulation.parquet` (one row per sample of the excitation: the model
+//! and predictive bands of the stress and of the force) and
+//! `simulation.toml` (how it was made; written last, removed first).
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::parquet::{f64_column, read_parquet, write_parquet, Table};
+use crate::error::{Error, Result};
+
+pub const FILE: &str = "simulation.parquet";
+pub const RECORD: &str = "simulation.toml";
+
+/// The force of a calibrated damper along an excitation of the user's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Simulation {
+    pub time: Vec<f64>,
+    pub displacement: Vec<f64>,
+    /// The shear strain that drove the model (smoothed as in calibration).
+    pub gamma_model: Vec<f64>,
+    /// q025, q25, q50, q75, q975 of the model stress (Pa).
+    pub model: [Vec<f64>; 5],
+    /// p025, p975 of a measured stress (Pa).
+    pub predictive: [Vec<f64>; 2],
+    pub record: SimulationRecord,
+}
+
+/// How a simulation was made.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SimulationRecord {
+    pub mrbp_version: String,
+    pub command: String,
+    /// The excitation's file.
+    pub input: String,
+    pub current_a: f64,
+    /// The damper's working area (m²): force = stress × area.
+    pub area_m2: f64,
+    pub draws: usize,
+    /// Draws whose integration failed (left out).
+    pub failed_draws: usize,
+    pub noise_replicates: usize,
+    pub seed: u64,
+    pub seconds: f64,
+    pub calibration_id: String,
+    /// Whether a current law extrapolates beyond its calibrated currents.
+    pub extrapolated: bool,
+}
+
+/// Writes the simulation into `dir`, the record last.
+pub fn write(dir: &Path, s: &Simulation) -> Result<()> {
+    let r = &s.record;
+    crate::atomic::remove(&dir.join(RECORD))?;
+    let force = |v: &[f64]| v.iter().map(|t| t * r.area_m2).collect::<Vec<f64>>();
+    let mut t = Table::new()
+        .derived_from(&r.calibration_id)
+        .f64("time_s", s.time.clone())
+        .f64("displacement_m", s.displacement.clone())
+        .f64("current_a", vec![r.current_a; s.time.len()])
+        .f64("gamma_model", s.gamma_model.clone());
+    for (name, band) in MODEL.iter().zip(&s.model).chain(PREDICTIVE.iter().zip(&s.predictive)) {
+        t = t.f64(name, band.clone());
+    }
+    for (name, band) in MODEL.iter().zip(&s.model).chain(PREDICTIVE.iter().zip(&s.predictive)) {
+        t = t.f64(&format!("force_{name}_n"), force(band));
+    }
+    write_parquet(&dir.join(FILE), t)?;
+    let text = toml::to_string(r).map_err(|e| Error::Compute(format!("writing {RECORD}: {e}")))?;
+    crate::atomic::write(&dir.join(RECORD), format!("# How simulation.parquet was made (mrbp simulate).\n{text}").as_bytes())
+}
+
+const MODEL: [&str; 5] = ["q025", "q25", "q50", "q75", "q975"];
+const PREDICTIVE: [&str; 2] = ["p025", "p975"];
+
+/// Reads the simulation in `dir` back.
+pub fn read(dir: &Path) -> Result<Simulation> {
+    let path = dir.join(RECORD);
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
+    let record: SimulationRecord = toml::from_str(&text).map_err(|e| Error::input(&path, format!("not a simulation record: {}", e.message())))?;
+    let table = dir.join(FILE);
+    super::check_derived(&table, &record.calibration_id, "mrbp simulate CALIBRATION --input FILE --out DIR")?;
+    let df = read_parquet(&table)?;
+    let col = |n: &str| f64_column(&df, n, &table);
+    Ok(Simulation {
+        time: col("time_s")?,
+        displacement: col("displacement_m")?,
+        gamma_model: col("gamma_model")?,
+        model: [col(MODEL[0])?, col(MODEL[1])?, col(MODEL[2])?, col(MODEL[3])?, col(MODEL[4])?],
+        predictive: [col(PREDICTIVE[0])?, col(PREDICTIVE[1])?],
+        record,
+    })
+}
