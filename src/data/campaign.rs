@@ -66,6 +66,18 @@ impl Run {
         &self.spec.id
     }
 
+    /// The run of `spec` from its `record` (read from, or named as,
+    /// `path`), checked against the manifest's limits and current.
+    fn checked(spec: &RunSpec, path: PathBuf, record: Record, manifest: &Manifest, map: &ColumnMap) -> Result<Run> {
+        record.check_limits(&path, map, &manifest.limits)?;
+        if let Some(current) = &record.current {
+            check_current(&path, map, spec, current)?;
+        }
+        let shear = Shear::from_record(&record, &manifest.geometry, spec.initial_stress_pa);
+        let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
+        Ok(Run { spec: spec.clone(), path, record, shear, branches, geometry: manifest.geometry })
+    }
+
     /// Why the run cannot be identified or calibrated, if it cannot: no
     /// motion (no loading branch) or no force signal.
     pub fn unusable(&self) -> Option<String> {
@@ -119,7 +131,8 @@ impl Manifest {
         Ok(manifest)
     }
 
-    fn check(&self, path: &Path) -> Result<()> {
+    /// Checks a manifest; `path` names it in messages.
+    pub fn check(&self, path: &Path) -> Result<()> {
         let positive = |value: f64, what: &str| {
             if value.is_finite() && value > 0.0 {
                 Ok(())
@@ -221,20 +234,7 @@ impl Campaign {
                 ));
             }
             let record = Record::read(&path, &map)?;
-            record.check_limits(&path, &map, &manifest.limits)?;
-            if let Some(current) = &record.current {
-                check_current(&path, &map, spec, current)?;
-            }
-            let shear = Shear::from_record(&record, &manifest.geometry, spec.initial_stress_pa);
-            let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
-            runs.push(Arc::new(Run {
-                spec: spec.clone(),
-                path,
-                record,
-                shear,
-                branches,
-                geometry: manifest.geometry,
-            }));
+            runs.push(Arc::new(Run::checked(spec, path, record, &manifest, &map)?));
         }
         for run in &runs {
             notes.extend(run.unusable());
@@ -247,6 +247,27 @@ impl Campaign {
             runs,
             notes,
         })
+    }
+
+    /// A campaign from records in memory (SI units; a notebook's frames):
+    /// the manifest's and the records' checks of [`Campaign::load`], with
+    /// each run named `<manifest name>/<run id>` in messages.
+    pub fn from_records(manifest: Manifest, records: Vec<Record>) -> Result<Campaign> {
+        let here = PathBuf::from(format!("campaign '{}'", manifest.name));
+        manifest.check(&here)?;
+        if records.len() != manifest.runs.len() {
+            return Err(Error::input(&here, format!("{} runs but {} records", manifest.runs.len(), records.len())));
+        }
+        let c = Columns::default();
+        let map = ColumnMap { time: (&c.time, 1.0), displacement: (&c.displacement, 1.0), force: (&c.force, 1.0), current: &c.current, force_required: true };
+        let mut runs = Vec::with_capacity(records.len());
+        for (spec, record) in manifest.runs.iter().zip(records) {
+            let path = PathBuf::from(format!("run '{}'", spec.id));
+            record.check(&path, &map)?;
+            runs.push(Arc::new(Run::checked(spec, path, record, &manifest, &map)?));
+        }
+        let notes = runs.iter().filter_map(|r| r.unusable()).collect();
+        Ok(Campaign { name: manifest.name.clone(), manifest_path: here, geometry: manifest.geometry, columns: c, runs, notes })
     }
 
     /// Refuses a campaign whose runs cannot be identified or calibrated (no

@@ -144,7 +144,7 @@ impl Record {
                 ))
             }
         };
-        record.check(path, columns)?;
+        record.check_rows(path, columns)?;
         Ok(record)
     }
 
@@ -156,7 +156,31 @@ impl Record {
         self.time.is_empty()
     }
 
-    fn check(&self, path: &Path, columns: &ColumnMap) -> Result<()> {
+    /// Checks a record read or handed over: at least MIN_ROWS rows, every
+    /// value finite, time strictly increasing; `path` names it in messages.
+    pub fn check(&self, path: &Path, columns: &ColumnMap) -> Result<()> {
+        let n = self.time.len();
+        let series: [(&[f64], &str); 3] = [(&self.time, columns.time.0), (&self.displacement, columns.displacement.0), (&self.force, columns.force.0)];
+        for (values, name) in series {
+            if values.len() != n {
+                return Err(Error::input_at(path, None, Some(name), format!("{} values where the time has {n}", values.len())));
+            }
+            if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+                finite(path, k + 1, name, values[k])?;
+            }
+        }
+        if let Some(current) = &self.current {
+            if current.len() != n {
+                return Err(Error::input_at(path, None, Some(columns.current), format!("{} values where the time has {n}", current.len())));
+            }
+            if let Some(k) = current.iter().position(|v| !v.is_finite()) {
+                finite(path, k + 1, columns.current, current[k])?;
+            }
+        }
+        self.check_rows(path, columns)
+    }
+
+    fn check_rows(&self, path: &Path, columns: &ColumnMap) -> Result<()> {
         if self.time.len() < MIN_ROWS {
             return Err(Error::input(
                 path,

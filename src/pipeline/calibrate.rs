@@ -163,19 +163,33 @@ impl Pipeline<'_> {
         refs.push(&mut checkpointer);
         let made = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)?;
 
+        let cal = self.write_calibration(campaign, dir, made.calibration, &made.start.identification)?;
+        // the chains are complete in chains.parquet: the checkpoint has done its job
+        let _ = std::fs::remove_file(&checkpoint);
+        self.emit(Event::Calibrated(&cal));
+        Ok(cal)
+    }
+
+    /// Writes `cal`, a calibration of `campaign` made in memory (from the
+    /// Python package, say) that started from `identification`, into `dir`
+    /// as `mrbp sample` would; an earlier calibration there is replaced
+    /// only if `force`.
+    pub fn save(&mut self, campaign: &Campaign, dir: &Path, cal: Calibration, identification: &CurrentIdentification, force: bool) -> Result<Calibration> {
+        self.prepare(dir, "the folder", &[campaign], &folders::CALIBRATION, force)?;
+        self.write_calibration(campaign, dir, cal, identification)
+    }
+
+    /// The files of a calibration into the folder `dir`, held already.
+    fn write_calibration(&mut self, campaign: &Campaign, dir: &Path, mut cal: Calibration, identification: &CurrentIdentification) -> Result<Calibration> {
         // the folder's earlier calibration is incomplete from here on
         // (no calibration.toml) until the new one is whole
         store::folder::retire(dir)?;
         folders::clear_derived(dir)?;
-        let group = campaign.at_current(made.start.current_a);
-        let mut cal = made.calibration;
-        let identification = std::slice::from_ref(&made.start.identification);
+        let group = campaign.at_current(identification.current_a);
+        let identification = std::slice::from_ref(identification);
         store::identification::write(&dir.join(store::identification::FILE), identification, Some(&cal.record.calibration_id))?;
         report::identification::write(dir, &group, identification)?;
         store::folder::write(dir, &mut cal)?;
-        // the chains are complete in chains.parquet: the checkpoint has done its job
-        let _ = std::fs::remove_file(&checkpoint);
-        self.emit(Event::Calibrated(&cal));
         Ok(cal)
     }
 }

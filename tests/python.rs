@@ -1,0 +1,30 @@
+//! The Python package (python/): its pytest suite against this build's
+//! command line. CI installs the package (`pip install ./python`) into
+//! MRBP_PYTHON's environment and sets MRBP_PYTHON_PACKAGE_CHECK=1, which
+//! makes a missing package a failure; elsewhere the suite runs where that
+//! Python can import `mrbp` and `pytest`, and is skipped with a line if not.
+
+use std::path::Path;
+use std::process::Command;
+
+#[test]
+fn python_package_agrees_with_the_command_line() {
+    let must = std::env::var("MRBP_PYTHON_PACKAGE_CHECK").is_ok_and(|v| v == "1");
+    let python = std::env::var("MRBP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ready = Command::new(&python).args(["-c", "import mrbp, pytest, pandas, pyarrow"]).output().is_ok_and(|o| o.status.success());
+    if !ready {
+        assert!(!must, "MRBP_PYTHON_PACKAGE_CHECK=1 but {python} cannot import mrbp (pip install ./python) or pytest");
+        eprintln!("python package tests skipped: {python} cannot import mrbp and pytest (pip install ./python pytest)");
+        return;
+    }
+    let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("python").join("tests");
+    let o = Command::new(&python)
+        .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
+        .arg(&tests)
+        .env("MRBP_BIN", env!("CARGO_BIN_EXE_mrbp"))
+        .output()
+        .expect("run pytest");
+    let said = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "pytest python/tests failed:\n{said}");
+    eprintln!("{said}");
+}
