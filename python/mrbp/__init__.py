@@ -18,6 +18,7 @@ bit for bit (docs/python.md).
 
 from __future__ import annotations
 
+import warnings
 from os import PathLike
 from typing import Mapping, Optional, Tuple, Union
 
@@ -163,6 +164,40 @@ class Calibration:
     def folder(self):
         """The folder it was read from or saved to, if any."""
         return self._inner.folder
+
+    def simulate(
+        self,
+        time,
+        displacement,
+        current: Optional[float] = None,
+        draws: int = 400,
+        replicates: int = 10,
+        seed: int = 1,
+    ) -> "pd.DataFrame":
+        """The force of the calibrated damper along an excitation of your own
+        (``mrbp simulate``): time (s) and displacement (m) as arrays; the
+        coil current (A) as one value, or an array of one value per sample
+        (it must hold still for now), or None for a per-current
+        calibration's own. Returns a frame with the columns of
+        ``simulation.parquet``: the model band of the stress (q025 … q975,
+        Pa), the 95 % band of a measured stress (p025, p975) and the same as
+        force (force_q025_n … force_p975_n, N). Notes (an extrapolating
+        current law, draws that failed) come as warnings."""
+        column = None
+        if current is not None and np.ndim(current) > 0:
+            column, current = np.asarray(current, dtype=np.float64).tolist(), None
+        columns, notes = self._inner.simulate(
+            np.asarray(time, dtype=np.float64).tolist(),
+            np.asarray(displacement, dtype=np.float64).tolist(),
+            current=None if current is None else float(current),
+            current_column=column,
+            draws=int(draws),
+            replicates=int(replicates),
+            seed=int(seed),
+        )
+        for note in notes:
+            warnings.warn(note, stacklevel=2)
+        return pd.DataFrame(dict(columns))
 
     def save(self, folder: Path, force: bool = False) -> None:
         """Writes the calibration folder ``mrbp sample`` would write (the

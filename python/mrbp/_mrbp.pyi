@@ -40,6 +40,16 @@ class Calibration:
     @property
     def folder(self) -> Optional[str]: ...
     def save(self, folder: str, force: bool = False) -> None: ...
+    def simulate(
+        self,
+        time: Sequence[float],
+        displacement: Sequence[float],
+        current: Optional[float] = None,
+        current_column: Optional[Sequence[float]] = None,
+        draws: int = 400,
+        replicates: int = 10,
+        seed: int = 1,
+    ) -> Tuple[List[Tuple[str, List[float]]], List[str]]: ...
 
 def calibrate(
     campaign: Campaign,

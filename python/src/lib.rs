@@ -116,6 +116,9 @@ impl Observer for Python_ {
     }
 }
 
+/// Named float columns, in order (a frame's).
+type Columns = Vec<(String, Vec<f64>)>;
+
 /// The columns of `chains.parquet`: integer bookkeeping, the coordinates
 /// with log_prob, and `accepted`.
 type ChainColumns = (Vec<(String, Vec<i64>)>, Vec<(String, Vec<f64>)>, Vec<bool>);
@@ -223,6 +226,56 @@ impl Calibration {
             .map_err(raise)?;
         self.inner = saved;
         Ok(())
+    }
+
+    /// The force of the calibrated damper along an excitation of your own
+    /// (`mrbp simulate`): columns of `simulation.parquet`, and the notes
+    /// (extrapolation, draws that failed).
+    #[pyo3(signature = (time, displacement, current = None, current_column = None, draws = 400, replicates = 10, seed = 1))]
+    #[allow(clippy::too_many_arguments)]
+    fn simulate(
+        &self,
+        py: Python<'_>,
+        time: Vec<f64>,
+        displacement: Vec<f64>,
+        current: Option<f64>,
+        current_column: Option<Vec<f64>>,
+        draws: usize,
+        replicates: usize,
+        seed: u64,
+    ) -> PyResult<(Columns, Vec<String>)> {
+        let cal = self.inner.clone();
+        let n = time.len();
+        let record = Record { time, displacement, force: vec![f64::NAN; n], current: current_column };
+        let options = mrbp::pipeline::PredictOptions { draws, replicates, seed };
+        let (made, notes) = py
+            .detach(move || {
+                let mut notes = Vec::new();
+                let mut listen = |e: mrbp::pipeline::Event<'_>| {
+                    if let mrbp::pipeline::Event::Note(line) = e {
+                        notes.push(line.to_string());
+                    }
+                };
+                let made = mrbp::pipeline::Pipeline::new(&mut listen, false).simulation(&cal, std::path::Path::new("excitation"), record, current, &options, None);
+                made.map(|m| (m, notes))
+            })
+            .map_err(raise)?;
+        let r = &made.record;
+        let mut columns = vec![
+            ("time_s".to_string(), made.time.clone()),
+            ("displacement_m".to_string(), made.displacement.clone()),
+            ("current_a".to_string(), vec![r.current_a; made.time.len()]),
+            ("gamma_model".to_string(), made.gamma_model.clone()),
+        ];
+        let names = ["q025", "q25", "q50", "q75", "q975", "p025", "p975"];
+        let bands: Vec<&Vec<f64>> = made.model.iter().chain(made.predictive.iter()).collect();
+        for (name, band) in names.iter().zip(&bands) {
+            columns.push((name.to_string(), (*band).clone()));
+        }
+        for (name, band) in names.iter().zip(&bands) {
+            columns.push((format!("force_{name}_n"), band.iter().map(|t| t * r.area_m2).collect()));
+        }
+        Ok((columns, notes))
     }
 
     fn __repr__(&self) -> String {

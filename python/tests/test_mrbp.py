@@ -117,3 +117,25 @@ def test_ctrl_c_raises_keyboard_interrupt(campaign):
             mrbp.calibrate(campaign, current=1.0, seed=1, steps=100_000)
     finally:
         timer.cancel()
+
+
+def test_simulate_equals_the_command_line(calibration, tmp_path):
+    # a 5 mm, 3 Hz sine the calibration never saw, without a force
+    t = np.arange(0, 701) / 1000.0
+    x = 0.005 * np.sin(2 * np.pi * 3.0 * t)
+    pd.DataFrame({"time_s": t, "displacement_m": x}).to_csv(tmp_path / "sine.csv", index=False)
+    folder = tmp_path / "cal"
+    calibration.save(folder)
+    for draws in (1, 40):
+        out = tmp_path / f"sim{draws}"
+        cli("simulate", folder, "--input", tmp_path / "sine.csv", "--out", out, "--draws", draws, "--replicates", 5, "--predict-seed", 7)
+        expected = pd.read_parquet(out / "simulation.parquet")
+        got = calibration.simulate(t, x, draws=draws, replicates=5, seed=7)
+        # the CSV's decimal text reads back to the same doubles
+        pd.testing.assert_frame_equal(got, expected, check_exact=True)
+    # the band is a band: 2.5 % ≤ median ≤ 97.5 % everywhere
+    assert (got.q025 <= got.q50).all() and (got.q50 <= got.q975).all() and (got.p025 < got.p975).all()
+    with pytest.raises(ValueError, match="cannot simulate 0.5 A"):
+        calibration.simulate(t, x, current=0.5)
+    with pytest.raises(ValueError, match="does not increase"):
+        calibration.simulate(t[::-1], x)

@@ -161,11 +161,13 @@ impl Record {
     pub fn check(&self, path: &Path, columns: &ColumnMap) -> Result<()> {
         let n = self.time.len();
         let series: [(&[f64], &str); 3] = [(&self.time, columns.time.0), (&self.displacement, columns.displacement.0), (&self.force, columns.force.0)];
-        for (values, name) in series {
+        for (i, (values, name)) in series.into_iter().enumerate() {
             if values.len() != n {
                 return Err(Error::input_at(path, None, Some(name), format!("{} values where the time has {n}", values.len())));
             }
-            if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+            // an excitation to simulate has no force to check
+            let checked = i < 2 || columns.force_required;
+            if let Some(k) = values.iter().position(|v| checked && !v.is_finite()) {
                 finite(path, k + 1, name, values[k])?;
             }
         }

@@ -25,14 +25,29 @@ impl Pipeline<'_> {
     /// predictive bands of the stress and of the force into `out`
     /// (`simulation.parquet`, `simulation.toml`, a figure).
     pub fn simulate(&mut self, cal: &Calibration, input: &Path, current: Option<f64>, out: &Path, options: &PredictOptions) -> Result<Simulation> {
+        let c = Columns::default();
+        let map = ColumnMap { time: (&c.time, 1.0), displacement: (&c.displacement, 1.0), force: (&c.force, 1.0), current: &c.current, force_required: false };
+        let record = Record::read(input, &map)?;
+        let simulation = self.simulation(cal, input, record, current, options, Some(out))?;
+        crate::report::simulation::write(out, &simulation, &cal.label())?;
+        crate::store::simulation::write(out, &simulation)?;
+        let path = out.join(crate::store::simulation::FILE);
+        self.emit(Event::Wrote(&path));
+        Ok(simulation)
+    }
+
+    /// [`Pipeline::simulate`] of a record in memory (time, displacement and
+    /// optionally current; its force is ignored) named by `input` in
+    /// messages, without writing anything but holding `out` if given.
+    pub fn simulation(&mut self, cal: &Calibration, input: &Path, mut record: Record, current: Option<f64>, options: &PredictOptions, out: Option<&Path>) -> Result<Simulation> {
         if options.draws == 0 || options.replicates == 0 {
             return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
         }
         let c = Columns::default();
         let map = ColumnMap { time: (&c.time, 1.0), displacement: (&c.displacement, 1.0), force: (&c.force, 1.0), current: &c.current, force_required: false };
-        let mut record = Record::read(input, &map)?;
-        record.check_limits(input, &map, &Limits::default())?;
         record.force = vec![f64::NAN; record.len()];
+        record.check(input, &map)?;
+        record.check_limits(input, &map, &Limits::default())?;
         let current_a = self.simulated_current(cal, input, &record, current)?;
         let extrapolated = self.check_current(cal, current_a)?;
         let geometry = match cal.record.geometry {
@@ -44,7 +59,9 @@ impl Pipeline<'_> {
         let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
         let spec = RunSpec { id: id.clone(), file: input.to_path_buf(), current_a, shear_rate: None, initial_stress_pa: None };
         let run = Run { spec, path: input.to_path_buf(), record, shear, branches, geometry };
-        self.prepare(out, "--out", &[], &[], true)?;
+        if let Some(out) = out {
+            self.prepare(out, "--out", &[], &[], true)?;
+        }
         let clock = Instant::now();
         let data = RunData::from_run(&run, RecordPart::WholeRecord, cal.settings.likelihood.smooth_strain_ms);
         let positions = cal.draw_positions(options.draws);
@@ -71,12 +88,7 @@ impl Pipeline<'_> {
         if b.failed > 0 {
             self.note(&format!("{} of {} posterior draws could not be integrated along {} (left out of the bands)", b.failed, b.failed + b.draws, input.display()));
         }
-        let simulation = Simulation { time: data.time.clone(), displacement: run.record.displacement.clone(), gamma_model: data.gamma.clone(), model: b.model, predictive: b.predictive, record };
-        crate::report::simulation::write(out, &simulation, &cal.label())?;
-        crate::store::simulation::write(out, &simulation)?;
-        let path = out.join(crate::store::simulation::FILE);
-        self.emit(Event::Wrote(&path));
-        Ok(simulation)
+        Ok(Simulation { time: data.time.clone(), displacement: run.record.displacement.clone(), gamma_model: data.gamma.clone(), model: b.model, predictive: b.predictive, record })
     }
 
     /// The current to simulate at: the option, else the file's (which must
