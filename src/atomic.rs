@@ -33,15 +33,23 @@ fn written() {
     }
 }
 
-/// Removes the file or folder at `path`, if there is one.
-pub fn remove(path: &Path) -> Result<()> {
+/// Removes the file or folder at `path`, if there is one; whether it did.
+fn remove_quietly(path: &Path) -> Result<bool> {
     let removed = match std::fs::symlink_metadata(path) {
-        Err(_) => return Ok(()),
+        Err(_) => return Ok(false),
         Ok(m) if m.is_dir() => std::fs::remove_dir_all(path),
         Ok(_) => std::fs::remove_file(path),
     };
     removed.map_err(|e| Error::output(path, e))?;
-    written();
+    Ok(true)
+}
+
+/// Removes the file or folder at `path`, if there is one (a write, for
+/// fault injection).
+pub fn remove(path: &Path) -> Result<()> {
+    if remove_quietly(path)? {
+        written();
+    }
     Ok(())
 }
 
@@ -71,9 +79,7 @@ pub fn clean_leftovers(dir: &Path) -> Result<()> {
     for entry in listed.flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
         if name.starts_with(TEMPORARY) && name.ends_with(".tmp") {
-            let path = entry.path();
-            let removed = if path.is_dir() { std::fs::remove_dir_all(&path) } else { std::fs::remove_file(&path) };
-            removed.map_err(|e| Error::output(&path, e))?;
+            remove_quietly(&entry.path())?;
         }
     }
     Ok(())

@@ -30,6 +30,11 @@ fn campaign(dir: &Path) -> PathBuf {
     data.join("campaign.toml")
 }
 
+/// [`job`] run to its end.
+fn run_job(manifest: &Path, out: &Path, seed: &str) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mrbp")).args(job(manifest, out, seed)).output().expect("run mrbp")
+}
+
 /// The whole job on `manifest` into `out`, small enough to run many times.
 fn job(manifest: &Path, out: &Path, seed: &str) -> Vec<String> {
     ["run", manifest.to_str().unwrap(), "--out", out.to_str().unwrap(), "--seed", seed, "--steps", "30", "--walkers", "18", "--draws", "10", "--replicates", "1", "--force"]
@@ -85,7 +90,7 @@ fn check_interrupted(w: &Path, before: &Path, reference: &Path, when: &str) {
             mrbp::store::folder::read(&dir).unwrap_or_else(|e| panic!("{when}: a complete folder refused: {e}"));
         } else {
             for p in &s.problems {
-                assert!(p.contains("rebuild: `mrbp "), "{when}: {current}: {p} does not say how to rebuild");
+                assert!(p.contains("rebuild it with `mrbp "), "{when}: {current}: {p} does not say how to rebuild");
             }
             if !dir.join("calibration.toml").exists() {
                 let e = mrbp::store::folder::read(&dir).expect_err("an incomplete calibration read as whole");
@@ -107,7 +112,7 @@ fn check_interrupted(w: &Path, before: &Path, reference: &Path, when: &str) {
             assert_eq!(now.calibration_id, c.calibration_id, "{when}: a complete comparison of calibrations since redone");
         }
     } else {
-        assert!(s.problems.iter().all(|p| p.contains("rebuild: `mrbp ")), "{when}: {:?}", s.problems);
+        assert!(s.problems.iter().all(|p| p.contains("rebuild it with `mrbp ")), "{when}: {:?}", s.problems);
     }
 }
 
@@ -139,7 +144,7 @@ fn killed_at_any_write_leaves_no_mix() {
     let manifest = campaign(t.path());
     let (before, reference) = (t.path().join("before"), t.path().join("reference"));
     for (out, seed) in [(&before, "2"), (&reference, "1")] {
-        let o = mrbp(&job(&manifest, out, seed).iter().map(String::as_str).collect::<Vec<_>>());
+        let o = run_job(&manifest, out, seed);
         assert!(o.status.success(), "{}", said(&o));
     }
     let w = t.path().join("w");
@@ -202,7 +207,7 @@ fn a_folder_being_written_is_refused() {
     let t = tempfile::tempdir().unwrap();
     let manifest = campaign(t.path());
     let out = t.path().join("out");
-    let o = mrbp(&job(&manifest, &out, "1").iter().map(String::as_str).collect::<Vec<_>>());
+    let o = run_job(&manifest, &out, "1");
     assert!(o.status.success(), "{}", said(&o));
     let cal = out.join("I1.0A");
     let (m, c) = (manifest.to_str().unwrap(), cal.to_str().unwrap());
@@ -218,7 +223,7 @@ fn a_folder_being_written_is_refused() {
     busy(&mrbp(&["predict", c]), "predict");
     busy(&mrbp(&["report", c]), "report");
     busy(&mrbp(&["compare", c, other.to_str().unwrap(), "--out", t.path().join("cmp").to_str().unwrap()]), "compare");
-    busy(&mrbp(&job(&manifest, &out, "2").iter().map(String::as_str).collect::<Vec<_>>()), "run");
+    busy(&run_job(&manifest, &out, "2"), "run");
     let o = mrbp(&["status", out.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", said(&o));
     assert!(said(&o).contains(&format!("being written (process {pid})")), "{}", said(&o));
@@ -264,7 +269,7 @@ fn stale_files_are_refused() {
     let manifest = campaign(t.path());
     let (a, b) = (t.path().join("a"), t.path().join("b"));
     for (out, seed) in [(&a, "1"), (&b, "2")] {
-        let o = mrbp(&job(&manifest, out, seed).iter().map(String::as_str).collect::<Vec<_>>());
+        let o = run_job(&manifest, out, seed);
         assert!(o.status.success(), "{}", said(&o));
     }
     let o = mrbp(&["status", a.to_str().unwrap()]);

@@ -121,7 +121,7 @@ type Columns = Vec<(String, Vec<f64>)>;
 
 /// The columns of `chains.parquet`: integer bookkeeping, the coordinates
 /// with log_prob, and `accepted`.
-type ChainColumns = (Vec<(String, Vec<i64>)>, Vec<(String, Vec<f64>)>, Vec<bool>);
+type ChainColumns = (Vec<(&'static str, Vec<i64>)>, Columns, Vec<bool>);
 
 /// A calibration: its settings, record, summary and posterior sample.
 #[pyclass(module = "mrbp._mrbp")]
@@ -140,21 +140,8 @@ impl Calibration {
     }
 
     /// The summary's columns, as `summary.parquet` holds them.
-    fn summary_columns(&self) -> Vec<(String, Vec<f64>)> {
-        let rows = &self.inner.summary;
-        let col = |f: &dyn Fn(&mrbp::sampler::ParameterDiagnostics) -> f64| rows.iter().map(|r| f(&r.stats)).collect::<Vec<f64>>();
-        vec![
-            ("mean".into(), col(&|p| p.mean)),
-            ("sd".into(), col(&|p| p.sd)),
-            ("q05".into(), col(&|p| p.q05)),
-            ("q50".into(), col(&|p| p.q50)),
-            ("q95".into(), col(&|p| p.q95)),
-            ("ess_bulk".into(), col(&|p| p.ess_bulk)),
-            ("ess_tail".into(), col(&|p| p.ess_tail)),
-            ("r_hat".into(), col(&|p| p.r_hat)),
-            ("tau_int".into(), col(&|p| p.tau_int)),
-            ("mcse_mean".into(), col(&|p| p.mcse_mean)),
-        ]
+    fn summary_columns(&self) -> Vec<(&'static str, Vec<f64>)> {
+        mrbp::store::summary::statistics(&self.inner.summary)
     }
 
     /// The summary's parameter names, in its row order.
@@ -166,17 +153,8 @@ impl Calibration {
     /// bookkeeping columns (ensemble, chain, draw, accepted) and the
     /// coordinates with log_prob.
     fn chain_columns(&self) -> ChainColumns {
-        let ch = &self.inner.sample.chains;
-        let (nc, steps) = (ch.chains(), ch.steps());
-        let order = || (0..nc).flat_map(move |c| (0..steps).map(move |s| (s, c)));
-        let ints = vec![
-            ("ensemble".to_string(), order().map(|(_, c)| (c / ch.walkers) as i64).collect()),
-            ("chain".to_string(), order().map(|(_, c)| c as i64).collect()),
-            ("draw".to_string(), order().map(|(s, _)| s as i64).collect()),
-        ];
-        let mut floats: Vec<(String, Vec<f64>)> = self.inner.sample.layout.names.iter().enumerate().map(|(i, name)| (name.clone(), order().map(|(s, c)| ch.at(s, c, i)).collect())).collect();
-        floats.push(("log_prob".into(), order().map(|(s, c)| ch.log_prob[s * nc + c]).collect()));
-        (ints, floats, order().map(|(s, c)| ch.accepted[s * nc + c]).collect())
+        let c = mrbp::store::chains::columns(&self.inner.sample);
+        (c.bookkeeping, c.values, c.accepted)
     }
 
     /// The first step after the burn-in (the summary's draws start there).
@@ -260,22 +238,7 @@ impl Calibration {
                 made.map(|m| (m, notes))
             })
             .map_err(raise)?;
-        let r = &made.record;
-        let mut columns = vec![
-            ("time_s".to_string(), made.time.clone()),
-            ("displacement_m".to_string(), made.displacement.clone()),
-            ("current_a".to_string(), vec![r.current_a; made.time.len()]),
-            ("gamma_model".to_string(), made.gamma_model.clone()),
-        ];
-        let names = ["q025", "q25", "q50", "q75", "q975", "p025", "p975"];
-        let bands: Vec<&Vec<f64>> = made.model.iter().chain(made.predictive.iter()).collect();
-        for (name, band) in names.iter().zip(&bands) {
-            columns.push((name.to_string(), (*band).clone()));
-        }
-        for (name, band) in names.iter().zip(&bands) {
-            columns.push((format!("force_{name}_n"), band.iter().map(|t| t * r.area_m2).collect()));
-        }
-        Ok((columns, notes))
+        Ok((mrbp::store::simulation::columns(&made), notes))
     }
 
     fn __repr__(&self) -> String {

@@ -102,6 +102,11 @@ impl Calibration {
         self.sample.model.is_current_law()
     }
 
+    /// The lowest and highest current the calibration saw (A).
+    pub fn current_range(&self) -> (f64, f64) {
+        self.record.currents.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)))
+    }
+
     /// The largest R̂ and the smallest bulk or tail ESS of the summary.
     pub fn max_rhat(&self) -> f64 {
         self.summary.iter().map(|r| r.r_hat).fold(f64::NAN, f64::max)

@@ -213,14 +213,7 @@ impl Campaign {
     pub fn load(manifest_path: &Path) -> Result<Campaign> {
         let manifest = Manifest::read(manifest_path)?;
         let dir = manifest_path.parent().unwrap_or(Path::new("."));
-        let c = &manifest.columns;
-        let map = ColumnMap {
-            time: (&c.time, c.time_scale),
-            displacement: (&c.displacement, c.displacement_scale),
-            force: (&c.force, c.force_scale),
-            current: &c.current,
-            force_required: true,
-        };
+        let map = ColumnMap::of(&manifest.columns, true);
         let mut runs = Vec::with_capacity(manifest.runs.len());
         let mut notes = Vec::new();
         for spec in &manifest.runs {
@@ -259,7 +252,7 @@ impl Campaign {
             return Err(Error::input(&here, format!("{} runs but {} records", manifest.runs.len(), records.len())));
         }
         let c = Columns::default();
-        let map = ColumnMap { time: (&c.time, 1.0), displacement: (&c.displacement, 1.0), force: (&c.force, 1.0), current: &c.current, force_required: true };
+        let map = ColumnMap::of(&c, true);
         let mut runs = Vec::with_capacity(records.len());
         for (spec, record) in manifest.runs.iter().zip(records) {
             let path = PathBuf::from(format!("run '{}'", spec.id));

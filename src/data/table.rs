@@ -84,6 +84,21 @@ pub struct ColumnMap<'a> {
     pub force_required: bool,
 }
 
+impl<'a> ColumnMap<'a> {
+    /// The columns named and scaled as `columns` says; `force_required`
+    /// as the field.
+    pub fn of(columns: &'a Columns, force_required: bool) -> Self {
+        let c = columns;
+        ColumnMap {
+            time: (&c.time, c.time_scale),
+            displacement: (&c.displacement, c.displacement_scale),
+            force: (&c.force, c.force_scale),
+            current: &c.current,
+            force_required,
+        }
+    }
+}
+
 /// The record as CSV with the default column names ([`Columns`]);
 /// numbers in Rust's shortest round-trip form, so the file is the same on
 /// every machine.

@@ -66,7 +66,7 @@ impl Pipeline<'_> {
         let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
         let own = canonical(&campaign.manifest_path) == canonical(Path::new(&cal.record.manifest));
         let runs = if cal.is_current_law() {
-            let (lo, hi) = cal.record.currents.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)));
+            let (lo, hi) = cal.current_range();
             for run in campaign.runs.iter().filter(|r| r.spec.current_a < lo - 1e-9 || r.spec.current_a > hi + 1e-9) {
                 self.note(&format!("{}: {} A is outside the calibrated currents {lo}–{hi} A: the current law extrapolates", run.id(), run.spec.current_a));
             }
@@ -101,9 +101,7 @@ impl Pipeline<'_> {
     /// cannot be predicted (no draw integrates along it) is left out, with
     /// why, and the others are written; if none can be, nothing is.
     fn predict_runs(&mut self, cal: &Calibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, out: &Path, options: &PredictOptions) -> Result<(Prediction, Vec<(String, String)>)> {
-        if options.draws == 0 || options.replicates == 0 {
-            return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
-        }
+        options.check()?;
         let clock = Instant::now();
         let positions = cal.draw_positions(options.draws);
         let settings = cal.predict_settings(options.replicates, options.seed);
@@ -166,6 +164,8 @@ impl Pipeline<'_> {
             self.note(&format!("leave-one-out skipped: the calibration in {} has a single run", cal.dir.display()));
             return Ok(None);
         }
+        // the study goes into the calibration's folder: held before the work
+        self.prepare(&cal.dir, "--out", &[], &[], true)?;
         let clock = Instant::now();
         let progress = self.progress;
         let listener = &mut *self.listener;
@@ -176,7 +176,6 @@ impl Pipeline<'_> {
         let held = leave_one_out(cal, &campaign, loo, &mut observe)?;
         let (bands, rows): (Vec<RunBands>, Vec<LooRow>) = held.into_iter().map(|h| (h.prediction.bands, h.row)).unzip();
         let study = LeaveOneOut { rows, bands };
-        self.prepare(&cal.dir, "--out", &[], &[], true)?;
         store::coverage::write_leave_one_out(&cal.dir, &study, &cal.record.calibration_id)?;
         self.emit(Event::LeftOneOut { rows: &study.rows, seconds: clock.elapsed().as_secs_f64() });
         Ok(Some(study))

@@ -26,8 +26,7 @@ impl Pipeline<'_> {
     /// (`simulation.parquet`, `simulation.toml`, a figure).
     pub fn simulate(&mut self, cal: &Calibration, input: &Path, current: Option<f64>, out: &Path, options: &PredictOptions) -> Result<Simulation> {
         let c = Columns::default();
-        let map = ColumnMap { time: (&c.time, 1.0), displacement: (&c.displacement, 1.0), force: (&c.force, 1.0), current: &c.current, force_required: false };
-        let record = Record::read(input, &map)?;
+        let record = Record::read(input, &ColumnMap::of(&c, false))?;
         let simulation = self.simulation(cal, input, record, current, options, Some(out))?;
         crate::report::simulation::write(out, &simulation, &cal.label())?;
         crate::store::simulation::write(out, &simulation)?;
@@ -40,11 +39,9 @@ impl Pipeline<'_> {
     /// optionally current; its force is ignored) named by `input` in
     /// messages, without writing anything but holding `out` if given.
     pub fn simulation(&mut self, cal: &Calibration, input: &Path, mut record: Record, current: Option<f64>, options: &PredictOptions, out: Option<&Path>) -> Result<Simulation> {
-        if options.draws == 0 || options.replicates == 0 {
-            return Err(Error::Usage("--draws and --replicates must be at least 1".into()));
-        }
+        options.check()?;
         let c = Columns::default();
-        let map = ColumnMap { time: (&c.time, 1.0), displacement: (&c.displacement, 1.0), force: (&c.force, 1.0), current: &c.current, force_required: false };
+        let map = ColumnMap::of(&c, false);
         record.force = vec![f64::NAN; record.len()];
         record.check(input, &map)?;
         record.check_limits(input, &map, &Limits::default())?;
@@ -140,7 +137,7 @@ impl Pipeline<'_> {
             }
             return Ok(false);
         }
-        let (lo, hi) = cal.record.currents.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)));
+        let (lo, hi) = cal.current_range();
         let reach = EXTRAPOLATION_LIMIT * (hi - lo);
         if current_a < lo - reach || current_a > hi + reach {
             return Err(Error::Usage(format!(

@@ -29,6 +29,16 @@ pub struct PredictOptions {
     pub seed: u64,
 }
 
+impl PredictOptions {
+    /// Refuses no draws or no replicates.
+    pub fn check(&self) -> Result<()> {
+        if self.draws == 0 || self.replicates == 0 {
+            return Err(crate::error::Error::Usage("--draws and --replicates must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
 impl Default for PredictOptions {
     fn default() -> Self {
         PredictOptions { draws: 400, replicates: 10, seed: 1 }

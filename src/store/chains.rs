@@ -11,26 +11,42 @@ use crate::sampler::Chains;
 
 const BOOKKEEPING: [&str; 5] = ["ensemble", "chain", "draw", "log_prob", "accepted"];
 
-/// Writes the chains of calibration `id`.
-pub fn write(path: &Path, sample: &PosteriorSample, id: &str) -> Result<()> {
+/// The columns of `chains.parquet`, in order: the integer bookkeeping
+/// (`ensemble`, `chain`, `draw`), the coordinates and `log_prob`, and
+/// `accepted`; rows chain by chain, steps in order. What the file and the
+/// Python package's frame hold.
+pub struct Columns {
+    pub bookkeeping: Vec<(&'static str, Vec<i64>)>,
+    pub values: Vec<(String, Vec<f64>)>,
+    pub accepted: Vec<bool>,
+}
+
+/// The columns of `sample`'s chains.
+pub fn columns(sample: &PosteriorSample) -> Columns {
     let ch = &sample.chains;
     let (nc, steps) = (ch.chains(), ch.steps());
-    let rows = nc * steps;
     let order = || (0..nc).flat_map(move |c| (0..steps).map(move |s| (s, c)));
-    let mut t = Table::new()
-        .i64("ensemble", order().map(|(_, c)| (c / ch.walkers) as i64).collect())
-        .i64("chain", order().map(|(_, c)| c as i64).collect())
-        .i64("draw", order().map(|(s, _)| s as i64).collect());
-    for (i, name) in sample.layout.names.iter().enumerate() {
-        let mut col = Vec::with_capacity(rows);
-        col.extend(order().map(|(s, c)| ch.at(s, c, i)));
-        t = t.f64(name, col);
+    let bookkeeping = vec![
+        ("ensemble", order().map(|(_, c)| (c / ch.walkers) as i64).collect()),
+        ("chain", order().map(|(_, c)| c as i64).collect()),
+        ("draw", order().map(|(s, _)| s as i64).collect()),
+    ];
+    let mut values: Vec<(String, Vec<f64>)> = sample.layout.names.iter().enumerate().map(|(i, name)| (name.clone(), order().map(|(s, c)| ch.at(s, c, i)).collect())).collect();
+    values.push(("log_prob".into(), order().map(|(s, c)| ch.log_prob[s * nc + c]).collect()));
+    Columns { bookkeeping, values, accepted: order().map(|(s, c)| ch.accepted[s * nc + c]).collect() }
+}
+
+/// Writes the chains of calibration `id`.
+pub fn write(path: &Path, sample: &PosteriorSample, id: &str) -> Result<()> {
+    let columns = columns(sample);
+    let mut t = Table::new().derived_from(id);
+    for (name, values) in columns.bookkeeping {
+        t = t.i64(name, values);
     }
-    let t = t
-        .derived_from(id)
-        .f64("log_prob", order().map(|(s, c)| ch.log_prob[s * nc + c]).collect())
-        .bool("accepted", order().map(|(s, c)| ch.accepted[s * nc + c]).collect());
-    write_parquet(path, t)
+    for (name, values) in columns.values {
+        t = t.f64(&name, values);
+    }
+    write_parquet(path, t.bool("accepted", columns.accepted))
 }
 
 /// Reads the chains back; their coordinates must be those of `layout`.

@@ -49,10 +49,9 @@ pub const RUNS: &str = "runs";
 /// The metadata key naming the run-alone calibrations (`run=id,…`).
 pub const RUN_IDS: &str = "mrbp.run_calibration_ids";
 
-/// The consistency of the runs of calibration `id` in its folder `dir`;
-/// one derived from another calibration, or from run-alone calibrations
-/// since redone, is refused.
-pub fn read(dir: &Path, id: &str) -> Result<Vec<ParameterConsistency>> {
+/// Refuses the consistency table in `dir` unless it was derived from
+/// calibration `id` and from the run-alone calibrations now in `runs/`.
+pub fn check(dir: &Path, id: &str) -> Result<()> {
     let path = dir.join(FILE);
     let rebuild = "mrbp sample MANIFEST --out DIR --per-run --force";
     super::check_derived(&path, id, rebuild)?;
@@ -66,6 +65,15 @@ pub fn read(dir: &Path, id: &str) -> Result<Vec<ParameterConsistency>> {
             }
         }
     }
+    Ok(())
+}
+
+/// The consistency of the runs of calibration `id` in its folder `dir`;
+/// one derived from another calibration, or from run-alone calibrations
+/// since redone, is refused.
+pub fn read(dir: &Path, id: &str) -> Result<Vec<ParameterConsistency>> {
+    check(dir, id)?;
+    let path = dir.join(FILE);
     let df = read_parquet(&path)?;
     let s = |n: &str| str_column(&df, n, &path);
     let f = |n: &str| f64_column(&df, n, &path);

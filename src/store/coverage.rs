@@ -14,7 +14,7 @@ pub const LOO: &str = "loo.parquet";
 pub const LOO_BANDS: &str = "loo_bands.parquet";
 
 /// The command that makes a leave-one-out study afresh, for messages.
-const REBUILD_LOO: &str = "mrbp report DIR --leave-one-out";
+pub const REBUILD_LOO: &str = "mrbp report DIR --leave-one-out";
 
 /// Writes a leave-one-out study of calibration `id` into its folder `dir`:
 /// `loo.parquet`, which says the study is complete, goes first and comes

@@ -99,12 +99,15 @@ pub fn parquet_meta(path: &Path, key: &str) -> Result<Option<String>> {
 /// `rebuild` is the command that makes it afresh.
 pub fn check_derived(path: &Path, id: &str, rebuild: &str) -> Result<()> {
     match parquet_meta(path, CALIBRATION_ID)? {
-        Some(found) if found != id => Err(Error::input(
-            path,
-            format!("stale: derived from calibration {found}, not from {id}, the one this folder holds; rebuild it with `{rebuild}`"),
-        )),
+        Some(found) if found != id => Err(Error::input(path, stale(&found, id, rebuild))),
         _ => Ok(()),
     }
+}
+
+/// What a file derived from calibration `found` is, in a folder that holds
+/// calibration `id`; `rebuild` makes it afresh.
+pub fn stale(found: &str, id: &str, rebuild: &str) -> String {
+    format!("stale: derived from calibration {found}, not from {id}, the one this folder holds; rebuild it with `{rebuild}`")
 }
 
 /// A float column of a table read back, with a clear error naming `path`.

@@ -47,22 +47,29 @@ pub struct SimulationRecord {
     pub extrapolated: bool,
 }
 
+/// The columns of `simulation.parquet`, in order: what the file and the
+/// Python package's frame hold.
+pub fn columns(s: &Simulation) -> Vec<(String, Vec<f64>)> {
+    let r = &s.record;
+    let mut columns = vec![
+        ("time_s".to_string(), s.time.clone()),
+        ("displacement_m".to_string(), s.displacement.clone()),
+        ("current_a".to_string(), vec![r.current_a; s.time.len()]),
+        ("gamma_model".to_string(), s.gamma_model.clone()),
+    ];
+    let bands = || MODEL.iter().zip(&s.model).chain(PREDICTIVE.iter().zip(&s.predictive));
+    columns.extend(bands().map(|(name, band)| (name.to_string(), band.clone())));
+    columns.extend(bands().map(|(name, band)| (format!("force_{name}_n"), band.iter().map(|t| t * r.area_m2).collect())));
+    columns
+}
+
 /// Writes the simulation into `dir`, the record last.
 pub fn write(dir: &Path, s: &Simulation) -> Result<()> {
     let r = &s.record;
     crate::atomic::remove(&dir.join(RECORD))?;
-    let force = |v: &[f64]| v.iter().map(|t| t * r.area_m2).collect::<Vec<f64>>();
-    let mut t = Table::new()
-        .derived_from(&r.calibration_id)
-        .f64("time_s", s.time.clone())
-        .f64("displacement_m", s.displacement.clone())
-        .f64("current_a", vec![r.current_a; s.time.len()])
-        .f64("gamma_model", s.gamma_model.clone());
-    for (name, band) in MODEL.iter().zip(&s.model).chain(PREDICTIVE.iter().zip(&s.predictive)) {
-        t = t.f64(name, band.clone());
-    }
-    for (name, band) in MODEL.iter().zip(&s.model).chain(PREDICTIVE.iter().zip(&s.predictive)) {
-        t = t.f64(&format!("force_{name}_n"), force(band));
+    let mut t = Table::new().derived_from(&r.calibration_id);
+    for (name, values) in columns(s) {
+        t = t.f64(&name, values);
     }
     write_parquet(&dir.join(FILE), t)?;
     let text = toml::to_string(r).map_err(|e| Error::Compute(format!("writing {RECORD}: {e}")))?;
@@ -72,11 +79,16 @@ pub fn write(dir: &Path, s: &Simulation) -> Result<()> {
 const MODEL: [&str; 5] = ["q025", "q25", "q50", "q75", "q975"];
 const PREDICTIVE: [&str; 2] = ["p025", "p975"];
 
-/// Reads the simulation in `dir` back.
-pub fn read(dir: &Path) -> Result<Simulation> {
+/// The record of the simulation in `dir`.
+pub fn read_record(dir: &Path) -> Result<SimulationRecord> {
     let path = dir.join(RECORD);
     let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
-    let record: SimulationRecord = toml::from_str(&text).map_err(|e| Error::input(&path, format!("not a simulation record: {}", e.message())))?;
+    toml::from_str(&text).map_err(|e| Error::input(&path, format!("not a simulation record: {}", e.message())))
+}
+
+/// Reads the simulation in `dir` back.
+pub fn read(dir: &Path) -> Result<Simulation> {
+    let record = read_record(dir)?;
     let table = dir.join(FILE);
     super::check_derived(&table, &record.calibration_id, "mrbp simulate CALIBRATION --input FILE --out DIR")?;
     let df = read_parquet(&table)?;

@@ -137,15 +137,15 @@ fn enclosing(dir: &Path) -> Option<String> {
 fn check_simulation(dir: &Path, problems: &mut Vec<String>) {
     let rebuild = "mrbp simulate CALIBRATION --input FILE --out DIR";
     if !dir.join(simulation::RECORD).exists() {
-        return problems.push(format!("{}: missing, the simulation is incomplete (stopped while written); rebuild: `{rebuild}`", simulation::RECORD));
+        return problems.push(format!("{}: missing, the simulation is incomplete (stopped while written); rebuild it with `{rebuild}`", simulation::RECORD));
     }
-    match simulation::read(dir) {
-        Err(e) => problems.push(e.to_string()),
-        Ok(s) => {
-            if let Some(id) = enclosing(dir).filter(|id| *id != s.record.calibration_id) {
-                problems.push(stale(&dir.join(simulation::FILE), &s.record.calibration_id, &id, rebuild));
-            }
-        }
+    let made_from = match simulation::read_record(dir) {
+        Ok(r) => r.calibration_id,
+        Err(e) => return problems.push(e.to_string()),
+    };
+    check_table(&dir.join(simulation::FILE), &made_from, rebuild, problems);
+    if let Some(id) = enclosing(dir).filter(|id| *id != made_from) {
+        problems.push(stale(&dir.join(simulation::FILE), &made_from, &id, rebuild));
     }
 }
 
@@ -166,7 +166,7 @@ fn check_table(path: &Path, id: &str, rebuild: &str, problems: &mut Vec<String>)
 }
 
 fn stale(path: &Path, found: &str, id: &str, rebuild: &str) -> String {
-    format!("{}: stale (from calibration {found}, the folder holds {id}); rebuild: `{rebuild}`", name(path))
+    format!("{}: {}", name(path), super::parquet::stale(found, id, rebuild))
 }
 
 fn name(path: &Path) -> String {
@@ -176,7 +176,7 @@ fn name(path: &Path) -> String {
 fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
     let record_path = dir.join(folder::RECORD);
     if !record_path.exists() {
-        problems.push(format!("{}: missing, the calibration is incomplete (stopped while written); rebuild: `{}`", folder::RECORD, folder::REBUILD));
+        problems.push(format!("{}: missing, the calibration is incomplete (stopped while written); rebuild it with `{}`", folder::RECORD, folder::REBUILD));
         return;
     }
     let id = match record::read(&record_path) {
@@ -185,7 +185,7 @@ fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
     };
     for file in [folder::CHAINS, folder::SUMMARY, folder::CONFIG] {
         if !dir.join(file).exists() {
-            problems.push(format!("{file}: missing; rebuild: `{}`", folder::REBUILD));
+            problems.push(format!("{file}: missing; rebuild it with `{}`", folder::REBUILD));
         }
     }
     for file in [folder::CHAINS, folder::SUMMARY, identification::FILE] {
@@ -202,15 +202,15 @@ fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
     }
     let (loo, loo_bands) = (dir.join(coverage::LOO), dir.join(coverage::LOO_BANDS));
     if loo_bands.exists() && !loo.exists() {
-        problems.push(format!("{}: missing, the leave-one-out study is incomplete; rebuild: `mrbp report DIR --leave-one-out`", coverage::LOO));
+        problems.push(format!("{}: missing, the leave-one-out study is incomplete; rebuild it with `mrbp report DIR --leave-one-out`", coverage::LOO));
     }
     if loo.exists() {
-        if let Err(e) = coverage::read_leave_one_out(dir, &id) {
-            problems.push(e.to_string());
+        for file in [loo, loo_bands] {
+            check_table(&file, &id, coverage::REBUILD_LOO, problems);
         }
     }
     if dir.join(consistency::FILE).exists() {
-        if let Err(e) = consistency::read(dir, &id) {
+        if let Err(e) = consistency::check(dir, &id) {
             problems.push(e.to_string());
         }
     }
@@ -222,7 +222,7 @@ fn check_prediction(dir: &Path, calibration: Option<&str>, rebuild: &str, proble
     let record_path = dir.join(prediction::RECORD);
     if !record_path.exists() {
         if files.iter().any(|f| dir.join(f).exists()) {
-            problems.push(format!("{}: missing, the bands are incomplete (stopped while written); rebuild: `{rebuild}`", prediction::RECORD));
+            problems.push(format!("{}: missing, the bands are incomplete (stopped while written); rebuild it with `{rebuild}`", prediction::RECORD));
         }
         return;
     }
@@ -237,7 +237,7 @@ fn check_prediction(dir: &Path, calibration: Option<&str>, rebuild: &str, proble
     }
     for file in files {
         if !dir.join(file).exists() {
-            problems.push(format!("{file}: missing; rebuild: `{rebuild}`"));
+            problems.push(format!("{file}: missing; rebuild it with `{rebuild}`"));
         }
         check_table(&dir.join(file), &made_from, rebuild, problems);
     }
@@ -252,14 +252,14 @@ fn check_report(dir: &Path, ids: &[String], rebuild: &str, problems: &mut Vec<St
     let Ok(html) = std::fs::read_to_string(&path) else { return };
     let named = report_ids(&html);
     if !named.is_empty() && named != ids {
-        problems.push(format!("{}: stale (made from calibration(s) {}, the folder holds {}); rebuild: `{rebuild}`", name(&path), named.join(", "), ids.join(", ")));
+        problems.push(format!("{}: stale (made from calibration(s) {}, the folder holds {}); rebuild it with `{rebuild}`", name(&path), named.join(", "), ids.join(", ")));
     }
 }
 
 fn check_comparison(dir: &Path, problems: &mut Vec<String>) {
     let rebuild = "mrbp compare DIR DIR … --out OUT";
     if !dir.join(comparison::RECORD).exists() {
-        return problems.push(format!("{}: missing, the comparison is incomplete (stopped while written, or made before comparisons were recorded); rebuild: `{rebuild}`", comparison::RECORD));
+        return problems.push(format!("{}: missing, the comparison is incomplete (stopped while written, or made before comparisons were recorded); rebuild it with `{rebuild}`", comparison::RECORD));
     }
     let record = match comparison::read_record(dir) {
         Ok(r) => r,
@@ -270,8 +270,8 @@ fn check_comparison(dir: &Path, problems: &mut Vec<String>) {
         let now = record::read(&cal.join(folder::RECORD)).map(|r| r.calibration_id);
         match now {
             Ok(now) if now == c.calibration_id => {}
-            Ok(now) => problems.push(format!("{}: calibrated again since this comparison (calibration {} then, {now} now); rebuild: `{rebuild}`", cal.display(), c.calibration_id)),
-            Err(_) => problems.push(format!("{}: no complete calibration there any more (it held {}); rebuild: `{rebuild}`", cal.display(), c.calibration_id)),
+            Ok(now) => problems.push(format!("{}: calibrated again since this comparison (calibration {} then, {now} now); rebuild it with `{rebuild}`", cal.display(), c.calibration_id)),
+            Err(_) => problems.push(format!("{}: no complete calibration there any more (it held {}); rebuild it with `{rebuild}`", cal.display(), c.calibration_id)),
         }
     }
     let ids = comparison::ids_text(&record);
@@ -279,7 +279,7 @@ fn check_comparison(dir: &Path, problems: &mut Vec<String>) {
         let path = dir.join(file);
         match table_id(&path, comparison::CALIBRATION_IDS) {
             Err(e) => problems.push(e),
-            Ok(Some(found)) if found != ids => problems.push(format!("{file}: stale (compares {found}, the record {ids}); rebuild: `{rebuild}`")),
+            Ok(Some(found)) if found != ids => problems.push(format!("{file}: stale (compares {found}, the record {ids}); rebuild it with `{rebuild}`")),
             Ok(_) => {}
         }
     }

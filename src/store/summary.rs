@@ -11,27 +11,34 @@ use crate::sampler::ParameterDiagnostics;
 /// The rows of a calibration whose draws run from `burn_in` to `steps`, of
 /// `walkers` chains in all, of calibration `id`.
 pub fn write(path: &Path, rows: &[SummaryRow], burn_in: usize, steps: usize, walkers: usize, id: &str) -> Result<()> {
-    let col = |f: &dyn Fn(&ParameterDiagnostics) -> f64| rows.iter().map(|r| f(&r.stats)).collect::<Vec<f64>>();
     let n = rows.len();
-    write_parquet(
-        path,
-        Table::new()
-            .derived_from(id)
-            .str("parameter", rows.iter().map(|r| r.parameter.clone()).collect())
-            .f64("mean", col(&|p| p.mean))
-            .f64("sd", col(&|p| p.sd))
-            .f64("q05", col(&|p| p.q05))
-            .f64("q50", col(&|p| p.q50))
-            .f64("q95", col(&|p| p.q95))
-            .f64("ess_bulk", col(&|p| p.ess_bulk))
-            .f64("ess_tail", col(&|p| p.ess_tail))
-            .f64("r_hat", col(&|p| p.r_hat))
-            .f64("tau_int", col(&|p| p.tau_int))
-            .f64("mcse_mean", col(&|p| p.mcse_mean))
-            .i64("first_draw", vec![burn_in as i64; n])
-            .i64("last_draw", vec![steps as i64; n])
-            .i64("walkers", vec![walkers as i64; n]),
-    )
+    let mut t = Table::new().derived_from(id).str("parameter", rows.iter().map(|r| r.parameter.clone()).collect());
+    for (name, values) in statistics(rows) {
+        t = t.f64(name, values);
+    }
+    let t = t.i64("first_draw", vec![burn_in as i64; n]).i64("last_draw", vec![steps as i64; n]).i64("walkers", vec![walkers as i64; n]);
+    write_parquet(path, t)
+}
+
+/// A summary column: its name and how it reads a coordinate's statistics.
+type Statistic = (&'static str, fn(&ParameterDiagnostics) -> f64);
+
+/// The statistics columns of the summary (after `parameter`), in order:
+/// what the file and the Python package's frame hold.
+pub fn statistics(rows: &[SummaryRow]) -> Vec<(&'static str, Vec<f64>)> {
+    let fields: [Statistic; 10] = [
+        ("mean", |p| p.mean),
+        ("sd", |p| p.sd),
+        ("q05", |p| p.q05),
+        ("q50", |p| p.q50),
+        ("q95", |p| p.q95),
+        ("ess_bulk", |p| p.ess_bulk),
+        ("ess_tail", |p| p.ess_tail),
+        ("r_hat", |p| p.r_hat),
+        ("tau_int", |p| p.tau_int),
+        ("mcse_mean", |p| p.mcse_mean),
+    ];
+    fields.into_iter().map(|(name, f)| (name, rows.iter().map(|r| f(&r.stats)).collect())).collect()
 }
 
 pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
