@@ -8,6 +8,9 @@ The same Rust library as the ``mrbp`` command line, one import away::
     cal = mrbp.calibrate(campaign, current=1.0, seed=1)
     cal.summary            # a pandas DataFrame, as summary.parquet
     cal.draws              # every walker's every step, as chains.parquet
+    cal.predict().bands    # the model and predictive bands of the runs
+    cal.to_inference_data()     # ArviZ: az.summary, az.plot_trace, az.loo
+    cal.simulate(t, x)     # the force along an excitation of your own
     cal.save("results/I1.0A")   # the folder the command line writes
     mrbp.load("results/I1.0A")
 
@@ -18,16 +21,21 @@ bit for bit (docs/python.md).
 
 from __future__ import annotations
 
+import io
+import json
+import sys
+import time as _time
 import warnings
+from dataclasses import dataclass, field
 from os import PathLike
-from typing import Mapping, Optional, Tuple, Union
+from typing import Callable, Dict, Mapping, Optional, Tuple, Union
 
 import numpy as np
 import pandas as pd
 
 from . import _mrbp
 
-__all__ = ["Campaign", "Calibration", "calibrate", "load", "__version__"]
+__all__ = ["Campaign", "Calibration", "Prediction", "calibrate", "load", "__version__"]
 __version__ = _mrbp.version()
 
 Path = Union[str, "PathLike[str]"]
@@ -79,7 +87,11 @@ class Campaign:
                     if required:
                         raise ValueError(f"run '{run_id}', column '{name}': no such column in the frame")
                     return None
-                return np.asarray(frame[name], dtype=np.float64).tolist()
+                try:
+                    # read in place by the library when already contiguous float64
+                    return np.ascontiguousarray(frame[name], dtype=np.float64)
+                except (TypeError, ValueError) as e:
+                    raise ValueError(f"run '{run_id}', column '{name}': not numbers ({e})") from None
 
             runs.append(
                 (
@@ -117,6 +129,54 @@ class Campaign:
         return repr(self._inner)
 
 
+@dataclass
+class Prediction:
+    """The bands of a calibration's runs (``Calibration.predict``): the
+    tables ``mrbp predict`` writes, as frames."""
+
+    bands: "pd.DataFrame"
+    coverage: "pd.DataFrame"
+    adequacy: "pd.DataFrame"
+    #: runs that could not be predicted: run id -> why
+    failed: Dict[str, str] = field(default_factory=dict)
+
+
+class _Progress:
+    """A progress display for ``calibrate(progress=True)``: a tqdm bar
+    (a widget in a notebook) when tqdm is installed, else one line on
+    ``sys.stderr`` rewritten in place (a notebook shows it in the cell)."""
+
+    def __init__(self):
+        try:
+            from tqdm.auto import tqdm
+        except ImportError:
+            tqdm = None
+        self._tqdm = tqdm
+        self._bar = None
+        self._shown = 0.0
+
+    def __call__(self, stage, step, max_steps, ess, ess_target, r_hat, acceptance):
+        status = f"acceptance {acceptance:.2f}"
+        if ess is not None:
+            target = f"/{ess_target:.0f}" if ess_target is not None else ""
+            status += f", smallest ESS {ess:.0f}{target}, largest R̂ {r_hat:.4f}"
+        if self._tqdm is not None:
+            if self._bar is None:
+                self._bar = self._tqdm(total=max_steps, desc="sampling", unit="step", initial=step)
+            self._bar.n = step
+            self._bar.set_postfix_str(status, refresh=False)
+            self._bar.refresh()
+            if stage == "finished":
+                self._bar.close()
+            return
+        now = _time.monotonic()
+        if stage == "step" and now - self._shown < 0.5:
+            return
+        self._shown = now
+        end = "\n" if stage == "finished" else ""
+        print(f"\rsampling: step {step} of at most {max_steps}, {status}   ", end=end, file=sys.stderr, flush=True)
+
+
 class Calibration:
     """A calibration: its posterior sample, summary and diagnostics."""
 
@@ -137,9 +197,9 @@ class Calibration:
         ``chains.parquet``: ensemble, chain, draw, the coordinates (SI),
         log_prob, accepted. Keep ``draw >= burn_in`` for the posterior."""
         ints, floats, accepted = self._inner.chain_columns()
-        columns = {name: np.asarray(v, dtype=np.int64) for name, v in ints}
-        columns.update({name: np.asarray(v, dtype=np.float64) for name, v in floats})
-        columns["accepted"] = np.asarray(accepted, dtype=bool)
+        columns = dict(ints)
+        columns.update(floats)
+        columns["accepted"] = accepted
         return pd.DataFrame(columns)
 
     @property
@@ -185,10 +245,10 @@ class Calibration:
         current law, draws that failed) come as warnings."""
         column = None
         if current is not None and np.ndim(current) > 0:
-            column, current = np.asarray(current, dtype=np.float64).tolist(), None
-        columns, notes = self._inner.simulate(
-            np.asarray(time, dtype=np.float64).tolist(),
-            np.asarray(displacement, dtype=np.float64).tolist(),
+            column, current = np.ascontiguousarray(current, dtype=np.float64), None
+        columns, notes, positions = self._inner.simulate(
+            np.ascontiguousarray(time, dtype=np.float64),
+            np.ascontiguousarray(displacement, dtype=np.float64),
             current=None if current is None else float(current),
             current_column=column,
             draws=int(draws),
@@ -197,12 +257,80 @@ class Calibration:
         )
         for note in notes:
             warnings.warn(note, stacklevel=2)
-        return pd.DataFrame(dict(columns))
+        frame = pd.DataFrame(dict(columns), copy=False)
+        # the posterior draws propagated: (draw, chain) rows of .draws
+        frame.attrs["draws"] = [(int(s), int(c)) for s, c in positions]
+        return frame
+
+    def predict(self, draws: int = 400, replicates: int = 10, seed: int = 1) -> "Prediction":
+        """The bands of the calibration's runs, as ``mrbp predict`` writes
+        them (the same numbers at the same options): ``.bands`` (one row per
+        run and sample: the model band q025 … q975 and the 95 % predictive
+        band p025, p975 of the shear stress, Pa, beside the record),
+        ``.coverage`` (one row per run: the share of samples inside each
+        band, lppd) and ``.adequacy`` (one row per run: where the law misses
+        the record). Runs that cannot be predicted are left out, named in
+        ``.failed`` and in a warning.
+
+        A current law predicts every run of its campaign; a per-current
+        calibration its own runs."""
+        tables, failed, notes = self._inner.predict(int(draws), int(replicates), int(seed))
+        frames = {name: pd.read_parquet(io.BytesIO(data)) for name, data in tables}
+        for note in notes:
+            warnings.warn(note, stacklevel=2)
+        for run, why in failed:
+            warnings.warn(f"{run}: not predicted: {why}", stacklevel=2)
+        return Prediction(
+            bands=frames["bands.parquet"],
+            coverage=frames["coverage.parquet"],
+            adequacy=frames["adequacy.parquet"],
+            failed=dict(failed),
+        )
+
+    def to_inference_data(self, seed: int = 1):
+        """The calibration as ArviZ's ``InferenceData``, built in memory:
+        the groups of ``inference.zarr`` (posterior, sample_stats,
+        log_likelihood, posterior_predictive, observed_data) with the same
+        values, so ``az.summary``, ``az.plot_trace`` and ``az.loo(idata,
+        reff=1.0)`` work on it. ``seed`` seeds the replicated records, as
+        ``mrbp predict --predict-seed``. Needs ``arviz`` and ``xarray``.
+
+        One chain is one walker; the root's and each group's attributes say
+        how mrbp's R̂ (over independent ensembles, in ``.summary``) differs
+        from ArviZ's over walkers."""
+        import arviz as az
+        import xarray as xr
+
+        root, groups, notes = self._inner.inference_data(int(seed))
+        for note in notes:
+            warnings.warn(note, stacklevel=2)
+        datasets = {}
+        for name, attrs, nodes in groups:
+            named = set()
+            for _, _, _, node_attrs in nodes:
+                named.update(json.loads(node_attrs).get("coordinates", "").split())
+            coords, variables = {}, {}
+            for node, dims, values, node_attrs in nodes:
+                node_attrs = json.loads(node_attrs)
+                node_attrs.pop("coordinates", None)
+                shape = tuple(n for _, n in dims)
+                dim_names = tuple(d for d, _ in dims)
+                values = np.asarray(values).reshape(shape)
+                entry = (dim_names, values, node_attrs)
+                if (len(dims) == 1 and dims[0][0] == node) or node in named:
+                    coords[node] = entry
+                else:
+                    variables[node] = entry
+            datasets[name] = xr.Dataset(variables, coords=coords, attrs=json.loads(attrs))
+        return az.InferenceData(attrs=json.loads(root), **datasets)
 
     def save(self, folder: Path, force: bool = False) -> None:
         """Writes the calibration folder ``mrbp sample`` would write (the
         command line's predict, report and compare read it); an earlier
-        calibration there is replaced only with ``force=True``."""
+        calibration there is replaced only with ``force=True``. A campaign
+        made from frames is written beside it first (``records/``: a
+        manifest and one CSV per run), so the command line finds its
+        records."""
         self._inner.save(str(folder), force)
 
     def __repr__(self) -> str:
@@ -221,7 +349,9 @@ def calibrate(
     substeps: Optional[int] = None,
     config: Optional[Path] = None,
     exact_input: bool = False,
-    progress: bool = False,
+    progress: Union[bool, Callable[..., None]] = False,
+    checkpoint: Optional[Path] = None,
+    resume: bool = False,
 ) -> Calibration:
     """Calibrates the runs of ``campaign`` at ``current`` (or all runs with
     ``model="current-law"``), as ``mrbp sample`` does with the same options:
@@ -230,10 +360,25 @@ def calibrate(
     noise: 'gaussian' (default), 'student-t', 'ar1', 'discrepancy';
     steps: a fixed number of steps (default: until R̂ < 1.01 and ESS ≥ 400);
     config: a settings file (TOML) as ``--config``;
-    progress: a progress line while sampling.
+    progress: True for a progress bar (tqdm's where installed, a notebook
+        widget in Jupyter; else a line on stderr), or a callable
+        ``f(stage, step, max_steps, ess, ess_target, r_hat, acceptance)``
+        called at "started", every "step" and "finished" (ess and r_hat are
+        None until the first convergence check);
+    checkpoint: a file for the sampler's state, saved every 100 steps and
+        at Ctrl-C (and removed when the calibration is done);
+    resume: continue from ``checkpoint`` (with the same options): the
+        chains equal an uninterrupted run's, bit for bit.
 
-    The GIL is released while it samples; Ctrl-C raises KeyboardInterrupt.
+    The GIL is released while it samples; Ctrl-C raises KeyboardInterrupt
+    at the next step (with the checkpoint saved, if one is kept).
     """
+    if progress is True:
+        progress = _Progress()
+    elif progress is False or progress is None:
+        progress = None
+    elif not callable(progress):
+        raise ValueError("progress: True, False or a callable")
     inner = _mrbp.calibrate(
         campaign._inner,
         current=current,
@@ -247,6 +392,8 @@ def calibrate(
         config=None if config is None else str(config),
         exact_input=exact_input,
         progress=progress,
+        checkpoint=None if checkpoint is None else str(checkpoint),
+        resume=resume,
     )
     return Calibration(inner)
 

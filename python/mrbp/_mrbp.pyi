@@ -1,6 +1,14 @@
 """Type hints of the compiled module behind the `mrbp` package."""
 
-from typing import List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+Floats = npt.NDArray[np.float64]
+#: one array of an InferenceData group: name, (dimension, length) pairs,
+#: values (a NumPy array, or a list of strings), attributes as JSON
+DataNode = Tuple[str, List[Tuple[str, int]], Union[np.ndarray, List[str]], str]
 
 def version() -> str: ...
 
@@ -12,7 +20,7 @@ class Campaign:
         name: str,
         area_m2: float,
         gap_m: float,
-        runs: Sequence[Tuple[str, float, Sequence[float], Sequence[float], Sequence[float], Optional[Sequence[float]]]],
+        runs: Sequence[Tuple[str, float, Floats, Floats, Floats, Optional[Floats]]],
     ) -> "Campaign": ...
     @property
     def name(self) -> str: ...
@@ -26,9 +34,9 @@ class Campaign:
 class Calibration:
     @staticmethod
     def load(folder: str) -> "Calibration": ...
-    def summary_columns(self) -> List[Tuple[str, List[float]]]: ...
+    def summary_columns(self) -> List[Tuple[str, Floats]]: ...
     def summary_parameters(self) -> List[str]: ...
-    def chain_columns(self) -> Tuple[List[Tuple[str, List[int]]], List[Tuple[str, List[float]]], List[bool]]: ...
+    def chain_columns(self) -> Tuple[List[Tuple[str, npt.NDArray[np.int64]]], List[Tuple[str, Floats]], npt.NDArray[np.bool_]]: ...
     @property
     def burn_in(self) -> int: ...
     @property
@@ -42,14 +50,16 @@ class Calibration:
     def save(self, folder: str, force: bool = False) -> None: ...
     def simulate(
         self,
-        time: Sequence[float],
-        displacement: Sequence[float],
+        time: Floats,
+        displacement: Floats,
         current: Optional[float] = None,
-        current_column: Optional[Sequence[float]] = None,
+        current_column: Optional[Floats] = None,
         draws: int = 400,
         replicates: int = 10,
         seed: int = 1,
-    ) -> Tuple[List[Tuple[str, List[float]]], List[str]]: ...
+    ) -> Tuple[List[Tuple[str, Floats]], List[str], List[Tuple[int, int]]]: ...
+    def predict(self, draws: int = 400, replicates: int = 10, seed: int = 1) -> Tuple[List[Tuple[str, bytes]], List[Tuple[str, str]], List[str]]: ...
+    def inference_data(self, seed: int = 1) -> Tuple[str, List[Tuple[str, str, List[DataNode]]], List[str]]: ...
 
 def calibrate(
     campaign: Campaign,
@@ -63,5 +73,7 @@ def calibrate(
     substeps: Optional[int] = None,
     config: Optional[str] = None,
     exact_input: bool = False,
-    progress: bool = False,
+    progress: Optional[Callable[[str, int, int, Optional[float], Optional[float], Optional[float], float], Any]] = None,
+    checkpoint: Optional[str] = None,
+    resume: bool = False,
 ) -> Calibration: ...

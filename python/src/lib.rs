@@ -6,15 +6,18 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use clap::ValueEnum;
+use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::exceptions::{PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyBytes;
 
 use mrbp::calibrate::settings::Overrides;
 use mrbp::data::{same_current, Geometry, Manifest, Record, RunSpec};
 use mrbp::error::Error;
 use mrbp::identify::CurrentIdentification;
 use mrbp::posterior::ModelKind;
-use mrbp::sampler::{Observer, RunState};
+use mrbp::sampler::{Checkpointer, Observer, RunState};
+use mrbp::store::inference::Values;
 
 /// A Python exception for an mrbp error: bad input is a ValueError (its
 /// message names the run, row and column), an interruption a
@@ -45,15 +48,22 @@ impl Campaign {
 
     /// A campaign from arrays in SI units: `runs` holds, per run, its id,
     /// coil current (A), time (s), displacement (m), force (N) and
-    /// optionally a current column (A).
+    /// optionally a current column (A), as contiguous float64 NumPy arrays
+    /// (read in place).
     #[staticmethod]
     #[allow(clippy::type_complexity)]
-    fn from_arrays(name: String, area_m2: f64, gap_m: f64, runs: Vec<(String, f64, Vec<f64>, Vec<f64>, Vec<f64>, Option<Vec<f64>>)>) -> PyResult<Campaign> {
+    fn from_arrays(
+        name: String,
+        area_m2: f64,
+        gap_m: f64,
+        runs: Vec<(String, f64, PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>, Option<PyReadonlyArray1<'_, f64>>)>,
+    ) -> PyResult<Campaign> {
         let mut specs = Vec::new();
         let mut records = Vec::new();
         for (id, current_a, time, displacement, force, current) in runs {
+            let current = current.map(|c| values(&c)).transpose()?;
+            records.push(Record { time: values(&time)?, displacement: values(&displacement)?, force: values(&force)?, current });
             specs.push(RunSpec { file: PathBuf::from(format!("{id}.csv")), id, current_a, shear_rate: None, initial_stress_pa: None });
-            records.push(Record { time, displacement, force, current });
         }
         let manifest = Manifest { name, geometry: Geometry { area_m2, gap_m }, columns: Default::default(), limits: Default::default(), runs: specs };
         mrbp::data::Campaign::from_records(manifest, records).map(|c| Campaign { inner: Arc::new(c) }).map_err(raise)
@@ -87,41 +97,104 @@ impl Campaign {
     }
 }
 
-/// Stops a calibration when Python has a signal pending (Ctrl-C in a
-/// notebook), and shows its progress where asked.
+/// Whether Python has a signal pending that raises (Ctrl-C in a terminal,
+/// a notebook's interrupt button); its handler runs here.
+fn python_interrupted() -> bool {
+    Python::attach(|py| py.check_signals().is_err())
+}
+
+/// Stops a calibration at Python's Ctrl-C (saving the sampler's state
+/// first where a checkpoint is kept), and reports its progress to a Python
+/// callable where asked: `progress(stage, step, max_steps, ess,
+/// ess_target, r_hat, acceptance)`, stage "started", "step" or
+/// "finished", the diagnostics None until the first convergence check.
 struct Python_ {
-    progress: Option<mrbp::sampler::Progress>,
+    progress: Option<Py<PyAny>>,
+    checkpoint: Option<PathBuf>,
+    checked: Option<(f64, f64)>,
+    accepted: usize,
+}
+
+impl Python_ {
+    fn report(&self, stage: &str, state: &RunState) -> mrbp::Result<()> {
+        let Some(callback) = &self.progress else { return Ok(()) };
+        let (ess, r_hat) = self.checked.map_or((None, None), |(e, r)| (Some(e), Some(r)));
+        let rate = self.accepted as f64 / state.chains.chains().max(1) as f64;
+        let called = Python::attach(|py| {
+            callback.call1(py, (stage, state.step, state.max_steps, ess, state.min_ess, r_hat, rate)).map(|_| ()).map_err(|e| e.is_instance_of::<PyKeyboardInterrupt>(py).then_some(()).ok_or(e.to_string()))
+        });
+        match called {
+            Ok(()) => Ok(()),
+            // Ctrl-C while the callback ran
+            Err(Ok(())) => Err(self.interrupted(state)),
+            Err(Err(e)) => Err(Error::Compute(format!("the progress callback raised: {e}"))),
+        }
+    }
+
+    /// The error that stops the run at Ctrl-C, the state saved first where
+    /// a checkpoint is kept.
+    fn interrupted(&self, state: &RunState) -> Error {
+        let Some(path) = &self.checkpoint else {
+            return Error::Interrupted(format!("interrupted after step {} (no checkpoint kept: calibrate(..., checkpoint='a file') keeps one to resume from)", state.step));
+        };
+        if let Err(e) = mrbp::sampler::checkpoint::save(path, state.settings, state.chains) {
+            return e;
+        }
+        Error::Interrupted(format!(
+            "interrupted after step {}: the chains so far are in {}; calibrate(..., checkpoint=<that file>, resume=True) with the same options continues them",
+            state.step,
+            path.display()
+        ))
+    }
 }
 
 impl Observer for Python_ {
     fn started(&mut self, state: &RunState) -> mrbp::Result<()> {
-        self.progress.as_mut().map_or(Ok(()), |p| p.started(state))
+        self.report("started", state)
     }
 
     fn stepped(&mut self, state: &RunState) -> mrbp::Result<()> {
-        if let Some(p) = self.progress.as_mut() {
-            p.stepped(state)?;
+        self.accepted = state.accepted;
+        self.report("step", state)?;
+        match python_interrupted() {
+            true => Err(self.interrupted(state)),
+            false => Ok(()),
         }
-        Python::attach(|py| py.check_signals()).map_err(|_| Error::Interrupted("interrupted from Python (KeyboardInterrupt)".into()))
     }
 
-    fn checked(&mut self, state: &RunState, diagnostics: &mrbp::sampler::Diagnostics) {
-        if let Some(p) = self.progress.as_mut() {
-            p.checked(state, diagnostics)
+    fn checked(&mut self, _state: &RunState, diagnostics: &mrbp::sampler::Diagnostics) {
+        let ess = diagnostics.min_ess();
+        if ess.is_finite() {
+            self.checked = Some((ess, diagnostics.max_rhat()));
         }
     }
 
     fn finished(&mut self, state: &RunState) -> mrbp::Result<()> {
-        self.progress.as_mut().map_or(Ok(()), |p| p.finished(state))
+        self.report("finished", state)
     }
 }
 
-/// Named float columns, in order (a frame's).
-type Columns = Vec<(String, Vec<f64>)>;
+/// A contiguous float64 NumPy array's values, read in place (one copy into
+/// the record Rust owns).
+fn values(a: &PyReadonlyArray1<'_, f64>) -> PyResult<Vec<f64>> {
+    a.as_slice().map(<[f64]>::to_vec).map_err(|_| PyValueError::new_err("an array must be contiguous float64 (numpy.ascontiguousarray)"))
+}
+
+/// Named NumPy arrays, handed over without a copy.
+fn arrays<'py, N: Into<String>>(py: Python<'py>, columns: Vec<(N, Vec<f64>)>) -> Vec<(String, Bound<'py, PyArray1<f64>>)> {
+    columns.into_iter().map(|(name, v)| (name.into(), PyArray1::from_vec(py, v))).collect()
+}
+
+/// Named NumPy columns, in order (a frame's).
+type Arrays<'py> = Vec<(String, Bound<'py, PyArray1<f64>>)>;
 
 /// The columns of `chains.parquet`: integer bookkeeping, the coordinates
 /// with log_prob, and `accepted`.
-type ChainColumns = (Vec<(&'static str, Vec<i64>)>, Columns, Vec<bool>);
+type ChainColumns<'py> = (Vec<(&'static str, Bound<'py, PyArray1<i64>>)>, Arrays<'py>, Bound<'py, PyArray1<bool>>);
+
+/// One array of an InferenceData group: name, dimensions, values, and
+/// attributes as JSON.
+type DataNode<'py> = (String, Vec<(&'static str, usize)>, Bound<'py, PyAny>, String);
 
 /// A calibration: its settings, record, summary and posterior sample.
 #[pyclass(module = "mrbp._mrbp")]
@@ -140,8 +213,8 @@ impl Calibration {
     }
 
     /// The summary's columns, as `summary.parquet` holds them.
-    fn summary_columns(&self) -> Vec<(&'static str, Vec<f64>)> {
-        mrbp::store::summary::statistics(&self.inner.summary)
+    fn summary_columns<'py>(&self, py: Python<'py>) -> Arrays<'py> {
+        arrays(py, mrbp::store::summary::statistics(&self.inner.summary))
     }
 
     /// The summary's parameter names, in its row order.
@@ -152,9 +225,10 @@ impl Calibration {
     /// Every walker's every step, as `chains.parquet` holds them: the
     /// bookkeeping columns (ensemble, chain, draw, accepted) and the
     /// coordinates with log_prob.
-    fn chain_columns(&self) -> ChainColumns {
+    fn chain_columns<'py>(&self, py: Python<'py>) -> ChainColumns<'py> {
         let c = mrbp::store::chains::columns(&self.inner.sample);
-        (c.bookkeeping, c.values, c.accepted)
+        let bookkeeping = c.bookkeeping.into_iter().map(|(n, v)| (n, PyArray1::from_vec(py, v))).collect();
+        (bookkeeping, arrays(py, c.values), PyArray1::from_vec(py, c.accepted))
     }
 
     /// The first step after the burn-in (the summary's draws start there).
@@ -207,38 +281,83 @@ impl Calibration {
     }
 
     /// The force of the calibrated damper along an excitation of your own
-    /// (`mrbp simulate`): columns of `simulation.parquet`, and the notes
-    /// (extrapolation, draws that failed).
+    /// (`mrbp simulate`): columns of `simulation.parquet`, the notes
+    /// (extrapolation, draws that failed), and the (step, chain) of the
+    /// posterior draws it propagated.
     #[pyo3(signature = (time, displacement, current = None, current_column = None, draws = 400, replicates = 10, seed = 1))]
-    #[allow(clippy::too_many_arguments)]
-    fn simulate(
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn simulate<'py>(
         &self,
-        py: Python<'_>,
-        time: Vec<f64>,
-        displacement: Vec<f64>,
+        py: Python<'py>,
+        time: PyReadonlyArray1<'_, f64>,
+        displacement: PyReadonlyArray1<'_, f64>,
         current: Option<f64>,
-        current_column: Option<Vec<f64>>,
+        current_column: Option<PyReadonlyArray1<'_, f64>>,
         draws: usize,
         replicates: usize,
         seed: u64,
-    ) -> PyResult<(Columns, Vec<String>)> {
+    ) -> PyResult<(Arrays<'py>, Vec<String>, Vec<(usize, usize)>)> {
         let cal = self.inner.clone();
+        let (time, displacement) = (values(&time)?, values(&displacement)?);
         let n = time.len();
-        let record = Record { time, displacement, force: vec![f64::NAN; n], current: current_column };
+        let record = Record { time, displacement, force: vec![f64::NAN; n], current: current_column.map(|c| values(&c)).transpose()? };
         let options = mrbp::pipeline::PredictOptions { draws, replicates, seed };
         let (made, notes) = py
+            .detach(move || noted(|p| p.simulation(&cal, std::path::Path::new("excitation"), record, current, &options, None)))
+            .map_err(raise)?;
+        let positions = if options.check().is_ok() { self.inner.draw_positions(draws) } else { Vec::new() };
+        Ok((arrays(py, mrbp::store::simulation::columns(&made)), notes, positions))
+    }
+
+    /// The bands of the calibration's runs (`mrbp predict`): the bytes of
+    /// `bands.parquet`, `coverage.parquet` and `adequacy.parquet` by file
+    /// name, the runs that could not be predicted (id, why), and the notes.
+    #[pyo3(signature = (draws = 400, replicates = 10, seed = 1))]
+    #[allow(clippy::type_complexity)]
+    fn predict<'py>(&self, py: Python<'py>, draws: usize, replicates: usize, seed: u64) -> PyResult<(Vec<(&'static str, Bound<'py, PyBytes>)>, Vec<(String, String)>, Vec<String>)> {
+        let cal = self.inner.clone();
+        let campaign = self.campaign()?;
+        let options = mrbp::pipeline::PredictOptions { draws, replicates, seed };
+        let ((tables, failed), notes) = py
             .detach(move || {
-                let mut notes = Vec::new();
-                let mut listen = |e: mrbp::pipeline::Event<'_>| {
-                    if let mrbp::pipeline::Event::Note(line) = e {
-                        notes.push(line.to_string());
-                    }
-                };
-                let made = mrbp::pipeline::Pipeline::new(&mut listen, false).simulation(&cal, std::path::Path::new("excitation"), record, current, &options, None);
-                made.map(|m| (m, notes))
+                noted(|pipeline| {
+                    let runs = if cal.is_current_law() { (*campaign).clone() } else { cal.used_runs(&campaign) };
+                    let (prediction, failed) = pipeline.prediction(&cal, &runs, &|run| cal.record.runs.iter().any(|r| r == run.id()), &options)?;
+                    Ok((mrbp::store::prediction::tables(&prediction)?, failed))
+                })
             })
             .map_err(raise)?;
-        Ok((mrbp::store::simulation::columns(&made), notes))
+        Ok((tables.into_iter().map(|(name, b)| (name, PyBytes::new(py, &b))).collect(), failed, notes))
+    }
+
+    /// The calibration as ArviZ's InferenceData, in memory (what
+    /// `inference.zarr` holds): the root's attributes (JSON), and per group
+    /// its name, attributes (JSON) and arrays (name, dimensions, NumPy
+    /// values or a list of strings, attributes as JSON); with the notes.
+    #[pyo3(signature = (seed = 1))]
+    #[allow(clippy::type_complexity)]
+    fn inference_data<'py>(&self, py: Python<'py>, seed: u64) -> PyResult<(String, Vec<(&'static str, String, Vec<DataNode<'py>>)>, Vec<String>)> {
+        let cal = self.inner.clone();
+        let campaign = self.campaign()?;
+        let (data, notes) = py.detach(move || noted(|p| p.inference_data(&cal, &campaign, seed))).map_err(raise)?;
+        let json = |m: &serde_json::Map<String, serde_json::Value>| serde_json::Value::Object(m.clone()).to_string();
+        let mut groups = Vec::new();
+        for g in data.groups {
+            let mut nodes = Vec::new();
+            for node in g.nodes {
+                let attrs = json(&node.attrs);
+                let values = match node.values {
+                    Values::F64(v) => PyArray1::from_vec(py, v).into_any(),
+                    Values::F32(v) => PyArray1::from_vec(py, v).into_any(),
+                    Values::I64(v) => PyArray1::from_vec(py, v).into_any(),
+                    Values::Bool(v) => PyArray1::from_vec(py, v).into_any(),
+                    Values::Str(v) => v.into_pyobject(py)?.into_any(),
+                };
+                nodes.push((node.name, node.dims, values, attrs));
+            }
+            groups.push((g.name, json(&g.attrs), nodes));
+        }
+        Ok((json(&data.attrs), groups, notes))
     }
 
     fn __repr__(&self) -> String {
@@ -247,13 +366,40 @@ impl Calibration {
     }
 }
 
+impl Calibration {
+    /// The campaign of the calibration's runs: the one it was made from, or
+    /// the manifest its record names.
+    fn campaign(&self) -> PyResult<Arc<mrbp::data::Campaign>> {
+        match &self.made {
+            Some((campaign, _)) => Ok(campaign.clone()),
+            None => self.inner.full_campaign().map(Arc::new).map_err(raise),
+        }
+    }
+}
+
+/// Runs `work` on a quiet pipeline whose notes it keeps.
+fn noted<T>(work: impl FnOnce(&mut mrbp::pipeline::Pipeline<'_>) -> mrbp::Result<T>) -> mrbp::Result<(T, Vec<String>)> {
+    let mut notes = Vec::new();
+    let made = {
+        let mut listen = |e: mrbp::pipeline::Event<'_>| {
+            if let mrbp::pipeline::Event::Note(line) = e {
+                notes.push(line.to_string());
+            }
+        };
+        work(&mut mrbp::pipeline::Pipeline::new(&mut listen, false))?
+    };
+    Ok((made, notes))
+}
+
 /// Calibrates the runs of `campaign` at `current` (per-current model; any
 /// current the campaign has, or its only one) or all runs with the current
 /// law (`model="current-law"`), as `mrbp sample` does with the same
 /// options: the same seed gives the same chains. The GIL is released while
-/// it samples; Ctrl-C raises KeyboardInterrupt.
+/// it samples; Ctrl-C raises KeyboardInterrupt, after saving the sampler's
+/// state to `checkpoint` if given (every 100 steps too), which `resume`
+/// continues exactly. `progress` is a callable told of every step.
 #[pyfunction]
-#[pyo3(signature = (campaign, current = None, model = None, noise = None, seed = None, steps = None, walkers = None, ensembles = None, substeps = None, config = None, exact_input = false, progress = false))]
+#[pyo3(signature = (campaign, current = None, model = None, noise = None, seed = None, steps = None, walkers = None, ensembles = None, substeps = None, config = None, exact_input = false, progress = None, checkpoint = None, resume = false))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate(
     py: Python<'_>,
@@ -268,7 +414,9 @@ fn calibrate(
     substeps: Option<u32>,
     config: Option<PathBuf>,
     exact_input: bool,
-    progress: bool,
+    progress: Option<Py<PyAny>>,
+    checkpoint: Option<PathBuf>,
+    resume: bool,
 ) -> PyResult<Calibration> {
     let value = |v: Option<String>| v.map(|s| s.trim().to_string()).filter(|s| !s.is_empty());
     let model = match value(model) {
@@ -301,12 +449,30 @@ fn calibrate(
         all.at_current(c)
     };
     group.require_usable("the calibration").map_err(raise)?;
+    let resume_from = match (&checkpoint, resume) {
+        (None, true) => return Err(PyValueError::new_err("resume: say which checkpoint to continue (checkpoint='the file')")),
+        (Some(path), true) if !path.exists() => return Err(PyValueError::new_err(format!("resume: no checkpoint at {}", path.display()))),
+        (Some(path), true) => {
+            mrbp::pipeline::check_resumable(path, &settings).map_err(raise)?;
+            Some(path.clone())
+        }
+        _ => None,
+    };
     let made = py
         .detach(move || {
             let start = mrbp::calibrate::start(&group, &settings, &mut |_| {})?;
-            let mut observer = Python_ { progress: progress.then(mrbp::sampler::Progress::default) };
-            let mut observers: [&mut dyn Observer; 1] = [&mut observer];
-            let made = mrbp::calibrate::sample(&group, start, None, &mut observers)?;
+            let mut observer = Python_ { progress, checkpoint: checkpoint.clone(), checked: None, accepted: 0 };
+            // the state every 100 steps, beside the one saved at Ctrl-C
+            let mut checkpointer = checkpoint.as_ref().map(|path| Checkpointer { path: path.clone(), every: mrbp::pipeline::CHECKPOINT_EVERY, stop: || false });
+            let mut observers: Vec<&mut dyn Observer> = vec![&mut observer];
+            if let Some(c) = checkpointer.as_mut() {
+                observers.push(c);
+            }
+            let made = mrbp::calibrate::sample(&group, start, resume_from.as_ref(), &mut observers)?;
+            if let Some(path) = &checkpoint {
+                // the chains are whole in the calibration returned: the checkpoint has done its job
+                let _ = std::fs::remove_file(path);
+            }
             Ok::<_, Error>((made, Arc::new(group)))
         })
         .map_err(raise)?;

@@ -242,6 +242,29 @@ impl Campaign {
         })
     }
 
+    /// Writes the campaign into `dir`: one CSV per run (SI units, the
+    /// default column names, numbers that read back to the same doubles)
+    /// and the manifest `campaign.toml`, after the comment lines `header`.
+    /// What [`Campaign::load`] reads back as this campaign; its path.
+    pub fn write(&self, dir: &Path, header: &str) -> Result<PathBuf> {
+        std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+        let mut runs = Vec::with_capacity(self.runs.len());
+        let mut taken = std::collections::HashSet::new();
+        for (i, run) in self.runs.iter().enumerate() {
+            let stem: String = run.id().chars().map(|c| if c.is_ascii_alphanumeric() || "._-".contains(c) { c } else { '_' }).collect();
+            let file = match taken.insert(stem.clone()) {
+                true => format!("{stem}.csv"),
+                false => format!("{stem}-{i}.csv"),
+            };
+            crate::atomic::write(&dir.join(&file), super::table::csv_text(&run.record).as_bytes())?;
+            runs.push(RunSpec { file: PathBuf::from(file), ..run.spec.clone() });
+        }
+        let manifest = Manifest { name: self.name.clone(), geometry: self.geometry, columns: Columns::default(), limits: Default::default(), runs };
+        let path = dir.join("campaign.toml");
+        manifest.write(&path, header)?;
+        Ok(path)
+    }
+
     /// A campaign from records in memory (SI units; a notebook's frames):
     /// the manifest's and the records' checks of [`Campaign::load`], with
     /// each run named `<manifest name>/<run id>` in messages.

@@ -105,10 +105,19 @@ impl<'a> ColumnMap<'a> {
 pub fn csv_text(rec: &Record) -> String {
     let c = Columns::default();
     let mut s = String::with_capacity(rec.len() * 64);
-    s.push_str(&format!("{},{},{},{}\n", c.time, c.displacement, c.force, c.current));
-    for k in 0..rec.len() {
-        let current = rec.current.as_ref().map(|c| c[k]).unwrap_or(f64::NAN);
-        s.push_str(&format!("{},{},{},{}\n", rec.time[k], rec.displacement[k], rec.force[k], current));
+    match &rec.current {
+        Some(current) => {
+            s.push_str(&format!("{},{},{},{}\n", c.time, c.displacement, c.force, c.current));
+            for k in 0..rec.len() {
+                s.push_str(&format!("{},{},{},{}\n", rec.time[k], rec.displacement[k], rec.force[k], current[k]));
+            }
+        }
+        None => {
+            s.push_str(&format!("{},{},{}\n", c.time, c.displacement, c.force));
+            for k in 0..rec.len() {
+                s.push_str(&format!("{},{},{}\n", rec.time[k], rec.displacement[k], rec.force[k]));
+            }
+        }
     }
     s
 }

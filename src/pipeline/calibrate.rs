@@ -13,13 +13,13 @@ use crate::store;
 use crate::validate::consistency::{consistency, ParameterConsistency};
 
 /// Steps between two checkpoints of the sampler.
-const CHECKPOINT_EVERY: usize = 100;
+pub const CHECKPOINT_EVERY: usize = 100;
 
 
 /// Checks a checkpoint against the options before any work: readable, the
 /// same sampler (ensembles, walkers where given, moves, seed), and not
 /// longer than a fixed `--steps`.
-fn check_resumable(checkpoint: &Path, settings: &CalibrationSettings) -> Result<()> {
+pub fn check_resumable(checkpoint: &Path, settings: &CalibrationSettings) -> Result<()> {
     if !checkpoint.exists() {
         return Ok(());
     }
@@ -174,8 +174,20 @@ impl Pipeline<'_> {
     /// Python package, say) that started from `identification`, into `dir`
     /// as `mrbp sample` would; an earlier calibration there is replaced
     /// only if `force`.
-    pub fn save(&mut self, campaign: &Campaign, dir: &Path, cal: Calibration, identification: &CurrentIdentification, force: bool) -> Result<Calibration> {
+    /// A campaign that has no manifest on disk (made from records in
+    /// memory) is written beside it first, into `records/`, so that the
+    /// command line's predict and report find its records.
+    pub fn save(&mut self, campaign: &Campaign, dir: &Path, mut cal: Calibration, identification: &CurrentIdentification, force: bool) -> Result<Calibration> {
         self.prepare(dir, "the folder", &[campaign], &folders::CALIBRATION, force)?;
+        if !campaign.manifest_path.is_file() {
+            let records = dir.join(folders::RECORDS);
+            if records.exists() {
+                std::fs::remove_dir_all(&records).map_err(|e| Error::output(&records, e))?;
+            }
+            let header = format!("# The records of the calibration in this folder's parent, written by mrbp from records in memory ({}).\n", campaign.manifest_path.display());
+            let manifest = campaign.write(&records, &header)?;
+            cal.record.manifest = std::fs::canonicalize(&manifest).unwrap_or(manifest).display().to_string();
+        }
         self.write_calibration(campaign, dir, cal, identification)
     }
 

@@ -29,6 +29,10 @@ pub const DERIVED: [&str; 10] = [
 /// The sub-folder of the run-alone calibrations (`--per-run`).
 pub const RUNS: &str = store::consistency::RUNS;
 
+/// The sub-folder of the records of a calibration made from records in
+/// memory (the Python package's frames): a manifest and one CSV per run.
+pub const RECORDS: &str = "records";
+
 /// The report's figures (SVG and PNG) start so; the identification's
 /// (`fig1…fig5`), which the calibration itself writes, do not.
 const FIGURES: [&str; 8] = ["bands_", "adequacy_", "residuals", "corner", "marginals", "traces", "diagnostics", "consistency"];

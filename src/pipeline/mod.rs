@@ -30,6 +30,7 @@ use crate::validate::consistency::ParameterConsistency;
 use crate::validate::{LooRow, LooSettings};
 
 pub use crate::predict::{PredictOptions, Prediction};
+pub use calibrate::{check_resumable, CHECKPOINT_EVERY};
 
 /// What a stage did, for the listener.
 pub enum Event<'a> {

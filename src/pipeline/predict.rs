@@ -29,10 +29,19 @@ impl Pipeline<'_> {
         Ok(prediction)
     }
 
-    /// `inference.zarr`: the posterior, the pointwise log-likelihood and
-    /// replicated records of a thinned set of draws, along the runs the
-    /// calibration saw, as ArviZ's InferenceData.
+    /// `inference.zarr`: [`Pipeline::inference_data`] into `out`.
     fn write_inference_data(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, seed: u64) -> Result<()> {
+        let data = self.inference_data(cal, campaign, seed)?;
+        let path = out.join(store::inference::FILE);
+        store::inference::write(&path, &data)?;
+        self.emit(Event::Wrote(&path));
+        Ok(())
+    }
+
+    /// The posterior, the pointwise log-likelihood and replicated records of
+    /// a thinned set of draws, along the runs of `campaign` the calibration
+    /// saw, as ArviZ's InferenceData (in memory).
+    pub fn inference_data(&mut self, cal: &Calibration, campaign: &Campaign, seed: u64) -> Result<store::inference::InferenceData> {
         let likelihood = &cal.settings.likelihood;
         let runs: Vec<RunData> = campaign
             .runs
@@ -40,19 +49,19 @@ impl Pipeline<'_> {
             .filter(|run| cal.record.runs.iter().any(|r| r == run.id()))
             .map(|run| RunData::from_run(run, likelihood.part, likelihood.smooth_strain_ms))
             .collect();
+        if runs.len() != cal.record.runs.len() {
+            return Err(Error::Usage(format!("{} does not hold every run of the calibration: {:?}", campaign.name, cal.record.runs)));
+        }
         let chains = &cal.sample.chains;
         let stride = cal.draws().thin;
         let steps = cal.draws().steps(chains, POINTWISE_DRAWS);
         let integrator = cal.predict_settings(1, seed).integrator;
         let draws = pointwise_draws(&cal.sample, &runs, &steps, &integrator, cal.settings.noise_model().as_ref(), seed);
         if draws.failed > 0 {
-            self.note(&format!("inference.zarr: {} of {} pointwise draws could not be integrated along every run (their log-likelihood is -inf)", draws.failed, steps.len() * chains.chains()));
+            self.note(&format!("inference data: {} of {} pointwise draws could not be integrated along every run (their log-likelihood is -inf)", draws.failed, steps.len() * chains.chains()));
         }
         let info = StoreInfo { calibration_id: &cal.record.calibration_id, burn_in: cal.burn_in(), ensembles: chains.ensembles, stride };
-        let path = out.join(store::inference::FILE);
-        store::inference::write(&path, &cal.sample, &draws, &info)?;
-        self.emit(Event::Wrote(&path));
-        Ok(())
+        Ok(store::inference::inference_data(&cal.sample, draws, &info))
     }
 
     /// Posterior draws of `cal` along the runs of another campaign — another
@@ -95,12 +104,21 @@ impl Pipeline<'_> {
         Ok((path, prediction))
     }
 
-    /// Bands, coverage and adequacy of `campaign`'s runs into `out`; `seen`
+    /// Bands, coverage and adequacy of `campaign`'s runs into `out`
+    /// ([`Pipeline::prediction`]), with `prediction.toml`.
+    fn predict_runs(&mut self, cal: &Calibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, out: &Path, options: &PredictOptions) -> Result<(Prediction, Vec<(String, String)>)> {
+        let (prediction, failed) = self.prediction(cal, campaign, seen, options)?;
+        store::prediction::write(out, &prediction)?;
+        self.emit(Event::Predicted { record: &prediction.record, dir: out });
+        Ok((prediction, failed))
+    }
+
+    /// Bands, coverage and adequacy of `campaign`'s runs, in memory; `seen`
     /// tells the runs the calibration saw (their own noise level and force
     /// offset) from those it did not (the others' typical ones). A run that
     /// cannot be predicted (no draw integrates along it) is left out, with
-    /// why, and the others are written; if none can be, nothing is.
-    fn predict_runs(&mut self, cal: &Calibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, out: &Path, options: &PredictOptions) -> Result<(Prediction, Vec<(String, String)>)> {
+    /// why (the second value); if none can be, an error.
+    pub fn prediction(&mut self, cal: &Calibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, options: &PredictOptions) -> Result<(Prediction, Vec<(String, String)>)> {
         options.check()?;
         let clock = Instant::now();
         let positions = cal.draw_positions(options.draws);
@@ -147,8 +165,6 @@ impl Pipeline<'_> {
             coverage: coverage.clone(),
         };
         let prediction = Prediction { bands, coverage, adequacy, record };
-        store::prediction::write(out, &prediction)?;
-        self.emit(Event::Predicted { record: &prediction.record, dir: out });
         Ok((prediction, failed))
     }
 

@@ -10,6 +10,11 @@ use crate::error::Result;
 
 /// Writes the adequacy of a prediction from calibration `id`.
 pub fn write(path: &Path, rows: &[AdequacyRow], id: &str) -> Result<()> {
+    write_parquet(path, table(rows, id))
+}
+
+/// The table of `adequacy.parquet`.
+pub fn table(rows: &[AdequacyRow], id: &str) -> Table {
     let f = |get: fn(&AdequacyRow) -> f64| rows.iter().map(get).collect::<Vec<f64>>();
     let mut t = Table::new()
         .derived_from(id)
@@ -36,7 +41,7 @@ pub fn write(path: &Path, rows: &[AdequacyRow], id: &str) -> Result<()> {
     if rows.iter().any(|r| r.innovation_lag1.is_finite()) {
         t = t.f64("innovation_lag1", f(|r| r.innovation_lag1));
     }
-    write_parquet(path, t)
+    t
 }
 
 pub fn read(path: &Path) -> Result<Vec<AdequacyRow>> {

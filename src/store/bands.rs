@@ -9,6 +9,11 @@ use crate::predict::RunBands;
 
 /// Writes the bands of every run, derived from calibration `id`.
 pub fn write(path: &Path, runs: &[RunBands], id: &str) -> Result<()> {
+    write_parquet(path, table(runs, id))
+}
+
+/// The table of `bands.parquet`.
+pub fn table(runs: &[RunBands], id: &str) -> Table {
     let col = |f: &dyn Fn(&RunBands) -> &[f64]| runs.iter().flat_map(|b| f(b).iter().copied()).collect::<Vec<f64>>();
     let per_sample = |f: &dyn Fn(&RunBands) -> f64| runs.iter().flat_map(|b| std::iter::repeat_n(f(b), b.time.len())).collect::<Vec<f64>>();
     let names = runs.iter().flat_map(|b| std::iter::repeat_n(b.run.clone(), b.time.len())).collect();
@@ -33,7 +38,7 @@ pub fn write(path: &Path, runs: &[RunBands], id: &str) -> Result<()> {
         let part = |i: usize| runs.iter().flat_map(|b| b.discrepancy.as_ref().map_or_else(|| vec![f64::NAN; b.time.len()], |d| d[i].clone())).collect::<Vec<f64>>();
         table = table.f64("discrepancy_pa", part(0)).f64("discrepancy_sd_pa", part(1)).f64("innovation", part(2));
     }
-    write_parquet(path, table)
+    table
 }
 
 /// Reads the bands of every run back, in file order.

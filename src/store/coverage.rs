@@ -42,7 +42,8 @@ pub fn write(path: &Path, rows: &[CoverageRow], id: &str) -> Result<()> {
     write_parquet(path, table(rows).derived_from(id))
 }
 
-fn table(rows: &[CoverageRow]) -> Table {
+/// The table of `coverage.parquet` (without its calibration's id).
+pub fn table(rows: &[CoverageRow]) -> Table {
     Table::new()
         .str("run", rows.iter().map(|r| r.run.clone()).collect())
         .f64("current_a", rows.iter().map(|r| r.current_a).collect())

@@ -52,12 +52,50 @@ pub struct StoreInfo<'a> {
     pub stride: usize,
 }
 
-/// Writes the store into `path` (a folder), replacing an earlier one; the
+/// The values of one array, flat, in C order over its dimensions.
+#[derive(Clone, Debug)]
+pub enum Values {
+    F64(Vec<f64>),
+    F32(Vec<f32>),
+    I64(Vec<i64>),
+    Bool(Vec<bool>),
+    Str(Vec<String>),
+}
+
+/// One array of a group: a variable, or a coordinate (an array over the
+/// one dimension it names, or one a variable's `coordinates` attribute
+/// names).
+#[derive(Clone, Debug)]
+pub struct Node {
+    pub name: String,
+    /// Its dimensions, with their lengths.
+    pub dims: Vec<(&'static str, usize)>,
+    pub values: Values,
+    pub attrs: Map<String, Value>,
+}
+
+/// One group of the InferenceData (`posterior`, `sample_stats`, …).
+#[derive(Clone, Debug)]
+pub struct DataGroup {
+    pub name: &'static str,
+    pub attrs: Map<String, Value>,
+    pub nodes: Vec<Node>,
+}
+
+/// The whole InferenceData, in memory: what `inference.zarr` holds and
+/// what the Python package hands to ArviZ without a file between.
+#[derive(Clone, Debug)]
+pub struct InferenceData {
+    pub attrs: Map<String, Value>,
+    pub groups: Vec<DataGroup>,
+}
+
+/// Writes `data` into `path` (a folder), replacing an earlier store; the
 /// store is built beside it and renamed into place.
-pub fn write(path: &Path, sample: &PosteriorSample, pointwise: &PointwiseDraws, info: &StoreInfo) -> Result<()> {
+pub fn write(path: &Path, data: &InferenceData) -> Result<()> {
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let tmp = tempfile::Builder::new().prefix(crate::atomic::TEMPORARY).suffix(".zarr.tmp").tempdir_in(parent).map_err(|e| Error::output(parent, e))?;
-    build(tmp.path(), sample, pointwise, info).map_err(|e| Error::output(path, e))?;
+    build(tmp.path(), data).map_err(|e| Error::output(path, e))?;
     crate::atomic::replace_dir(&tmp.keep(), path)
 }
 
@@ -114,46 +152,61 @@ fn read_store(path: &Path) -> std::result::Result<Stored, Failure> {
     Ok(Stored { calibration_id, draws, posterior, log_likelihood, pointwise_shape: (dim(0), dim(1), dim(2)) })
 }
 
-fn build(dir: &Path, sample: &PosteriorSample, pw: &PointwiseDraws, info: &StoreInfo) -> std::result::Result<(), Failure> {
-    let store: ReadableWritableListableStorage = Arc::new(FilesystemStore::new(dir)?);
+impl DataGroup {
+    fn new(name: &'static str, pairs: &[(&str, Value)]) -> DataGroup {
+        DataGroup { name, attrs: attrs(pairs), nodes: Vec::new() }
+    }
+
+    fn put(&mut self, name: &str, dims: &[(&'static str, usize)], values: Values, pairs: &[(&str, Value)]) {
+        self.nodes.push(Node { name: name.to_string(), dims: dims.to_vec(), values, attrs: attrs(pairs) });
+    }
+}
+
+/// The InferenceData of a calibration's `sample`, with the pointwise terms
+/// `pw` of a thinned set of its draws.
+pub fn inference_data(sample: &PosteriorSample, pw: PointwiseDraws, info: &StoreInfo) -> InferenceData {
     let chains = sample.chains.chains();
     let walkers = chains / info.ensembles.max(1);
     // the draws the diagnostics use
     let n = analysed_draws(sample.chains.steps().saturating_sub(info.burn_in));
     let first = sample.chains.steps() - n;
-    let mut root = GroupBuilder::new().build(store.clone(), "/")?;
-    root.attributes_mut().extend(attrs(&[
+    let root = attrs(&[
         ("created_by", json!("mrbp")),
         ("mrbp_version", json!(env!("CARGO_PKG_VERSION"))),
         ("inference_library", json!("mrbp")),
         ("calibration_id", json!(info.calibration_id)),
         ("sampler", json!(format!("affine-invariant ensemble: {} ensembles of {walkers} walkers", info.ensembles))),
         ("r_hat_note", json!(RHAT_NOTE)),
-    ]));
-    root.store_metadata()?;
+    ]);
+    let mut groups = Vec::new();
 
     let draw_coord: Vec<i64> = (first..first + n).map(|s| s as i64).collect();
     let ensemble: Vec<i64> = (0..chains).map(|c| (c / walkers.max(1)) as i64).collect();
     let chain_coord: Vec<i64> = (0..chains as i64).collect();
     let stats_attrs = [("burn_in", json!(info.burn_in)), ("first_draw", json!(first)), ("r_hat_note", json!(RHAT_NOTE))];
-    for group in ["posterior", "sample_stats"] {
-        group_with(&store, group, &stats_attrs)?;
-        let g = format!("/{group}");
-        put(&store, &format!("{g}/chain"), &[("chain", chains)], &chain_coord, &[])?;
-        put(&store, &format!("{g}/draw"), &[("draw", n)], &draw_coord, &[])?;
-        put(&store, &format!("{g}/ensemble"), &[("chain", chains)], &ensemble, &[])?;
-    }
     // (step, chain) of every cell of a chain × draw array, chain-major
     let cells: Vec<(usize, usize)> = (0..chains).flat_map(|c| (first..first + n).map(move |s| (s, c))).collect();
-    for (i, name) in sample.layout.names.iter().enumerate() {
-        let values: Vec<f64> = cells.iter().map(|&(s, c)| sample.chains.at(s, c, i)).collect();
-        let attrs = [("units", json!(unit_of(name))), ("coordinates", json!("ensemble")), ("long_name", json!(name))];
-        put(&store, &format!("/posterior/{}", node_name(name)), &[("chain", chains), ("draw", n)], &values, &attrs)?;
+    let by_draw = [("chain", chains), ("draw", n)];
+    let on_ensemble = || [("coordinates", json!("ensemble"))];
+    for name in ["posterior", "sample_stats"] {
+        let mut g = DataGroup::new(name, &stats_attrs);
+        g.put("chain", &[("chain", chains)], Values::I64(chain_coord.clone()), &[]);
+        g.put("draw", &[("draw", n)], Values::I64(draw_coord.clone()), &[]);
+        g.put("ensemble", &[("chain", chains)], Values::I64(ensemble.clone()), &[]);
+        if name == "posterior" {
+            for (i, coordinate) in sample.layout.names.iter().enumerate() {
+                let values: Vec<f64> = cells.iter().map(|&(s, c)| sample.chains.at(s, c, i)).collect();
+                let pairs = [("units", json!(unit_of(coordinate))), ("coordinates", json!("ensemble")), ("long_name", json!(coordinate))];
+                g.put(&node_name(coordinate), &by_draw, Values::F64(values), &pairs);
+            }
+        } else {
+            let lp: Vec<f64> = cells.iter().map(|&(s, c)| sample.chains.log_prob[s * chains + c]).collect();
+            g.put("lp", &by_draw, Values::F64(lp), &on_ensemble());
+            let accepted: Vec<bool> = cells.iter().map(|&(s, c)| sample.chains.accepted[s * chains + c]).collect();
+            g.put("accepted", &by_draw, Values::Bool(accepted), &on_ensemble());
+        }
+        groups.push(g);
     }
-    let lp: Vec<f64> = cells.iter().map(|&(s, c)| sample.chains.log_prob[s * chains + c]).collect();
-    put(&store, "/sample_stats/lp", &[("chain", chains), ("draw", n)], &lp, &[("coordinates", json!("ensemble"))])?;
-    let accepted: Vec<bool> = cells.iter().map(|&(s, c)| sample.chains.accepted[s * chains + c]).collect();
-    put(&store, "/sample_stats/accepted", &[("chain", chains), ("draw", n)], &accepted, &[("coordinates", json!("ensemble"))])?;
 
     // the observations, their coordinates in every group that has them
     let nobs = pw.observed.len();
@@ -167,23 +220,52 @@ fn build(dir: &Path, sample: &PosteriorSample, pw: &PointwiseDraws, info: &Store
         ("note", json!("every chain at a few steps at least tau_max apart: nearly independent draws, so az.loo(idata, reff=1.0)")),
         ("factorisation", json!("terms are conditional densities p(y_k | earlier y of the run or branch, theta) that sum to the likelihood the sampler used")),
     ];
-    for group in ["log_likelihood", "posterior_predictive", "observed_data"] {
-        group_with(&store, group, if group == "observed_data" { &[] } else { &thinning })?;
-        let g = format!("/{group}");
-        put(&store, &format!("{g}/obs"), &[("obs", nobs)], &obs, &[])?;
-        put(&store, &format!("{g}/run"), &[("obs", nobs)], &run_names, &[])?;
-        put(&store, &format!("{g}/time"), &[("obs", nobs)], &pw.time, &[("units", json!("s"))])?;
-        if group != "observed_data" {
-            put(&store, &format!("{g}/chain"), &[("chain", chains)], &chain_coord, &[])?;
-            put(&store, &format!("{g}/draw"), &[("draw", pw_steps.len())], &pw_steps, &[])?;
-        }
-    }
     let coords = json!("run time");
     let dims = [("chain", chains), ("draw", pw_steps.len()), ("obs", nobs)];
-    put(&store, "/log_likelihood/tau", &dims, &pw.log_likelihood, &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))])?;
-    let shear = [("coordinates", coords), ("units", json!("Pa")), ("long_name", json!("shear stress"))];
-    put(&store, "/posterior_predictive/tau", &dims, &pw.replicate, &shear)?;
-    put(&store, "/observed_data/tau", &[("obs", nobs)], &pw.observed, &shear)?;
+    let shear = [("coordinates", coords.clone()), ("units", json!("Pa")), ("long_name", json!("shear stress"))];
+    let (mut log_likelihood, mut replicate, mut observed) = (Some(pw.log_likelihood), Some(pw.replicate), Some(pw.observed));
+    for name in ["log_likelihood", "posterior_predictive", "observed_data"] {
+        let mut g = DataGroup::new(name, if name == "observed_data" { &[] } else { &thinning });
+        g.put("obs", &[("obs", nobs)], Values::I64(obs.clone()), &[]);
+        g.put("run", &[("obs", nobs)], Values::Str(run_names.clone()), &[]);
+        g.put("time", &[("obs", nobs)], Values::F64(pw.time.clone()), &[("units", json!("s"))]);
+        if name != "observed_data" {
+            g.put("chain", &[("chain", chains)], Values::I64(chain_coord.clone()), &[]);
+            g.put("draw", &[("draw", pw_steps.len())], Values::I64(pw_steps.clone()), &[]);
+        }
+        match name {
+            "log_likelihood" => {
+                let values = Values::F64(log_likelihood.take().unwrap_or_default());
+                g.put("tau", &dims, values, &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))]);
+            }
+            "posterior_predictive" => g.put("tau", &dims, Values::F32(replicate.take().unwrap_or_default()), &shear),
+            _ => g.put("tau", &[("obs", nobs)], Values::F64(observed.take().unwrap_or_default()), &shear),
+        }
+        groups.push(g);
+    }
+    InferenceData { attrs: root, groups }
+}
+
+fn build(dir: &Path, data: &InferenceData) -> std::result::Result<(), Failure> {
+    let store: ReadableWritableListableStorage = Arc::new(FilesystemStore::new(dir)?);
+    let mut root = GroupBuilder::new().build(store.clone(), "/")?;
+    root.attributes_mut().extend(data.attrs.clone());
+    root.store_metadata()?;
+    for group in &data.groups {
+        let mut g = GroupBuilder::new().build(store.clone(), &format!("/{}", group.name))?;
+        g.attributes_mut().extend(group.attrs.clone());
+        g.store_metadata()?;
+        for node in &group.nodes {
+            let path = format!("/{}/{}", group.name, node.name);
+            match &node.values {
+                Values::F64(v) => put(&store, &path, &node.dims, v, &node.attrs)?,
+                Values::F32(v) => put(&store, &path, &node.dims, v, &node.attrs)?,
+                Values::I64(v) => put(&store, &path, &node.dims, v, &node.attrs)?,
+                Values::Bool(v) => put(&store, &path, &node.dims, v, &node.attrs)?,
+                Values::Str(v) => put(&store, &path, &node.dims, v, &node.attrs)?,
+            }
+        }
+    }
     Ok(())
 }
 
@@ -243,17 +325,10 @@ fn attrs(pairs: &[(&str, Value)]) -> Map<String, Value> {
     pairs.iter().map(|(k, v)| (k.to_string(), v.clone())).collect()
 }
 
-fn group_with(store: &ReadableWritableListableStorage, name: &str, pairs: &[(&str, Value)]) -> std::result::Result<(), Failure> {
-    let mut g = GroupBuilder::new().build(store.clone(), &format!("/{name}"))?;
-    g.attributes_mut().extend(attrs(pairs));
-    g.store_metadata()?;
-    Ok(())
-}
-
 /// One array over the named dimensions of the given lengths: a single
 /// chunk, or one per chain for the pointwise (chain, draw, obs) arrays,
 /// which keeps the encoding's copies small.
-fn put<'a, T>(store: &ReadableWritableListableStorage, path: &str, dims: &[(&str, usize)], values: &'a [T], pairs: &[(&str, Value)]) -> std::result::Result<(), Failure>
+fn put<'a, T>(store: &ReadableWritableListableStorage, path: &str, dims: &[(&str, usize)], values: &'a [T], attributes: &Map<String, Value>) -> std::result::Result<(), Failure>
 where
     &'a [T]: IntoArrayBytes<'a>,
     T: Element,
@@ -269,7 +344,7 @@ where
     }
     let array = ArrayBuilder::new(shape.clone(), chunk, T::data_type(), fill)
         .dimension_names(Some(dims.iter().map(|(d, _)| *d)))
-        .attributes(attrs(pairs))
+        .attributes(attributes.clone())
         .build(store.clone(), path)?;
     array.store_metadata()?;
     if !values.is_empty() {

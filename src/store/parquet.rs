@@ -62,16 +62,22 @@ impl Table {
 
 /// Writes a table to `path` as Parquet (zstd-compressed), atomically.
 pub fn write_parquet(path: &Path, table: Table) -> Result<()> {
+    atomic::write_with(path, |file| encode(table, file).map_err(|e| Error::output(path, e)))
+}
+
+/// The bytes of the Parquet file [`write_parquet`] would write: the same
+/// table in memory (the Python package reads them as a frame).
+pub fn parquet_bytes(table: Table) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    encode(table, &mut bytes).map_err(|e| Error::Compute(format!("encoding a table: {e}")))?;
+    Ok(bytes)
+}
+
+fn encode(table: Table, sink: impl std::io::Write) -> std::result::Result<(), Box<dyn std::error::Error>> {
     let metadata = (!table.metadata.is_empty()).then(|| KeyValueMetadata::from_static(table.metadata.clone()));
     let mut df = table.into_frame()?;
-    atomic::write_with(path, |file| {
-        ParquetWriter::new(file)
-            .with_compression(ParquetCompression::Zstd(None))
-            .with_key_value_metadata(metadata)
-            .finish(&mut df)
-            .map(|_| ())
-            .map_err(|e| Error::output(path, e))
-    })
+    ParquetWriter::new(sink).with_compression(ParquetCompression::Zstd(None)).with_key_value_metadata(metadata).finish(&mut df)?;
+    Ok(())
 }
 
 /// Reads a Parquet file back (for tests and for later stages).

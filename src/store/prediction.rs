@@ -26,6 +26,17 @@ pub fn write(dir: &Path, p: &Prediction) -> Result<()> {
     write_record(&dir.join(RECORD), &p.record)
 }
 
+/// The three tables of a prediction as the bytes of their Parquet files,
+/// by file name: what [`write`] writes, in memory.
+pub fn tables(p: &Prediction) -> Result<Vec<(&'static str, Vec<u8>)>> {
+    let id = &p.record.calibration_id;
+    Ok(vec![
+        (BANDS, super::parquet::parquet_bytes(bands::table(&p.bands, id))?),
+        (COVERAGE, super::parquet::parquet_bytes(coverage::table(&p.coverage).derived_from(id))?),
+        (ADEQUACY, super::parquet::parquet_bytes(adequacy::table(&p.adequacy, id))?),
+    ])
+}
+
 /// The prediction in `dir`, if it has a complete one (all four files);
 /// tables from another calibration than its record's are refused.
 pub fn read(dir: &Path) -> Result<Option<Prediction>> {
