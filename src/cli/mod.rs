@@ -43,7 +43,17 @@ fn dispatch(cli: Cli) -> Result<()> {
             Cli::command().print_help().map_err(|e| Error::output("stdout", e))?;
             Err(Error::Usage(format!("no command given (and no {BUNDLED} here: the bundled job runs in the mrbp project folder)")))
         }
-        None => pipeline.bundled().map(|reports| print::reports(&reports, clock)),
+        None => {
+            // the measured damper's part runs beside the virtual one; what it
+            // says is shown after the virtual part's, in its own order
+            let mut later: Vec<(bool, String)> = Vec::new();
+            let mut keep = |e: crate::pipeline::Event<'_>| later.push(print::render(e));
+            let done = pipeline.bundled(&mut keep);
+            for (to_stderr, text) in &later {
+                print::show(*to_stderr, text);
+            }
+            done.map(|reports| print::reports(&reports, clock))
+        }
         Some(Command::Check { manifest }) => pipeline.check(&manifest).map(drop),
         Some(Command::Status { dir }) => status(&dir),
         Some(Command::Synth { out, config, seed, options }) => {

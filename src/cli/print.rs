@@ -6,19 +6,33 @@ use crate::report::text;
 
 /// Prints what a pipeline stage did.
 pub fn event(e: Event) {
+    let (to_stderr, text) = render(e);
+    show(to_stderr, &text);
+}
+
+/// What [`event`] prints: whether to standard error, and the text.
+pub fn render(e: Event) -> (bool, String) {
+    let out = |text: String| (false, text);
     match e {
-        Event::Note(line) => eprintln!("{line}"),
-        Event::Checked(campaign) => print!("{}", text::campaign(campaign)),
-        Event::Identified(results) => print!("{}", text::identification(results)),
-        Event::Calibrating { what, dir } => println!("\ncalibrating {what} into {}", dir.display()),
-        Event::Calibrated(cal) => print!("{}", text::calibration(cal)),
+        Event::Note(line) => (true, format!("{line}\n")),
+        Event::Checked(campaign) => out(text::campaign(campaign)),
+        Event::Identified(results) => out(text::identification(results)),
+        Event::Calibrating { what, dir } => out(format!("\ncalibrating {what} into {}\n", dir.display())),
+        Event::Calibrated(cal) => out(text::calibration(cal)),
         Event::Predicted { record, dir } => {
-            print!("{}", text::prediction(record));
-            println!("wrote bands.parquet, coverage.parquet and prediction.toml to {}", dir.display());
+            out(format!("{}wrote bands.parquet, coverage.parquet and prediction.toml to {}\n", text::prediction(record), dir.display()))
         }
-        Event::LeftOneOut { rows, seconds } => print!("{}", text::leave_one_out(rows, seconds)),
-        Event::Consistency(parameters) => print!("{}", text::consistency(parameters)),
-        Event::Wrote(path) => println!("wrote {}", path.display()),
+        Event::LeftOneOut { rows, seconds } => out(text::leave_one_out(rows, seconds)),
+        Event::Consistency(parameters) => out(text::consistency(parameters)),
+        Event::Wrote(path) => out(format!("wrote {}\n", path.display())),
+    }
+}
+
+/// Prints text that [`render`] made.
+pub fn show(to_stderr: bool, text: &str) {
+    match to_stderr {
+        true => eprint!("{text}"),
+        false => print!("{text}"),
     }
 }
 
