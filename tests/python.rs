@@ -7,26 +7,36 @@
 use std::path::Path;
 use std::process::Command;
 
-#[test]
-fn python_package_agrees_with_the_command_line() {
+/// `MRBP_PYTHON` (or `python3`) if it imports `modules`; `None` (with a
+/// line saying so) where it does not and the package check is not
+/// mandatory.
+fn python_with(modules: &str, what: &str) -> Option<String> {
     let must = std::env::var("MRBP_PYTHON_PACKAGE_CHECK").is_ok_and(|v| v == "1");
     let python = std::env::var("MRBP_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ready = Command::new(&python).args(["-c", "import mrbp, pytest, pandas, pyarrow"]).output().is_ok_and(|o| o.status.success());
+    let ready = Command::new(&python).args(["-c", &format!("import {modules}")]).output().is_ok_and(|o| o.status.success());
     if !ready {
-        assert!(!must, "MRBP_PYTHON_PACKAGE_CHECK=1 but {python} cannot import mrbp (pip install ./python) or pytest");
-        eprintln!("python package tests skipped: {python} cannot import mrbp and pytest (pip install ./python pytest)");
-        return;
+        assert!(!must, "MRBP_PYTHON_PACKAGE_CHECK=1 but {python} cannot import {modules} (pip install ./python; scripts/requirements-checks.txt)");
+        eprintln!("{what} skipped: {python} cannot import {modules}");
+        return None;
     }
-    let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("python").join("tests");
-    let o = Command::new(&python)
-        .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
-        .arg(&tests)
-        .env("MRBP_BIN", env!("CARGO_BIN_EXE_mrbp"))
-        .output()
-        .expect("run pytest");
+    Some(python)
+}
+
+/// Runs `command` to success, showing what it said.
+fn succeeds(command: &mut Command, what: &str) {
+    let o = command.output().unwrap_or_else(|e| panic!("{what}: {e}"));
     let said = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    assert!(o.status.success(), "pytest python/tests failed:\n{said}");
+    assert!(o.status.success(), "{what} failed:\n{said}");
     eprintln!("{said}");
+}
+
+#[test]
+fn python_package_agrees_with_the_command_line() {
+    let Some(python) = python_with("mrbp, pytest, pandas, pyarrow", "python package tests") else { return };
+    let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("python").join("tests");
+    let mut pytest = Command::new(&python);
+    pytest.args(["-m", "pytest", "-q", "-p", "no:cacheprovider"]).arg(&tests).env("MRBP_BIN", env!("CARGO_BIN_EXE_mrbp"));
+    succeeds(&mut pytest, "pytest python/tests");
 }
 
 /// The example notebook (examples/python/calibrate.ipynb) executed end to
@@ -35,21 +45,9 @@ fn python_package_agrees_with_the_command_line() {
 /// asserts convergence and coverage. Mandatory where the package check is.
 #[test]
 fn example_notebook_runs_end_to_end() {
-    let must = std::env::var("MRBP_PYTHON_PACKAGE_CHECK").is_ok_and(|v| v == "1");
-    let python = std::env::var("MRBP_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ready = Command::new(&python).args(["-c", "import mrbp, nbclient, nbformat, ipykernel, arviz, matplotlib"]).output().is_ok_and(|o| o.status.success());
-    if !ready {
-        assert!(!must, "MRBP_PYTHON_PACKAGE_CHECK=1 but {python} cannot import mrbp, nbclient, nbformat, ipykernel, arviz and matplotlib (scripts/requirements-checks.txt)");
-        eprintln!("example notebook skipped: {python} cannot import mrbp, nbclient, ipykernel, arviz and matplotlib");
-        return;
-    }
+    let Some(python) = python_with("mrbp, nbclient, nbformat, ipykernel, arviz, matplotlib", "the example notebook") else { return };
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let o = Command::new(&python)
-        .arg(root.join("scripts").join("run_notebook.py"))
-        .arg(root.join("examples").join("python").join("calibrate.ipynb"))
-        .output()
-        .expect("run the notebook");
-    let said = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    assert!(o.status.success(), "examples/python/calibrate.ipynb failed:\n{said}");
-    eprintln!("{said}");
+    let mut notebook = Command::new(&python);
+    notebook.arg(root.join("scripts").join("run_notebook.py")).arg(root.join("examples").join("python").join("calibrate.ipynb"));
+    succeeds(&mut notebook, "examples/python/calibrate.ipynb");
 }

@@ -125,8 +125,7 @@ impl Calibration {
         let (made, notes) = py
             .detach(move || noted(|p| p.simulation(&cal, std::path::Path::new("excitation"), record, current, &options, None)))
             .map_err(raise)?;
-        let positions = if options.check().is_ok() { self.inner.draw_positions(draws) } else { Vec::new() };
-        Ok((arrays(py, mrbp::store::simulation::columns(&made)), notes, positions))
+        Ok((arrays(py, mrbp::store::simulation::columns(&made)), notes, self.inner.draw_positions(draws)))
     }
 
     /// The bands of the calibration's runs (`mrbp predict`): the bytes of
@@ -141,8 +140,7 @@ impl Calibration {
         let ((tables, failed), notes) = py
             .detach(move || {
                 noted(|pipeline| {
-                    let runs = if cal.is_current_law() { (*campaign).clone() } else { cal.used_runs(&campaign) };
-                    let (prediction, failed) = pipeline.prediction(&cal, &runs, &|run| cal.record.runs.iter().any(|r| r == run.id()), &options)?;
+                    let (prediction, failed) = pipeline.own_prediction(&cal, &campaign, &options)?;
                     Ok((mrbp::store::prediction::tables(&prediction)?, failed))
                 })
             })

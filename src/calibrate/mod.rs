@@ -69,10 +69,14 @@ impl Calibration {
         Ok(self.used_runs(&self.full_campaign()?))
     }
 
+    /// Whether the calibration used the run `id`.
+    pub fn saw(&self, id: &str) -> bool {
+        self.record.runs.iter().any(|r| r == id)
+    }
+
     /// The runs of `campaign` this calibration used.
     pub fn used_runs(&self, campaign: &Campaign) -> Campaign {
-        let runs = &self.record.runs;
-        campaign.filtered(|r| runs.iter().any(|id| id == r.id()))
+        campaign.filtered(|r| self.saw(r.id()))
     }
 
     /// Every run of the campaign's manifest (a current law predicts them all).

@@ -105,19 +105,17 @@ impl<'a> ColumnMap<'a> {
 pub fn csv_text(rec: &Record) -> String {
     let c = Columns::default();
     let mut s = String::with_capacity(rec.len() * 64);
-    match &rec.current {
-        Some(current) => {
-            s.push_str(&format!("{},{},{},{}\n", c.time, c.displacement, c.force, c.current));
-            for k in 0..rec.len() {
-                s.push_str(&format!("{},{},{},{}\n", rec.time[k], rec.displacement[k], rec.force[k], current[k]));
-            }
+    s.push_str(&format!("{},{},{}", c.time, c.displacement, c.force));
+    if rec.current.is_some() {
+        s.push_str(&format!(",{}", c.current));
+    }
+    s.push('\n');
+    for k in 0..rec.len() {
+        s.push_str(&format!("{},{},{}", rec.time[k], rec.displacement[k], rec.force[k]));
+        if let Some(current) = &rec.current {
+            s.push_str(&format!(",{}", current[k]));
         }
-        None => {
-            s.push_str(&format!("{},{},{}\n", c.time, c.displacement, c.force));
-            for k in 0..rec.len() {
-                s.push_str(&format!("{},{},{}\n", rec.time[k], rec.displacement[k], rec.force[k]));
-            }
-        }
+        s.push('\n');
     }
     s
 }
@@ -191,7 +189,7 @@ impl Record {
             }
             // an excitation to simulate has no force to check
             let checked = i < 2 || columns.force_required;
-            if let Some(k) = values.iter().position(|v| checked && !v.is_finite()) {
+            if let Some(k) = checked.then(|| values.iter().position(|v| !v.is_finite())).flatten() {
                 finite(path, k + 1, name, values[k])?;
             }
         }

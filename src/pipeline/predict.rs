@@ -22,11 +22,19 @@ impl Pipeline<'_> {
     /// `adequacy.parquet` and `prediction.toml` into `out`.
     pub fn predict(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
         self.prepare(out, "--out", &[campaign], &[], true)?;
-        let campaign = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
-        let (prediction, failed) = self.predict_runs(cal, &campaign, &|run| cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
-        self.write_inference_data(cal, &campaign, out, options.seed)?;
+        let (prediction, failed) = self.own_prediction(cal, campaign, options)?;
+        self.write_prediction(&prediction, out)?;
+        self.write_inference_data(cal, campaign, out, options.seed)?;
         unpredicted(&failed, out)?;
         Ok(prediction)
+    }
+
+    /// [`Pipeline::prediction`] of the runs of `campaign` that `cal` should
+    /// predict (its own runs; every run for a current law, seen or not), in
+    /// memory.
+    pub fn own_prediction(&mut self, cal: &Calibration, campaign: &Campaign, options: &PredictOptions) -> Result<(Prediction, Vec<(String, String)>)> {
+        let runs = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
+        self.prediction(cal, &runs, &|run| cal.saw(run.id()), options)
     }
 
     /// `inference.zarr`: [`Pipeline::inference_data`] into `out`.
@@ -46,7 +54,7 @@ impl Pipeline<'_> {
         let runs: Vec<RunData> = campaign
             .runs
             .iter()
-            .filter(|run| cal.record.runs.iter().any(|r| r == run.id()))
+            .filter(|run| cal.saw(run.id()))
             .map(|run| RunData::from_run(run, likelihood.part, likelihood.smooth_strain_ms))
             .collect();
         if runs.len() != cal.record.runs.len() {
@@ -96,7 +104,8 @@ impl Pipeline<'_> {
             }
             kept
         };
-        let (prediction, failed) = self.predict_runs(cal, &runs, &|run| own && cal.record.runs.iter().any(|r| r == run.id()), out, options)?;
+        let (prediction, failed) = self.prediction(cal, &runs, &|run| own && cal.saw(run.id()), options)?;
+        self.write_prediction(&prediction, out)?;
         let predicted = runs.filtered(|r| !failed.iter().any(|(id, _)| id == r.id()));
         let path = report::prediction::write(&PredictionReport { cal, campaign: &predicted, dir: out, prediction: &prediction })?;
         self.emit(Event::Wrote(&path));
@@ -104,13 +113,11 @@ impl Pipeline<'_> {
         Ok((path, prediction))
     }
 
-    /// Bands, coverage and adequacy of `campaign`'s runs into `out`
-    /// ([`Pipeline::prediction`]), with `prediction.toml`.
-    fn predict_runs(&mut self, cal: &Calibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, out: &Path, options: &PredictOptions) -> Result<(Prediction, Vec<(String, String)>)> {
-        let (prediction, failed) = self.prediction(cal, campaign, seen, options)?;
-        store::prediction::write(out, &prediction)?;
+    /// The prediction's tables and `prediction.toml` into `out`.
+    fn write_prediction(&mut self, prediction: &Prediction, out: &Path) -> Result<()> {
+        store::prediction::write(out, prediction)?;
         self.emit(Event::Predicted { record: &prediction.record, dir: out });
-        Ok((prediction, failed))
+        Ok(())
     }
 
     /// Bands, coverage and adequacy of `campaign`'s runs, in memory; `seen`

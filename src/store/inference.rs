@@ -223,8 +223,8 @@ pub fn inference_data(sample: &PosteriorSample, pw: PointwiseDraws, info: &Store
     let coords = json!("run time");
     let dims = [("chain", chains), ("draw", pw_steps.len()), ("obs", nobs)];
     let shear = [("coordinates", coords.clone()), ("units", json!("Pa")), ("long_name", json!("shear stress"))];
-    let (mut log_likelihood, mut replicate, mut observed) = (Some(pw.log_likelihood), Some(pw.replicate), Some(pw.observed));
-    for name in ["log_likelihood", "posterior_predictive", "observed_data"] {
+    // a group of the observations, with their coordinates (and the draws')
+    let observations = |name: &'static str| {
         let mut g = DataGroup::new(name, if name == "observed_data" { &[] } else { &thinning });
         g.put("obs", &[("obs", nobs)], Values::I64(obs.clone()), &[]);
         g.put("run", &[("obs", nobs)], Values::Str(run_names.clone()), &[]);
@@ -233,16 +233,17 @@ pub fn inference_data(sample: &PosteriorSample, pw: PointwiseDraws, info: &Store
             g.put("chain", &[("chain", chains)], Values::I64(chain_coord.clone()), &[]);
             g.put("draw", &[("draw", pw_steps.len())], Values::I64(pw_steps.clone()), &[]);
         }
-        match name {
-            "log_likelihood" => {
-                let values = Values::F64(log_likelihood.take().unwrap_or_default());
-                g.put("tau", &dims, values, &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))]);
-            }
-            "posterior_predictive" => g.put("tau", &dims, Values::F32(replicate.take().unwrap_or_default()), &shear),
-            _ => g.put("tau", &[("obs", nobs)], Values::F64(observed.take().unwrap_or_default()), &shear),
-        }
-        groups.push(g);
-    }
+        g
+    };
+    let mut g = observations("log_likelihood");
+    g.put("tau", &dims, Values::F64(pw.log_likelihood), &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))]);
+    groups.push(g);
+    let mut g = observations("posterior_predictive");
+    g.put("tau", &dims, Values::F32(pw.replicate), &shear);
+    groups.push(g);
+    let mut g = observations("observed_data");
+    g.put("tau", &[("obs", nobs)], Values::F64(pw.observed), &shear);
+    groups.push(g);
     InferenceData { attrs: root, groups }
 }
 
