@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::{Columns, Geometry, Manifest, Record, RunSpec};
 use crate::error::{Error, Result};
 use crate::atomic;
-use crate::model::{CurrentLaw, Integrator, Params};
+use crate::model::{CurrentCurves, CurrentLaw, Integrator, Params};
 use crate::noise::Kernel;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 
@@ -71,13 +71,18 @@ impl Crank {
 /// The stand uses the current law of [`crate::model::CurrentLaw`] with
 /// reference current 1 A and saturation current `saturation_a`; the
 /// pre-yield modulus G is half field-induced, half the carrier fluid's, so
-/// G(I) = G (1 + s(I))/2, and m1, m2, n do not depend on the field.
+/// G(I) = G (1 + s(I))/2, and m1, m2, n do not depend on the field. With
+/// `[law.curves]` it follows those curves instead ([`CurrentCurves`]:
+/// an off-state, each parameter its own bend, G may fall), and `at_1a` and
+/// `saturation_a` are not used.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct StandLaw {
     pub at_1a: Params,
     /// Saturation current I_s (A).
     pub saturation_a: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub curves: Option<CurrentCurves>,
 }
 
 impl Default for StandLaw {
@@ -85,6 +90,7 @@ impl Default for StandLaw {
         StandLaw {
             at_1a: Params::reference_1a(),
             saturation_a: 1.0,
+            curves: None,
         }
     }
 }
@@ -92,6 +98,14 @@ impl Default for StandLaw {
 impl StandLaw {
     pub fn law(&self) -> CurrentLaw {
         CurrentLaw::through(&self.at_1a, 1.0, self.saturation_a, 0.5)
+    }
+
+    /// The fluid's B-P parameters at `current_a`.
+    pub fn params_at(&self, current_a: f64) -> Params {
+        match &self.curves {
+            Some(c) => c.params_at(current_a),
+            None => self.law().params_at(current_a),
+        }
     }
 }
 
@@ -357,6 +371,14 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     if !settings.extra_force.viscous_n_s_per_m.is_finite() {
         return Err(Error::Usage("extra force: the viscous coefficient must be finite".into()));
     }
+    if let Some(c) = &settings.law.curves {
+        if !(c.low_a >= 0.0 && c.high_a > c.low_a && c.high_a.is_finite()) {
+            return Err(Error::Usage(format!("[law.curves]: need anchor currents 0 ≤ low_a < high_a; got {} and {}", c.low_a, c.high_a)));
+        }
+        if let Some(k) = c.bend.iter().position(|b| !(*b > 0.0 && b.is_finite())) {
+            return Err(Error::Usage(format!("[law.curves]: bend {} of {} must be positive and finite", c.bend[k], crate::model::PARAM_NAMES[k])));
+        }
+    }
     std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
     let _held = crate::lock::write(dir)?;
     crate::atomic::clean_leftovers(dir)?;
@@ -366,7 +388,7 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     let mut panels = Vec::new();
     let mut stream = 0u64;
     for &current in &settings.currents_a {
-        let p = settings.law.law().params_at(current);
+        let p = settings.law.params_at(current);
         p.validate()
             .map_err(|e| Error::Usage(format!("at {current} A: {e}")))?;
         let mut chart = Chart::new(

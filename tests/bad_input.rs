@@ -288,6 +288,21 @@ fn cases() -> Vec<Case> {
             code: 2,
             expect: &["--model current-law"],
         },
+        Case {
+            name: "current curves from one current",
+            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--model", "current-curves"]),
+            code: 2,
+            expect: &["two or more currents"],
+        },
+        Case {
+            name: "--config curves' anchors reversed",
+            make: |r| {
+                std::fs::write(r.join("c.toml"), "model = \"current-curves\"\nanchor_currents_a = [1.0, 0.5]\n").unwrap();
+                s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--config", &p(&r.join("c.toml"))])
+            },
+            code: 2,
+            expect: &["c.toml", "anchor_currents_a", "low < high"],
+        },
         Case { name: "--noise unknown", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--noise", "pink"]), code: 2, expect: &["pink"] },
         Case { name: "--config missing", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--config", &p(&r.join("none.toml"))]), code: 2, expect: &["none.toml"] },
         Case {

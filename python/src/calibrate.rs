@@ -124,7 +124,7 @@ pub(crate) fn calibrate(
 ) -> PyResult<Calibration> {
     let value = |v: Option<String>| v.map(|s| s.trim().to_string()).filter(|s| !s.is_empty());
     let model = match value(model) {
-        Some(m) => Some(ModelKind::from_str(&m, true).map_err(|_| PyValueError::new_err(format!("model {m:?}: one of 'per-current', 'current-law'")))?),
+        Some(m) => Some(ModelKind::from_str(&m, true).map_err(|_| PyValueError::new_err(format!("model {m:?}: one of 'per-current', 'current-law', 'current-curves'")))?),
         None => None,
     };
     let noise = match value(noise) {

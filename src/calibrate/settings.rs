@@ -227,6 +227,11 @@ pub struct CalibrationSettings {
     pub model: ModelKind,
     /// Reference current of the current law (A): R0, R1, D1 are its values there.
     pub reference_current_a: f64,
+    /// The current curves' anchor currents (A): their `*_low` and `*_high`
+    /// parameters are the values there. Unset: the lowest and highest
+    /// current calibrated (filled in when the calibration starts).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub anchor_currents_a: Option<(f64, f64)>,
     pub likelihood: LikelihoodSettings,
     pub integrator: IntegratorSettings,
     pub sampler: SamplingSettings,
@@ -244,6 +249,7 @@ impl Default for CalibrationSettings {
         CalibrationSettings {
             model: ModelKind::PerCurrent,
             reference_current_a: 1.0,
+            anchor_currents_a: None,
             likelihood: LikelihoodSettings::default(),
             integrator: IntegratorSettings::default(),
             sampler: SamplingSettings::default(),
@@ -288,6 +294,11 @@ impl CalibrationSettings {
         if !(self.reference_current_a > 0.0) {
             return Err("reference_current_a must be positive".into());
         }
+        if let Some((lo, hi)) = self.anchor_currents_a {
+            if !(lo >= 0.0 && hi > lo && hi.is_finite()) {
+                return Err(format!("anchor_currents_a must be two currents 0 ≤ low < high; got [{lo}, {hi}]"));
+            }
+        }
         if self.sampler.ensembles == 0 {
             return Err("at least one ensemble".into());
         }
@@ -301,7 +312,17 @@ impl CalibrationSettings {
 
     /// How θ gives the B-P parameters of each run.
     pub fn parameter_model(&self) -> ParameterModel {
-        ParameterModel::new(self.model, self.reference_current_a)
+        ParameterModel::new(self.model, self.reference_current_a, self.anchor_currents_a)
+    }
+
+    /// The curves' anchors, where unset, from the currents calibrated: the
+    /// lowest and the highest.
+    pub fn fill_anchors(&mut self, currents: &[f64]) {
+        if self.model == ModelKind::CurrentCurves && self.anchor_currents_a.is_none() && currents.len() >= 2 {
+            let lo = currents.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = currents.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            self.anchor_currents_a = Some((lo, hi));
+        }
     }
 
     /// The noise model of the likelihood, with its scales' bounds.

@@ -32,6 +32,7 @@ pub struct Start {
 pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn FnMut(&str)) -> Result<Start> {
     let clock = Instant::now();
     let mut settings = settings.clone();
+    settings.fill_anchors(&campaign.currents());
     let model = settings.parameter_model();
     let current_a = model.identification_current(&campaign.currents())?;
     let identification = identify_current(campaign, current_a, &settings.identify);

@@ -45,8 +45,9 @@ pub enum Command {
         predict: PredictOptions,
         #[command(flatten)]
         validation: LooOptions,
-        /// With several currents: also calibrate the current law, holding out
-        /// the middle current when there are three or more, and predict it
+        /// With several currents: also calibrate the current law (or, with
+        /// `--model current-curves`, the current curves), holding out the
+        /// middle current when there are three or more, and predict it
         #[arg(long)]
         current_law: bool,
     },

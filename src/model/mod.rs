@@ -4,6 +4,7 @@
 //! This module knows nothing about data files, identification or sampling:
 //! it maps a parameter set and a prescribed strain history to a stress history.
 
+pub mod current_curves;
 pub mod current_law;
 pub mod integrate;
 pub mod lanes;
@@ -11,6 +12,7 @@ pub mod law;
 pub mod params;
 pub mod simd;
 
+pub use current_curves::CurrentCurves;
 pub use current_law::CurrentLaw;
 pub use integrate::{integrate, uses_avx2, IntegrationError, Integrator, LaneStates, Scheme, State, Trajectory};
 pub use lanes::LANES;

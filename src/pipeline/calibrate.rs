@@ -74,8 +74,9 @@ impl Pipeline<'_> {
                 return Err(Error::Usage(format!("--hold-out-current {h}: no run at {h} A (currents: {:?})", campaign.currents())));
             }
             let used = campaign.filtered(|r| !held.iter().any(|h| same_current(r.spec.current_a, *h)));
+            let law = if settings.model == crate::posterior::ModelKind::CurrentCurves { "the current curves" } else { "the current law" };
             let what = format!(
-                "the current law on {} run(s) at {:?} A{}",
+                "{law} on {} run(s) at {:?} A{}",
                 used.runs.len(),
                 used.currents(),
                 if held.is_empty() { String::new() } else { format!(" (holding out {held:?} A)") }
@@ -83,7 +84,7 @@ impl Pipeline<'_> {
             return Ok(vec![self.calibrate_into(&used, out, request, &what)?]);
         }
         if !request.hold_out_current.is_empty() {
-            return Err(Error::Usage("--hold-out-current needs --model current-law".into()));
+            return Err(Error::Usage("--hold-out-current needs --model current-law or current-curves".into()));
         }
         let currents = match request.current {
             Some(c) if !campaign.has_current(c) => {

@@ -23,7 +23,6 @@ use crate::calibrate::{Calibration, CalibrationSettings};
 use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::CurrentIdentification;
-use crate::posterior::ModelKind;
 use crate::sampler::{Observer, Progress};
 use crate::predict::PredictionRecord;
 use crate::validate::consistency::ParameterConsistency;
@@ -81,10 +80,10 @@ impl SampleOptions {
     /// The request: the settings file with the options applied, checked.
     pub fn request(&self) -> Result<SampleRequest> {
         let settings = self.settings.settings()?;
-        if !self.hold_out_current.is_empty() && settings.model != ModelKind::CurrentLaw {
-            return Err(Error::Usage("--hold-out-current needs --model current-law".into()));
+        if !self.hold_out_current.is_empty() && !settings.model.is_law() {
+            return Err(Error::Usage("--hold-out-current needs --model current-law or current-curves".into()));
         }
-        if self.per_run && settings.model == ModelKind::CurrentLaw {
+        if self.per_run && settings.model.is_law() {
             return Err(Error::Usage("--per-run calibrates each run alone, which a current law cannot (one run has one current): use the per-current model".into()));
         }
         Ok(SampleRequest { settings, current: self.current, hold_out_current: self.hold_out_current.clone(), resume: self.resume, force: self.force, per_run: self.per_run })

@@ -23,9 +23,13 @@ impl Pipeline<'_> {
         let loo = options.leave_one_out.map(|steps| self.loo_settings(steps, &options.predict));
         let several = options.sample.current.is_none() && all.len() >= 2;
         let held: Vec<f64> = if several && all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };
+        // the law stage fits the law the settings name (`--model
+        // current-curves`), else the current law; every current alone is per-current
+        let law_kind = if options.sample.settings.model.is_law() { options.sample.settings.model } else { ModelKind::CurrentLaw };
+        let stem = if law_kind == ModelKind::CurrentCurves { "current-curves" } else { "current-law" };
         let law = match held.first() {
-            Some(h) => format!("current-law-without-{}", current_tag(*h)),
-            None => "current-law".to_string(),
+            Some(h) => format!("{stem}-without-{}", current_tag(*h)),
+            None => stem.to_string(),
         };
         // every folder of the job is held from the start: another command
         // cannot slip into one of them half-way through
@@ -40,7 +44,8 @@ impl Pipeline<'_> {
         let mut reports = Vec::new();
         let mut entries = Vec::new();
         for c in currents {
-            let request = SampleRequest { current: Some(c), ..options.sample.clone() };
+            let mut request = SampleRequest { current: Some(c), ..options.sample.clone() };
+            request.settings.model = ModelKind::PerCurrent;
             for cal in self.sample(&campaign, &out.join(current_tag(c)), &request)? {
                 let (report, prediction) = self.predict_and_report(&cal, &campaign, &options.predict, loo.as_ref())?;
                 reports.push(report);
@@ -52,7 +57,7 @@ impl Pipeline<'_> {
                 // hold out the middle current: the law must predict it
                 let name = law;
                 let mut settings = options.sample.settings.clone();
-                settings.model = ModelKind::CurrentLaw;
+                settings.model = law_kind;
                 let request = SampleRequest { settings, hold_out_current: held, ..options.sample.clone() };
                 for cal in self.sample(&campaign, &out.join(name), &request)? {
                     let (report, prediction) = self.predict_and_report(&cal, &campaign, &options.predict, None)?;

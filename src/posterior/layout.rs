@@ -50,8 +50,9 @@ pub struct Layout {
     /// The noise parameters: block p holds parameter p of every run.
     pub noise: Range<usize>,
     pub noise_parameters: &'static [Parameter],
-    /// Where R1 and D1 sit in θ when they are walked as saturation and share.
-    share: Option<(usize, usize)>,
+    /// Where each pair of R1 and D1 sits in θ when they are walked as
+    /// saturation and share (one pair, or one per anchor of the curves).
+    share: Vec<(usize, usize)>,
 }
 
 /// ln(1 + eᵛ), without overflow.
@@ -83,8 +84,8 @@ impl Layout {
             noise: nf..nf + nr * noise_parameters.len(),
             noise_parameters,
             share: match coordinates {
-                Coordinates::Log => None,
-                Coordinates::SaturationShare => Some((model.index("R1"), model.index("D1"))),
+                Coordinates::Log => Vec::new(),
+                Coordinates::SaturationShare => model.saturation_pairs(),
             },
         }
     }
@@ -130,9 +131,10 @@ impl Layout {
                 _ => format!("ln {n}"),
             })
             .collect();
-        if let Some((r1, d1)) = self.share {
-            names[r1] = "ln (R1 + D1)".into();
-            names[d1] = "ln (D1 / R1)".into();
+        for &(r1, d1) in &self.share {
+            let (a, b) = (&self.names[r1], &self.names[d1]);
+            names[r1] = format!("ln ({a} + {b})");
+            names[d1] = format!("ln ({b} / {a})");
         }
         names
     }
@@ -140,7 +142,7 @@ impl Layout {
     /// ln θ at the sampler's coordinates `x` (θ first).
     pub fn log_theta(&self, x: &[f64]) -> Vec<f64> {
         let mut log = x[self.theta.clone()].to_vec();
-        if let Some((r1, d1)) = self.share {
+        for &(r1, d1) in &self.share {
             let (u, v) = (x[r1], x[d1]);
             log[r1] = u - softplus(v);
             log[d1] = u - softplus(-v);
@@ -151,7 +153,7 @@ impl Layout {
     /// The sampler's θ coordinates of ln θ (inverse of [`Self::log_theta`]).
     pub fn theta_coordinates(&self, log_theta: &[f64]) -> Vec<f64> {
         let mut x = log_theta.to_vec();
-        if let Some((r1, d1)) = self.share {
+        for &(r1, d1) in &self.share {
             let (a, b) = (log_theta[r1], log_theta[d1]);
             x[r1] = a.max(b) + (-(a - b).abs()).exp().ln_1p();
             x[d1] = b - a;

@@ -30,7 +30,7 @@ use crate::noise::{NoiseModel, NoiseValues, MAX_PARAMETERS};
 use crate::sampler::LogDensity;
 pub use layout::{unit_of, Coordinates, Layout};
 pub use likelihood::{run_log_likelihood, LikelihoodSettings};
-pub use parameters::{ModelKind, ParameterModel, LAW_NAMES};
+pub use parameters::{ModelKind, ParameterModel, CURVE_NAMES, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, Draws, PosteriorSample, SummaryRow};
 pub use terms::ModelTerms;

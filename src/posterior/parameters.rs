@@ -1,6 +1,7 @@
 //! What the θ coordinates of a posterior are, and how they give the B-P
 //! parameters of each run: one parameter set for the runs of one current,
-//! or the current law of [`CurrentLaw`] over several currents.
+//! the current law of [`CurrentLaw`] over several currents, or each
+//! parameter its own curve in the current ([`CurrentCurves`]).
 //!
 //! Every question that depends on that choice (names, priors, parameters at
 //! a current, the start of the MAP search, the current an identification
@@ -11,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::prior::Prior;
 use crate::error::{Error, Result};
-use crate::model::{CurrentLaw, Params, PARAM_NAMES, PHYSICAL_RANGE};
+use crate::model::{CurrentCurves, CurrentLaw, Params, PARAM_NAMES, PHYSICAL_RANGE};
 
 /// The choice as written in settings files and on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -22,10 +23,33 @@ pub enum ModelKind {
     /// R0, R1, D1 and G as saturating functions of the current, one
     /// posterior from the runs of every current.
     CurrentLaw,
+    /// Every parameter its own curve in the current, with an off-state:
+    /// its values at two anchor currents and a bend.
+    CurrentCurves,
+}
+
+impl ModelKind {
+    /// Whether one posterior describes several currents.
+    pub fn is_law(self) -> bool {
+        self != ModelKind::PerCurrent
+    }
 }
 
 /// Names of a current law's θ coordinates (SI units in outputs).
 pub const LAW_NAMES: [&str; 9] = ["G_field", "R0", "R1", "D1", "m1", "m2", "n", "saturation_current_a", "G_zero"];
+
+/// Names of the current curves' θ coordinates: the parameters at the low
+/// anchor current, at the high one, and each curve's bend κ.
+pub const CURVE_NAMES: [&str; 21] = [
+    "G_low", "R0_low", "R1_low", "D1_low", "m1_low", "m2_low", "n_low", "G_high", "R0_high", "R1_high", "D1_high", "m1_high", "m2_high", "n_high", "G_bend", "R0_bend",
+    "R1_bend", "D1_bend", "m1_bend", "m2_bend", "n_bend",
+];
+
+/// The prior of each curve's bend κ: ln κ normal about 0 (a straight line in
+/// ln p against I) with sd 2, so that ±1 sd puts the middle of the change
+/// between 27 % and 73 % of the way between the anchors (ln κ = ∓2), within
+/// ln κ ∈ [−6, 6] (5 % and 95 %).
+pub const BEND_PRIOR: Prior = Prior::LogNormal { median: 1.0, sd_log: 2.0, lower: 0.002_478_752_176_666_358, upper: 403.428_793_492_735_1 };
 
 /// How θ maps to the B-P parameters of a run.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -34,13 +58,21 @@ pub enum ParameterModel {
     PerCurrent,
     /// θ = the current law's [`LAW_NAMES`], with its reference current (A).
     CurrentLaw { reference_a: f64 },
+    /// θ = [`CURVE_NAMES`], with the anchor currents (A).
+    CurrentCurves { low_a: f64, high_a: f64 },
 }
 
 impl ParameterModel {
-    pub fn new(kind: ModelKind, reference_a: f64) -> Self {
+    /// The model of `kind`; the curves' anchors (`anchors_a`) are known
+    /// once the calibrated currents are (NaN until then).
+    pub fn new(kind: ModelKind, reference_a: f64, anchors_a: Option<(f64, f64)>) -> Self {
         match kind {
             ModelKind::PerCurrent => ParameterModel::PerCurrent,
             ModelKind::CurrentLaw => ParameterModel::CurrentLaw { reference_a },
+            ModelKind::CurrentCurves => {
+                let (low_a, high_a) = anchors_a.unwrap_or((f64::NAN, f64::NAN));
+                ParameterModel::CurrentCurves { low_a, high_a }
+            }
         }
     }
 
@@ -48,11 +80,13 @@ impl ParameterModel {
         match self {
             ParameterModel::PerCurrent => ModelKind::PerCurrent,
             ParameterModel::CurrentLaw { .. } => ModelKind::CurrentLaw,
+            ParameterModel::CurrentCurves { .. } => ModelKind::CurrentCurves,
         }
     }
 
+    /// Whether θ describes several currents (a law or curves).
     pub fn is_current_law(&self) -> bool {
-        self.kind() == ModelKind::CurrentLaw
+        self.kind().is_law()
     }
 
     /// Names of the θ coordinates, SI in outputs.
@@ -60,6 +94,16 @@ impl ParameterModel {
         match self {
             ParameterModel::PerCurrent => &PARAM_NAMES,
             ParameterModel::CurrentLaw { .. } => &LAW_NAMES,
+            ParameterModel::CurrentCurves { .. } => &CURVE_NAMES,
+        }
+    }
+
+    /// Where each (R1, D1) pair sits in θ: the saturated stress and its
+    /// share, walked together in [`super::Coordinates::SaturationShare`].
+    pub fn saturation_pairs(&self) -> Vec<(usize, usize)> {
+        match self {
+            ParameterModel::CurrentCurves { .. } => vec![(self.index("R1_low"), self.index("D1_low")), (self.index("R1_high"), self.index("D1_high"))],
+            _ => vec![(self.index("R1"), self.index("D1"))],
         }
     }
 
@@ -71,14 +115,33 @@ impl ParameterModel {
     /// Priors of θ from the priors of the seven B-P parameters. In a current
     /// law those describe the reference current; G_field and G_zero each get
     /// G's prior, and I_s a log-normal with median I_ref and a factor e
-    /// spread, within [0.05 I_ref, 20 I_ref].
+    /// spread, within [0.05 I_ref, 20 I_ref]. The curves' values at each
+    /// anchor get the parameter's prior, their bends [`BEND_PRIOR`].
     pub fn priors(&self, bp: &[Prior; 7]) -> Vec<Prior> {
         let mut p = bp.to_vec();
-        if let ParameterModel::CurrentLaw { reference_a } = *self {
-            p.push(Prior::LogNormal { median: reference_a, sd_log: 1.0, lower: 0.05 * reference_a, upper: 20.0 * reference_a });
-            p.push(bp[0]);
+        match *self {
+            ParameterModel::PerCurrent => {}
+            ParameterModel::CurrentLaw { reference_a } => {
+                p.push(Prior::LogNormal { median: reference_a, sd_log: 1.0, lower: 0.05 * reference_a, upper: 20.0 * reference_a });
+                p.push(bp[0]);
+            }
+            ParameterModel::CurrentCurves { .. } => {
+                p.extend_from_slice(bp);
+                p.extend([BEND_PRIOR; 7]);
+            }
         }
         p
+    }
+
+    /// The current curves at θ (SI, in the order of [`CURVE_NAMES`]).
+    pub fn curves(low_a: f64, high_a: f64, theta: &[f64]) -> CurrentCurves {
+        CurrentCurves {
+            low_a,
+            high_a,
+            low: Params::from_array(std::array::from_fn(|k| theta[k])),
+            high: Params::from_array(std::array::from_fn(|k| theta[7 + k])),
+            bend: std::array::from_fn(|k| theta[14 + k]),
+        }
     }
 
     /// The current law at θ (SI, in the order of [`LAW_NAMES`]).
@@ -102,15 +165,23 @@ impl ParameterModel {
         match *self {
             ParameterModel::PerCurrent => Params::from_array(std::array::from_fn(|i| theta[i])),
             ParameterModel::CurrentLaw { reference_a } => Self::law(reference_a, theta).params_at(current_a),
+            ParameterModel::CurrentCurves { low_a, high_a } => Self::curves(low_a, high_a, theta).params_at(current_a),
         }
     }
 
     /// θ (SI) that gives `p` at `current_a`: the start of the MAP search
     /// from an identification. A current law starts with I_s = I_ref and
-    /// half of G from the field.
+    /// half of G from the field; curves start flat (`p` at every current).
     pub fn start(&self, p: &Params, current_a: f64) -> Vec<f64> {
-        let ParameterModel::CurrentLaw { reference_a } = *self else {
-            return p.to_array().to_vec();
+        let reference_a = match *self {
+            ParameterModel::PerCurrent => return p.to_array().to_vec(),
+            ParameterModel::CurrentCurves { .. } => {
+                let mut theta = p.to_array().to_vec();
+                theta.extend(p.to_array());
+                theta.extend([1.0; 7]);
+                return theta;
+            }
+            ParameterModel::CurrentLaw { reference_a } => reference_a,
         };
         let probe = CurrentLaw::through(p, reference_a, reference_a, 0.5);
         let s = probe.scale(current_a).max(1e-3);
@@ -137,7 +208,7 @@ impl ParameterModel {
                 [c] => Ok(*c),
                 _ => Err(Error::Usage(format!("a calibration takes runs of one current; got {currents:?} A"))),
             },
-            ParameterModel::CurrentLaw { reference_a } => {
+            ParameterModel::CurrentLaw { reference_a } | ParameterModel::CurrentCurves { high_a: reference_a, .. } => {
                 if currents.len() < 2 {
                     return Err(Error::Usage(format!("the current law needs runs at two or more currents; got {currents:?} A")));
                 }
@@ -147,11 +218,12 @@ impl ParameterModel {
     }
 
     /// The current the calibration's parameters describe: its one current,
-    /// or a law's reference.
+    /// a law's reference, or the curves' high anchor.
     pub fn describes_current(&self, identification_current: f64) -> f64 {
         match *self {
             ParameterModel::PerCurrent => identification_current,
             ParameterModel::CurrentLaw { reference_a } => reference_a,
+            ParameterModel::CurrentCurves { high_a, .. } => high_a,
         }
     }
 }
@@ -175,5 +247,31 @@ mod tests {
             }
         }
         assert_eq!(model.names().len(), theta.len());
+    }
+
+    /// Curves map θ in the order of their names, start flat, and their
+    /// priors line up with their names.
+    #[test]
+    fn curves_map_their_coordinates() {
+        let model = ParameterModel::new(ModelKind::CurrentCurves, 1.0, Some((0.25, 1.0)));
+        let p = Params::reference_1a();
+        let theta = model.start(&p, 0.5);
+        assert_eq!(theta.len(), CURVE_NAMES.len());
+        let close = |a: f64, b: f64| (a / b - 1.0).abs() < 1e-13;
+        for (a, b) in model.params(&theta, 0.1).to_array().iter().zip(p.to_array()) {
+            assert!(close(*a, b), "flat curves: {a} vs {b}");
+        }
+        let priors = model.priors(&crate::posterior::prior::default_priors());
+        assert_eq!(priors.len(), CURVE_NAMES.len());
+        assert_eq!(priors[model.index("n_high")], priors[6]);
+        assert_eq!(priors[model.index("G_bend")], BEND_PRIOR);
+        // BEND_PRIOR's bounds are e^∓6
+        let (lo, hi) = BEND_PRIOR.bounds();
+        assert!((lo.ln() + 6.0).abs() < 1e-12 && (hi.ln() - 6.0).abs() < 1e-12);
+        let mut t = theta.clone();
+        t[model.index("D1_high")] *= 2.0;
+        assert!(close(model.params(&t, 1.0).d1, 2.0 * p.d1));
+        assert!(close(model.params(&t, 0.25).d1, p.d1));
+        assert_eq!(model.describes_current(0.5), 1.0);
     }
 }

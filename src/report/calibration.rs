@@ -13,6 +13,7 @@ use crate::data::{current_tag, Campaign};
 use crate::error::{Error, Result};
 use crate::model::PARAM_NAMES;
 use crate::posterior::map::step_shift_limit;
+use crate::posterior::ParameterModel;
 use crate::calibrate::Calibration;
 use crate::predict::{CoverageRow, Prediction};
 use crate::sampler::diagnostics::MIN_TAU_MULTIPLE;
@@ -94,12 +95,15 @@ fn title(cal: &Calibration) -> String {
 }
 
 fn calibrated_at(cal: &Calibration) -> String {
-    if cal.is_current_law() {
-        format!("{:?} A as functions of the coil current (reference {} A)", cal.record.currents, cal.settings.reference_current_a)
-    } else {
-        format!("{} A", cal.record.current_a)
+    match cal.sample.model {
+        ParameterModel::CurrentLaw { reference_a } => format!("{:?} A as functions of the coil current (reference {reference_a} A)", cal.record.currents),
+        ParameterModel::CurrentCurves { low_a, high_a } => {
+            format!("{:?} A, each parameter its own curve in the coil current through its values at {low_a} and {high_a} A", cal.record.currents)
+        }
+        ParameterModel::PerCurrent => format!("{} A", cal.record.current_a),
     }
 }
+
 
 /// The figures of the calibration and of its leave-one-out study.
 /// The corner plot shows every coordinate up to this many, else θ alone.
