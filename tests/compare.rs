@@ -109,6 +109,50 @@ fn current_law_predicts_a_held_out_current() {
     let html = std::fs::read_to_string(cmp.join("report.html")).unwrap();
     assert!(html.contains("<b>held out</b>") && html.contains("held_out_law"), "held-out rows and figure");
 
+    // the law says how the parameters differ between currents, draw by
+    // draw: R0 at 1.5 A over R0 at 0.5 A is tanh(1.5)/tanh(0.5) = 1.959 on
+    // the stand (5 % tolerance as in `compare_tells_current_levels_apart`);
+    // m1, m2 and n do not follow the current in the law, so their ratio is
+    // exactly 1 in every draw and P(a > b) exactly ½ (every pair a tie)
+    let path = cmp.join("differences.parquet");
+    let d = read_parquet(&path).unwrap();
+    let (a, b, params) = (str_column(&d, "calibration_a", &path).unwrap(), str_column(&d, "calibration_b", &path).unwrap(), str_column(&d, "parameter", &path).unwrap());
+    let (p, r05, r50, r95) = (f64_column(&d, "p_greater", &path).unwrap(), f64_column(&d, "ratio_q05", &path).unwrap(), f64_column(&d, "ratio_q50", &path).unwrap(), f64_column(&d, "ratio_q95", &path).unwrap());
+    let row = |x: &str, y: &str, name: &str| (0..a.len()).find(|&i| a[i] == x && b[i] == y && params[i] == name).unwrap_or_else(|| panic!("{x} − {y} {name} in {a:?}"));
+    // the currents of the comparison: the law's two and the per-current one
+    assert_eq!(a.iter().filter(|x| x.starts_with("law at")).count(), 3 * 7, "three pairs of currents, seven parameters");
+    let truth = 1.5f64.tanh() / 0.5f64.tanh();
+    for name in ["R0", "R1", "D1"] {
+        let i = row("law at 1.5 A", "law at 0.5 A", name);
+        assert!(p[i] > 0.99, "{name}: P = {}", p[i]);
+        assert!(r05[i] < truth * 1.05 && r95[i] > truth * 0.95, "{name}: ratio [{}, {}] vs {truth}", r05[i], r95[i]);
+    }
+    for name in ["m1", "m2", "n"] {
+        let i = row("law at 1.0 A", "law at 0.5 A", name);
+        assert_eq!((p[i], r50[i]), (0.5, 1.0), "{name} does not follow the current in the law");
+    }
+
+    // the law's parameters against the current, in its folder: the
+    // off-state has no yield stress in this law (s(0) = 0), the held-out
+    // current lies between the calibrated ones, and the band there holds
+    // the stand's R0 (5 % tolerance as above)
+    let path = law.join("against_current.parquet");
+    let t = read_parquet(&path).unwrap();
+    assert_eq!(column_names(&t), ["parameter", "current_a", "kind", "mean", "sd", "q05", "q50", "q95"]);
+    let (names, kinds) = (str_column(&t, "parameter", &path).unwrap(), str_column(&t, "kind", &path).unwrap());
+    let (current, q05, q50, q95) = (f64_column(&t, "current_a", &path).unwrap(), f64_column(&t, "q05", &path).unwrap(), f64_column(&t, "q50", &path).unwrap(), f64_column(&t, "q95", &path).unwrap());
+    let at = |name: &str, i: f64| (0..names.len()).find(|&k| names[k] == name && (current[k] - i).abs() < 1e-9).unwrap_or_else(|| panic!("{name} at {i} A"));
+    assert_eq!((kinds[at("R0", 0.0)].as_str(), q50[at("R0", 0.0)]), ("outside", 0.0));
+    assert_eq!(kinds[at("R0", 0.5)], "calibrated");
+    assert_eq!(kinds[at("R0", 1.0)], "between");
+    assert_eq!(kinds[at("R0", 1.8)], "outside", "the grid reaches 1.2× the highest current");
+    let stand = mrbp::synth::StandLaw::default().params_at(1.0);
+    let k = at("R0", 1.0);
+    assert!(q05[k] < stand.r0 * 1.05 && q95[k] > stand.r0 * 0.95, "R0 at 1.0 A: [{}, {}] vs {}", q05[k], q95[k], stand.r0);
+    ok(mrbp(&["report", s(&law)]));
+    let report = std::fs::read_to_string(law.join("report.html")).unwrap();
+    assert!(report.contains("alt=\"against_current\"") && law.join("against_current.png").exists(), "the law's report draws its curves");
+
     // bad use is a usage error, not a crash
     let o = mrbp(&["sample", &manifest, "--out", s(&per), "--hold-out-current", "1.0"]);
     assert_eq!(o.status.code(), Some(2));

@@ -192,6 +192,21 @@ class Calibration:
         return frame
 
     @property
+    def against_current(self) -> Optional["pd.DataFrame"]:
+        """A law's (``model="current-law"`` or ``"current-curves"``) B-P
+        parameters against the coil current, as ``against_current.parquet``:
+        parameter, current_a, kind ('calibrated', 'between', 'outside'),
+        mean, sd, q05, q50, q95 (SI); None for a calibration at one current."""
+        made = self._inner.against_current()
+        if made is None:
+            return None
+        parameters, kinds, columns = made
+        frame = pd.DataFrame(dict(columns))
+        frame.insert(0, "parameter", parameters)
+        frame.insert(2, "kind", kinds)
+        return frame
+
+    @property
     def draws(self) -> "pd.DataFrame":
         """Every walker's every step, burn-in included, as
         ``chains.parquet``: ensemble, chain, draw, the coordinates (SI),

@@ -42,6 +42,20 @@ impl Calibration {
         self.inner.summary.iter().map(|r| r.parameter.clone()).collect()
     }
 
+    /// A law's B-P parameters against the coil current, as
+    /// `against_current.parquet` holds them: parameter, kind, and the
+    /// current and statistics columns; None for a calibration at one current.
+    fn against_current<'py>(&self, py: Python<'py>) -> Option<(Vec<String>, Vec<String>, Arrays<'py>)> {
+        let cal = &self.inner;
+        if !cal.is_current_law() {
+            return None;
+        }
+        let rows = mrbp::compare::against_current(&cal.sample, &cal.draw_positions(mrbp::store::folder::CURRENT_DRAWS), &cal.record.currents);
+        let f = |g: fn(&mrbp::compare::CurrentRow) -> f64| rows.iter().map(g).collect::<Vec<f64>>();
+        let columns = vec![("current_a", f(|r| r.current_a)), ("mean", f(|r| r.mean)), ("sd", f(|r| r.sd)), ("q05", f(|r| r.q05)), ("q50", f(|r| r.q50)), ("q95", f(|r| r.q95))];
+        Some((rows.iter().map(|r| r.parameter.clone()).collect(), rows.iter().map(|r| r.kind.name().to_string()).collect(), arrays(py, columns)))
+    }
+
     /// Every walker's every step, as `chains.parquet` holds them: the
     /// bookkeeping columns (ensemble, chain, draw, accepted) and the
     /// coordinates with log_prob.

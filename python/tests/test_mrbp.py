@@ -67,6 +67,17 @@ def test_saved_folder_is_the_command_lines(calibration, tmp_path):
         calibration.save(folder)
 
 
+def test_a_laws_parameters_against_the_current_are_its_folders(calibration, tmp_path):
+    # a short current-law calibration of two of the bundled currents
+    cli("sample", MANIFEST, "--out", tmp_path, "--model", "current-law", "--seed", 4, "--steps", 10,
+        "--hold-out-current", 0.5)
+    law = mrbp.load(tmp_path).against_current
+    stored = pd.read_parquet(tmp_path / "against_current.parquet")
+    pd.testing.assert_frame_equal(law, stored, check_exact=True)
+    assert set(law["kind"]) == {"calibrated", "between", "outside"}
+    assert calibration.against_current is None
+
+
 def test_frames_calibrate_as_the_files_do(campaign, calibration):
     from_disk = [r for r in campaign.runs if r.startswith("I1.0_")]
     frames = {r: pd.read_csv(MANIFEST.parent / f"{r}.csv") for r in from_disk}

@@ -60,6 +60,7 @@ impl Pipeline<'_> {
                 summary: &e.cal.summary,
                 sample: &e.cal.sample,
                 positions: e.positions.clone(),
+                law_currents: if e.cal.is_current_law() { e.cal.record.currents.clone() } else { Vec::new() },
             })
             .collect();
         let comparison = Comparison::of(&tables);

@@ -88,7 +88,8 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
 fn title(cal: &Calibration) -> String {
     let rec = &cal.record;
     if cal.is_current_law() {
-        format!("mrbp report: {}, current law from {:?} A", rec.campaign, rec.currents)
+        let kind = if cal.sample.model.kind() == crate::posterior::ModelKind::CurrentCurves { "current curves" } else { "current law" };
+        format!("mrbp report: {}, {kind} from {:?} A", rec.campaign, rec.currents)
     } else {
         format!("mrbp report: {} at {} A", rec.campaign, rec.current_a)
     }
@@ -116,6 +117,15 @@ fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
     let geometry = r.campaign.geometry;
     figures::bands(dir, &r.prediction.bands, geometry.area_m2, geometry.gap_m, &mut figs)?;
     figures::residuals(dir, &r.prediction.bands, &mut figs)?;
+    if cal.is_current_law() {
+        // the table the folder holds; computed afresh for a folder made before it
+        let rows = match crate::store::against_current::read(dir, &rec.calibration_id)? {
+            Some(rows) => rows,
+            None => crate::compare::against_current(&cal.sample, &cal.draw_positions(crate::store::folder::CURRENT_DRAWS), &rec.currents),
+        };
+        let law = figures::LawCurves { label: "law", rows: &rows, calibrated_a: &rec.currents };
+        figures::against_current(dir, &[law], &[], &mut figs)?;
+    }
     let positions = cal.draw_positions(PLOT_DRAWS);
     // θ and the noise scales, as long as the matrix stays readable
     let layout = &cal.sample.layout;

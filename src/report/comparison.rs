@@ -4,17 +4,16 @@
 use std::path::{Path, PathBuf};
 
 use super::html::{esc, num, Mark, Page};
-use super::figures::Figures;
+use super::figures::{AtCurrent, Figures, LawCurves};
 use crate::predict::adequacy::{AdequacyRow, Excitation};
 use crate::atomic;
-use crate::compare::Comparison;
+use crate::compare::{self, Comparison, CurrentRow};
 use crate::data::{loading_branches, REVERSAL_SHARE};
 use crate::error::Result;
 use crate::model::PARAM_NAMES;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 use crate::posterior::unit_of;
 use crate::predict::{Prediction, RunBands};
-use crate::sampler::quantile;
 use crate::calibrate::Calibration;
 use crate::store::command_line;
 
@@ -144,7 +143,7 @@ fn parameters_section(page: &mut Page, entries: &[Entry]) {
 
 fn differences_section(page: &mut Page, comparison: &Comparison) {
     page.section("differences", "Differences");
-    page.para("For each pair a, b and each parameter both have: the 90 % interval of a − b and of a / b, and P(a > b). Probabilities beyond 0.99 or below 0.01 (bold) mean the records tell the two apart.");
+    page.para("For each pair a, b and each parameter both have: the 90 % interval of a − b and of a / b, and P(a > b). Probabilities beyond 0.99 or below 0.01 (bold) mean the records tell the two apart. Two calibrations are independent posteriors; a law's rows (\"LAW at I A\") compare its B-P parameters at two currents within its one posterior, draw by draw — what the law says about how the damper changes with the current.");
     let table: Vec<Vec<String>> = comparison
         .differences
         .iter()
@@ -301,58 +300,24 @@ fn forest(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
     Ok(())
 }
 
-/// Each B-P parameter against the coil current: per-current calibrations as
-/// medians with 90 % bars, current laws as a 90 % band over the current.
+/// Each B-P parameter against the coil current: every law's band beside
+/// the per-current calibrations.
 fn against_current(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
-    let per_current: Vec<&Entry> = entries.iter().filter(|e| !e.is_law()).collect();
-    let top = entries.iter().flat_map(|e| e.cal.record.currents.iter().copied().chain([e.cal.record.current_a])).fold(0.0f64, f64::max);
-    if top <= 0.0 {
-        return Ok(());
-    }
-    let grid: Vec<f64> = (1..=60).map(|i| 1.15 * top * i as f64 / 60.0).collect();
-    let laws: Vec<&Entry> = entries.iter().filter(|e| e.is_law()).collect();
-    // each law's B-P parameters at each current of the grid, over 400 of its draws
-    let law_params: Vec<Vec<Vec<[f64; 7]>>> = laws
+    let laws: Vec<(&Entry, Vec<CurrentRow>)> = entries
         .iter()
-        .map(|law| {
-            let take: Vec<(usize, usize)> = law.positions.iter().step_by((law.positions.len() / 400).max(1)).copied().collect();
-            grid.iter()
-                .map(|&i| take.iter().map(|&(s, ch)| law.cal.sample.params_at(s, ch, i).to_array()).collect())
-                .collect()
+        .filter(|e| e.is_law())
+        .map(|e| (e, compare::against_current(&e.cal.sample, &e.positions, &e.cal.record.currents)))
+        .collect();
+    let curves: Vec<LawCurves> = laws.iter().map(|(e, rows)| LawCurves { label: &e.label, rows, calibrated_a: &e.cal.record.currents }).collect();
+    let per_current: Vec<AtCurrent> = entries
+        .iter()
+        .filter(|e| !e.is_law())
+        .map(|e| AtCurrent {
+            current_a: e.cal.record.current_a,
+            quantiles: PARAM_NAMES.map(|name| e.cal.summary.iter().find(|r| r.parameter == name).map(|r| [r.q05, r.q50, r.q95])),
         })
         .collect();
-    let mut panels = Vec::new();
-    for (k, name) in PARAM_NAMES.iter().enumerate() {
-        let mut c = Chart::new(*name, "coil current I (A)", format!("{name} ({})", unit_of(name)));
-        for (j, (law, at_grid)) in laws.iter().zip(&law_params).enumerate() {
-            let (mut lo, mut mid, mut hi) = (Vec::new(), Vec::new(), Vec::new());
-            for draws in at_grid {
-                let v: Vec<f64> = draws.iter().map(|p| p[k]).collect();
-                lo.push(quantile(&v, 0.05));
-                mid.push(quantile(&v, 0.5));
-                hi.push(quantile(&v, 0.95));
-            }
-            let color = PALETTE[(4 + j) % 8];
-            c.series.push(Series::band(Some(format!("{} (90 %)", law.label)), color, grid.clone(), lo, hi).with_opacity(0.3));
-            c.series.push(Series::line(None, color, grid.clone(), mid).with_width(2));
-        }
-        let (mut x, mut y) = (vec![], vec![]);
-        for e in &per_current {
-            if let Some(r) = e.cal.summary.iter().find(|r| r.parameter == *name) {
-                c.series.push(Series::line(None, PALETTE[0], vec![e.cal.record.current_a; 2], vec![r.q05, r.q95]).with_width(2));
-                x.push(e.cal.record.current_a);
-                y.push(r.q50);
-            }
-        }
-        c.series.push(Series::points(Some("per-current (median, 90 %)".into()), PALETTE[0], x, y).with_width(5));
-        c.x_range = Some((0.0, 1.15 * top));
-        c.legend = panels.is_empty();
-        c.legend_at = LegendAt::LowerRight;
-        panels.push(c);
-    }
-    plot::save(&Figure::grid(panels, 4), &out.join("against_current"))?;
-    figs.push("against_current", "Each B-P parameter against the coil current: per-current calibrations (median and 90 % interval) and, where given, the current law's 90 % band.");
-    Ok(())
+    super::figures::against_current(out, &curves, &per_current, figs)
 }
 
 /// The predictive bands of every per-current calibration at one crank

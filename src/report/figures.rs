@@ -4,9 +4,11 @@
 
 use std::path::Path;
 
+use crate::compare::{CurrentKind, CurrentRow};
 use crate::error::Result;
+use crate::model::PARAM_NAMES;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
-use crate::posterior::{PosteriorSample, Prior};
+use crate::posterior::{unit_of, PosteriorSample, Prior};
 use crate::predict::RunBands;
 use crate::sampler::quantile;
 use crate::validate::consistency::ParameterConsistency;
@@ -538,5 +540,75 @@ pub fn consistency(dir: &Path, parameters: &[ParameterConsistency], figs: &mut F
     }
     plot::save(&Figure::grid(panels, 4), &dir.join("consistency"))?;
     figs.push("consistency", "Consistency across runs: median (dot) and 90 % interval (bar) of each parameter from each run calibrated alone, from the joint calibration, and the between-run layer's prediction for a new test (grey). χ²/ν in each title: about 1 when one parameter set describes every run.");
+    Ok(())
+}
+
+/// A law's B-P parameters against the coil current, ready to draw.
+pub struct LawCurves<'a> {
+    pub label: &'a str,
+    pub rows: &'a [CurrentRow],
+    /// The currents it was calibrated on (A).
+    pub calibrated_a: &'a [f64],
+}
+
+/// A per-current estimate drawn beside the laws: its current, and per B-P
+/// parameter (in [`PARAM_NAMES`] order) its 5 %, 50 % and 95 % quantiles.
+pub struct AtCurrent {
+    pub current_a: f64,
+    pub quantiles: [Option<[f64; 3]>; 7],
+}
+
+/// Each B-P parameter against the coil current: every law's 90 % band and
+/// median over its grid (its calibrated currents marked), and the
+/// per-current estimates as medians with 90 % bars, into `dir/against_current`.
+pub fn against_current(dir: &Path, laws: &[LawCurves], per_current: &[AtCurrent], figs: &mut Figures) -> Result<()> {
+    let top = laws.iter().flat_map(|l| l.rows.iter().map(|r| r.current_a)).chain(per_current.iter().map(|p| p.current_a)).fold(0.0f64, f64::max);
+    if top <= 0.0 {
+        return Ok(());
+    }
+    let mut panels = Vec::new();
+    for (k, name) in PARAM_NAMES.iter().enumerate() {
+        let mut c = Chart::new(*name, "coil current I (A)", format!("{name} ({})", unit_of(name)));
+        for (j, law) in laws.iter().enumerate() {
+            let rows: Vec<&CurrentRow> = law.rows.iter().filter(|r| r.parameter == *name).collect();
+            let x: Vec<f64> = rows.iter().map(|r| r.current_a).collect();
+            let color = PALETTE[(4 + j) % 8];
+            let label = format!("{} (90 %)", law.label);
+            c.series.push(Series::band(Some(label), color, x.clone(), rows.iter().map(|r| r.q05).collect(), rows.iter().map(|r| r.q95).collect()).with_opacity(0.3));
+            c.series.push(Series::line(None, color, x, rows.iter().map(|r| r.q50).collect()).with_width(2));
+            let seen: Vec<&&CurrentRow> = rows.iter().filter(|r| r.kind == CurrentKind::Calibrated).collect();
+            let mark = (j == 0).then(|| "calibrated currents".to_string());
+            c.series.push(Series::points(mark, color, seen.iter().map(|r| r.current_a).collect(), seen.iter().map(|r| r.q50).collect()).with_width(4));
+            // the extrapolated part (below the lowest calibrated current and
+            // above the highest) dashed over the band
+            let (lo, hi) = law.calibrated_a.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+            for part in [rows.iter().filter(|r| r.current_a <= lo).collect::<Vec<_>>(), rows.iter().filter(|r| r.current_a >= hi).collect()] {
+                if part.len() >= 2 {
+                    c.series.push(Series::dashed(None, GREY, part.iter().map(|r| r.current_a).collect(), part.iter().map(|r| r.q50).collect()).with_width(2));
+                }
+            }
+        }
+        let (mut x, mut y) = (vec![], vec![]);
+        for p in per_current {
+            if let Some([q05, q50, q95]) = p.quantiles[k] {
+                c.series.push(Series::line(None, PALETTE[0], vec![p.current_a; 2], vec![q05, q95]).with_width(2));
+                x.push(p.current_a);
+                y.push(q50);
+            }
+        }
+        if !x.is_empty() {
+            c.series.push(Series::points(Some("per-current (median, 90 %)".into()), PALETTE[0], x, y).with_width(5));
+        }
+        c.x_range = Some((0.0, top));
+        c.legend = panels.is_empty();
+        c.legend_at = LegendAt::LowerRight;
+        panels.push(c);
+    }
+    plot::save(&Figure::grid(panels, 4), &dir.join("against_current"))?;
+    let per = if per_current.is_empty() { "" } else { "; per-current calibrations as medians with 90 % bars" };
+    figs.push(
+        "against_current",
+        &format!("Each B-P parameter against the coil current: the law's median and 90 % credible band from the off-state (0 A) to 1.2× its highest calibrated current (dots: the currents it was calibrated on; grey dashes: extrapolated beyond them){per}. The values are in against_current.parquet."),
+    );
     Ok(())
 }

@@ -1,10 +1,11 @@
 //! A calibration folder as a whole: the files that make a
 //! [`Calibration`] — `config.toml`, `calibration.toml`, `summary.parquet`,
-//! `chains.parquet` — written and read.
+//! `chains.parquet`, and for a law `against_current.parquet` — written and
+//! read.
 
 use std::path::Path;
 
-use super::{chains, record, summary};
+use super::{against_current, chains, record, summary};
 use crate::calibrate::{Calibration, CalibrationSettings};
 use crate::error::{Error, Result};
 use crate::posterior::Layout;
@@ -16,6 +17,9 @@ pub const RECORD: &str = "calibration.toml";
 pub const CONFIG: &str = "config.toml";
 /// The sampler's checkpoint, while a calibration runs or after it was stopped.
 pub const CHECKPOINT: &str = "sampler.checkpoint";
+
+/// Posterior draws behind a law's `against_current.parquet`.
+pub const CURRENT_DRAWS: usize = 4000;
 
 /// The command that rebuilds a calibration folder, for messages.
 pub const REBUILD: &str = "mrbp sample MANIFEST --out DIR --force (--resume continues from a checkpoint)";
@@ -69,6 +73,12 @@ pub fn write(dir: &Path, cal: &mut Calibration) -> Result<()> {
     let id = &cal.record.calibration_id;
     chains::write(&dir.join(CHAINS), &cal.sample, id)?;
     summary::write(&dir.join(SUMMARY), &cal.summary, cal.record.burn_in, cal.record.steps, cal.sample.chains.chains(), id)?;
+    if cal.is_current_law() {
+        let rows = crate::compare::against_current(&cal.sample, &cal.draw_positions(CURRENT_DRAWS), &cal.record.currents);
+        against_current::write(dir, &rows, id)?;
+    } else {
+        crate::atomic::remove(&dir.join(against_current::FILE))?;
+    }
     cal.settings.write(&dir.join(CONFIG))?;
     record::write(&dir.join(RECORD), &cal.record)?;
     cal.dir = dir.to_path_buf();

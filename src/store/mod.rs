@@ -15,12 +15,14 @@
 //! | `prediction.toml` | [`prediction`] |
 //! | `comparison.parquet`, `differences.parquet` | [`comparison`] |
 //! | `consistency.parquet` | [`consistency`] |
+//! | `against_current.parquet` (a law) | [`against_current`] |
 //! | `inference.zarr` (ArviZ) | [`inference`] |
 //!
 //! [`folder`] writes and reads a whole calibration folder; [`parquet`]
 //! holds the table helpers.
 
 pub mod adequacy;
+pub mod against_current;
 pub mod bands;
 pub mod chains;
 pub mod comparison;

@@ -188,7 +188,7 @@ fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
             problems.push(format!("{file}: missing; rebuild it with `{}`", folder::REBUILD));
         }
     }
-    for file in [folder::CHAINS, folder::SUMMARY, identification::FILE] {
+    for file in [folder::CHAINS, folder::SUMMARY, identification::FILE, super::against_current::FILE] {
         check_table(&dir.join(file), &id, folder::REBUILD, problems);
     }
     check_prediction(dir, Some(&id), "mrbp predict DIR", problems);
