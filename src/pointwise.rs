@@ -86,8 +86,7 @@ pub fn pointwise_draws(
     let mut failed = vec![false; positions.len()];
     for (j, run) in runs.iter().enumerate() {
         let draws = sample.draws(&positions, &run.id, run.current_a);
-        let params: Vec<_> = draws.iter().map(|d| d.params).collect();
-        let paths = model_paths(run, &params, integrator, &|| {});
+        let paths = model_paths(run, &draws, integrator, &|| {});
         let terms: Vec<Pointwise> = positions
             .par_iter()
             .zip(&draws)

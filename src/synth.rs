@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::{Columns, Geometry, Manifest, Record, RunSpec};
 use crate::error::{Error, Result};
 use crate::atomic;
-use crate::model::{CurrentCurves, CurrentLaw, Integrator, Params};
+use crate::model::{CurrentCurves, CurrentLaw, FieldLaw, Integrator, Params, LANES};
 use crate::noise::Kernel;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 
@@ -83,6 +83,21 @@ pub struct StandLaw {
     pub saturation_a: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub curves: Option<CurrentCurves>,
+    /// The coil's lag τ_c (s): how far the field trails a current that
+    /// changes ([`crate::model::FieldCurrent`]; the switched records').
+    #[serde(default = "default_lag", skip_serializing_if = "is_default_lag")]
+    pub coil_lag_s: f64,
+}
+
+/// The stand coil's lag unless `synth.toml` says otherwise (s).
+const DEFAULT_LAG_S: f64 = 0.01;
+
+fn default_lag() -> f64 {
+    DEFAULT_LAG_S
+}
+
+fn is_default_lag(v: &f64) -> bool {
+    *v == DEFAULT_LAG_S
 }
 
 impl Default for StandLaw {
@@ -91,6 +106,7 @@ impl Default for StandLaw {
             at_1a: Params::reference_1a(),
             saturation_a: 1.0,
             curves: None,
+            coil_lag_s: DEFAULT_LAG_S,
         }
     }
 }
@@ -98,6 +114,14 @@ impl Default for StandLaw {
 impl StandLaw {
     pub fn law(&self) -> CurrentLaw {
         CurrentLaw::through(&self.at_1a, 1.0, self.saturation_a, 0.5)
+    }
+
+    /// How the stand's parameters follow the current.
+    pub fn field_law(&self) -> FieldLaw {
+        match &self.curves {
+            Some(c) => FieldLaw::Curves(*c),
+            None => FieldLaw::Law(self.law()),
+        }
     }
 
     /// The fluid's B-P parameters at `current_a`.
@@ -133,6 +157,68 @@ pub struct SynthSettings {
     /// whole truth.
     #[serde(default, skip_serializing_if = "ExtraForce::is_none")]
     pub extra_force: ExtraForce,
+    /// Records whose current is switched while the crank turns
+    /// (`[[switched]]`), beside the records of one current each.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub switched: Vec<SwitchedRun>,
+}
+
+/// A record whose coil current steps through `levels_a`, round and round,
+/// each level held for its entry of `holds_s` (one value: every level
+/// alike): a step programme (levels 0.25, 1.0, 0.5 A, 80 ms each) or a
+/// PWM-like command (levels 0 and 1 A, held 6 and 14 ms: 50 Hz at 70 %).
+/// The record's current column is the command; the field trails it by the
+/// stand's coil lag.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SwitchedRun {
+    pub rpm: f64,
+    pub levels_a: Vec<f64>,
+    pub holds_s: Vec<f64>,
+}
+
+impl SwitchedRun {
+    /// Checks the programme; `law` must hold at every level.
+    fn check(&self, law: &StandLaw) -> Result<()> {
+        let bad = |m: String| Err(Error::Usage(format!("[[switched]] at {} rpm: {m}", self.rpm)));
+        if !(self.rpm > 0.0) || self.levels_a.len() < 2 {
+            return bad("needs a positive rpm and two or more levels_a".into());
+        }
+        if !(self.holds_s.len() == 1 || self.holds_s.len() == self.levels_a.len()) || self.holds_s.iter().any(|h| !(*h > 0.0 && h.is_finite())) {
+            return bad(format!("holds_s must be one positive time or one per level ({} levels)", self.levels_a.len()));
+        }
+        for &level in &self.levels_a {
+            if !(level >= 0.0 && level.is_finite()) {
+                return bad(format!("level {level} A: a coil current is 0 A or more"));
+            }
+            if let Err(e) = law.params_at(level).validate() {
+                return bad(format!("at {level} A the stand's law has {e} (the tanh law has no yield stress at 0 A: use [law.curves])"));
+            }
+        }
+        if !(law.coil_lag_s >= 0.0 && law.coil_lag_s.is_finite()) {
+            return bad(format!("coil_lag_s = {} must be 0 or positive", law.coil_lag_s));
+        }
+        Ok(())
+    }
+
+    /// The commanded current at time `t`.
+    pub fn current_at(&self, t: f64) -> f64 {
+        let hold = |i: usize| if self.holds_s.len() == 1 { self.holds_s[0] } else { self.holds_s[i] };
+        let cycle: f64 = (0..self.levels_a.len()).map(hold).sum();
+        let mut into = t.rem_euclid(cycle);
+        for (i, level) in self.levels_a.iter().enumerate() {
+            if into < hold(i) {
+                return *level;
+            }
+            into -= hold(i);
+        }
+        self.levels_a[self.levels_a.len() - 1]
+    }
+
+    /// The run's id: `S<k>_<rpm>rpm` for the k-th switched record (from 1).
+    pub fn id(&self, k: usize) -> String {
+        format!("S{k}_{:.0}rpm", self.rpm)
+    }
 }
 
 /// The virtual stand's force beyond the B-P law (`[extra_force]`): a
@@ -205,6 +291,7 @@ impl Default for SynthSettings {
             noise_displacement_m: 2.0e-6,
             seed: 20_261_122,
             extra_force: ExtraForce::default(),
+            switched: Vec::new(),
         }
     }
 }
@@ -323,6 +410,44 @@ pub fn virtual_record(
     }
     .run(p, &time, &gamma)
     .map_err(|e| Error::Compute(format!("virtual experiment at {rpm} rpm: {e}")))?;
+    sensed(settings, rpm, time, x, &truth.tau, vec![current_a; n + 1], smooth, stream)
+}
+
+/// Finer time steps per sample of a switched record's true response: the
+/// field, and with it the parameters, changes within a sample interval.
+const SWITCHED_OVERSAMPLING: usize = 8;
+
+/// One switched-current record (`[[switched]]`): the command held from
+/// sample to sample, the field trailing it by the coil's lag, the truth
+/// integrated on a grid 8× finer than the samples (with the command held
+/// over each sample interval) so that it does not share the likelihood's
+/// discretisation; sensor noise from the stream `(seed, stream)`.
+pub fn switched_record(settings: &SynthSettings, run: &SwitchedRun, stream: u64) -> Result<Record> {
+    let rpm = run.rpm;
+    let duration = settings.cycles * 60.0 / rpm;
+    let n = (duration * settings.rate_hz).round() as usize;
+    let time: Vec<f64> = (0..=n).map(|k| k as f64 / settings.rate_hz).collect();
+    let x: Vec<f64> = time.iter().map(|&t| settings.crank.displacement(rpm, t)).collect();
+    let current: Vec<f64> = time.iter().map(|&t| run.current_at(t)).collect();
+    let m = SWITCHED_OVERSAMPLING;
+    let fine_t: Vec<f64> = (0..=n * m).map(|k| k as f64 / (settings.rate_hz * m as f64)).collect();
+    let fine_gamma: Vec<f64> = fine_t.iter().map(|&t| settings.crank.displacement(rpm, t) / settings.geometry.gap_m).collect();
+    let fine_current: Vec<f64> = (0..=n * m).map(|k| current[k / m]).collect();
+    let lanes = [settings.law.field_law(); LANES];
+    let mut fine_tau = vec![0.0; fine_t.len()];
+    let integrator = Integrator { substeps: TRUTH_SUBSTEPS / m as u32, extrapolate: true, max_substeps: 1_000_000, ..Integrator::default() };
+    let [outcome, ..] = integrator.run_lanes_along(&lanes, &[settings.law.coil_lag_s; LANES], &fine_current, &fine_t, &fine_gamma, 0.0, |k, s| fine_tau[k] = s.tau[0]);
+    outcome.map_err(|e| Error::Compute(format!("switched virtual experiment at {rpm} rpm: {e}")))?;
+    let tau: Vec<f64> = (0..=n).map(|k| fine_tau[k * m]).collect();
+    sensed(settings, rpm, time, x, &tau, current, None, stream)
+}
+
+/// The record the stand's sensors give of the true stress `tau` along the
+/// piston displacement `x` at the sample `time`s: force and displacement
+/// noise from the stream `(seed, stream)`, the extra force (the smooth
+/// one `smooth`) added, and the coil current `current`.
+#[allow(clippy::too_many_arguments)]
+fn sensed(settings: &SynthSettings, rpm: f64, time: Vec<f64>, x: Vec<f64>, tau: &[f64], current: Vec<f64>, smooth: Option<(f64, f64)>, stream: u64) -> Result<Record> {
 
     let mut rng = crate::rng::stream(settings.seed, &[stream]);
     let noise = |sd: f64| Normal::new(0.0, sd).map_err(|e| Error::Usage(format!("noise level {sd}: {e}")));
@@ -330,7 +455,7 @@ pub fn virtual_record(
     let disp_noise = noise(settings.noise_displacement_m)?;
     let mut force = Vec::with_capacity(time.len());
     let mut displacement = Vec::with_capacity(time.len());
-    for (tau, x) in truth.tau.iter().zip(&x) {
+    for (tau, x) in tau.iter().zip(&x) {
         force.push(tau * settings.geometry.area_m2 + force_noise.sample(&mut rng));
         displacement.push(x + disp_noise.sample(&mut rng));
     }
@@ -346,7 +471,7 @@ pub fn virtual_record(
         force.iter_mut().zip(&time).for_each(|(f, &t)| *f += c * settings.crank.velocity(rpm, t));
     }
     Ok(Record {
-        current: Some(vec![current_a; time.len()]),
+        current: Some(current),
         time,
         displacement,
         force,
@@ -378,6 +503,9 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
         if let Some(k) = c.bend.iter().position(|b| !(*b > 0.0 && b.is_finite())) {
             return Err(Error::Usage(format!("[law.curves]: bend {} of {} must be positive and finite", c.bend[k], crate::model::PARAM_NAMES[k])));
         }
+    }
+    for run in &settings.switched {
+        run.check(&settings.law)?;
     }
     std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
     let _held = crate::lock::write(dir)?;
@@ -416,6 +544,33 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
                 current_a: current,
                 shear_rate: Some((settings.crank.nominal_shear_rate(rpm, settings.geometry.gap_m) * 10.0).round() / 10.0),
                 initial_stress_pa: None,
+                current_varies: false,
+            });
+        }
+        panels.push(chart);
+    }
+    if !settings.switched.is_empty() {
+        let mut chart = Chart::new("switched-current records", "piston displacement x (mm)", "damper force F (kN)");
+        chart.legend_at = LegendAt::Middle;
+        for (k, run) in settings.switched.iter().enumerate() {
+            let id = run.id(k + 1);
+            let file = format!("{id}.csv");
+            let rec = switched_record(settings, run, stream)?;
+            stream += 1;
+            chart.series.push(
+                Series::line(Some(id.clone()), PALETTE[k % PALETTE.len()], rec.displacement.iter().map(|x| x * 1e3).collect(), rec.force.iter().map(|f| f * 1e-3).collect()).with_width(1),
+            );
+            // the run's nominal current: the command's mean over the record
+            let current = rec.current.as_deref().unwrap_or(&[]);
+            let mean = current.iter().sum::<f64>() / current.len().max(1) as f64;
+            atomic::write(&dir.join(&file), crate::data::table::csv_text(&rec).as_bytes())?;
+            runs.push(RunSpec {
+                id,
+                file: file.into(),
+                current_a: (mean * 1e3).round() / 1e3,
+                shear_rate: Some((settings.crank.nominal_shear_rate(run.rpm, settings.geometry.gap_m) * 10.0).round() / 10.0),
+                initial_stress_pa: None,
+                current_varies: true,
             });
         }
         panels.push(chart);

@@ -215,7 +215,25 @@ fn cases() -> Vec<Case> {
             name: "file current disagrees with the manifest",
             make: |r| s(&["check", &p(&csv_campaign(r, &with_current(&record(400), 2.5)))]),
             code: 2,
-            expect: &["column 'current_a'", "2.5 A", "1 A"],
+            expect: &["column 'current_a'", "2.5 A", "1 A", "current_varies = true"],
+        },
+        Case {
+            name: "a varying current without its column",
+            make: |r| s(&["check", &p(&setup(r, &manifest_with("", &format!("{}current_varies = true\n", one_run("run1.csv"))), &[("run1.csv", record(400).into())]))]),
+            code: 2,
+            expect: &["column 'current_a'", "missing", "current_varies = true"],
+        },
+        Case {
+            name: "a varying current below 0 A",
+            make: |r| s(&["check", &p(&setup(r, &manifest_with("", &format!("{}current_varies = true\n", one_run("run1.csv"))), &[("run1.csv", nth_row(&with_current(&record(400), 0.5), 4, "0.003,0,0,-0.2").into())]))]),
+            code: 2,
+            expect: &["row 4", "column 'current_a'", "-0.2 A", "0 A or more"],
+        },
+        Case {
+            name: "a varying current is read",
+            make: |r| s(&["check", &p(&setup(r, &manifest_with("", &format!("{}current_varies = true\n", one_run("run1.csv"))), &[("run1.csv", with_current(&record(400), 2.5).into())]))]),
+            code: 0,
+            expect: &[],
         },
         Case { name: "file current within ripple", make: |r| s(&["check", &p(&csv_campaign(r, &with_current(&record(400), 1.02)))]), code: 0, expect: &[] },
         Case {

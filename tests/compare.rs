@@ -165,24 +165,34 @@ fn current_law_predicts_a_held_out_current() {
 /// The current curves recover a law of their own form from a virtual
 /// campaign at 0.25, 0.5 and 1.0 A: an off-state, every parameter its own
 /// bend, G falling with the current (as on the measured damper), R0
-/// saturating early. Every coordinate's posterior mean lies within 3.5 of
-/// its posterior sds of the truth (a two-sided normal tail of 5·10⁻⁴ per
-/// coordinate: one of the 21 fails by chance with probability about 1 %).
-/// Measured: |z| ≤ 1.63 (m2 at the low anchor).
+/// saturating early — together with two records whose current is switched
+/// while the crank turns (steps through 0.25, 1.0 and 0.5 A every 80 ms;
+/// a 50 Hz PWM-like command between 0 and 1 A), through which the coil's
+/// lag (12 ms) is recovered too. Every coordinate's posterior mean lies
+/// within 3.5 of its posterior sds of the truth (a two-sided normal tail of
+/// 5·10⁻⁴ per coordinate: one of the 22 fails by chance with probability
+/// about 1 %). Measured: |z| ≤ 1.70 (R0_high); the lag 11.98 ± 0.03 ms.
 #[test]
-fn current_curves_recover_their_truth() {
+fn current_curves_and_coil_lag_recover_their_truth() {
     use mrbp::model::{CurrentCurves, Params};
+    use mrbp::synth::SwitchedRun;
     let low = Params { g: 2.6e5, r0: 6.0e4, r1: 9.0e4, d1: 1.5e4, m1: 3.0e-6, m2: 4.0e-4, n: 1.1 };
     let high = Params { g: 1.7e5, r0: 1.3e5, r1: 1.6e5, d1: 4.0e4, m1: 4.0e-6, m2: 2.0e-4, n: 1.3 };
     let truth = CurrentCurves { low_a: 0.25, high_a: 1.0, low, high, bend: [6.0, 0.2, 1.0, 2.0, 1.0, 1.0, 0.5] };
+    let lag = 0.012;
     let data = tempfile::tempdir().unwrap();
     let mut settings = SynthSettings { currents_a: vec![0.25, 0.5, 1.0], rpms: vec![100.0, 400.0], cycles: 1.0, rate_hz: 2000.0, ..SynthSettings::default() };
     settings.law.curves = Some(truth);
+    settings.law.coil_lag_s = lag;
+    settings.switched = vec![
+        SwitchedRun { rpm: 200.0, levels_a: vec![0.25, 1.0, 0.5], holds_s: vec![0.08] },
+        SwitchedRun { rpm: 400.0, levels_a: vec![0.0, 1.0], holds_s: vec![0.006, 0.014] },
+    ];
     write_campaign(&settings, data.path()).unwrap();
     let manifest = data.path().join("campaign.toml");
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("curves");
-    ok(mrbp(&["sample", s(&manifest), "--out", s(&dir), "--model", "current-curves", "--substeps", "2"]));
+    ok(mrbp(&["sample", s(&manifest), "--out", s(&dir), "--model", "current-curves"]));
     let path = dir.join("summary.parquet");
     let t = read_parquet(&path).unwrap();
     let names = str_column(&t, "parameter", &path).unwrap();
@@ -192,13 +202,39 @@ fn current_curves_recover_their_truth() {
         (mean[i], sd[i])
     };
     let (lo, hi) = (low.to_array(), high.to_array());
+    let mut expected: Vec<(String, f64)> = vec![("coil_lag_s".into(), lag)];
     for (k, p) in mrbp::model::PARAM_NAMES.iter().enumerate() {
-        for (name, want) in [(format!("{p}_low"), lo[k]), (format!("{p}_high"), hi[k]), (format!("{p}_bend"), truth.bend[k])] {
-            let (m, s) = value(&name);
-            let z = (m - want) / s;
-            assert!(z.abs() < 3.5, "{name}: {m:.4e} ± {s:.2e} against the truth {want:.4e} (z = {z:.2})");
+        expected.extend([(format!("{p}_low"), lo[k]), (format!("{p}_high"), hi[k]), (format!("{p}_bend"), truth.bend[k])]);
+    }
+    let mut largest = (String::new(), 0.0f64);
+    for (name, want) in expected {
+        let (m, s) = value(&name);
+        let z = (m - want) / s;
+        assert!(z.abs() < 3.5, "{name}: {m:.4e} ± {s:.2e} against the truth {want:.4e} (z = {z:.2})");
+        if z.abs() > largest.1.abs() {
+            largest = (name, z);
         }
     }
+    eprintln!("largest |z|: {} ({:.2}); coil lag {:?}", largest.0, largest.1, value("coil_lag_s"));
+    // the switched runs are predicted along their current: their 95 %
+    // predictive band holds about 95 % of each (at least 90 %: a model
+    // that missed the switching would leave whole stretches outside)
+    ok(mrbp(&["predict", s(&dir), "--draws", "60", "--replicates", "4"]));
+    let path = dir.join("coverage.parquet");
+    let cov = read_parquet(&path).unwrap();
+    let (runs, inside) = (str_column(&cov, "run", &path).unwrap(), f64_column(&cov, "inside_p95", &path).unwrap());
+    for id in ["S1_200rpm", "S2_400rpm"] {
+        let i = runs.iter().position(|r| r == id).unwrap();
+        assert!(inside[i] >= 0.9, "{id}: {:.1} % inside", 100.0 * inside[i]);
+    }
+    // one parameter set per current cannot calibrate a switched run: it is
+    // left out, and said so
+    let per = out.path().join("per");
+    let o = mrbp(&["sample", s(&manifest), "--out", s(&per), "--current", "1.0", "--steps", "5"]);
+    let said = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success() && said.contains("S1_200rpm, S2_400rpm: the current changes within the record"), "{said}");
+    let config = std::fs::read_to_string(dir.join("config.toml")).unwrap();
+    assert!(config.contains("coil_lag = true"), "the lag is written with the settings:\n{config}");
     let config = std::fs::read_to_string(dir.join("config.toml")).unwrap();
     assert!(config.contains("anchor_currents_a = [0.25, 1.0]"), "the anchors are written with the settings:\n{config}");
 }

@@ -252,8 +252,8 @@ class Calibration:
         """The force of the calibrated damper along an excitation of your own
         (``mrbp simulate``): time (s) and displacement (m) as arrays; the
         coil current (A) as one value, or an array of one value per sample
-        (it must hold still for now), or None for a per-current
-        calibration's own. Returns a frame with the columns of
+        (a law follows it where it changes, the field trailing it by the
+        law's coil lag), or None for a per-current calibration's own. Returns a frame with the columns of
         ``simulation.parquet``: the model band of the stress (q025 … q975,
         Pa), the 95 % band of a measured stress (p025, p975) and the same as
         force (force_q025_n … force_p975_n, N). Notes (an extrapolating

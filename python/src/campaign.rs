@@ -41,7 +41,7 @@ impl Campaign {
         for (id, current_a, time, displacement, force, current) in runs {
             let current = current.map(|c| values(&c)).transpose()?;
             records.push(Record { time: values(&time)?, displacement: values(&displacement)?, force: values(&force)?, current });
-            specs.push(RunSpec { file: PathBuf::from(format!("{id}.csv")), id, current_a, shear_rate: None, initial_stress_pa: None });
+            specs.push(RunSpec::new(id.clone(), PathBuf::from(format!("{id}.csv")), current_a));
         }
         let manifest = Manifest { name, geometry: Geometry { area_m2, gap_m }, columns: Default::default(), limits: Default::default(), runs: specs };
         mrbp::data::Campaign::from_records(manifest, records).map(|c| Campaign { inner: Arc::new(c) }).map_err(raise)

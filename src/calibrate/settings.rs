@@ -232,6 +232,12 @@ pub struct CalibrationSettings {
     /// current calibrated (filled in when the calibration starts).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub anchor_currents_a: Option<(f64, f64)>,
+    /// A law's coil lag τ_c as a parameter (`coil_lag_s`): by default on
+    /// where a run's current varies within its record, off otherwise
+    /// (filled in when the calibration starts); `false` takes the record's
+    /// current as the field's (a measured coil current that already lags).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coil_lag: Option<bool>,
     pub likelihood: LikelihoodSettings,
     pub integrator: IntegratorSettings,
     pub sampler: SamplingSettings,
@@ -250,6 +256,7 @@ impl Default for CalibrationSettings {
             model: ModelKind::PerCurrent,
             reference_current_a: 1.0,
             anchor_currents_a: None,
+            coil_lag: None,
             likelihood: LikelihoodSettings::default(),
             integrator: IntegratorSettings::default(),
             sampler: SamplingSettings::default(),
@@ -312,7 +319,7 @@ impl CalibrationSettings {
 
     /// How θ gives the B-P parameters of each run.
     pub fn parameter_model(&self) -> ParameterModel {
-        ParameterModel::new(self.model, self.reference_current_a, self.anchor_currents_a)
+        ParameterModel::new(self.model, self.reference_current_a, self.anchor_currents_a, self.coil_lag.unwrap_or(false))
     }
 
     /// The curves' anchors, where unset, from the currents calibrated: the
@@ -322,6 +329,14 @@ impl CalibrationSettings {
             let lo = currents.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = currents.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             self.anchor_currents_a = Some((lo, hi));
+        }
+    }
+
+    /// The coil's lag, where unset: on for a law when some run's current
+    /// varies (`varies`).
+    pub fn fill_coil_lag(&mut self, varies: bool) {
+        if self.coil_lag.is_none() && self.model.is_law() {
+            self.coil_lag = Some(varies);
         }
     }
 

@@ -33,6 +33,7 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     let clock = Instant::now();
     let mut settings = settings.clone();
     settings.fill_anchors(&campaign.currents());
+    settings.fill_coil_lag(!campaign.varying_runs().is_empty());
     let model = settings.parameter_model();
     let current_a = model.identification_current(&campaign.currents())?;
     let identification = identify_current(campaign, current_a, &settings.identify);

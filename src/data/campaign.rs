@@ -45,6 +45,19 @@ pub struct RunSpec {
     /// unstressed (0) unless the run says otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub initial_stress_pa: Option<f64>,
+    /// The coil current changes within the record: the law follows the
+    /// file's current column sample by sample, and `current_a` is the run's
+    /// nominal current (a label). Only a law (current law, current curves)
+    /// calibrates or predicts such a run.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub current_varies: bool,
+}
+
+impl RunSpec {
+    /// A run of one current, with the defaults of the optional fields.
+    pub fn new(id: String, file: PathBuf, current_a: f64) -> RunSpec {
+        RunSpec { id, file, current_a, shear_rate: None, initial_stress_pa: None, current_varies: false }
+    }
 }
 
 /// One loaded run: its manifest entry, its record and what follows from it.
@@ -70,8 +83,17 @@ impl Run {
     /// `path`), checked against the manifest's limits and current.
     fn checked(spec: &RunSpec, path: PathBuf, record: Record, manifest: &Manifest, map: &ColumnMap) -> Result<Run> {
         record.check_limits(&path, map, &manifest.limits)?;
-        if let Some(current) = &record.current {
-            check_current(&path, map, spec, current)?;
+        match &record.current {
+            Some(current) => check_current(&path, map, spec, current)?,
+            None if spec.current_varies => {
+                return Err(Error::input_at(
+                    &path,
+                    None,
+                    Some(map.current),
+                    format!("missing: run '{}' has current_varies = true, so its file needs the current column", spec.id),
+                ))
+            }
+            None => {}
         }
         let shear = Shear::from_record(&record, &manifest.geometry, spec.initial_stress_pa);
         let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
@@ -190,8 +212,15 @@ fn outside(dir: &Path, file: &Path) -> bool {
     !resolve(file).starts_with(&dir)
 }
 
-/// The file's current column must agree with the manifest's current_a.
+/// The file's current column must agree with the manifest's current_a,
+/// or, where the current varies, be a coil current (0 A or more).
 fn check_current(path: &Path, map: &ColumnMap, spec: &RunSpec, current: &[f64]) -> Result<()> {
+    if spec.current_varies {
+        if let Some(k) = current.iter().position(|v| *v < 0.0) {
+            return Err(Error::input_at(path, Some(k + 1), Some(map.current), format!("{} A: the law takes a coil current of 0 A or more", current[k])));
+        }
+        return Ok(());
+    }
     let mut sorted = current.to_vec();
     sorted.sort_by(f64::total_cmp);
     let median = sorted[sorted.len() / 2];
@@ -201,7 +230,10 @@ fn check_current(path: &Path, map: &ColumnMap, spec: &RunSpec, current: &[f64]) 
             path,
             None,
             Some(map.current),
-            format!("the file's coil current is {median} A (median), the manifest's current_a for run '{}' is {} A", spec.id, spec.current_a),
+            format!(
+                "the file's coil current is {median} A (median), the manifest's current_a for run '{}' is {} A (if the current changes within the record, set current_varies = true for this run)",
+                spec.id, spec.current_a
+            ),
         ));
     }
     Ok(())
@@ -297,9 +329,10 @@ impl Campaign {
         Ok(())
     }
 
-    /// The distinct coil currents of the campaign, ascending.
+    /// The distinct coil currents of the campaign's runs of one current
+    /// (not those whose current varies), ascending.
     pub fn currents(&self) -> Vec<f64> {
-        let mut c: Vec<f64> = self.runs.iter().map(|r| r.spec.current_a).collect();
+        let mut c: Vec<f64> = self.runs.iter().filter(|r| !r.spec.current_varies).map(|r| r.spec.current_a).collect();
         c.sort_by(f64::total_cmp);
         c.dedup();
         c
@@ -317,14 +350,19 @@ impl Campaign {
         }
     }
 
-    /// The runs at one coil current.
+    /// The runs held at one coil current (not those whose current varies).
     pub fn at_current(&self, current_a: f64) -> Campaign {
-        self.filtered(|r| same_current(r.spec.current_a, current_a))
+        self.filtered(|r| !r.spec.current_varies && same_current(r.spec.current_a, current_a))
     }
 
-    /// Whether any run is at `current_a`.
+    /// Whether any run is held at `current_a`.
     pub fn has_current(&self, current_a: f64) -> bool {
-        self.runs.iter().any(|r| same_current(r.spec.current_a, current_a))
+        self.runs.iter().any(|r| !r.spec.current_varies && same_current(r.spec.current_a, current_a))
+    }
+
+    /// The ids of the runs whose current varies within the record.
+    pub fn varying_runs(&self) -> Vec<&str> {
+        self.runs.iter().filter(|r| r.spec.current_varies).map(|r| r.id()).collect()
     }
 }
 

@@ -31,7 +31,11 @@ pub struct RunData {
     pub gamma: Vec<f64>,
     pub tau: Vec<f64>,
     pub initial_tau: f64,
+    /// The run's current (A); where it varies, its nominal one.
     pub current_a: f64,
+    /// The coil current at every sample (A), where it varies within the
+    /// record (the manifest's `current_varies`).
+    pub current: Option<Vec<f64>>,
     /// The damper's area and gap, which turn force terms into stress.
     pub area_m2: f64,
     pub gap_m: f64,
@@ -92,6 +96,9 @@ impl RunData {
             (strain_noise_var, strain_smoothing_share),
         );
         data.period_s = period_of(&data.time, &turns);
+        if run.spec.current_varies {
+            data.current = run.record.current.as_ref().map(|c| c[..end].to_vec());
+        }
         data
     }
 
@@ -115,7 +122,7 @@ impl RunData {
         let turns: Vec<f64> = time.iter().zip(&reverses).filter(|(_, r)| **r).map(|(t, _)| *t).collect();
         let period_s = period_of(&time, &turns);
         let stress_step_pa = resolution(&tau);
-        RunData { id, time, gamma, tau, initial_tau, current_a, area_m2, gap_m, strain_noise_var, strain_smoothing_share, reverses, step_s, uniform, stress_step_pa, period_s }
+        RunData { id, time, gamma, tau, initial_tau, current_a, current: None, area_m2, gap_m, strain_noise_var, strain_smoothing_share, reverses, step_s, uniform, stress_step_pa, period_s }
     }
 
     /// Residuals compared: every sample after the first.

@@ -145,7 +145,7 @@ mod tests {
             geometry: Geometry { area_m2: 0.05, gap_m: 1e-3 },
             columns: Columns::default(),
             limits: Default::default(),
-            runs: vec![RunSpec { id: "r".into(), file: "r.csv".into(), current_a: 1.0, shear_rate: None, initial_stress_pa: None }],
+            runs: vec![RunSpec::new("r".into(), "r.csv".into(), 1.0)],
         };
         std::fs::write(dir.path().join("c.toml"), toml::to_string(&manifest).unwrap()).unwrap();
         let campaign = Campaign::load(&dir.path().join("c.toml")).unwrap();

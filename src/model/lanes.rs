@@ -14,6 +14,7 @@ const INV_SQRT_3: f64 = 0.577_350_269_189_625_8;
 const MAX_LOG_Q: f64 = 700.0;
 
 /// Per-lane parameters with the constants of eq. 3 precomputed.
+#[derive(Clone, Copy)]
 pub struct LaneLaw<S> {
     pub g: S,
     r0: S,
@@ -41,6 +42,26 @@ impl<S: F64xN> LaneLaw<S> {
             half_n1_over_n: lanes(|p| 0.5 * (p.n + 1.0) / p.n),
             two_n: lanes(|p| 2.0 * p.n),
             n_plus_1: lanes(|p| p.n + 1.0),
+        }
+    }
+
+    /// The law the share `s` (per lane, 0 to 1) of the way from `self` to
+    /// `to`, every field linear in between: the parameters within a sample
+    /// interval over which they change.
+    #[inline(always)]
+    pub fn toward(&self, to: &Self, s: S) -> Self {
+        // written out, not through a closure: a closure would not inherit
+        // the AVX2 target feature of the loop it is called from
+        LaneLaw {
+            g: self.g + (to.g - self.g) * s,
+            r0: self.r0 + (to.r0 - self.r0) * s,
+            r1: self.r1 + (to.r1 - self.r1) * s,
+            d1: self.d1 + (to.d1 - self.d1) * s,
+            m1: self.m1 + (to.m1 - self.m1) * s,
+            m2: self.m2 + (to.m2 - self.m2) * s,
+            half_n1_over_n: self.half_n1_over_n + (to.half_n1_over_n - self.half_n1_over_n) * s,
+            two_n: self.two_n + (to.two_n - self.two_n) * s,
+            n_plus_1: self.n_plus_1 + (to.n_plus_1 - self.n_plus_1) * s,
         }
     }
 

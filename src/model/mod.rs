@@ -6,6 +6,7 @@
 
 pub mod current_curves;
 pub mod current_law;
+pub mod field;
 pub mod integrate;
 pub mod lanes;
 pub mod law;
@@ -14,6 +15,7 @@ pub mod simd;
 
 pub use current_curves::CurrentCurves;
 pub use current_law::CurrentLaw;
+pub use field::{FieldCurrent, FieldLaw};
 pub use integrate::{integrate, uses_avx2, IntegrationError, Integrator, LaneStates, Scheme, State, Trajectory};
 pub use lanes::LANES;
 pub use law::tangent_stiffness;

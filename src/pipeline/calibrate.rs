@@ -86,6 +86,13 @@ impl Pipeline<'_> {
         if !request.hold_out_current.is_empty() {
             return Err(Error::Usage("--hold-out-current needs --model current-law or current-curves".into()));
         }
+        let varying = campaign.varying_runs();
+        if !varying.is_empty() {
+            self.note(&format!(
+                "{}: the current changes within the record; one parameter set per current cannot describe it, so it is left out here (--model current-curves or current-law calibrates it)",
+                varying.join(", ")
+            ));
+        }
         let currents = match request.current {
             Some(c) if !campaign.has_current(c) => {
                 return Err(Error::Usage(format!("no run at {c} A in {} (currents: {:?})", campaign.manifest_path.display(), campaign.currents())))

@@ -45,8 +45,14 @@ impl Pipeline<'_> {
         record.force = vec![f64::NAN; record.len()];
         record.check(input, &map)?;
         record.check_limits(input, &map, &Limits::default())?;
-        let current_a = self.simulated_current(cal, input, &record, current)?;
-        let extrapolated = self.check_current(cal, current_a)?;
+        let (current_a, varies) = self.simulated_current(cal, input, &record, current)?;
+        let extrapolated = match (varies, &record.current) {
+            (true, Some(values)) => {
+                let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+                self.check_current(cal, lo)? | self.check_current(cal, hi)?
+            }
+            _ => self.check_current(cal, current_a)?,
+        };
         let geometry = match cal.record.geometry {
             Some(g) => g,
             None => cal.full_campaign()?.geometry,
@@ -54,7 +60,10 @@ impl Pipeline<'_> {
         let id = input.file_stem().map_or_else(|| "input".to_string(), |s| s.to_string_lossy().into_owned());
         let shear = Shear::from_record(&record, &geometry, None);
         let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
-        let spec = RunSpec { id: id.clone(), file: input.to_path_buf(), current_a, shear_rate: None, initial_stress_pa: None };
+        if varies && !cal.sample.model.has_lag() {
+            self.note("the law was calibrated without records whose current changes, so it has no coil lag: the field follows the current at once here");
+        }
+        let spec = RunSpec { current_varies: varies, ..RunSpec::new(id.clone(), input.to_path_buf(), current_a) };
         let run = Run { spec, path: input.to_path_buf(), record, shear, branches, geometry };
         if let Some(out) = out {
             self.prepare(out, "--out", &[], &[], true)?;
@@ -73,6 +82,7 @@ impl Pipeline<'_> {
             command: command_line(),
             input: input.display().to_string(),
             current_a,
+            current_varies: varies,
             area_m2: geometry.area_m2,
             draws: b.draws,
             failed_draws: b.failed,
@@ -85,12 +95,15 @@ impl Pipeline<'_> {
         if b.failed > 0 {
             self.note(&format!("{} of {} posterior draws could not be integrated along {} (left out of the bands)", b.failed, b.failed + b.draws, input.display()));
         }
-        Ok(Simulation { time: data.time.clone(), displacement: run.record.displacement.clone(), gamma_model: data.gamma.clone(), model: b.model, predictive: b.predictive, record })
+        let current = data.current.clone().unwrap_or_else(|| vec![current_a; data.time.len()]);
+        Ok(Simulation { time: data.time.clone(), displacement: run.record.displacement.clone(), current, gamma_model: data.gamma.clone(), model: b.model, predictive: b.predictive, record })
     }
 
-    /// The current to simulate at: the option, else the file's (which must
-    /// hold still), else a per-current calibration's own.
-    fn simulated_current(&mut self, cal: &Calibration, input: &Path, record: &Record, current: Option<f64>) -> Result<f64> {
+    /// The current to simulate at, and whether it changes along the
+    /// excitation: the option, else the file's (a law follows it where it
+    /// changes; one parameter set cannot), else a per-current
+    /// calibration's own. Where it changes, the current returned is its mean.
+    fn simulated_current(&mut self, cal: &Calibration, input: &Path, record: &Record, current: Option<f64>) -> Result<(f64, bool)> {
         let column = Columns::default().current;
         let from_file = match &record.current {
             None => None,
@@ -98,17 +111,36 @@ impl Pipeline<'_> {
                 let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
                 let mid = 0.5 * (lo + hi);
                 if !same_current(lo, mid) || !same_current(hi, mid) {
-                    return Err(Error::input_at(
-                        input,
-                        None,
-                        Some(&column),
-                        format!("the current changes within the record ({lo} to {hi} A): mrbp simulates one current per record so far; split the record where the current steps"),
-                    ));
+                    if !cal.is_current_law() {
+                        return Err(Error::input_at(
+                            input,
+                            None,
+                            Some(&column),
+                            format!(
+                                "the current changes within the record ({lo} to {hi} A): the calibration in {} has one parameter set, at {} A; a law (mrbp sample --model current-curves or current-law) follows a changing current",
+                                cal.dir.display(),
+                                cal.record.current_a
+                            ),
+                        ));
+                    }
+                    if let Some(k) = values.iter().position(|v| !(*v >= 0.0)) {
+                        return Err(Error::input_at(input, Some(k + 1), Some(&column), format!("{} A: the law takes a coil current of 0 A or more", values[k])));
+                    }
+                    if lo <= 0.0 && cal.sample.model.kind() == crate::posterior::ModelKind::CurrentLaw {
+                        return Err(Error::Usage(format!(
+                            "the current of {} reaches 0 A, where the current law has no yield stress (R0, R1, D1 ∝ s(I)); the current curves (--model current-curves) have an off-state",
+                            input.display()
+                        )));
+                    }
+                    if let Some(c) = current {
+                        return Err(Error::Usage(format!("--current {c} names one current, but the column {column} of {} changes ({lo} to {hi} A): leave --current out to follow it", input.display())));
+                    }
+                    return Ok((values.iter().sum::<f64>() / values.len() as f64, true));
                 }
                 Some(mid)
             }
         };
-        match (current, from_file) {
+        let one = match (current, from_file) {
             (Some(c), Some(f)) if !same_current(c, f) => Err(Error::Usage(format!("--current {c} disagrees with the {f} A of the column {column} in {}", input.display()))),
             (Some(c), _) => Ok(c),
             (None, Some(f)) => Ok(f),
@@ -118,7 +150,8 @@ impl Pipeline<'_> {
                 cal.record.currents
             ))),
             (None, None) => Ok(cal.record.current_a),
-        }
+        };
+        one.map(|c| (c, false))
     }
 
     /// Refuses a current the calibration does not cover; returns whether a

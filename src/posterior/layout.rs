@@ -233,6 +233,7 @@ pub fn unit_of(name: &str) -> &'static str {
     match name {
         "G_field" | "G_zero" => "Pa",
         "saturation_current_a" => "A",
+        "coil_lag_s" => "s",
         "gas_spring_n_per_m" => "N/m",
         _ if name.starts_with("force_offset_n_") => "N",
         _ => crate::noise::unit_of(name).unwrap_or(""),
@@ -262,7 +263,7 @@ mod tests {
         for (a, b) in l.from_si(&si).iter().zip(&x) {
             assert!((a - b).abs() < 1e-12);
         }
-        let g = Layout::new(&ParameterModel::CurrentLaw { reference_a: 1.0 }, &runs, gaussian.as_ref(), Coordinates::Log, &ModelTerms::default());
+        let g = Layout::new(&ParameterModel::CurrentLaw { reference_a: 1.0, lag: false }, &runs, gaussian.as_ref(), Coordinates::Log, &ModelTerms::default());
         assert_eq!((g.dim(), g.noise.len()), (11, 2));
         let terms = ModelTerms { force_offset: true, gas_spring: true, ..ModelTerms::default() };
         let t = Layout::new(&ParameterModel::PerCurrent, &runs, gaussian.as_ref(), Coordinates::Log, &terms);

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use crate::data::{RecordPart, RunData};
-use crate::model::{tangent_stiffness, Integrator, Params, LANES};
+use crate::model::{tangent_stiffness, FieldLaw, IntegrationError, Integrator, LaneStates, Params, LANES};
 use crate::noise::{DiscrepancySettings, NoiseKind, NoiseModel, NoiseOptions, NoiseValues};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -71,6 +71,49 @@ impl LikelihoodSettings {
     }
 }
 
+/// The B-P parameters of up to [`LANES`] points along one run: a set per
+/// lane, or each lane's law and coil lag where the run's current varies.
+// on the stack for one batch of lanes: boxing the larger variant would
+// allocate in the likelihood's loop
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug)]
+pub enum LaneParams {
+    Fixed([Params; LANES]),
+    Along { laws: [FieldLaw; LANES], lags_s: [f64; LANES] },
+}
+
+impl LaneParams {
+    /// Integrates every lane along `run` ([`Integrator::run_lanes`], or
+    /// [`Integrator::run_lanes_along`] the run's current where it varies).
+    pub fn integrate(&self, integrator: &Integrator, run: &RunData, visit: impl FnMut(usize, &LaneStates)) -> [Result<(), IntegrationError>; LANES] {
+        match (self, &run.current) {
+            (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.run_lanes_along(laws, lags_s, current, &run.time, &run.gamma, run.initial_tau, visit),
+            _ => integrator.run_lanes(&self.at(run.current_a), &run.time, &run.gamma, run.initial_tau, visit),
+        }
+    }
+
+    /// Every lane's parameters at a steady current `current_a`.
+    pub fn at(&self, current_a: f64) -> [Params; LANES] {
+        match self {
+            LaneParams::Fixed(p) => *p,
+            LaneParams::Along { laws, .. } => std::array::from_fn(|lane| laws[lane].params_at(current_a)),
+        }
+    }
+
+    /// Each lane's G along `run`, the bound of the law's tangent stiffness:
+    /// where the current varies, the largest (G is monotone in the current,
+    /// so at the record's lowest or highest current).
+    pub fn g_bound(&self, run: &RunData) -> [f64; LANES] {
+        match (self, &run.current) {
+            (LaneParams::Along { laws, .. }, Some(current)) => {
+                let (lo, hi) = current.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
+                std::array::from_fn(|lane| laws[lane].params_at(lo).g.max(laws[lane].params_at(hi).g))
+            }
+            _ => self.at(run.current_a).map(|p| p.g),
+        }
+    }
+}
+
 /// The log-likelihood of `run` for up to [`LANES`] points: their B-P
 /// parameters, noise coordinates and model terms (gas-spring stiffness,
 /// force offset); `None` where the integration failed. The law is
@@ -80,17 +123,18 @@ pub fn run_log_likelihood(
     noise: &dyn NoiseModel,
     integrator: &Integrator,
     run: &RunData,
-    params: &[Params; LANES],
+    params: &LaneParams,
     coordinates: &[NoiseValues; LANES],
     terms: [(f64, f64); LANES],
 ) -> [Option<f64>; LANES] {
     let with_terms = terms.iter().any(|t| *t != (0.0, 0.0));
     let stiff = noise.uses_stiffness(run);
+    let g = if stiff { params.g_bound(run) } else { [0.0; LANES] };
     let mut scorer = noise.scorer(run, coordinates);
     let mut residual = [0.0; LANES];
     let mut stiffness = [0.0; LANES];
     let mut prev_model = [run.initial_tau; LANES];
-    let outcome = integrator.run_lanes(params, &run.time, &run.gamma, run.initial_tau, |k, s| {
+    let outcome = params.integrate(integrator, run, |k, s| {
         if k == 0 {
             return;
         }
@@ -100,7 +144,7 @@ pub fn run_log_likelihood(
             let model = if with_terms { s.tau[lane] + run.terms_stress(k, terms[lane].0, terms[lane].1) } else { s.tau[lane] };
             residual[lane] = obs - model;
             if stiff {
-                stiffness[lane] = tangent_stiffness(s.tau[lane] - prev_model[lane], dg, params[lane].g);
+                stiffness[lane] = tangent_stiffness(s.tau[lane] - prev_model[lane], dg, g[lane]);
                 prev_model[lane] = s.tau[lane];
             }
         }

@@ -15,10 +15,10 @@ use nalgebra::{DMatrix, DVector};
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-use super::{Layout, Posterior};
+use super::{LaneParams, Layout, Posterior};
 use crate::data::RunData;
 use crate::fit::least_squares;
-use crate::model::{Integrator, Params, LANES};
+use crate::model::{Integrator, LANES};
 use crate::noise::{Profile, Whiten};
 use crate::sampler::LogDensity;
 
@@ -74,10 +74,10 @@ const JACOBIAN_STEP: f64 = 1e-6;
 
 /// Residuals τ_obs − τ_model of run `r` for up to [`LANES`] parameter sets
 /// with their model terms (gas-spring stiffness, force offset).
-fn run_residuals(post: &Posterior, r: &RunData, params: &[Params], terms: &[(f64, f64)]) -> Vec<Option<Vec<f64>>> {
-    let lanes: [Params; LANES] = std::array::from_fn(|l| params.get(l).copied().unwrap_or(params[0]));
-    let mut out = vec![Vec::with_capacity(r.compared()); params.len()];
-    let outcome = post.integrator.run_lanes(&lanes, &r.time, &r.gamma, r.initial_tau, |k, s| {
+fn run_residuals(post: &Posterior, r: &RunData, xs: &[&[f64]], terms: &[(f64, f64)]) -> Vec<Option<Vec<f64>>> {
+    let params = post.lane_params(xs, r);
+    let mut out = vec![Vec::with_capacity(r.compared()); xs.len()];
+    let outcome = params.integrate(&post.integrator, r, |k, s| {
         if k > 0 {
             for (lane, o) in out.iter_mut().enumerate() {
                 o.push(r.tau[k] - s.tau[lane] - r.terms_stress(k, terms[lane].0, terms[lane].1));
@@ -96,9 +96,9 @@ fn residuals_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<Vec<f64>>
         .map(|&(r, g)| {
             let run = &post.runs[r];
             let group = &xs[g..(g + LANES).min(xs.len())];
-            let params: Vec<Params> = group.iter().map(|x| post.params_at_current(x, run.current_a)).collect();
+            let points: Vec<&[f64]> = group.iter().map(|x| x.as_slice()).collect();
             let terms: Vec<(f64, f64)> = group.iter().map(|x| post.layout.terms(x, r)).collect();
-            run_residuals(post, run, &params, &terms)
+            run_residuals(post, run, &points, &terms)
         })
         .collect();
     let mut out: Vec<Option<Vec<Vec<f64>>>> = vec![Some(Vec::new()); xs.len()];
@@ -227,7 +227,7 @@ pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
 /// Each run's noise fitted to its residuals at the fitted point `x`.
 fn profiles(post: &Posterior, x: &[f64]) -> Option<Vec<Profile>> {
     let res = residuals_many(post, &[x.to_vec()]).pop()??;
-    Some(res.iter().zip(&post.runs).map(|(r, run)| post.noise.profile(run, r, post.params_at_current(x, run.current_a).g)).collect())
+    Some(res.iter().zip(&post.runs).map(|(r, run)| post.noise.profile(run, r, post.lane_params(&[x], run).g_bound(run)[0])).collect())
 }
 
 /// θ extended by the noise coordinates that maximise the likelihood of the
@@ -392,7 +392,13 @@ impl Laplace {
 /// The Euler steps of one log-density at `x` (all runs): what the
 /// integrator costs there.
 pub fn euler_steps(post: &Posterior, x: &[f64]) -> u64 {
-    post.runs.iter().map(|r| post.integrator.euler_steps(&post.params_at_current(x, r.current_a), &r.time, &r.gamma, r.initial_tau)).sum()
+    post.runs
+        .iter()
+        .map(|r| match (post.lane_params(&[x], r), &r.current) {
+            (LaneParams::Along { laws, lags_s }, Some(current)) => post.integrator.euler_steps_along(&laws[0], lags_s[0], current, &r.time, &r.gamma, r.initial_tau),
+            (p, _) => post.integrator.euler_steps(&p.at(r.current_a)[0], &r.time, &r.gamma, r.initial_tau),
+        })
+        .sum()
 }
 
 /// Spread of the initial walkers over the Laplace approximation's: a

@@ -25,11 +25,11 @@ pub mod terms;
 use std::sync::Arc;
 
 use crate::data::{Campaign, RunData};
-use crate::model::{Integrator, Params, LANES};
+use crate::model::{FieldLaw, Integrator, Params, LANES};
 use crate::noise::{NoiseModel, NoiseValues, MAX_PARAMETERS};
 use crate::sampler::LogDensity;
 pub use layout::{unit_of, Coordinates, Layout};
-pub use likelihood::{run_log_likelihood, LikelihoodSettings};
+pub use likelihood::{run_log_likelihood, LaneParams, LikelihoodSettings};
 pub use parameters::{ModelKind, ParameterModel, CURVE_NAMES, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, Draws, PosteriorSample, SummaryRow};
@@ -86,8 +86,32 @@ impl Posterior {
 
     /// The B-P parameters at a coil current, from the sampler's coordinates `x`.
     pub fn params_at_current(&self, x: &[f64], current_a: f64) -> Params {
-        let theta: Vec<f64> = self.layout.log_theta(x).into_iter().map(f64::exp).collect();
-        self.model.params(&theta, current_a)
+        self.model.params(&self.theta(x), current_a)
+    }
+
+    /// θ in SI units at the sampler's coordinates `x`.
+    fn theta(&self, x: &[f64]) -> Vec<f64> {
+        self.layout.log_theta(x).into_iter().map(f64::exp).collect()
+    }
+
+    /// A law's field law and coil lag at the sampler's coordinates `x`;
+    /// `None` for one parameter set.
+    pub fn field_at(&self, x: &[f64]) -> Option<(FieldLaw, f64)> {
+        let theta = self.theta(x);
+        self.model.field_law(&theta).map(|law| (law, self.model.lag_s(&theta)))
+    }
+
+    /// The B-P parameters of the points `xs` (sampler coordinates, up to
+    /// [`LANES`]; the last repeated) along run `run`: at its current, or
+    /// following it where it varies and θ is a law.
+    pub fn lane_params(&self, xs: &[&[f64]], run: &RunData) -> LaneParams {
+        let point = |lane: usize| xs[lane.min(xs.len() - 1)];
+        if run.current.is_some() && self.model.is_current_law() {
+            let thetas: [Vec<f64>; LANES] = std::array::from_fn(|lane| self.theta(point(lane)));
+            let law = |t: &Vec<f64>| self.model.field_law(t).expect("a law");
+            return LaneParams::Along { laws: std::array::from_fn(|lane| law(&thetas[lane])), lags_s: std::array::from_fn(|lane| self.model.lag_s(&thetas[lane])) };
+        }
+        LaneParams::Fixed(std::array::from_fn(|lane| self.params_at_current(point(lane), run.current_a)))
     }
 
     /// Log-prior of the coordinates (the priors are densities of ln θ, and
@@ -117,14 +141,14 @@ impl Posterior {
         if out.iter().all(|v| *v == f64::NEG_INFINITY) {
             return;
         }
-        let mut params = [Params::reference_1a(); LANES];
+        // lanes out of the prior's support get the first lane's point
+        let alive: Vec<&[f64]> = (0..count).map(|lane| if out[lane] > f64::NEG_INFINITY { point(lane) } else { point(0) }).collect();
+        let mut params = LaneParams::Fixed([Params::reference_1a(); LANES]);
         for (i, r) in self.runs.iter().enumerate() {
             // a current law gives each run its own parameters; one set is
             // the same for every run and computed once
             if i == 0 || self.model.is_current_law() {
-                for lane in (0..count).filter(|&lane| out[lane] > f64::NEG_INFINITY) {
-                    params[lane] = self.params_at_current(point(lane), r.current_a);
-                }
+                params = self.lane_params(&alive, r);
             }
             let coordinates: [NoiseValues; LANES] =
                 std::array::from_fn(|lane| if lane < count { l.noise_values(point(lane), i) } else { [0.0; MAX_PARAMETERS] });

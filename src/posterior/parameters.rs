@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::prior::Prior;
 use crate::error::{Error, Result};
-use crate::model::{CurrentCurves, CurrentLaw, Params, PARAM_NAMES, PHYSICAL_RANGE};
+use crate::model::{CurrentCurves, CurrentLaw, FieldLaw, Params, PARAM_NAMES, PHYSICAL_RANGE};
 
 /// The choice as written in settings files and on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -38,12 +38,30 @@ impl ModelKind {
 /// Names of a current law's θ coordinates (SI units in outputs).
 pub const LAW_NAMES: [&str; 9] = ["G_field", "R0", "R1", "D1", "m1", "m2", "n", "saturation_current_a", "G_zero"];
 
+/// The coil's lag τ_c (s), the last θ coordinate of a law whose runs'
+/// current varies ([`crate::model::FieldCurrent`]).
+pub const LAG_NAME: &str = "coil_lag_s";
+
+/// [`LAW_NAMES`] and the coil's lag.
+const LAW_NAMES_LAGGED: [&str; 10] = ["G_field", "R0", "R1", "D1", "m1", "m2", "n", "saturation_current_a", "G_zero", LAG_NAME];
+
 /// Names of the current curves' θ coordinates: the parameters at the low
 /// anchor current, at the high one, and each curve's bend κ.
 pub const CURVE_NAMES: [&str; 21] = [
     "G_low", "R0_low", "R1_low", "D1_low", "m1_low", "m2_low", "n_low", "G_high", "R0_high", "R1_high", "D1_high", "m1_high", "m2_high", "n_high", "G_bend", "R0_bend",
     "R1_bend", "D1_bend", "m1_bend", "m2_bend", "n_bend",
 ];
+
+/// [`CURVE_NAMES`] and the coil's lag.
+const CURVE_NAMES_LAGGED: [&str; 22] = [
+    "G_low", "R0_low", "R1_low", "D1_low", "m1_low", "m2_low", "n_low", "G_high", "R0_high", "R1_high", "D1_high", "m1_high", "m2_high", "n_high", "G_bend", "R0_bend",
+    "R1_bend", "D1_bend", "m1_bend", "m2_bend", "n_bend", LAG_NAME,
+];
+
+/// The prior of the coil's lag τ_c: log-normal about 10 ms (a damper
+/// coil's field settles in 5–30 ms) with a factor-e spread, within
+/// [0.1 ms, 1 s].
+pub const LAG_PRIOR: Prior = Prior::LogNormal { median: 0.01, sd_log: 1.0, lower: 1.0e-4, upper: 1.0 };
 
 /// The prior of each curve's bend κ: ln κ normal about 0 (a straight line in
 /// ln p against I) with sd 2, so that ±1 sd puts the middle of the change
@@ -56,23 +74,50 @@ pub const BEND_PRIOR: Prior = Prior::LogNormal { median: 1.0, sd_log: 2.0, lower
 pub enum ParameterModel {
     /// θ = (G, R0, R1, D1, m1, m2, n) for every run.
     PerCurrent,
-    /// θ = the current law's [`LAW_NAMES`], with its reference current (A).
-    CurrentLaw { reference_a: f64 },
-    /// θ = [`CURVE_NAMES`], with the anchor currents (A).
-    CurrentCurves { low_a: f64, high_a: f64 },
+    /// θ = the current law's [`LAW_NAMES`], with its reference current (A),
+    /// and the coil's lag where `lag`.
+    CurrentLaw { reference_a: f64, lag: bool },
+    /// θ = [`CURVE_NAMES`], with the anchor currents (A), and the coil's
+    /// lag where `lag`.
+    CurrentCurves { low_a: f64, high_a: f64, lag: bool },
 }
 
 impl ParameterModel {
     /// The model of `kind`; the curves' anchors (`anchors_a`) are known
-    /// once the calibrated currents are (NaN until then).
-    pub fn new(kind: ModelKind, reference_a: f64, anchors_a: Option<(f64, f64)>) -> Self {
+    /// once the calibrated currents are (NaN until then). A law has the
+    /// coil's lag as a coordinate where `lag` (runs whose current varies).
+    pub fn new(kind: ModelKind, reference_a: f64, anchors_a: Option<(f64, f64)>, lag: bool) -> Self {
         match kind {
             ModelKind::PerCurrent => ParameterModel::PerCurrent,
-            ModelKind::CurrentLaw => ParameterModel::CurrentLaw { reference_a },
+            ModelKind::CurrentLaw => ParameterModel::CurrentLaw { reference_a, lag },
             ModelKind::CurrentCurves => {
                 let (low_a, high_a) = anchors_a.unwrap_or((f64::NAN, f64::NAN));
-                ParameterModel::CurrentCurves { low_a, high_a }
+                ParameterModel::CurrentCurves { low_a, high_a, lag }
             }
+        }
+    }
+
+    /// Whether θ ends with the coil's lag.
+    pub fn has_lag(&self) -> bool {
+        matches!(self, ParameterModel::CurrentLaw { lag: true, .. } | ParameterModel::CurrentCurves { lag: true, .. })
+    }
+
+    /// How the B-P parameters follow the coil current at θ (SI); `None`
+    /// for one parameter set.
+    pub fn field_law(&self, theta: &[f64]) -> Option<FieldLaw> {
+        match *self {
+            ParameterModel::PerCurrent => None,
+            ParameterModel::CurrentLaw { reference_a, .. } => Some(FieldLaw::Law(Self::law(reference_a, theta))),
+            ParameterModel::CurrentCurves { low_a, high_a, .. } => Some(FieldLaw::Curves(Self::curves(low_a, high_a, theta))),
+        }
+    }
+
+    /// The coil's lag τ_c at θ (SI, s): 0 where θ has none.
+    pub fn lag_s(&self, theta: &[f64]) -> f64 {
+        if self.has_lag() {
+            theta[self.names().len() - 1]
+        } else {
+            0.0
         }
     }
 
@@ -93,8 +138,10 @@ impl ParameterModel {
     pub fn names(&self) -> &'static [&'static str] {
         match self {
             ParameterModel::PerCurrent => &PARAM_NAMES,
-            ParameterModel::CurrentLaw { .. } => &LAW_NAMES,
-            ParameterModel::CurrentCurves { .. } => &CURVE_NAMES,
+            ParameterModel::CurrentLaw { lag: false, .. } => &LAW_NAMES,
+            ParameterModel::CurrentLaw { lag: true, .. } => &LAW_NAMES_LAGGED,
+            ParameterModel::CurrentCurves { lag: false, .. } => &CURVE_NAMES,
+            ParameterModel::CurrentCurves { lag: true, .. } => &CURVE_NAMES_LAGGED,
         }
     }
 
@@ -121,7 +168,7 @@ impl ParameterModel {
         let mut p = bp.to_vec();
         match *self {
             ParameterModel::PerCurrent => {}
-            ParameterModel::CurrentLaw { reference_a } => {
+            ParameterModel::CurrentLaw { reference_a, .. } => {
                 p.push(Prior::LogNormal { median: reference_a, sd_log: 1.0, lower: 0.05 * reference_a, upper: 20.0 * reference_a });
                 p.push(bp[0]);
             }
@@ -129,6 +176,9 @@ impl ParameterModel {
                 p.extend_from_slice(bp);
                 p.extend([BEND_PRIOR; 7]);
             }
+        }
+        if self.has_lag() {
+            p.push(LAG_PRIOR);
         }
         p
     }
@@ -164,8 +214,8 @@ impl ParameterModel {
     pub fn params(&self, theta: &[f64], current_a: f64) -> Params {
         match *self {
             ParameterModel::PerCurrent => Params::from_array(std::array::from_fn(|i| theta[i])),
-            ParameterModel::CurrentLaw { reference_a } => Self::law(reference_a, theta).params_at(current_a),
-            ParameterModel::CurrentCurves { low_a, high_a } => Self::curves(low_a, high_a, theta).params_at(current_a),
+            ParameterModel::CurrentLaw { reference_a, .. } => Self::law(reference_a, theta).params_at(current_a),
+            ParameterModel::CurrentCurves { low_a, high_a, .. } => Self::curves(low_a, high_a, theta).params_at(current_a),
         }
     }
 
@@ -173,6 +223,15 @@ impl ParameterModel {
     /// from an identification. A current law starts with I_s = I_ref and
     /// half of G from the field; curves start flat (`p` at every current).
     pub fn start(&self, p: &Params, current_a: f64) -> Vec<f64> {
+        let mut theta = self.start_without_lag(p, current_a);
+        if self.has_lag() {
+            // the prior's median
+            theta.push(0.01);
+        }
+        theta
+    }
+
+    fn start_without_lag(&self, p: &Params, current_a: f64) -> Vec<f64> {
         let reference_a = match *self {
             ParameterModel::PerCurrent => return p.to_array().to_vec(),
             ParameterModel::CurrentCurves { .. } => {
@@ -181,7 +240,7 @@ impl ParameterModel {
                 theta.extend([1.0; 7]);
                 return theta;
             }
-            ParameterModel::CurrentLaw { reference_a } => reference_a,
+            ParameterModel::CurrentLaw { reference_a, .. } => reference_a,
         };
         let probe = CurrentLaw::through(p, reference_a, reference_a, 0.5);
         let s = probe.scale(current_a).max(1e-3);
@@ -208,7 +267,7 @@ impl ParameterModel {
                 [c] => Ok(*c),
                 _ => Err(Error::Usage(format!("a calibration takes runs of one current; got {currents:?} A"))),
             },
-            ParameterModel::CurrentLaw { reference_a } | ParameterModel::CurrentCurves { high_a: reference_a, .. } => {
+            ParameterModel::CurrentLaw { reference_a, .. } | ParameterModel::CurrentCurves { high_a: reference_a, .. } => {
                 if currents.len() < 2 {
                     return Err(Error::Usage(format!("the current law needs runs at two or more currents; got {currents:?} A")));
                 }
@@ -222,7 +281,7 @@ impl ParameterModel {
     pub fn describes_current(&self, identification_current: f64) -> f64 {
         match *self {
             ParameterModel::PerCurrent => identification_current,
-            ParameterModel::CurrentLaw { reference_a } => reference_a,
+            ParameterModel::CurrentLaw { reference_a, .. } => reference_a,
             ParameterModel::CurrentCurves { high_a, .. } => high_a,
         }
     }
@@ -236,7 +295,7 @@ mod tests {
     /// reproduces the current dependence of the virtual stand.
     #[test]
     fn law_start_reproduces_the_virtual_stand() {
-        let model = ParameterModel::CurrentLaw { reference_a: 1.0 };
+        let model = ParameterModel::CurrentLaw { reference_a: 1.0, lag: false };
         let stand = crate::synth::StandLaw::default().law();
         let theta = model.start(&Params::reference_1a(), 1.0);
         for i in [0.5, 1.0, 1.5] {
@@ -253,7 +312,7 @@ mod tests {
     /// priors line up with their names.
     #[test]
     fn curves_map_their_coordinates() {
-        let model = ParameterModel::new(ModelKind::CurrentCurves, 1.0, Some((0.25, 1.0)));
+        let model = ParameterModel::new(ModelKind::CurrentCurves, 1.0, Some((0.25, 1.0)), false);
         let p = Params::reference_1a();
         let theta = model.start(&p, 0.5);
         assert_eq!(theta.len(), CURVE_NAMES.len());

@@ -6,8 +6,10 @@
 //! comparisons, figures) treats both alike.
 
 use super::layout::Layout;
+use super::likelihood::LaneParams;
 use super::parameters::ParameterModel;
-use crate::model::Params;
+use crate::data::RunData;
+use crate::model::{FieldLaw, Params};
 use crate::noise::NoiseValues;
 use crate::sampler::{Chains, Diagnostics, ParameterDiagnostics};
 
@@ -16,7 +18,11 @@ use crate::sampler::{Chains, Diagnostics, ParameterDiagnostics};
 /// noise model's order).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Draw {
+    /// The B-P parameters at the run's (nominal) current.
     pub params: Params,
+    /// A law's draw: how the parameters follow the current, and the coil's
+    /// lag (s), for a run whose current varies.
+    pub field: Option<(FieldLaw, f64)>,
     pub spring_n_per_m: f64,
     pub offset_n: f64,
     pub noise: NoiseValues,
@@ -25,7 +31,25 @@ pub struct Draw {
 impl Draw {
     /// A draw of the B-P law alone: no model terms, noise `noise`.
     pub fn of_law(params: Params, noise: NoiseValues) -> Self {
-        Draw { params, spring_n_per_m: 0.0, offset_n: 0.0, noise }
+        Draw { params, field: None, spring_n_per_m: 0.0, offset_n: 0.0, noise }
+    }
+
+    /// The parameters of up to `LANES` draws (the last repeated) along `run`.
+    pub fn lanes(draws: &[Draw], run: &RunData) -> LaneParams {
+        let at = |lane: usize| &draws[lane.min(draws.len() - 1)];
+        match (run.current.is_some(), draws.iter().all(|d| d.field.is_some())) {
+            (true, true) => LaneParams::Along {
+                laws: std::array::from_fn(|lane| at(lane).field.expect("a law").0),
+                lags_s: std::array::from_fn(|lane| at(lane).field.expect("a law").1),
+            },
+            _ => LaneParams::Fixed(std::array::from_fn(|lane| at(lane).params)),
+        }
+    }
+
+    /// G along `run`, the bound of the law's tangent stiffness
+    /// ([`LaneParams::g_bound`]).
+    pub fn g_bound(&self, run: &RunData) -> f64 {
+        Draw::lanes(std::slice::from_ref(self), run).g_bound(run)[0]
     }
 }
 
@@ -61,6 +85,13 @@ impl PosteriorSample {
         self.model.params(&x[self.layout.theta.clone()], current_a)
     }
 
+    /// A law's field law and coil lag at one position; `None` for one
+    /// parameter set.
+    pub fn field_at(&self, step: usize, chain: usize) -> Option<(FieldLaw, f64)> {
+        let theta = &self.chains.point(step, chain)[self.layout.theta.clone()];
+        self.model.field_law(theta).map(|law| (law, self.model.lag_s(theta)))
+    }
+
     /// The draw at one position for run `run` at `current_a`. A run the
     /// posterior did not see has no noise of its own: it gets that of the
     /// runs it saw, pooled ([`Self::draw_without`]).
@@ -69,7 +100,7 @@ impl PosteriorSample {
         match self.layout.run_index(run) {
             Some(j) => {
                 let (spring_n_per_m, offset_n) = self.layout.terms(x, j);
-                Draw { params: self.params_at(step, chain, current_a), spring_n_per_m, offset_n, noise: self.layout.noise_values(x, j) }
+                Draw { params: self.params_at(step, chain, current_a), field: self.field_at(step, chain), spring_n_per_m, offset_n, noise: self.layout.noise_values(x, j) }
             }
             None => self.draw_without(step, chain, run, current_a),
         }
@@ -85,6 +116,7 @@ impl PosteriorSample {
         let offsets: Vec<f64> = others.iter().map(|&i| l.terms(x, i).1).collect();
         Draw {
             params: self.params_at(step, chain, current_a),
+            field: self.field_at(step, chain),
             spring_n_per_m: l.terms(x, 0).0,
             offset_n: crate::noise::Pool::Mean.of(&offsets),
             noise: l.pooled_noise(x, &others),

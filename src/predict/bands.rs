@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::{Run, RunData};
 use crate::error::{Error, Result};
-use crate::model::{tangent_stiffness, Integrator, Params, LANES};
+use crate::model::{tangent_stiffness, Integrator, LANES};
 use crate::noise::{Explained, NoiseModel, NoiseValues};
 use crate::posterior::Draw;
 use crate::rng;
@@ -102,22 +102,21 @@ pub fn bands(
     settings: &PredictSettings,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Bands> {
-    let params: Vec<Params> = draws.iter().map(|d| d.params).collect();
-    let paths = model_paths(run, &params, &settings.integrator, tick);
+    let paths = model_paths(run, draws, &settings.integrator, tick);
     let kept: Vec<(&Draw, &[f64])> = draws.iter().zip(&paths).filter_map(|(d, p)| p.as_deref().map(|p| (d, p))).collect();
     bands_of(run, run_index, &kept, draws.len() - kept.len(), settings)
 }
 
-/// The model stress along `run` for each parameter set, four at a time in
-/// SIMD lanes and in parallel; `None` where the integration failed.
-pub fn model_paths(run: &RunData, params: &[Params], integrator: &Integrator, tick: &(dyn Fn() + Sync)) -> Vec<Option<Vec<f64>>> {
+/// The model stress along `run` for each draw, [`LANES`] at a time in
+/// SIMD lanes and in parallel (following the run's current where it
+/// varies and the draws are a law's); `None` where the integration failed.
+pub fn model_paths(run: &RunData, draws: &[Draw], integrator: &Integrator, tick: &(dyn Fn() + Sync)) -> Vec<Option<Vec<f64>>> {
     let n = run.time.len();
-    params
+    draws
         .par_chunks(LANES)
         .flat_map_iter(|chunk| {
-            let lanes: [Params; LANES] = std::array::from_fn(|l| chunk.get(l).copied().unwrap_or(chunk[0]));
             let mut tau = vec![vec![0.0; n]; chunk.len()];
-            let outcome = integrator.run_lanes(&lanes, &run.time, &run.gamma, run.initial_tau, |k, s| {
+            let outcome = Draw::lanes(chunk, run).integrate(integrator, run, |k, s| {
                 for (lane, path) in tau.iter_mut().enumerate() {
                     path[k] = s.tau[lane];
                 }
@@ -147,6 +146,7 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
     let mut simulator = noise.simulator(run, &noise_of, reps);
     let mut model = [(); 5].map(|_| vec![0.0; n]);
     let mut predictive = [(); 2].map(|_| vec![0.0; n]);
+    let g_bound: Vec<f64> = kept.iter().map(|(d, _)| if stiff { d.g_bound(run) } else { 0.0 }).collect();
     let mut at_k = vec![0.0; kept.len()];
     let mut stiffness = vec![0.0; kept.len()];
     let mut noise_k = vec![0.0; kept.len() * reps];
@@ -158,7 +158,7 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
         for (i, (d, path)) in kept.iter().enumerate() {
             at_k[i] = path[k] + run.terms_stress(k, d.spring_n_per_m, d.offset_n);
             // the law's tangent stiffness, where the noise model takes it
-            let g = d.params.g;
+            let g = g_bound[i];
             stiffness[i] = if !stiff { 0.0 } else if k > 0 { tangent_stiffness(path[k] - path[k - 1], dg, g) } else { g };
             log_p[i] = noise.marginal_ln_pdf(run, run.tau[k] - at_k[i], stiffness[i], &d.noise);
         }
@@ -298,7 +298,7 @@ impl CoverageRow {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::Scheme;
+    use crate::model::{Params, Scheme};
     use crate::noise::{NoiseKind, NoiseOptions};
 
     fn ramp_run() -> RunData {

@@ -97,8 +97,8 @@ fn title(cal: &Calibration) -> String {
 
 fn calibrated_at(cal: &Calibration) -> String {
     match cal.sample.model {
-        ParameterModel::CurrentLaw { reference_a } => format!("{:?} A as functions of the coil current (reference {reference_a} A)", cal.record.currents),
-        ParameterModel::CurrentCurves { low_a, high_a } => {
+        ParameterModel::CurrentLaw { reference_a, .. } => format!("{:?} A as functions of the coil current (reference {reference_a} A)", cal.record.currents),
+        ParameterModel::CurrentCurves { low_a, high_a, .. } => {
             format!("{:?} A, each parameter its own curve in the coil current through its values at {low_a} and {high_a} A", cal.record.currents)
         }
         ParameterModel::PerCurrent => format!("{} A", cal.record.current_a),
@@ -119,7 +119,7 @@ fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
     figures::residuals(dir, &r.prediction.bands, &mut figs)?;
     if cal.is_current_law() {
         // the table the folder holds; computed afresh for a folder made before it
-        let rows = match crate::store::against_current::read(dir, &rec.calibration_id)? {
+        let rows = match crate::store::against_current::read(dir, &rec.calibration_id, crate::store::folder::REBUILD)? {
             Some(rows) => rows,
             None => crate::compare::against_current(&cal.sample, &cal.draw_positions(crate::store::folder::CURRENT_DRAWS), &rec.currents),
         };

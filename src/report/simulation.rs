@@ -36,7 +36,12 @@ pub fn write(dir: &Path, s: &Simulation, calibration: &str) -> Result<()> {
         c
     };
     let extrapolated = if r.extrapolated { ", extrapolated" } else { "" };
-    let title = format!("{calibration} at {} A{extrapolated}", r.current_a);
+    let title = if r.current_varies {
+        let (lo, hi) = s.current.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
+        format!("{calibration}, current {lo}–{hi} A along the excitation{extrapolated}")
+    } else {
+        format!("{calibration} at {} A{extrapolated}", r.current_a)
+    };
     let in_time = panel(&format!("{title}: force against time"), "time t (s)", pick(&s.time, 1.0), false, LegendAt::UpperRight);
     let in_x = panel(&format!("{title}: force against displacement"), "displacement x (mm)", pick(&s.displacement, 1e3), true, LegendAt::Middle);
     plot::save(&Figure::grid(vec![in_time, in_x], 2), &dir.join(FIGURE))

@@ -91,8 +91,8 @@ pub fn calibration(cal: &Calibration) -> String {
     let mut out = String::new();
     let rec = &cal.record;
     let at = match cal.sample.model {
-        ParameterModel::CurrentLaw { reference_a } => format!("current law (reference {reference_a} A) from {:?} A", rec.currents),
-        ParameterModel::CurrentCurves { low_a, high_a } => format!("current curves (anchors {low_a} and {high_a} A) from {:?} A", rec.currents),
+        ParameterModel::CurrentLaw { reference_a, .. } => format!("current law (reference {reference_a} A) from {:?} A", rec.currents),
+        ParameterModel::CurrentCurves { low_a, high_a, .. } => format!("current curves (anchors {low_a} and {high_a} A) from {:?} A", rec.currents),
         ParameterModel::PerCurrent => format!("posterior at {} A", rec.current_a),
     };
     let s = &cal.settings;

@@ -30,13 +30,13 @@ pub fn write(dir: &Path, rows: &[CurrentRow], id: &str) -> Result<()> {
 }
 
 /// The rows in `dir` of calibration `id`, if it has the file; a file of
-/// another calibration is refused.
-pub fn read(dir: &Path, id: &str) -> Result<Option<Vec<CurrentRow>>> {
+/// another calibration is refused, naming the command that `rebuild`s it.
+pub fn read(dir: &Path, id: &str, rebuild: &str) -> Result<Option<Vec<CurrentRow>>> {
     let path = dir.join(FILE);
     if !path.exists() {
         return Ok(None);
     }
-    super::check_derived(&path, id, super::folder::REBUILD)?;
+    super::check_derived(&path, id, rebuild)?;
     let df = read_parquet(&path)?;
     let (parameter, kind) = (str_column(&df, "parameter", &path)?, str_column(&df, "kind", &path)?);
     let col = |n: &str| f64_column(&df, n, &path);

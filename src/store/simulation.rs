@@ -17,6 +17,9 @@ pub const RECORD: &str = "simulation.toml";
 pub struct Simulation {
     pub time: Vec<f64>,
     pub displacement: Vec<f64>,
+    /// The coil current at every sample (A): the one current simulated, or
+    /// the excitation's own where it changes.
+    pub current: Vec<f64>,
     /// The shear strain that drove the model (smoothed as in calibration).
     pub gamma_model: Vec<f64>,
     /// q025, q25, q50, q75, q975 of the model stress (Pa).
@@ -33,7 +36,12 @@ pub struct SimulationRecord {
     pub command: String,
     /// The excitation's file.
     pub input: String,
+    /// The current simulated (A); where it changes, its mean.
     pub current_a: f64,
+    /// Whether the current changes along the excitation (its column in
+    /// `simulation.parquet` then holds it sample by sample).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub current_varies: bool,
     /// The damper's working area (m²): force = stress × area.
     pub area_m2: f64,
     pub draws: usize,
@@ -54,7 +62,7 @@ pub fn columns(s: &Simulation) -> Vec<(String, Vec<f64>)> {
     let mut columns = vec![
         ("time_s".to_string(), s.time.clone()),
         ("displacement_m".to_string(), s.displacement.clone()),
-        ("current_a".to_string(), vec![r.current_a; s.time.len()]),
+        ("current_a".to_string(), s.current.clone()),
         ("gamma_model".to_string(), s.gamma_model.clone()),
     ];
     let bands = || MODEL.iter().zip(&s.model).chain(PREDICTIVE.iter().zip(&s.predictive));
@@ -96,6 +104,7 @@ pub fn read(dir: &Path) -> Result<Simulation> {
     Ok(Simulation {
         time: col("time_s")?,
         displacement: col("displacement_m")?,
+        current: col("current_a")?,
         gamma_model: col("gamma_model")?,
         model: [col(MODEL[0])?, col(MODEL[1])?, col(MODEL[2])?, col(MODEL[3])?, col(MODEL[4])?],
         predictive: [col(PREDICTIVE[0])?, col(PREDICTIVE[1])?],

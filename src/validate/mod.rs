@@ -17,7 +17,6 @@ use serde::{Deserialize, Serialize};
 use crate::calibrate::{sampling, Calibration, CalibrationSettings};
 use crate::data::{Campaign, Run};
 use crate::error::{Error, Result};
-use crate::model::Params;
 use rand::RngExt;
 use rand_distr::{ChiSquared, StandardNormal};
 use rayon::prelude::*;
@@ -179,10 +178,9 @@ fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &
 
     // 1. the full posterior's draws, reweighted by 1/p(y_j | θ)
     let positions = Draws { burn_in: full.cal.burn_in(), thin: 1 }.positions(&sample.chains, loo.weighted_draws);
-    let params: Vec<Params> = positions.iter().map(|&(s, c)| sample.params_at(s, c, current)).collect();
-    let paths = model_paths(&target.data, &params, &target.predict.integrator, &|| {});
     // the run's own force offset (and the spring) in each full-posterior draw
     let own: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw(s, c, left_out.id(), current)).collect();
+    let paths = model_paths(&target.data, &own, &target.predict.integrator, &|| {});
     let reweighted = psis::smooth(&target.log_weights(&paths, &own));
     let mut row = LooRow { coverage: CoverageRow::default(), pareto_k: reweighted.k_hat, pareto_k_laplace: f64::NAN, by: HeldOutBy::Reweighting, max_rhat: f64::NAN };
     let prediction = if reweighted.k_hat <= psis::K_THRESHOLD {
@@ -235,8 +233,7 @@ fn laplace_importance(target: &Target, posterior: &Posterior, map: &MapEstimate,
     }
     let current = target.run.spec.current_a;
     let draws: Vec<Draw> = proposals.iter().map(|x| unseen_draw(posterior, x, current)).collect();
-    let params: Vec<Params> = draws.iter().map(|d| d.params).collect();
-    let paths = model_paths(&target.data, &params, &target.predict.integrator, &|| {});
+    let paths = model_paths(&target.data, &draws, &target.predict.integrator, &|| {});
     Ok((from_laplace.k_hat, Some(target.weighted_bands(&draws, &paths, &from_laplace.weights, loo.draws)?)))
 }
 
@@ -298,6 +295,7 @@ fn unseen_draw(posterior: &Posterior, x: &[f64], current_a: f64) -> Draw {
     let offsets: Vec<f64> = runs.iter().map(|&j| l.terms(x, j).1).collect();
     Draw {
         params: posterior.params_at_current(x, current_a),
+        field: posterior.field_at(x),
         spring_n_per_m: l.terms(x, 0).0,
         offset_n: crate::noise::Pool::Mean.of(&offsets),
         noise: l.pooled_noise(&si, &runs),
