@@ -141,8 +141,11 @@ impl Posterior {
         if out.iter().all(|v| *v == f64::NEG_INFINITY) {
             return;
         }
-        // lanes out of the prior's support get the first lane's point
-        let alive: Vec<&[f64]> = (0..count).map(|lane| if out[lane] > f64::NEG_INFINITY { point(lane) } else { point(0) }).collect();
+        // lanes out of the prior's support integrate a point that is in it
+        // (their results are dropped; an extreme point would only make the
+        // other lanes wait for its sub-steps)
+        let first_alive = (0..count).find(|&lane| out[lane] > f64::NEG_INFINITY).unwrap_or(0);
+        let alive: Vec<&[f64]> = (0..count).map(|lane| point(if out[lane] > f64::NEG_INFINITY { lane } else { first_alive })).collect();
         let mut params = LaneParams::Fixed([Params::reference_1a(); LANES]);
         for (i, r) in self.runs.iter().enumerate() {
             // a current law gives each run its own parameters; one set is
