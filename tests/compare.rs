@@ -227,6 +227,22 @@ fn current_curves_and_coil_lag_recover_their_truth() {
         let i = runs.iter().position(|r| r == id).unwrap();
         assert!(inside[i] >= 0.9, "{id}: {:.1} % inside", 100.0 * inside[i]);
     }
+    // the bands carry a switched run's current (the command's levels, each
+    // held in turn), NaN for a run at one current; its figure draws it
+    let path = dir.join("bands.parquet");
+    let bands = read_parquet(&path).unwrap();
+    let (rows, current) = (str_column(&bands, "run", &path).unwrap(), f64_column(&bands, "coil_current_a", &path).unwrap());
+    let of = |id: &str| -> Vec<f64> { rows.iter().zip(&current).filter(|(r, _)| *r == id).map(|(_, c)| *c).collect() };
+    let s1 = of("S1_200rpm");
+    assert!(!s1.is_empty() && s1.iter().all(|c| [0.25, 1.0, 0.5].iter().any(|l| (c - l).abs() < 1e-12)), "S1's current holds its levels");
+    for level in [0.25, 1.0, 0.5] {
+        assert!(s1.contains(&level), "S1 holds {level} A at some sample");
+    }
+    let held = rows.iter().find(|r| !r.starts_with('S')).expect("a run at one current").clone();
+    assert!(of(&held).iter().all(|c| c.is_nan()), "{held} has no current history");
+    ok(mrbp(&["report", s(&dir)]));
+    let figure = std::fs::read_to_string(dir.join("bands_S1_200rpm.svg")).expect("the switched run's bands figure");
+    assert!(figure.contains("S1_200rpm: coil current"), "the figure has the current's panel");
     // one parameter set per current cannot calibrate a switched run: it is
     // left out, and said so
     let per = out.path().join("per");

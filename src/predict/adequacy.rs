@@ -289,6 +289,7 @@ mod tests {
             displacement: x,
             force: vec![100.0; n],
             discrepancy: None,
+            coil_current_a: None,
             time,
         }
     }

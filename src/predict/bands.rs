@@ -229,6 +229,9 @@ pub struct RunBands {
     /// model), per sample (NaN at the first): the smoothed discrepancy and
     /// its sd (Pa), and the standardised one-step-ahead innovation.
     pub discrepancy: Option<[Vec<f64>; 3]>,
+    /// The coil current at every sample (A), where it varies within the
+    /// record (the manifest's `current_varies`).
+    pub coil_current_a: Option<Vec<f64>>,
 }
 
 impl RunBands {
@@ -247,6 +250,7 @@ impl RunBands {
             displacement: run.record.displacement[..n].to_vec(),
             force: run.record.force[..n].to_vec(),
             discrepancy: bands.explained.map(|e| [e.mean, e.sd, e.innovations].map(|v| std::iter::once(f64::NAN).chain(v).collect())),
+            coil_current_a: data.current.as_ref().map(|c| c[..n].to_vec()),
         }
     }
 }

@@ -103,18 +103,30 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
         let yield_zoom = zoom(b, first_loading(b), &format!("{}: first loading", b.run), LegendAt::LowerRight);
         let reversal_zoom = zoom(b, first_reversal(b), &format!("{}: first reversal", b.run), LegendAt::UpperRight);
         let stem = format!("bands_{}", b.run);
-        plot::save(&Figure::grid(vec![tau_gamma, force_disp, force_vel, around, yield_zoom, reversal_zoom], 3), &dir.join(&stem))?;
-        figs.push(
-            &stem,
-            &format!(
-                "{} ({} A): posterior bands of the model stress and the 95 % band of a new measurement, with the record (one sample in {} shown in the loops). \
-                 The lower row shows the bands where they are easiest to read: about the posterior median over the whole record, \
-                 and the stress against time over the first loading and around the first reversal.",
-                b.run, b.current_a, step
-            ),
+        let mut panels = vec![tau_gamma, force_disp, force_vel, around, yield_zoom, reversal_zoom];
+        let mut caption = format!(
+            "{} ({} A): posterior bands of the model stress and the 95 % band of a new measurement, with the record (one sample in {} shown in the loops). \
+             The second row shows the bands where they are easiest to read: about the posterior median over the whole record, \
+             and the stress against time over the first loading and around the first reversal.",
+            b.run, b.current_a, step
         );
+        if let Some(current) = &b.coil_current_a {
+            panels.push(coil_current(b, current));
+            caption.push_str(" Its coil current changes within the record (the last panel): the law was driven along it.");
+        }
+        plot::save(&Figure::grid(panels, 3), &dir.join(&stem))?;
+        figs.push(&stem, &caption);
     }
     Ok(())
+}
+
+/// The coil current of a run whose current changes, against time.
+fn coil_current(b: &RunBands, current: &[f64]) -> Chart {
+    let thin = every(b.time.len(), MAX_VERTICES);
+    let mut c = Chart::new(format!("{}: coil current", b.run), "time t (s)", "coil current I (A)");
+    c.series.push(Series::line(Some("current".into()), PALETTE[2], b.time.iter().step_by(thin).copied().collect(), current.iter().step_by(thin).copied().collect()).with_width(1));
+    c.legend_at = LegendAt::UpperRight;
+    c
 }
 
 /// The first loading: from the start to the first reversal, where the

@@ -38,6 +38,10 @@ pub fn table(runs: &[RunBands], id: &str) -> Table {
         let part = |i: usize| runs.iter().flat_map(|b| b.discrepancy.as_ref().map_or_else(|| vec![f64::NAN; b.time.len()], |d| d[i].clone())).collect::<Vec<f64>>();
         table = table.f64("discrepancy_pa", part(0)).f64("discrepancy_sd_pa", part(1)).f64("innovation", part(2));
     }
+    if runs.iter().any(|b| b.coil_current_a.is_some()) {
+        let current = runs.iter().flat_map(|b| b.coil_current_a.clone().unwrap_or_else(|| vec![f64::NAN; b.time.len()])).collect::<Vec<f64>>();
+        table = table.f64("coil_current_a", current);
+    }
     table
 }
 
@@ -53,6 +57,10 @@ pub fn read(path: &Path) -> Result<Vec<RunBands>> {
     let (disp, force) = (col("displacement_m")?, col("force_n")?);
     let discrepancy = match column_names(&df).iter().any(|c| c == "discrepancy_pa") {
         true => Some([col("discrepancy_pa")?, col("discrepancy_sd_pa")?, col("innovation")?]),
+        false => None,
+    };
+    let coil_current = match column_names(&df).iter().any(|c| c == "coil_current_a") {
+        true => Some(col("coil_current_a")?),
         false => None,
     };
     let mut out: Vec<RunBands> = Vec::new();
@@ -72,6 +80,8 @@ pub fn read(path: &Path) -> Result<Vec<RunBands>> {
                 displacement: disp[r.clone()].to_vec(),
                 force: force[r.clone()].to_vec(),
                 discrepancy: discrepancy.as_ref().map(|d| d.clone().map(|c| c[r.clone()].to_vec())),
+                // a run whose current does not vary has NaN there
+                coil_current_a: coil_current.as_ref().map(|c| c[r.clone()].to_vec()).filter(|c| c.iter().all(|v| v.is_finite())),
             });
             start = i;
         }
