@@ -212,14 +212,20 @@ fn outside(dir: &Path, file: &Path) -> bool {
     !resolve(file).starts_with(&dir)
 }
 
+/// A current that changes along a record (its `column` in `path`) must be
+/// a coil current: 0 A or more at every sample.
+pub fn check_coil_current(path: &Path, column: &str, current: &[f64]) -> Result<()> {
+    match current.iter().position(|v| !(*v >= 0.0)) {
+        Some(k) => Err(Error::input_at(path, Some(k + 1), Some(column), format!("{} A: the law takes a coil current of 0 A or more", current[k]))),
+        None => Ok(()),
+    }
+}
+
 /// The file's current column must agree with the manifest's current_a,
 /// or, where the current varies, be a coil current (0 A or more).
 fn check_current(path: &Path, map: &ColumnMap, spec: &RunSpec, current: &[f64]) -> Result<()> {
     if spec.current_varies {
-        if let Some(k) = current.iter().position(|v| *v < 0.0) {
-            return Err(Error::input_at(path, Some(k + 1), Some(map.current), format!("{} A: the law takes a coil current of 0 A or more", current[k])));
-        }
-        return Ok(());
+        return check_coil_current(path, map.current, current);
     }
     let mut sorted = current.to_vec();
     sorted.sort_by(f64::total_cmp);

@@ -8,7 +8,7 @@ use std::time::Instant;
 use super::{Event, Pipeline, PredictOptions};
 use crate::calibrate::{command_line, Calibration};
 use crate::data::table::ColumnMap;
-use crate::data::{loading_branches, same_current, Columns, Limits, Record, RecordPart, Run, RunData, RunSpec, Shear, REVERSAL_SHARE};
+use crate::data::{check_coil_current, loading_branches, same_current, Columns, Limits, Record, RecordPart, Run, RunData, RunSpec, Shear, REVERSAL_SHARE};
 use crate::error::{Error, Result};
 use crate::predict::bands;
 use crate::store::simulation::{Simulation, SimulationRecord};
@@ -45,13 +45,11 @@ impl Pipeline<'_> {
         record.force = vec![f64::NAN; record.len()];
         record.check(input, &map)?;
         record.check_limits(input, &map, &Limits::default())?;
-        let (current_a, varies) = self.simulated_current(cal, input, &record, current)?;
-        let extrapolated = match (varies, &record.current) {
-            (true, Some(values)) => {
-                let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
-                self.check_current(cal, lo)? | self.check_current(cal, hi)?
-            }
-            _ => self.check_current(cal, current_a)?,
+        let (current_a, range) = self.simulated_current(cal, input, &record, current)?;
+        let varies = range.is_some();
+        let extrapolated = match range {
+            Some((lo, hi)) => self.check_current(cal, lo)? | self.check_current(cal, hi)?,
+            None => self.check_current(cal, current_a)?,
         };
         let geometry = match cal.record.geometry {
             Some(g) => g,
@@ -99,11 +97,12 @@ impl Pipeline<'_> {
         Ok(Simulation { time: data.time.clone(), displacement: run.record.displacement.clone(), current, gamma_model: data.gamma.clone(), model: b.model, predictive: b.predictive, record })
     }
 
-    /// The current to simulate at, and whether it changes along the
-    /// excitation: the option, else the file's (a law follows it where it
-    /// changes; one parameter set cannot), else a per-current
-    /// calibration's own. Where it changes, the current returned is its mean.
-    fn simulated_current(&mut self, cal: &Calibration, input: &Path, record: &Record, current: Option<f64>) -> Result<(f64, bool)> {
+    /// The current to simulate at, and its lowest and highest where it
+    /// changes along the excitation: the option, else the file's (a law
+    /// follows it where it changes; one parameter set cannot), else a
+    /// per-current calibration's own. Where it changes, the current
+    /// returned is its mean.
+    fn simulated_current(&mut self, cal: &Calibration, input: &Path, record: &Record, current: Option<f64>) -> Result<(f64, Option<(f64, f64)>)> {
         let column = Columns::default().current;
         let from_file = match &record.current {
             None => None,
@@ -123,9 +122,7 @@ impl Pipeline<'_> {
                             ),
                         ));
                     }
-                    if let Some(k) = values.iter().position(|v| !(*v >= 0.0)) {
-                        return Err(Error::input_at(input, Some(k + 1), Some(&column), format!("{} A: the law takes a coil current of 0 A or more", values[k])));
-                    }
+                    check_coil_current(input, &column, values)?;
                     if lo <= 0.0 && cal.sample.model.kind() == crate::posterior::ModelKind::CurrentLaw {
                         return Err(Error::Usage(format!(
                             "the current of {} reaches 0 A, where the current law has no yield stress (R0, R1, D1 ∝ s(I)); the current curves (--model current-curves) have an off-state",
@@ -135,7 +132,7 @@ impl Pipeline<'_> {
                     if let Some(c) = current {
                         return Err(Error::Usage(format!("--current {c} names one current, but the column {column} of {} changes ({lo} to {hi} A): leave --current out to follow it", input.display())));
                     }
-                    return Ok((values.iter().sum::<f64>() / values.len() as f64, true));
+                    return Ok((values.iter().sum::<f64>() / values.len() as f64, Some((lo, hi))));
                 }
                 Some(mid)
             }
@@ -151,7 +148,7 @@ impl Pipeline<'_> {
             ))),
             (None, None) => Ok(cal.record.current_a),
         };
-        one.map(|c| (c, false))
+        one.map(|c| (c, None))
     }
 
     /// Refuses a current the calibration does not cover; returns whether a

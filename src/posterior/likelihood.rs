@@ -92,6 +92,15 @@ impl LaneParams {
         }
     }
 
+    /// The Euler steps lane 0's integration along `run` takes
+    /// ([`Integrator::euler_steps`], or its twin along a varying current).
+    pub fn euler_steps(&self, integrator: &Integrator, run: &RunData) -> u64 {
+        match (self, &run.current) {
+            (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.euler_steps_along(&laws[0], lags_s[0], current, &run.time, &run.gamma, run.initial_tau),
+            _ => integrator.euler_steps(&self.at(run.current_a)[0], &run.time, &run.gamma, run.initial_tau),
+        }
+    }
+
     /// Every lane's parameters at a steady current `current_a`.
     pub fn at(&self, current_a: f64) -> [Params; LANES] {
         match self {

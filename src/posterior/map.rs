@@ -15,7 +15,7 @@ use nalgebra::{DMatrix, DVector};
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-use super::{LaneParams, Layout, Posterior};
+use super::{Layout, Posterior};
 use crate::data::RunData;
 use crate::fit::least_squares;
 use crate::model::{Integrator, LANES};
@@ -392,13 +392,7 @@ impl Laplace {
 /// The Euler steps of one log-density at `x` (all runs): what the
 /// integrator costs there.
 pub fn euler_steps(post: &Posterior, x: &[f64]) -> u64 {
-    post.runs
-        .iter()
-        .map(|r| match (post.lane_params(&[x], r), &r.current) {
-            (LaneParams::Along { laws, lags_s }, Some(current)) => post.integrator.euler_steps_along(&laws[0], lags_s[0], current, &r.time, &r.gamma, r.initial_tau),
-            (p, _) => post.integrator.euler_steps(&p.at(r.current_a)[0], &r.time, &r.gamma, r.initial_tau),
-        })
-        .sum()
+    post.runs.iter().map(|r| post.lane_params(&[x], r).euler_steps(&post.integrator, r)).sum()
 }
 
 /// Spread of the initial walkers over the Laplace approximation's: a

@@ -97,8 +97,7 @@ impl Posterior {
     /// A law's field law and coil lag at the sampler's coordinates `x`;
     /// `None` for one parameter set.
     pub fn field_at(&self, x: &[f64]) -> Option<(FieldLaw, f64)> {
-        let theta = self.theta(x);
-        self.model.field_law(&theta).map(|law| (law, self.model.lag_s(&theta)))
+        self.model.field(&self.theta(x))
     }
 
     /// The B-P parameters of the points `xs` (sampler coordinates, up to
@@ -107,9 +106,8 @@ impl Posterior {
     pub fn lane_params(&self, xs: &[&[f64]], run: &RunData) -> LaneParams {
         let point = |lane: usize| xs[lane.min(xs.len() - 1)];
         if run.current.is_some() && self.model.is_current_law() {
-            let thetas: [Vec<f64>; LANES] = std::array::from_fn(|lane| self.theta(point(lane)));
-            let law = |t: &Vec<f64>| self.model.field_law(t).expect("a law");
-            return LaneParams::Along { laws: std::array::from_fn(|lane| law(&thetas[lane])), lags_s: std::array::from_fn(|lane| self.model.lag_s(&thetas[lane])) };
+            let fields: [(FieldLaw, f64); LANES] = std::array::from_fn(|lane| self.field_at(point(lane)).expect("a law"));
+            return LaneParams::Along { laws: fields.map(|f| f.0), lags_s: fields.map(|f| f.1) };
         }
         LaneParams::Fixed(std::array::from_fn(|lane| self.params_at_current(point(lane), run.current_a)))
     }

@@ -112,6 +112,12 @@ impl ParameterModel {
         }
     }
 
+    /// A law's field law and coil lag at θ (SI); `None` for one parameter
+    /// set.
+    pub fn field(&self, theta: &[f64]) -> Option<(FieldLaw, f64)> {
+        self.field_law(theta).map(|law| (law, self.lag_s(theta)))
+    }
+
     /// The coil's lag τ_c at θ (SI, s): 0 where θ has none.
     pub fn lag_s(&self, theta: &[f64]) -> f64 {
         if self.has_lag() {

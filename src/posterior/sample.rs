@@ -88,8 +88,7 @@ impl PosteriorSample {
     /// A law's field law and coil lag at one position; `None` for one
     /// parameter set.
     pub fn field_at(&self, step: usize, chain: usize) -> Option<(FieldLaw, f64)> {
-        let theta = &self.chains.point(step, chain)[self.layout.theta.clone()];
-        self.model.field_law(theta).map(|law| (law, self.model.lag_s(theta)))
+        self.model.field(&self.chains.point(step, chain)[self.layout.theta.clone()])
     }
 
     /// The draw at one position for run `run` at `current_a`. A run the
