@@ -50,7 +50,7 @@ fn pointwise_terms_sum_to_the_samplers_likelihood() {
         let x = layout.from_si(&si);
         let total = posterior.log_density(&x) - posterior.log_prior(&x);
         let chains = Chains { dim: x.len(), ensembles: 1, walkers: 1, positions: x.clone(), log_prob: vec![total], accepted: vec![true] };
-        let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains);
+        let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains, Vec::new());
         let draws = pointwise_draws(&sample, &posterior.runs, &[0], &integrator, posterior.noise.as_ref(), 7);
         let sum: f64 = draws.log_likelihood.iter().sum();
         let n = draws.observed.len() as f64;

@@ -90,6 +90,10 @@ fn current_law_predicts_a_held_out_current() {
     let law = out.path().join("law");
     ok(mrbp(&["sample", &manifest, "--out", s(&law), "--model", "current-law", "--hold-out-current", "1.0", "--substeps", "2"]));
     ok(mrbp(&["predict", s(&law), "--draws", "200"]));
+    // the record keeps each run's current: an unseen run's noise is
+    // interpolated between the calibrated currents from it
+    let record = std::fs::read_to_string(law.join("calibration.toml")).unwrap();
+    assert!(record.contains("run_currents = [0.5, 1.5]"), "{record}");
     let path = law.join("coverage.parquet");
     let cov = read_parquet(&path).unwrap();
     let runs = str_column(&cov, "run", &path).unwrap();

@@ -35,6 +35,10 @@ pub struct CalibrationRecord {
     /// The current the parameters describe (a current law's reference).
     pub current_a: f64,
     pub runs: Vec<String>,
+    /// The nominal coil current of each run, in `runs`' order (A); empty
+    /// in folders written before it was recorded.
+    #[serde(default)]
+    pub run_currents: Vec<f64>,
     pub noise: NoiseKind,
     pub part: RecordPart,
     pub substeps: u32,
@@ -99,6 +103,7 @@ impl CalibrationRecord {
             manifest: manifest.display().to_string(),
             current_a: start.posterior.model.describes_current(start.current_a),
             runs: campaign.runs.iter().map(|r| r.id().to_string()).collect(),
+            run_currents: campaign.runs.iter().map(|r| r.spec.current_a).collect(),
             noise: start.settings.likelihood.noise,
             part: start.settings.likelihood.part,
             substeps: start.settings.integrator.substeps,

@@ -37,11 +37,12 @@ pub fn run(posterior: &Posterior, sampler: &mut Sampler<Posterior>, control: &Ru
     let layout = &posterior.layout;
     let adaptive = sampler.adaptive();
     let burn_in_of = |chains: &Chains| if burn_in > 0 { burn_in } else { Diagnostics::burn_in_rule(chains, adaptive) };
-    let diagnose = |chains: &Chains| PosteriorSample::from_coordinates(layout, posterior.model, chains).diagnostics(burn_in_of(chains));
+    let currents: Vec<f64> = posterior.runs.iter().map(|r| r.current_a).collect();
+    let diagnose = |chains: &Chains| PosteriorSample::from_coordinates(layout, posterior.model, chains, Vec::new()).diagnostics(burn_in_of(chains));
     sampler.run_until(control, observers, &diagnose)?;
     let chains = sampler.chains.clone();
     let seconds = clock.elapsed().as_secs_f64();
-    let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains);
+    let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains, currents);
     let mut diagnostics = sample.diagnostics(burn_in_of(&chains));
     diagnostics.warnings.extend(crate::sampler::stranded::history(&chains).iter().map(|r| r.message()));
     Ok(Sampled { chains, sample, diagnostics, seconds })

@@ -119,6 +119,44 @@ impl Layout {
         v
     }
 
+    /// The noise of a run at `current_a` from the runs `others` at point
+    /// `x` (SI), every run's current in `run_currents`: where they were
+    /// measured at one current, or the currents are not known, all of
+    /// them pooled. Otherwise the runs at each current
+    /// are pooled, and a current between two calibrated ones gets each
+    /// noise parameter interpolated linearly in the current between the
+    /// two nearest (a damper's misfit grows with its force, and so with the
+    /// current); a calibrated current its own runs' pool; a current
+    /// outside the calibrated ones that of the nearest, not extrapolated.
+    pub fn noise_at_current(&self, x: &[f64], others: &[usize], run_currents: &[f64], current_a: f64) -> NoiseValues {
+        let known = run_currents.len() == self.runs.len();
+        let mut levels: Vec<f64> = match known {
+            true => others.iter().map(|&i| run_currents[i]).collect(),
+            false => Vec::new(),
+        };
+        levels.sort_by(f64::total_cmp);
+        levels.dedup_by(|a, b| crate::data::same_current(*a, *b));
+        if levels.len() < 2 {
+            return self.pooled_noise(x, others);
+        }
+        let at = |level: f64| {
+            let runs: Vec<usize> = others.iter().copied().filter(|&i| crate::data::same_current(run_currents[i], level)).collect();
+            self.pooled_noise(x, &runs)
+        };
+        let above = levels.partition_point(|&c| c < current_a && !crate::data::same_current(c, current_a));
+        match above {
+            0 => at(levels[0]),
+            k if k == levels.len() => at(levels[k - 1]),
+            k if crate::data::same_current(levels[k], current_a) => at(levels[k]),
+            k => {
+                let (lo, hi) = (levels[k - 1], levels[k]);
+                let (a, b) = (at(lo), at(hi));
+                let w = (current_a - lo) / (hi - lo);
+                std::array::from_fn(|p| a[p] + w * (b[p] - a[p]))
+            }
+        }
+    }
+
     /// Names of the sampler's coordinates, for messages.
     pub fn coordinate_names(&self) -> Vec<String> {
         let mut names: Vec<String> = self

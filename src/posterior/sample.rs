@@ -60,12 +60,18 @@ pub struct PosteriorSample {
     pub model: ParameterModel,
     /// Positions in SI units (θ, σ, ρ), `[step][chain][coordinate]`.
     pub chains: Chains,
+    /// The nominal coil current of each calibrated run (A), in the
+    /// layout's order of runs; empty where not known (a folder written
+    /// before it was recorded). A run the posterior did not see takes its
+    /// noise from the runs nearest in current ([`Self::draw_without`]).
+    pub run_currents: Vec<f64>,
 }
 
 impl PosteriorSample {
-    /// The sample of sampler chains in unconstrained coordinates.
-    pub fn from_coordinates(layout: &Layout, model: ParameterModel, chains: &Chains) -> Self {
-        PosteriorSample { layout: layout.clone(), model, chains: chains.map_points(|x| layout.to_si(x)) }
+    /// The sample of sampler chains in unconstrained coordinates, of runs
+    /// at `run_currents`.
+    pub fn from_coordinates(layout: &Layout, model: ParameterModel, chains: &Chains, run_currents: Vec<f64>) -> Self {
+        PosteriorSample { layout: layout.clone(), model, chains: chains.map_points(|x| layout.to_si(x)), run_currents }
     }
 
     /// Diagnostics of every coordinate in SI units after `burn_in` steps.
@@ -107,7 +113,8 @@ impl PosteriorSample {
 
     /// The draw at one position for run `run` as if the posterior had not
     /// seen it: the noise of the other runs pooled (the root-mean-square
-    /// σ, the mean ρ, …) and their mean force offset.
+    /// σ, the mean ρ, …, as [`Layout::noise_at_current`] says) and their mean force
+    /// offset.
     pub fn draw_without(&self, step: usize, chain: usize, run: &str, current_a: f64) -> Draw {
         let x = self.chains.point(step, chain);
         let l = &self.layout;
@@ -118,7 +125,7 @@ impl PosteriorSample {
             field: self.field_at(step, chain),
             spring_n_per_m: l.terms(x, 0).0,
             offset_n: crate::noise::Pool::Mean.of(&offsets),
-            noise: l.pooled_noise(x, &others),
+            noise: l.noise_at_current(x, &others, &self.run_currents, current_a),
         }
     }
 
@@ -215,11 +222,35 @@ mod tests {
         let mut point = Params::reference_1a().to_array().to_vec();
         point.extend([3.0, 4.0, 0.2, 0.6]);
         let chains = Chains { dim: 11, ensembles: 1, walkers: 1, positions: point, log_prob: vec![0.0], accepted: vec![false] };
-        let sample = PosteriorSample { layout, model: ParameterModel::PerCurrent, chains };
+        let sample = PosteriorSample { layout, model: ParameterModel::PerCurrent, chains, run_currents: Vec::new() };
         let own = sample.draw(0, 0, "b", 1.0);
         assert_eq!((own.noise, own.offset_n), ([4.0, 0.6, 0.0, 0.0], 0.0));
         assert_eq!(own.params, Params::reference_1a());
         let unseen = sample.draw(0, 0, "c", 1.0);
         assert!((unseen.noise[0] - 12.5f64.sqrt()).abs() < 1e-12 && (unseen.noise[1] - 0.4).abs() < 1e-12);
+    }
+
+    /// An unseen run's σ follows the current: its own current's runs
+    /// pooled, linear between two calibrated currents, the nearest outside
+    /// them; all runs pooled where the currents are not known.
+    #[test]
+    fn an_unseen_runs_noise_follows_the_current() {
+        let runs: Vec<String> = ["a", "b", "c"].iter().map(|s| s.to_string()).collect();
+        let gaussian = NoiseKind::Gaussian.model(&NoiseOptions::default());
+        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, gaussian.as_ref(), crate::posterior::Coordinates::Log, &Default::default());
+        let mut point = Params::reference_1a().to_array().to_vec();
+        point.extend([100.0, 100.0, 300.0]);
+        let chains = Chains { dim: 10, ensembles: 1, walkers: 1, positions: point, log_prob: vec![0.0], accepted: vec![false] };
+        let mut sample = PosteriorSample { layout, model: ParameterModel::PerCurrent, chains, run_currents: vec![0.25, 0.25, 1.0] };
+        let sigma = |s: &PosteriorSample, current: f64| s.draw(0, 0, "new", current).noise[0];
+        // 100 + (0.5 − 0.25) / (1 − 0.25) × (300 − 100)
+        assert!((sigma(&sample, 0.5) - (100.0 + 200.0 / 3.0)).abs() < 1e-9);
+        assert!((sigma(&sample, 0.25) - 100.0).abs() < 1e-9);
+        assert!((sigma(&sample, 0.1) - 100.0).abs() < 1e-9);
+        assert!((sigma(&sample, 1.5) - 300.0).abs() < 1e-9);
+        // a run left out of the 1 A level leaves 0.25 A alone: its pool
+        assert!((sample.draw_without(0, 0, "c", 1.0).noise[0] - 100.0).abs() < 1e-9);
+        sample.run_currents.clear();
+        assert!((sigma(&sample, 0.5) - (110_000.0f64 / 3.0).sqrt()).abs() < 1e-9);
     }
 }

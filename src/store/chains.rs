@@ -49,8 +49,9 @@ pub fn write(path: &Path, sample: &PosteriorSample, id: &str) -> Result<()> {
     write_parquet(path, t.bool("accepted", columns.accepted))
 }
 
-/// Reads the chains back; their coordinates must be those of `layout`.
-pub fn read(path: &Path, layout: &Layout, model: ParameterModel) -> Result<PosteriorSample> {
+/// Reads the chains back; their coordinates must be those of `layout`,
+/// their runs' currents `run_currents` (the record's; may be empty).
+pub fn read(path: &Path, layout: &Layout, model: ParameterModel, run_currents: &[f64]) -> Result<PosteriorSample> {
     let df = read_parquet(path)?;
     let chain = f64_column(&df, "chain", path)?;
     let draw = f64_column(&df, "draw", path)?;
@@ -88,5 +89,6 @@ pub fn read(path: &Path, layout: &Layout, model: ParameterModel) -> Result<Poste
             log_prob: order().map(|(s, c)| log_prob[row(s, c)]).collect(),
             accepted: order().map(|(s, c)| accepted[row(s, c)] != 0.0).collect(),
         },
+        run_currents: run_currents.to_vec(),
     })
 }

@@ -55,7 +55,7 @@ pub fn read(dir: &Path) -> Result<Calibration> {
     let summary = summary::read(&need(SUMMARY)?)?;
     let model = settings.parameter_model();
     let layout = Layout::new(&model, &record.runs, settings.noise_model().as_ref(), settings.sampler.coordinates, &settings.terms);
-    let sample = chains::read(&need(CHAINS)?, &layout, model)?;
+    let sample = chains::read(&need(CHAINS)?, &layout, model, &record.run_currents)?;
     Ok(Calibration { dir: dir.to_path_buf(), settings, record, summary, sample })
 }
 

@@ -287,18 +287,20 @@ fn log_densities(posterior: &Posterior, points: &[Vec<f64>]) -> Vec<f64> {
 }
 
 /// The draw at coordinates `x` of a posterior that did not see the run:
-/// its B-P parameters at `current_a` and the pooled noise of its runs.
+/// its B-P parameters at `current_a` and the noise of its runs pooled
+/// ([`crate::posterior::Layout::noise_at_current`]).
 fn unseen_draw(posterior: &Posterior, x: &[f64], current_a: f64) -> Draw {
     let l = &posterior.layout;
     let si = l.to_si(x);
     let runs: Vec<usize> = (0..l.runs.len()).collect();
+    let currents: Vec<f64> = posterior.runs.iter().map(|r| r.current_a).collect();
     let offsets: Vec<f64> = runs.iter().map(|&j| l.terms(x, j).1).collect();
     Draw {
         params: posterior.params_at_current(x, current_a),
         field: posterior.field_at(x),
         spring_n_per_m: l.terms(x, 0).0,
         offset_n: crate::noise::Pool::Mean.of(&offsets),
-        noise: l.pooled_noise(&si, &runs),
+        noise: l.noise_at_current(&si, &runs, &currents, current_a),
     }
 }
 
