@@ -41,7 +41,20 @@ fn identification_gives_a_usable_start_at_every_current() {
         for r in &res.runs {
             assert!(r.g.is_finite() && r.g > 0.0, "{}: G {} ({:?})", r.run, r.g, r.warnings);
         }
+        // steady cycles only: the expected route is said in one line, not
+        // as warnings, and names what it had to choose
+        let route = res.route.as_deref().unwrap_or_else(|| panic!("{} A: no route line", res.current_a));
+        assert!(route.contains("no record starts from rest") && route.contains("m1 = ") && route.contains("m2 = "), "{route}");
+        assert!(res.warnings.is_empty(), "{} A: {:?}", res.current_a, res.warnings);
     }
+    let text = mrbp::report::text::identification(&results);
+    let rows: Vec<&str> = text.lines().filter(|l| l.starts_with("I0.25_") || l.starts_with("I1.00_")).collect();
+    // the id column holds the longest id: every row's G in the same column
+    let g_end = |l: &str| {
+        let g = l.split_whitespace().nth(1).unwrap();
+        l.find(g).unwrap() + g.len()
+    };
+    assert!(rows.windows(2).all(|w| g_end(w[0]) == g_end(w[1])), "{text}");
 }
 
 /// `sample` (until converged, about 50 steps; gas spring and force offsets

@@ -153,6 +153,10 @@ pub struct CurrentIdentification {
     pub euler_rms: Vec<f64>,
     /// τ of the Euler solution per run (empty where it failed).
     pub euler_tau: Vec<Vec<f64>>,
+    /// How the estimate was reached where the records do not allow the
+    /// paper's route: steady cycles only, no loading from rest (one line).
+    pub route: Option<String>,
+    /// What went wrong or was forced on the way.
     pub warnings: Vec<String>,
 }
 
@@ -334,7 +338,8 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
     let steady_z = median(&steady.iter().map(|f| f.z).collect::<Vec<_>>());
     let steady_n = median(&steady.iter().map(|f| f.n).collect::<Vec<_>>());
     let mut yield_fit = yield_stress::fit_eq6(&points);
-    if points.is_empty() && !steady.is_empty() {
+    let steady_only = points.is_empty() && !steady.is_empty();
+    if steady_only {
         // no loading from rest: the initial yield of R0 cannot be seen, and
         // R0 starts at the saturated value of R (no isotropic hardening)
         yield_fit = yield_stress::YieldFit {
@@ -342,10 +347,7 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
             n: steady_n,
             converged: true,
             rms_log: f64::NAN,
-            note: Some(format!(
-                "no record starts from rest: n = {steady_n:.3} from the flow curve of steady cycles, R0 = R1 = {:.0} % of the saturated flow stress's R + D",
-                100.0 * (1.0 - D1_SHARE)
-            )),
+            note: None,
         };
     } else if yield_fit.n == 1.0 && yield_fit.note.is_some() && steady_n.is_finite() {
         yield_fit.note = Some(format!("{}; n = {steady_n:.3} from the flow curve of steady cycles instead", yield_fit.note.as_deref().unwrap_or("")));
@@ -374,17 +376,37 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
         median(&positive(&|r| r.m2)),
         yield_fit.n,
     ];
-    if !(raw[2].is_finite() && raw[3].is_finite()) && steady_z.is_finite() {
+    let split = !(raw[2].is_finite() && raw[3].is_finite()) && steady_z.is_finite();
+    if split {
         raw[2] = (1.0 - D1_SHARE) * steady_z;
         raw[3] = D1_SHARE * steady_z;
-        warnings.push(format!("R1 + D1 = {steady_z:.3e} Pa from the flow curve of steady cycles, D1 its {:.0} % (the split shows only in a loading from rest)", 100.0 * D1_SHARE));
+        if !steady_only {
+            warnings.push(format!("R1 + D1 = {steady_z:.3e} Pa from the flow curve of steady cycles, D1 its {:.0} % (the split shows only in a loading from rest)", 100.0 * D1_SHARE));
+        }
     }
+    let mut centred = Vec::new();
     for (i, name) in PARAM_NAMES.iter().enumerate() {
         if !(raw[i] > 0.0) {
             raw[i] = Params::plausible_centre(i);
-            warnings.push(format!("no run gives {name}: the middle of its plausible range, {:.3e}, starts the calibration", raw[i]));
+            match steady_only && (*name == "m1" || *name == "m2") {
+                true => centred.push(format!("{name} = {:.1e}", raw[i])),
+                false => warnings.push(format!("no run gives {name}: the middle of its plausible range, {:.3e}, starts the calibration", raw[i])),
+            }
         }
     }
+    // steady cycles only: the route in one line, its forced choices named
+    let route = steady_only.then(|| {
+        let mut line = format!(
+            "steady cycles only (no record starts from rest): n = {steady_n:.3} and R + D = {steady_z:.3e} Pa from their flow curve; R0 = R1 = {:.0} % of R + D, D1 {:.0} %",
+            100.0 * (1.0 - D1_SHARE),
+            100.0 * D1_SHARE
+        );
+        if !centred.is_empty() {
+            let which = if centred.len() == 1 { "the middle of its plausible range" } else { "the middles of their plausible ranges" };
+            line.push_str(&format!("; {}, {which}", centred.join(" and ")));
+        }
+        line
+    });
     let (params, moved) = Params::from_array(raw).clamped();
     for name in moved {
         let i = PARAM_NAMES.iter().position(|n| *n == name).unwrap_or(0);
@@ -395,7 +417,7 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
         ));
     }
     let (euler_rms, euler_tau) = euler_check(&group, &params, s, &mut warnings);
-    CurrentIdentification { current_a, runs, yield_fit, raw, params, euler_rms, euler_tau, warnings }
+    CurrentIdentification { current_a, runs, yield_fit, raw, params, euler_rms, euler_tau, route, warnings }
 }
 
 /// The paper's check of the combined estimate: the explicit Euler solution

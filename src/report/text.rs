@@ -45,35 +45,40 @@ pub fn campaign(campaign: &Campaign) -> String {
 pub fn identification(results: &[CurrentIdentification]) -> String {
     let mut out = String::new();
     for res in results {
+        // the run column as wide as the longest id
+        let w = res.runs.iter().map(|r| r.run.chars().count()).max().unwrap_or(0).max(14);
         row!(out, "\nidentification at {} A", res.current_a);
         row!(
             out,
-            "{:<14} {:>9} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>9}",
+            "{:<w$} {:>9} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>9}",
             "run", "G", "tau02", "rate02", "R0", "R1", "D1", "m1", "m2", "n", "", "rms_pa"
         );
         for (i, r) in res.runs.iter().enumerate() {
             if let Some(f) = &r.steady {
                 // steady cycles: G, the saturated R + D and n of the flow curve
                 row!(
-            out,
-                    "{:<14} {:>9.3e} {:>9} {:>8} {:>9} {:>19} {:>9} {:>9} {:>9.3} {:>6} {:>9.1}",
+                    out,
+                    "{:<w$} {:>9.3e} {:>9} {:>8} {:>9} {:>19} {:>9} {:>9} {:>9.3} {:>6} {:>9.1}",
                     r.run, r.g, "", "", "", format!("R1+D1 {:.3e}", f.z), "", "", f.n, "steady", res.euler_rms[i]
                 );
                 continue;
             }
             let (t, g) = r.yield_point.unwrap_or((f64::NAN, f64::NAN));
             row!(
-            out,
-                "{:<14} {:>9.3e} {:>9.3e} {:>8.1} {:>9} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9} {:>6} {:>9.1}",
+                out,
+                "{:<w$} {:>9.3e} {:>9.3e} {:>8.1} {:>9} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9} {:>6} {:>9.1}",
                 r.run, r.g, t, g, "", r.r1, r.d1, r.m1, r.m2, "", "", res.euler_rms[i]
             );
         }
         let p = res.params;
         row!(
             out,
-            "{:<14} {:>9.3e} {:>9} {:>8} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3} {:>6}",
+            "{:<w$} {:>9.3e} {:>9} {:>8} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3e} {:>9.3} {:>6}",
             "all", p.g, "", "", p.r0, p.r1, p.d1, p.m1, p.m2, p.n, "(SI)"
         );
+        if let Some(route) = &res.route {
+            row!(out, "  route: {route}");
+        }
         for w in &res.warnings {
             row!(out, "  warning: {w}");
         }
