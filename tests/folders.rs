@@ -135,6 +135,40 @@ fn copy_tree(from: &Path, to: &Path) {
     assert!(o.status.success(), "{}", said(&o));
 }
 
+/// `mrbp run` calibrates its currents side by side (the command line puts
+/// events into words, so a stage beside another can tell them later); a
+/// library pipeline without words for them calibrates the currents in
+/// turn. The same seed gives the same tables, value for value, and the
+/// command line tells each current's stages whole, in order.
+#[test]
+fn currents_side_by_side_equal_currents_in_turn() {
+    use mrbp::pipeline::{Pipeline, PredictOptions, RunOptions, SampleOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = campaign(dir.path());
+    let beside = dir.path().join("beside");
+    let o = run_job(&manifest, &beside, "3");
+    assert!(o.status.success(), "{}", said(&o));
+    let printed = String::from_utf8_lossy(&o.stdout).to_string();
+    let at = |what: &str| printed.find(what).unwrap_or_else(|| panic!("{what} not in {printed}"));
+    assert!(at("calibrating 1 run(s) at 0.5 A") < at("I0.5A/report.html") && at("I0.5A/report.html") < at("calibrating 1 run(s) at 1 A"), "{printed}");
+
+    let in_turn = dir.path().join("in-turn");
+    let settings = mrbp::calibrate::settings::Overrides { seed: Some(3), steps: Some(30), walkers: Some(18), ..Default::default() };
+    let options = RunOptions {
+        sample: SampleOptions { settings, force: true, ..Default::default() }.request().unwrap(),
+        predict: PredictOptions { draws: 10, replicates: 1, ..Default::default() },
+        leave_one_out: None,
+        current_law: false,
+    };
+    let mut quiet = |_: mrbp::pipeline::Event<'_>| {};
+    Pipeline::new(&mut quiet, false).run(&manifest, &in_turn, &options).unwrap();
+    for current in CURRENTS {
+        for file in ["chains.parquet", "summary.parquet", "bands.parquet", "coverage.parquet"] {
+            assert!(same_table(&beside.join(current).join(file), &in_turn.join(current).join(file)), "{current}/{file}");
+        }
+    }
+}
+
 /// Aborted after each chosen write (all of them with MRBP_CRASH_TEST=full),
 /// then run again: never a mixed folder, and the same results.
 #[test]

@@ -36,24 +36,16 @@ fn dispatch(cli: Cli) -> Result<()> {
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| Error::Usage(format!("--threads: {e}")))?;
     }
     let mut listener = print::event;
-    let mut pipeline = Pipeline::new(&mut listener, true);
+    let mut pipeline = Pipeline::new(&mut listener, true).rendering(print::render);
     let clock = std::time::Instant::now();
     match cli.command {
         None if !Path::new(BUNDLED).exists() => {
             Cli::command().print_help().map_err(|e| Error::output("stdout", e))?;
             Err(Error::Usage(format!("no command given (and no {BUNDLED} here: the bundled job runs in the mrbp project folder)")))
         }
-        None => {
-            // the measured damper's part runs beside the virtual one; what it
-            // says is shown after the virtual part's, in its own order
-            let mut later: Vec<(bool, String)> = Vec::new();
-            let mut keep = |e: crate::pipeline::Event<'_>| later.push(print::render(e));
-            let done = pipeline.bundled(&mut keep);
-            for (to_stderr, text) in &later {
-                print::show(*to_stderr, text);
-            }
-            done.map(|reports| print::reports(&reports, clock))
-        }
+        // the measured damper's part runs beside the virtual one; what it
+        // says is shown after the virtual part's, in its own order
+        None => pipeline.bundled().map(|reports| print::reports(&reports, clock)),
         Some(Command::Check { manifest }) => pipeline.check(&manifest).map(drop),
         Some(Command::Status { dir }) => status(&dir),
         Some(Command::Synth { out, config, seed, options }) => {

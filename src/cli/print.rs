@@ -25,6 +25,7 @@ pub fn render(e: Event) -> (bool, String) {
         Event::LeftOneOut { rows, seconds } => out(text::leave_one_out(rows, seconds)),
         Event::Consistency(parameters) => out(text::consistency(parameters)),
         Event::Wrote(path) => out(format!("wrote {}\n", path.display())),
+        Event::Said { to_stderr, text } => (to_stderr, text.to_string()),
     }
 }
 

@@ -2,9 +2,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{Event, LooOptions, Pipeline, RunOptions, SampleOptions};
+use super::{LooOptions, Pipeline, RunOptions, SampleOptions};
 use crate::data::Manifest;
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 /// The bundled virtual campaign, relative to the project folder.
 pub const BUNDLED: &str = "data/campaign.toml";
@@ -26,12 +26,12 @@ impl Pipeline<'_> {
     /// The job is the demo: it replaces its own earlier results. Returns
     /// the reports written.
     ///
-    /// The two parts run side by side, on threads of their own sharing the
-    /// sampler's thread pool, so the serial stretches of one (figures,
-    /// reports, tables) overlap the other's sampling; each part's numbers
-    /// are the same bits as alone. The measured part tells its events to
-    /// `beside`, without progress bars.
-    pub fn bundled(&mut self, beside: &mut (dyn FnMut(Event<'_>) + Send)) -> Result<Vec<PathBuf>> {
+    /// With a renderer ([`Pipeline::rendering`]) the two parts run side by
+    /// side, on threads sharing the sampler's thread pool, so the serial
+    /// stretches of one (figures, reports, tables) overlap the other's
+    /// sampling; each part's numbers are the same bits as alone. The
+    /// measured part's events are told after the virtual part's.
+    pub fn bundled(&mut self) -> Result<Vec<PathBuf>> {
         let job = |sample: SampleOptions, leave_one_out: bool| -> Result<RunOptions> {
             Ok(RunOptions {
                 sample: sample.request()?,
@@ -49,18 +49,22 @@ impl Pipeline<'_> {
             true => Some((into(measured)?, job(SampleOptions { current: Some(MEASURED_CURRENT_A), ..replace }, false)?)),
             false => None,
         };
-        std::thread::scope(|scope| {
-            let other = measured_job.map(|(out, options)| scope.spawn(move || Pipeline::new(beside, false).run(measured, &out, &options)));
-            let mut reports = self.run(manifest, &virtual_job.0, &virtual_job.1);
-            if let Some(other) = other {
-                let measured_reports = other.join().map_err(|_| Error::Compute("the measured damper's part of the job stopped unexpectedly".into()))?;
-                match (&mut reports, measured_reports) {
-                    (Ok(all), Ok(more)) => all.extend(more),
-                    (Ok(_), Err(e)) => reports = Err(e),
-                    (Err(_), _) => {}
-                }
+        let Some(render) = self.render else {
+            let mut reports = self.run(manifest, &virtual_job.0, &virtual_job.1)?;
+            if let Some((out, options)) = measured_job {
+                reports.extend(self.run(measured, &out, &options)?);
             }
-            reports
+            return Ok(reports);
+        };
+        std::thread::scope(|scope| {
+            let other = measured_job.map(|(out, options)| scope.spawn(move || Pipeline::beside(render, |p| p.run(measured, &out, &options))));
+            let reports = self.run(manifest, &virtual_job.0, &virtual_job.1);
+            let measured_reports = other.map(|o| self.join_beside(o.join()));
+            let mut reports = reports?;
+            if let Some(more) = measured_reports {
+                reports.extend(more?);
+            }
+            Ok(reports)
         })
     }
 }

@@ -47,6 +47,22 @@ pub enum Event<'a> {
     Consistency(&'a [ParameterConsistency]),
     /// A file of results (a report) was written.
     Wrote(&'a Path),
+    /// What a stage that ran beside another said, as the pipeline's
+    /// [`Render`] put it: shown after the stage it ran beside.
+    Said { to_stderr: bool, text: &'a str },
+}
+
+/// How a listener puts an event into words: whether for standard error,
+/// and the text. A pipeline given one ([`Pipeline::rendering`]) may run
+/// stages side by side, keeping what each says in words until its turn.
+pub type Render = fn(Event<'_>) -> (bool, String);
+
+/// What a stage that ran on a thread of its own returned and said, and the
+/// folders it held.
+struct Beside<T> {
+    result: Result<T>,
+    said: Vec<(bool, String)>,
+    held: Vec<crate::lock::Writing>,
 }
 
 /// Which runs to calibrate and how, as the command line says it.
@@ -146,11 +162,46 @@ pub struct Pipeline<'a> {
     /// The folders the stages have written, held until the pipeline ends:
     /// no other process writes them, nor reads them half-written.
     held: Vec<crate::lock::Writing>,
+    /// The listener's words for an event, where stages may run side by side.
+    render: Option<Render>,
 }
 
 impl<'a> Pipeline<'a> {
     pub fn new(listener: &'a mut dyn FnMut(Event<'_>), progress: bool) -> Self {
-        Pipeline { listener, progress, held: Vec::new() }
+        Pipeline { listener, progress, held: Vec::new(), render: None }
+    }
+
+    /// The pipeline, allowed to run independent stages side by side (the
+    /// currents of [`Pipeline::run`], the bundled job's two parts): each
+    /// stage beside the first tells its events in `render`'s words, after
+    /// the first, in order. Without it every stage runs in turn. Either
+    /// way the results are the same bits.
+    pub fn rendering(mut self, render: Render) -> Self {
+        self.render = Some(render);
+        self
+    }
+
+    /// Runs `work` on a pipeline of its own on the current thread, keeping
+    /// what it says in `render`'s words (no progress bars).
+    fn beside<T>(render: Render, work: impl FnOnce(&mut Pipeline<'_>) -> Result<T>) -> Beside<T> {
+        let mut said = Vec::new();
+        let mut keep = |e: Event<'_>| said.push(render(e));
+        let mut side = Pipeline::new(&mut keep, false);
+        let result = work(&mut side);
+        let held = std::mem::take(&mut side.held);
+        drop(side);
+        Beside { result, said, held }
+    }
+
+    /// Tells what a stage run [`Pipeline::beside`] said, keeps its folders
+    /// held, and returns its result.
+    fn join_beside<T>(&mut self, done: std::thread::Result<Beside<T>>) -> Result<T> {
+        let done = done.map_err(|_| Error::Compute("a part of the job running beside another stopped unexpectedly".into()))?;
+        for (to_stderr, text) in &done.said {
+            self.emit(Event::Said { to_stderr: *to_stderr, text });
+        }
+        self.held.extend(done.held);
+        done.result
     }
 
     /// [`folders::prepare`]: `out` made ready for results and held until

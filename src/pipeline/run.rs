@@ -3,16 +3,21 @@
 use std::path::{Path, PathBuf};
 
 use super::{compare, Pipeline, RunOptions, SampleRequest};
-use crate::data::current_tag;
+use crate::data::{current_tag, Campaign};
 use crate::error::Result;
 use crate::posterior::ModelKind;
+use crate::report::comparison::Entry;
+use crate::validate::LooSettings;
 
 impl Pipeline<'_> {
     /// The whole job on one campaign: one calibration folder per current in
     /// `out/I<current>A/` (identification, posterior, bands, leave-one-out,
     /// report); then, with several currents, the current law in
     /// `out/current-law…/` and the comparison in `out/comparison/`.
-    /// Returns the reports written.
+    /// Returns the reports written. With a renderer
+    /// ([`Pipeline::rendering`]) the currents are calibrated side by side,
+    /// each telling its events whole after the one before; the results are
+    /// the same bits as in turn.
     pub fn run(&mut self, manifest: &Path, out: &Path, options: &RunOptions) -> Result<Vec<PathBuf>> {
         let campaign = self.check(manifest)?;
         let all = campaign.currents();
@@ -43,14 +48,42 @@ impl Pipeline<'_> {
         }
         let mut reports = Vec::new();
         let mut entries = Vec::new();
-        for c in currents {
-            let mut request = SampleRequest { current: Some(c), ..options.sample.clone() };
-            request.settings.model = ModelKind::PerCurrent;
-            for cal in self.sample(&campaign, &out.join(current_tag(c)), &request)? {
-                let (report, prediction) = self.predict_and_report(&cal, &campaign, &options.predict, loo.as_ref())?;
-                reports.push(report);
-                entries.push(compare::entry(cal, Some(prediction)));
+        let stage = |p: &mut Pipeline<'_>, c: f64| p.at_current(&campaign, out, c, options, loo.as_ref());
+        let done: Vec<Result<CurrentStage>> = match (self.render, currents.split_first()) {
+            // the currents side by side: the first tells its events as they
+            // come, each other one after it, in order
+            (Some(render), Some((&first, rest))) if !rest.is_empty() => std::thread::scope(|scope| {
+                let others: Vec<_> = rest.iter().map(|&c| scope.spawn(move || Pipeline::beside(render, |p| stage(p, c)))).collect();
+                let mut done = vec![stage(self, first)];
+                done.extend(others.into_iter().map(|o| self.join_beside(o.join())));
+                done
+            }),
+            _ => {
+                let mut done = Vec::new();
+                for &c in &currents {
+                    done.push(stage(self, c));
+                    if done.last().is_some_and(|d| d.is_err()) {
+                        break;
+                    }
+                }
+                done
             }
+        };
+        // the first current's error ends the job; what the others met is told
+        let mut failed = None;
+        for d in done {
+            match (d, &failed) {
+                (Ok((r, e)), None) => {
+                    reports.extend(r);
+                    entries.extend(e);
+                }
+                (Ok(_), Some(_)) => {}
+                (Err(e), None) => failed = Some(e),
+                (Err(e), Some(_)) => self.note(&format!("mrbp: error: {e}")),
+            }
+        }
+        if let Some(e) = failed {
+            return Err(e);
         }
         if several {
             if options.current_law {
@@ -70,4 +103,22 @@ impl Pipeline<'_> {
         Ok(reports)
     }
 
+    /// One current of the whole job: its calibration, bands, leave-one-out
+    /// (if `loo`) and report, in `out/I<current>A/`.
+    fn at_current(&mut self, campaign: &Campaign, out: &Path, c: f64, options: &RunOptions, loo: Option<&LooSettings>) -> Result<CurrentStage> {
+        let mut request = SampleRequest { current: Some(c), ..options.sample.clone() };
+        request.settings.model = ModelKind::PerCurrent;
+        let mut reports = Vec::new();
+        let mut entries = Vec::new();
+        for cal in self.sample(campaign, &out.join(current_tag(c)), &request)? {
+            let (report, prediction) = self.predict_and_report(&cal, campaign, &options.predict, loo)?;
+            reports.push(report);
+            entries.push(compare::entry(cal, Some(prediction)));
+        }
+        Ok((reports, entries))
+    }
 }
+
+/// What one current's stage wrote: its reports, and its calibrations as the
+/// comparison takes them.
+type CurrentStage = (Vec<PathBuf>, Vec<Entry>);
