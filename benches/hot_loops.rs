@@ -199,6 +199,51 @@ fn likelihood() {
     println!();
 }
 
+/// The log-density at a calibration's start, as the sampler calls it (96
+/// walkers about the MAP, spread by the Laplace sds, batches of eight),
+/// on the bundled virtual and the measured 1 A records: the integrator the
+/// step rule chose, the Euler steps one log-density takes there (counted,
+/// with the sub-steps the stability control adds), and their rate.
+fn likelihood_at_start() {
+    use mrbp::calibrate::CalibrationSettings;
+    use rayon::prelude::*;
+    println!("## Log-density at the start of a 1 A calibration (default settings, the step rule's integrator)\n");
+    println!("| records | samples | integrator | Euler steps per log-density (nominal, counted) | threads | log-densities/s | M walker-steps/s (counted) |");
+    println!("|---|---|---|---|---|---|---|");
+    let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    for (name, manifest) in [("bundled virtual", "data/campaign.toml"), ("measured (utfsm-mts)", "data/utfsm-mts/campaign.toml")] {
+        let campaign = mrbp::data::Campaign::load(&repo.join(manifest)).unwrap().at_current(1.0);
+        let start = mrbp::calibrate::start::start(&campaign, &CalibrationSettings::default(), &mut |_| {}).unwrap();
+        let post = &start.posterior;
+        let d = post.dim();
+        let nt = start.map.cov.nrows();
+        let sd: Vec<f64> = (0..d).map(|i| if i < nt { start.map.cov[(i, i)].sqrt() } else { 0.0 }).collect();
+        let points: Vec<f64> = (0..96).flat_map(|w| (0..d).map(|i| start.map.x[i] + 0.5 * sd[i] * ((w * (i + 1)) as f64).sin()).collect::<Vec<f64>>()).collect();
+        let counted: u64 = points.chunks(d).map(|x| mrbp::posterior::map::euler_steps(post, x)).sum::<u64>() / 96;
+        let samples: usize = campaign.runs.iter().map(|r| r.shear.len()).sum();
+        let integ = &post.integrator;
+        let nominal = (samples - campaign.runs.len()) as u64 * integ.substeps as u64 * if integ.extrapolate { 3 } else { 1 };
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let secs = best_of(3, || {
+                pool.install(|| {
+                    let mut out = vec![0.0; 96];
+                    points.par_chunks(d * 8).zip(out.par_chunks_mut(8)).for_each(|(x, o)| post.log_density_batch(x, o));
+                    black_box(out);
+                })
+            });
+            let evals = 96.0 / secs;
+            println!(
+                "| {name} | {samples} | {:?} × {} | {nominal}, {counted} | {threads} | {evals:.0} | {:.1} |",
+                integ.scheme,
+                integ.substeps,
+                evals * counted as f64 * 1e-6
+            );
+        }
+    }
+    println!();
+}
+
 /// One current of three campaigns calibrated with the default settings, to
 /// R̂ < 1.01 and ESS ≥ 400: the bundled virtual campaign (1 A), a fresh
 /// `mrbp synth` campaign at 2 kHz with 20 N force noise (1 A), and the
@@ -261,6 +306,9 @@ fn main() {
     }
     if want("sampler") {
         sampler_overhead();
+    }
+    if want("start") {
+        likelihood_at_start();
     }
     if want("calibration") {
         calibration();
