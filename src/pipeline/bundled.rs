@@ -42,29 +42,12 @@ impl Pipeline<'_> {
         };
         let replace = SampleOptions { force: true, ..Default::default() };
         let into = |manifest: &Path| -> Result<PathBuf> { Ok(Path::new("reports").join(Manifest::read(manifest)?.name)) };
-        let manifest = Path::new(BUNDLED);
-        let virtual_job = (into(manifest)?, job(replace.clone(), true)?);
-        let measured = Path::new(MEASURED);
-        let measured_job = match measured.exists() {
-            true => Some((into(measured)?, job(SampleOptions { current: Some(MEASURED_CURRENT_A), ..replace }, false)?)),
-            false => None,
-        };
-        let Some(render) = self.render else {
-            let mut reports = self.run(manifest, &virtual_job.0, &virtual_job.1)?;
-            if let Some((out, options)) = measured_job {
-                reports.extend(self.run(measured, &out, &options)?);
-            }
-            return Ok(reports);
-        };
-        std::thread::scope(|scope| {
-            let other = measured_job.map(|(out, options)| scope.spawn(move || Pipeline::beside(render, |p| p.run(measured, &out, &options))));
-            let reports = self.run(manifest, &virtual_job.0, &virtual_job.1);
-            let measured_reports = other.map(|o| self.join_beside(o.join()));
-            let mut reports = reports?;
-            if let Some(more) = measured_reports {
-                reports.extend(more?);
-            }
-            Ok(reports)
-        })
+        let (manifest, measured) = (Path::new(BUNDLED), Path::new(MEASURED));
+        let mut parts = vec![(manifest, into(manifest)?, job(replace.clone(), true)?)];
+        if measured.exists() {
+            parts.push((measured, into(measured)?, job(SampleOptions { current: Some(MEASURED_CURRENT_A), ..replace }, false)?));
+        }
+        let reports = self.side_by_side(&parts, |p, (manifest, out, options)| p.run(manifest, out, options))?;
+        Ok(reports.into_iter().flatten().collect())
     }
 }

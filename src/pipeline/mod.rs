@@ -181,6 +181,46 @@ impl<'a> Pipeline<'a> {
         self
     }
 
+    /// `work` on every item, in the items' order: with a renderer side by
+    /// side (the first on this pipeline, telling its events as they come;
+    /// each other on a thread of its own, told whole after the one before),
+    /// else in turn, stopping at the first error. The first error ends the
+    /// whole; what the later items met is told as notes.
+    fn side_by_side<I: Sync, T: Send>(&mut self, items: &[I], work: impl Fn(&mut Pipeline<'_>, &I) -> Result<T> + Sync) -> Result<Vec<T>> {
+        let done: Vec<Result<T>> = match (self.render, items.split_first()) {
+            (Some(render), Some((first, rest))) if !rest.is_empty() => std::thread::scope(|scope| {
+                let work = &work;
+                let others: Vec<_> = rest.iter().map(|item| scope.spawn(move || Pipeline::beside(render, |p| work(p, item)))).collect();
+                let mut done = vec![work(self, first)];
+                done.extend(others.into_iter().map(|o| self.join_beside(o.join())));
+                done
+            }),
+            _ => {
+                let mut done = Vec::new();
+                for item in items {
+                    done.push(work(self, item));
+                    if done.last().is_some_and(|d| d.is_err()) {
+                        break;
+                    }
+                }
+                done
+            }
+        };
+        let mut results = Vec::new();
+        let mut failed = None;
+        for d in done {
+            match d {
+                Ok(t) => results.push(t),
+                Err(e) if failed.is_none() => failed = Some(e),
+                Err(e) => self.note(&format!("mrbp: error: {e}")),
+            }
+        }
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(results),
+        }
+    }
+
     /// Runs `work` on a pipeline of its own on the current thread, keeping
     /// what it says in `render`'s words (no progress bars).
     fn beside<T>(render: Render, work: impl FnOnce(&mut Pipeline<'_>) -> Result<T>) -> Beside<T> {

@@ -48,42 +48,10 @@ impl Pipeline<'_> {
         }
         let mut reports = Vec::new();
         let mut entries = Vec::new();
-        let stage = |p: &mut Pipeline<'_>, c: f64| p.at_current(&campaign, out, c, options, loo.as_ref());
-        let done: Vec<Result<CurrentStage>> = match (self.render, currents.split_first()) {
-            // the currents side by side: the first tells its events as they
-            // come, each other one after it, in order
-            (Some(render), Some((&first, rest))) if !rest.is_empty() => std::thread::scope(|scope| {
-                let others: Vec<_> = rest.iter().map(|&c| scope.spawn(move || Pipeline::beside(render, |p| stage(p, c)))).collect();
-                let mut done = vec![stage(self, first)];
-                done.extend(others.into_iter().map(|o| self.join_beside(o.join())));
-                done
-            }),
-            _ => {
-                let mut done = Vec::new();
-                for &c in &currents {
-                    done.push(stage(self, c));
-                    if done.last().is_some_and(|d| d.is_err()) {
-                        break;
-                    }
-                }
-                done
-            }
-        };
-        // the first current's error ends the job; what the others met is told
-        let mut failed = None;
-        for d in done {
-            match (d, &failed) {
-                (Ok((r, e)), None) => {
-                    reports.extend(r);
-                    entries.extend(e);
-                }
-                (Ok(_), Some(_)) => {}
-                (Err(e), None) => failed = Some(e),
-                (Err(e), Some(_)) => self.note(&format!("mrbp: error: {e}")),
-            }
-        }
-        if let Some(e) = failed {
-            return Err(e);
+        let stages = self.side_by_side(&currents, |p, &c| p.at_current(&campaign, out, c, options, loo.as_ref()))?;
+        for (r, e) in stages {
+            reports.extend(r);
+            entries.extend(e);
         }
         if several {
             if options.current_law {
