@@ -228,7 +228,7 @@ fn likelihood_at_start() {
             let secs = best_of(3, || {
                 pool.install(|| {
                     let mut out = vec![0.0; 96];
-                    points.par_chunks(d * 8).zip(out.par_chunks_mut(8)).for_each(|(x, o)| post.log_density_batch(x, o));
+                    points.par_chunks(d * mrbp::model::LANES).zip(out.par_chunks_mut(mrbp::model::LANES)).for_each(|(x, o)| post.log_density_batch(x, o));
                     black_box(out);
                 })
             });

@@ -102,6 +102,20 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     let first = read_parquet(&dir.join("bands.parquet")).unwrap();
     assert!(again.equals(&first), "same seed, one thread: same bands");
 
+    // leave-one-out weighs its held-out runs side by side: one thread gives
+    // the same table and bands, bit for bit
+    let alone = tempfile::tempdir().unwrap();
+    let o = Command::new("cp").arg("-a").arg(&dir).arg(alone.path()).output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let again_dir = alone.path().join("I1.0A");
+    let o = mrbp(&["--threads", "1", "report", again_dir.to_str().unwrap(), "--leave-one-out", "--loo-steps", "200", "--draws", "200"]);
+    assert!(o.status.success(), "{}", text(&o));
+    for file in ["loo.parquet", "loo_bands.parquet"] {
+        let one = read_parquet(&again_dir.join(file)).unwrap();
+        let all = read_parquet(&dir.join(file)).unwrap();
+        assert!(one.equals_missing(&all), "{file}: one thread and all threads differ");
+    }
+
     // records of the model with white noise: the adequacy table finds no
     // memory (lag-1 autocorrelation of white noise from ≥ 300 samples has
     // sd ≤ 0.06; 0.3 is five of them) and no memory warning is written

@@ -373,6 +373,13 @@ impl Laplace {
         Laplace { mean: map.x.clone(), chol }
     }
 
+    /// The Gaussian with this mean and covariance; `None` if the
+    /// covariance is not positive definite.
+    pub fn from_moments(mean: Vec<f64>, cov: DMatrix<f64>) -> Option<Laplace> {
+        let chol = cov.cholesky()?.l();
+        Some(Laplace { mean, chol })
+    }
+
     /// mean + spread · L z.
     pub fn point(&self, z: &[f64], spread: f64) -> Vec<f64> {
         let step = &self.chol * DVector::from_column_slice(z) * spread;

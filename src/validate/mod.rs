@@ -4,10 +4,13 @@
 //! The held-out posterior is first reached by Pareto-smoothed importance
 //! sampling ([`psis`]) of the full posterior's draws, with weights
 //! 1/p(y_j | θ), the run's likelihood with its noise level profiled out. A
-//! run that carries so much of the information that the weights cannot be
-//! trusted (k̂ > 0.7) is calibrated afresh without it, warm-started from the
-//! reweighted draws. The held-out run's noise level is not known to that
-//! posterior; the prediction uses the root-mean-square σ of the other runs.
+//! run that carries so much of the information that these weights cannot be
+//! trusted (k̂ > 0.7) is reached by importance sampling from the Laplace
+//! approximation of the posterior without it (a Student-t about its MAP,
+//! searched from the reweighted draws' mean), and where that k̂ is too large
+//! too, by sampling that posterior afresh. The held-out run's noise is not
+//! known to that posterior; the prediction pools the other runs' at the
+//! run's current ([`crate::posterior::Layout::noise_at_current`]).
 
 pub mod consistency;
 pub mod psis;
@@ -23,6 +26,7 @@ use rayon::prelude::*;
 
 use crate::data::{RecordPart, RunData};
 use crate::posterior::map::{self, Laplace, MapEstimate};
+use crate::model::LANES;
 use crate::posterior::{Draw, Draws, Posterior};
 use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictOptions, PredictSettings, RunBands, RunPrediction};
 use crate::sampler::{LogDensity, Observer, RunControl, Sampler};
@@ -68,7 +72,8 @@ pub enum HeldOutBy {
     /// The full posterior's draws, Pareto-smoothed importance weights.
     Reweighting,
     /// Importance sampling from the Laplace approximation of the held-out
-    /// posterior (a Student-t around its MAP), Pareto-smoothed.
+    /// posterior (a Student-t around its MAP), moved to the weighted draws'
+    /// moments where its weights cannot be trusted; Pareto-smoothed.
     LaplaceImportance,
     /// Ensemble MCMC of the held-out posterior.
     Sampling,
@@ -91,8 +96,9 @@ pub struct LooRow {
     pub coverage: CoverageRow,
     /// k̂ of the full posterior's reweighting.
     pub pareto_k: f64,
-    /// k̂ of the importance sampling from the Laplace approximation (NaN if
-    /// not needed).
+    /// k̂ of the importance sampling from the Laplace approximation, of its
+    /// last round of moment matching where there were any (NaN if not
+    /// needed).
     pub pareto_k_laplace: f64,
     pub by: HeldOutBy,
     /// Largest R̂ of the held-out sampling (NaN if not needed).
@@ -108,12 +114,24 @@ struct Full<'a> {
 /// Leaves out each run of `cal` (whose runs are `campaign`'s) in turn.
 /// `observe` makes the observers of a fresh calibration, told the id of
 /// the run left out.
+///
+/// The held-out runs are weighed side by side (reweighting, MAP, Laplace
+/// importance: each on random streams of its own, so the results do not
+/// depend on the threads); those that still need sampling are then sampled
+/// one after the other, each sampler using every thread.
 pub fn leave_one_out(cal: &Calibration, campaign: &Campaign, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<Vec<HeldOut>> {
     if campaign.runs.len() < 2 {
         return Err(Error::Usage("leave-one-out needs a calibration of at least two runs".into()));
     }
     let full = Full { cal, campaign };
-    campaign.runs.iter().enumerate().map(|(j, run)| hold_out(&full, j, run, loo, observe)).collect()
+    let weighed: Vec<Result<Weighed>> = campaign.runs.par_iter().enumerate().map(|(j, run)| weigh(&full, j, run, loo)).collect();
+    weighed
+        .into_iter()
+        .map(|w| match w? {
+            Weighed::Done(held) => Ok(*held),
+            Weighed::ToSample(pending) => pending.sample(&full.cal.settings, loo, observe),
+        })
+        .collect()
 }
 
 /// Proposals of the importance sampling from the Laplace approximation:
@@ -161,9 +179,36 @@ impl Target<'_> {
     }
 }
 
+/// A held-out run after the cheap routes: its prediction, or what its
+/// sampling starts from.
+enum Weighed<'a> {
+    Done(Box<HeldOut>),
+    ToSample(Box<Pending<'a>>),
+}
+
+/// A held-out run whose importance weights cannot be trusted: its
+/// posterior without the run, that posterior's MAP, and the row so far.
+struct Pending<'a> {
+    target: Target<'a>,
+    posterior: Posterior,
+    map: MapEstimate,
+    row: LooRow,
+}
+
+impl Pending<'_> {
+    /// 3. the held-out posterior sampled afresh.
+    fn sample(mut self: Box<Self>, settings: &CalibrationSettings, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<HeldOut> {
+        let (prediction, max_rhat) = sample_afresh(&self.target, &self.posterior, &self.map, settings, loo, observe)?;
+        (self.row.by, self.row.max_rhat) = (HeldOutBy::Sampling, max_rhat);
+        self.row.coverage = prediction.coverage.clone();
+        Ok(HeldOut { prediction, row: self.row })
+    }
+}
+
 /// The held-out posterior of run `j` by the cheapest way that can be
-/// trusted, and its prediction of the run.
-fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<HeldOut> {
+/// trusted short of sampling, and its prediction of the run; or what
+/// sampling it needs.
+fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Result<Weighed<'a>> {
     let settings = &full.cal.settings;
     let lik = &settings.likelihood;
     let target = Target {
@@ -200,41 +245,82 @@ fn hold_out(full: &Full, j: usize, left_out: &Run, loo: &LooSettings, observe: &
                 row.by = HeldOutBy::LaplaceImportance;
                 prediction
             }
-            None => {
-                let (prediction, max_rhat) = sample_afresh(&target, &posterior, &map, settings, loo, observe)?;
-                (row.by, row.max_rhat) = (HeldOutBy::Sampling, max_rhat);
-                prediction
-            }
+            None => return Ok(Weighed::ToSample(Box::new(Pending { target, posterior, map, row }))),
         }
     };
     row.coverage = prediction.coverage.clone();
-    Ok(HeldOut { prediction, row })
+    Ok(Weighed::Done(Box::new(HeldOut { prediction, row })))
 }
 
 /// Importance sampling from the held-out posterior's Laplace approximation
-/// around its MAP: the weights' k̂, and the prediction if they can be
+/// around its MAP, adapted where its weights cannot be trusted: the
+/// proposal moved to the weighted draws' mean and covariance and drawn
+/// again, up to [`ADAPTATIONS`] times (adaptive importance sampling by
+/// moment matching). The last k̂, and the prediction if its weights can be
 /// trusted.
 fn laplace_importance(target: &Target, posterior: &Posterior, map: &MapEstimate, seed: u64, loo: &LooSettings) -> Result<(f64, Option<RunPrediction>)> {
-    let laplace = Laplace::new(posterior, map);
-    let mut rng = crate::rng::stream(seed, &[0x1005, target.j as u64]);
+    let mut proposal = Laplace::new(posterior, map);
+    let mut round = 0;
+    loop {
+        // the first round on the stream it always had
+        let mut rng = if round == 0 { crate::rng::stream(seed, &[0x1005, target.j as u64]) } else { crate::rng::stream(seed, &[0x1005, target.j as u64, round]) };
+        let (proposals, smoothed) = importance_draws(posterior, &proposal, &mut rng, loo.weighted_draws);
+        if smoothed.k_hat <= psis::K_THRESHOLD {
+            let current = target.run.spec.current_a;
+            let draws: Vec<Draw> = proposals.iter().map(|x| unseen_draw(posterior, x, current)).collect();
+            let paths = model_paths(&target.data, &draws, &target.predict.integrator, &|| {});
+            return Ok((smoothed.k_hat, Some(target.weighted_bands(&draws, &paths, &smoothed.weights, loo.draws)?)));
+        }
+        round += 1;
+        match weighted_moments(&proposals, &smoothed.weights) {
+            Some(moved) if round <= ADAPTATIONS => proposal = moved,
+            _ => return Ok((smoothed.k_hat, None)),
+        }
+    }
+}
+
+/// Rounds of moment matching after the Laplace proposal's own: each costs
+/// [`LooSettings::weighted_draws`] log-densities, a few per cent of a
+/// held-out posterior sampled afresh.
+const ADAPTATIONS: u64 = 2;
+
+/// `count` draws from the Student-t about `proposal` and their
+/// Pareto-smoothed importance weights to the posterior.
+fn importance_draws(posterior: &impl LogDensity, proposal: &Laplace, rng: &mut impl rand::Rng, count: usize) -> (Vec<Vec<f64>>, psis::Smoothed) {
     let d = posterior.dim();
-    let proposals: Vec<Vec<f64>> = (0..loo.weighted_draws)
+    let proposals: Vec<Vec<f64>> = (0..count)
         .map(|_| {
             let w = (LAPLACE_DF / rng.sample::<f64, _>(ChiSquared::new(LAPLACE_DF).expect("positive df"))).sqrt();
             let z: Vec<f64> = (0..d).map(|_| w * rng.sample::<f64, _>(StandardNormal)).collect();
-            laplace.point(&z, LAPLACE_SPREAD)
+            proposal.point(&z, LAPLACE_SPREAD)
         })
         .collect();
     let log_p = log_densities(posterior, &proposals);
-    let log_w: Vec<f64> = proposals.iter().zip(&log_p).map(|(x, lp)| lp - laplace.log_t_density(x, LAPLACE_SPREAD, LAPLACE_DF)).collect();
-    let from_laplace = psis::smooth(&log_w);
-    if from_laplace.k_hat > psis::K_THRESHOLD {
-        return Ok((from_laplace.k_hat, None));
+    let log_w: Vec<f64> = proposals.iter().zip(&log_p).map(|(x, lp)| lp - proposal.log_t_density(x, LAPLACE_SPREAD, LAPLACE_DF)).collect();
+    (proposals, psis::smooth(&log_w))
+}
+
+/// The Gaussian with the weighted mean and covariance of `points`; `None`
+/// where the weights rest on too few points to fix a covariance.
+fn weighted_moments(points: &[Vec<f64>], weights: &[f64]) -> Option<Laplace> {
+    let d = points.first()?.len();
+    // the weights' effective sample size must exceed the dimension
+    let ess = 1.0 / weights.iter().map(|w| w * w).sum::<f64>();
+    if !(ess > d as f64 + 1.0) {
+        return None;
     }
-    let current = target.run.spec.current_a;
-    let draws: Vec<Draw> = proposals.iter().map(|x| unseen_draw(posterior, x, current)).collect();
-    let paths = model_paths(&target.data, &draws, &target.predict.integrator, &|| {});
-    Ok((from_laplace.k_hat, Some(target.weighted_bands(&draws, &paths, &from_laplace.weights, loo.draws)?)))
+    let mut mean = vec![0.0; d];
+    for (x, w) in points.iter().zip(weights) {
+        for (m, v) in mean.iter_mut().zip(x) {
+            *m += w * v;
+        }
+    }
+    let mut cov = nalgebra::DMatrix::zeros(d, d);
+    for (x, w) in points.iter().zip(weights) {
+        let r = nalgebra::DVector::from_iterator(d, x.iter().zip(&mean).map(|(v, m)| v - m));
+        cov += (&r * r.transpose()) * *w;
+    }
+    Laplace::from_moments(mean, cov)
 }
 
 /// The held-out posterior sampled afresh, from walkers around its MAP, on
@@ -278,11 +364,11 @@ fn weighted_mean_theta(full: &Full, posterior: &Posterior, positions: &[(usize, 
 }
 
 /// Log-densities of `points`, in parallel batches.
-fn log_densities(posterior: &Posterior, points: &[Vec<f64>]) -> Vec<f64> {
+fn log_densities(posterior: &impl LogDensity, points: &[Vec<f64>]) -> Vec<f64> {
     let flat: Vec<f64> = points.iter().flatten().copied().collect();
     let d = posterior.dim();
     let mut out = vec![0.0; points.len()];
-    flat.par_chunks(8 * d).zip(out.par_chunks_mut(8)).for_each(|(x, o)| posterior.log_density_batch(x, o));
+    flat.par_chunks(LANES * d).zip(out.par_chunks_mut(LANES)).for_each(|(x, o)| posterior.log_density_batch(x, o));
     out
 }
 
@@ -329,6 +415,73 @@ pub fn systematic_resample(weights: &[f64], count: usize) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A standard normal in `d` dimensions.
+    struct Normal(usize);
+
+    impl LogDensity for Normal {
+        fn dim(&self) -> usize {
+            self.0
+        }
+        fn log_density(&self, x: &[f64]) -> f64 {
+            -0.5 * x.iter().map(|v| v * v).sum::<f64>()
+        }
+    }
+
+    /// The weighted moments are those of the weighted points, computed by
+    /// hand: (0, 0), (2, 0), (0, 4) with weights ½, ¼, ¼ have mean (½, 1)
+    /// and covariance [[0.75, −0.5], [−0.5, 3]]; effective sample sizes not
+    /// above d + 1 give none.
+    #[test]
+    fn weighted_moments_are_those_of_the_points() {
+        let points = vec![vec![0.0, 0.0], vec![2.0, 0.0], vec![0.0, 4.0]];
+        // three copies of each: effective sample size 8, above d + 1 = 3
+        let many: Vec<Vec<f64>> = points.iter().cycle().take(9).cloned().collect();
+        let w: Vec<f64> = [0.5, 0.25, 0.25].iter().cycle().take(9).map(|v| v / 3.0).collect();
+        let g = weighted_moments(&many, &w).expect("enough points");
+        assert!((g.mean[0] - 0.5).abs() < 1e-12 && (g.mean[1] - 1.0).abs() < 1e-12, "{:?}", g.mean);
+        // L Lᵀ from the points L e₁, L e₂ of the proposal
+        let c0 = g.point(&[1.0, 0.0], 1.0);
+        let c1 = g.point(&[0.0, 1.0], 1.0);
+        let col = |c: &[f64]| [c[0] - g.mean[0], c[1] - g.mean[1]];
+        let (a, b) = (col(&c0), col(&c1));
+        let cov = [[a[0] * a[0] + b[0] * b[0], a[0] * a[1] + b[0] * b[1]], [a[1] * a[0] + b[1] * b[0], a[1] * a[1] + b[1] * b[1]]];
+        let want = [[0.75, -0.5], [-0.5, 3.0]];
+        for i in 0..2 {
+            for j in 0..2 {
+                assert!((cov[i][j] - want[i][j]).abs() < 1e-12, "cov {cov:?}");
+            }
+        }
+        assert!(weighted_moments(&points, &[0.5, 0.25, 0.25]).is_none(), "2.67 effective points: too few");
+    }
+
+    /// A proposal half an sd off in every coordinate of a 6-D standard
+    /// normal and half as wide gives weights that cannot be trusted; moment
+    /// matching (as many rounds as a held-out run gets) brings k̂ under 0.7
+    /// and the weighted mean within 5 Monte Carlo standard errors of 0 (the
+    /// MC se of a weighted mean with effective sample size n is about 1/√n).
+    #[test]
+    fn moment_matching_repairs_a_poor_proposal() {
+        let d = 6;
+        let target = Normal(d);
+        let mut rng = crate::rng::stream(7, &[1]);
+        let mut proposal = Laplace::from_moments(vec![0.5; d], nalgebra::DMatrix::identity(d, d) * 0.16).expect("positive definite");
+        let (mut points, mut smoothed) = importance_draws(&target, &proposal, &mut rng, 1000);
+        assert!(smoothed.k_hat > psis::K_THRESHOLD, "the premise: k̂ {}", smoothed.k_hat);
+        for _ in 0..ADAPTATIONS {
+            if smoothed.k_hat <= psis::K_THRESHOLD {
+                break;
+            }
+            proposal = weighted_moments(&points, &smoothed.weights).expect("enough effective points");
+            (points, smoothed) = importance_draws(&target, &proposal, &mut rng, 1000);
+        }
+        assert!(smoothed.k_hat <= psis::K_THRESHOLD, "k̂ after moment matching {}", smoothed.k_hat);
+        let ess = 1.0 / smoothed.weights.iter().map(|w| w * w).sum::<f64>();
+        for i in 0..d {
+            let mean: f64 = points.iter().zip(&smoothed.weights).map(|(x, w)| w * x[i]).sum();
+            assert!(mean.abs() < 5.0 / ess.sqrt(), "coordinate {i}: weighted mean {mean}, ess {ess}");
+        }
+    }
 
     #[test]
     fn systematic_resampling_follows_the_weights() {
