@@ -3,9 +3,11 @@ the same posterior, run side by side with mrbp on the same machine.
 
     python benches/peer/emcee_numba.py CAMPAIGN_DIR [--current 1.0]
 
-CAMPAIGN_DIR holds a campaign made by `mrbp synth` (see docs/performance.md
-for the command). The script calibrates it with mrbp (release binary in
-target/release), then samples the same posterior with emcee: ln θ of the
+CAMPAIGN_DIR holds a campaign made by `mrbp synth` or measured records in
+the campaign format (see docs/performance.md for both). The script
+calibrates it with mrbp (release binary in target/release; `--exact-input`,
+Gaussian noise, no model terms), then samples the same posterior with
+emcee: ln θ of the
 seven B-P parameters and ln σ of each run, the same priors, Gaussian noise,
 the measured strain smoothed by the same local cubic (±2 ms), explicit Euler
 with 4 fixed sub-steps per sample (the paper's integrator, as a Python user
@@ -130,8 +132,10 @@ def main():
 
     # mrbp, as a user runs it
     clock = time.perf_counter()
+    # --exact-input: the posterior below (mrbp's default adds the strain's
+    # noise to the residuals' variance: errors in variables)
     subprocess.run([str(repo / "target/release/mrbp"), "sample", str(args.campaign / "campaign.toml"),
-                    "--current", str(args.current), "--out", str(out)], check=True, stdout=subprocess.DEVNULL)
+                    "--current", str(args.current), "--exact-input", "--out", str(out)], check=True, stdout=subprocess.DEVNULL)
     mrbp_seconds = time.perf_counter() - clock
     summary = pd.read_parquet(out / "summary.parquet").set_index("parameter")
     mrbp_ess = summary.loc[NAMES, "ess_bulk"].min()
