@@ -20,7 +20,7 @@ use crate::data::RunData;
 use crate::fit::least_squares;
 use crate::model::{Integrator, LANES};
 use crate::noise::{Profile, Whiten};
-use crate::sampler::LogDensity;
+use crate::sampler::{Elliptical, LogDensity};
 
 /// The MAP point and the Laplace approximation of θ around it.
 #[derive(Clone, Debug)]
@@ -351,49 +351,19 @@ pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, 
 /// MAP with the covariance of θ from the surrogate's Hessian and, for the
 /// noise of each run, the sd its noise model gives for n residuals (1/√(2n)
 /// for ln σ, say; nearly independent of θ).
-pub struct Laplace {
-    pub mean: Vec<f64>,
-    /// Lower Cholesky factor of the covariance (θ block, then the noise).
-    chol: DMatrix<f64>,
-}
-
-impl Laplace {
-    pub fn new(post: &Posterior, map: &MapEstimate) -> Laplace {
-        let (d, l) = (post.dim(), &post.layout);
-        let nt = l.fitted.len();
-        let mut chol = DMatrix::zeros(d, d);
-        // a θ covariance that is not positive definite: a tiny ball instead
-        let theta = map.cov.clone().cholesky().map(|c| c.l()).unwrap_or_else(|| DMatrix::identity(nt, nt) * 1e-4);
-        chol.view_mut((0, 0), (nt, nt)).copy_from(&theta);
-        let nr = post.runs.len();
-        for i in l.noise.clone() {
-            let (p, j) = ((i - l.noise.start) / nr, (i - l.noise.start) % nr);
-            chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p];
-        }
-        Laplace { mean: map.x.clone(), chol }
+pub fn laplace(post: &Posterior, map: &MapEstimate) -> Elliptical {
+    let (d, l) = (post.dim(), &post.layout);
+    let nt = l.fitted.len();
+    let mut chol = DMatrix::zeros(d, d);
+    // a θ covariance that is not positive definite: a tiny ball instead
+    let theta = map.cov.clone().cholesky().map(|c| c.l()).unwrap_or_else(|| DMatrix::identity(nt, nt) * 1e-4);
+    chol.view_mut((0, 0), (nt, nt)).copy_from(&theta);
+    let nr = post.runs.len();
+    for i in l.noise.clone() {
+        let (p, j) = ((i - l.noise.start) / nr, (i - l.noise.start) % nr);
+        chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p];
     }
-
-    /// The Gaussian with this mean and covariance; `None` if the
-    /// covariance is not positive definite.
-    pub fn from_moments(mean: Vec<f64>, cov: DMatrix<f64>) -> Option<Laplace> {
-        let chol = cov.cholesky()?.l();
-        Some(Laplace { mean, chol })
-    }
-
-    /// mean + spread · L z.
-    pub fn point(&self, z: &[f64], spread: f64) -> Vec<f64> {
-        let step = &self.chol * DVector::from_column_slice(z) * spread;
-        self.mean.iter().zip(step.iter()).map(|(m, s)| m + s).collect()
-    }
-
-    /// ln of the density at `x` of the multivariate Student-t with `df`
-    /// degrees of freedom and this mean and covariance (scaled by
-    /// `spread`²), up to a constant.
-    pub fn log_t_density(&self, x: &[f64], spread: f64, df: f64) -> f64 {
-        let r = DVector::from_iterator(x.len(), x.iter().zip(&self.mean).map(|(a, m)| (a - m) / spread));
-        let z = self.chol.solve_lower_triangular(&r).unwrap_or(r);
-        -0.5 * (df + x.len() as f64) * (z.norm_squared() / df).ln_1p()
-    }
+    Elliptical::from_factor(DVector::from_column_slice(&map.x), chol)
 }
 
 /// The Euler steps of one log-density at `x` (all runs): what the
@@ -407,12 +377,12 @@ pub fn euler_steps(post: &Posterior, x: &[f64]) -> u64 {
 /// onto the posterior, not ones that started on it.
 const START_SPREAD: f64 = 1.0;
 
-/// Initial walker positions from the [`Laplace`] approximation, spread by
+/// Initial walker positions from the [`laplace`] approximation, spread by
 /// [`START_SPREAD`], every one with a finite log-density (redrawn up to 100
 /// times, then a tiny ball around the MAP).
 pub fn initial_walkers(post: &Posterior, map: &MapEstimate, count: usize, seed: u64) -> Vec<Vec<f64>> {
     let d = post.dim();
-    let laplace = Laplace::new(post, map);
+    let laplace = laplace(post, map);
     (0..count)
         .map(|c| {
             let mut rng = crate::rng::stream(seed, &[u64::MAX - 1, c as u64]);

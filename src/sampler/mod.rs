@@ -3,6 +3,8 @@
 //!
 //! * [`density`]: what a target implements ([`LogDensity`]: one point, or a batch);
 //! * [`moves`]: the stretch, differential-evolution, snooker and independence moves;
+//! * [`elliptical`]: a Student-t or Gaussian fitted to points (the
+//!   independence proposals, the Laplace approximation);
 //! * [`ensemble`]: several independent ensembles stepped with the parallel
 //!   red-blue update, and when to stop; [`settings`]: what a sampler is;
 //! * [`chains`]: the history of a run;
@@ -20,6 +22,7 @@ pub mod chains;
 pub mod density;
 pub mod checkpoint;
 pub mod diagnostics;
+pub mod elliptical;
 pub mod ensemble;
 pub mod moves;
 pub mod observer;
@@ -29,6 +32,7 @@ pub mod stranded;
 pub use chains::Chains;
 pub use density::LogDensity;
 pub use diagnostics::{quantile, quantile_sorted, Diagnostics, ParameterDiagnostics};
+pub use elliptical::{Elliptical, Moments};
 pub use ensemble::{RunControl, Sampler};
 pub use moves::Move;
 pub use observer::{Checkpointer, Observer, Progress, RunState};

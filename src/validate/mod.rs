@@ -21,15 +21,16 @@ use crate::calibrate::{sampling, Calibration, CalibrationSettings};
 use crate::data::{Campaign, Run};
 use crate::error::{Error, Result};
 use rand::RngExt;
-use rand_distr::{ChiSquared, StandardNormal};
+use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
 use crate::data::{RecordPart, RunData};
-use crate::posterior::map::{self, Laplace, MapEstimate};
+use crate::posterior::map::{self, MapEstimate};
 use crate::model::LANES;
 use crate::posterior::{Draw, Draws, Posterior};
 use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictOptions, PredictSettings, RunBands, RunPrediction};
-use crate::sampler::{LogDensity, Observer, RunControl, Sampler};
+use crate::sampler::elliptical::t_factor;
+use crate::sampler::{Elliptical, LogDensity, Moments, Observer, RunControl, Sampler};
 
 /// How each held-out posterior is reached and propagated.
 #[derive(Clone, Copy, Debug)]
@@ -259,7 +260,7 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
 /// moment matching). The last k̂, and the prediction if its weights can be
 /// trusted.
 fn laplace_importance(target: &Target, posterior: &Posterior, map: &MapEstimate, seed: u64, loo: &LooSettings) -> Result<(f64, Option<RunPrediction>)> {
-    let mut proposal = Laplace::new(posterior, map);
+    let mut proposal = map::laplace(posterior, map);
     let mut round = 0;
     loop {
         // the first round on the stream it always had
@@ -286,41 +287,30 @@ const ADAPTATIONS: u64 = 2;
 
 /// `count` draws from the Student-t about `proposal` and their
 /// Pareto-smoothed importance weights to the posterior.
-fn importance_draws(posterior: &impl LogDensity, proposal: &Laplace, rng: &mut impl rand::Rng, count: usize) -> (Vec<Vec<f64>>, psis::Smoothed) {
+fn importance_draws(posterior: &impl LogDensity, proposal: &Elliptical, rng: &mut impl rand::Rng, count: usize) -> (Vec<Vec<f64>>, psis::Smoothed) {
     let d = posterior.dim();
     let proposals: Vec<Vec<f64>> = (0..count)
         .map(|_| {
-            let w = (LAPLACE_DF / rng.sample::<f64, _>(ChiSquared::new(LAPLACE_DF).expect("positive df"))).sqrt();
+            let w = t_factor(Some(LAPLACE_DF), rng);
             let z: Vec<f64> = (0..d).map(|_| w * rng.sample::<f64, _>(StandardNormal)).collect();
             proposal.point(&z, LAPLACE_SPREAD)
         })
         .collect();
     let log_p = log_densities(posterior, &proposals);
-    let log_w: Vec<f64> = proposals.iter().zip(&log_p).map(|(x, lp)| lp - proposal.log_t_density(x, LAPLACE_SPREAD, LAPLACE_DF)).collect();
+    let log_w: Vec<f64> = proposals.iter().zip(&log_p).map(|(x, lp)| lp - proposal.log_kernel(Some(LAPLACE_DF), x, LAPLACE_SPREAD)).collect();
     (proposals, psis::smooth(&log_w))
 }
 
 /// The Gaussian with the weighted mean and covariance of `points`; `None`
 /// where the weights rest on too few points to fix a covariance.
-fn weighted_moments(points: &[Vec<f64>], weights: &[f64]) -> Option<Laplace> {
+fn weighted_moments(points: &[Vec<f64>], weights: &[f64]) -> Option<Elliptical> {
     let d = points.first()?.len();
     // the weights' effective sample size must exceed the dimension
     let ess = 1.0 / weights.iter().map(|w| w * w).sum::<f64>();
     if !(ess > d as f64 + 1.0) {
         return None;
     }
-    let mut mean = vec![0.0; d];
-    for (x, w) in points.iter().zip(weights) {
-        for (m, v) in mean.iter_mut().zip(x) {
-            *m += w * v;
-        }
-    }
-    let mut cov = nalgebra::DMatrix::zeros(d, d);
-    for (x, w) in points.iter().zip(weights) {
-        let r = nalgebra::DVector::from_iterator(d, x.iter().zip(&mean).map(|(v, m)| v - m));
-        cov += (&r * r.transpose()) * *w;
-    }
-    Laplace::from_moments(mean, cov)
+    Elliptical::new(Moments::weighted(points.iter().map(Vec::as_slice).zip(weights.iter().copied()), d))
 }
 
 /// The held-out posterior sampled afresh, from walkers around its MAP, on
@@ -428,31 +418,17 @@ mod tests {
         }
     }
 
-    /// The weighted moments are those of the weighted points, computed by
-    /// hand: (0, 0), (2, 0), (0, 4) with weights ½, ¼, ¼ have mean (½, 1)
-    /// and covariance [[0.75, −0.5], [−0.5, 3]]; effective sample sizes not
-    /// above d + 1 give none.
+    /// Moment matching needs more effective points than d + 1: (0, 0),
+    /// (2, 0), (0, 4) weighted ½, ¼, ¼ (2.67 effective points) give none,
+    /// three copies of each (8) their weighted mean (½, 1).
     #[test]
-    fn weighted_moments_are_those_of_the_points() {
+    fn moment_matching_needs_enough_effective_points() {
         let points = vec![vec![0.0, 0.0], vec![2.0, 0.0], vec![0.0, 4.0]];
-        // three copies of each: effective sample size 8, above d + 1 = 3
+        assert!(weighted_moments(&points, &[0.5, 0.25, 0.25]).is_none(), "2.67 effective points: too few");
         let many: Vec<Vec<f64>> = points.iter().cycle().take(9).cloned().collect();
         let w: Vec<f64> = [0.5, 0.25, 0.25].iter().cycle().take(9).map(|v| v / 3.0).collect();
         let g = weighted_moments(&many, &w).expect("enough points");
         assert!((g.mean[0] - 0.5).abs() < 1e-12 && (g.mean[1] - 1.0).abs() < 1e-12, "{:?}", g.mean);
-        // L Lᵀ from the points L e₁, L e₂ of the proposal
-        let c0 = g.point(&[1.0, 0.0], 1.0);
-        let c1 = g.point(&[0.0, 1.0], 1.0);
-        let col = |c: &[f64]| [c[0] - g.mean[0], c[1] - g.mean[1]];
-        let (a, b) = (col(&c0), col(&c1));
-        let cov = [[a[0] * a[0] + b[0] * b[0], a[0] * a[1] + b[0] * b[1]], [a[1] * a[0] + b[1] * b[0], a[1] * a[1] + b[1] * b[1]]];
-        let want = [[0.75, -0.5], [-0.5, 3.0]];
-        for i in 0..2 {
-            for j in 0..2 {
-                assert!((cov[i][j] - want[i][j]).abs() < 1e-12, "cov {cov:?}");
-            }
-        }
-        assert!(weighted_moments(&points, &[0.5, 0.25, 0.25]).is_none(), "2.67 effective points: too few");
     }
 
     /// A proposal half an sd off in every coordinate of a 6-D standard
@@ -465,7 +441,7 @@ mod tests {
         let d = 6;
         let target = Normal(d);
         let mut rng = crate::rng::stream(7, &[1]);
-        let mut proposal = Laplace::from_moments(vec![0.5; d], nalgebra::DMatrix::identity(d, d) * 0.16).expect("positive definite");
+        let mut proposal = Elliptical::new(Moments { mean: nalgebra::DVector::from_element(d, 0.5), cov: nalgebra::DMatrix::identity(d, d) * 0.16 }).expect("positive definite");
         let (mut points, mut smoothed) = importance_draws(&target, &proposal, &mut rng, 1000);
         assert!(smoothed.k_hat > psis::K_THRESHOLD, "the premise: k̂ {}", smoothed.k_hat);
         for _ in 0..ADAPTATIONS {

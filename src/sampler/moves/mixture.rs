@@ -14,9 +14,10 @@
 //! Metropolis-Hastings independence sampler (factor q(x)/q(y)); each fit
 //! depends on the stored chains only, so a resumed run refits the same.
 
-use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
+use nalgebra::DVector;
 use rand::RngExt;
-use rand_distr::{ChiSquared, StandardNormal};
+
+use super::super::elliptical::{Elliptical, Moments};
 
 /// The most components a fit may have.
 pub const MAX_COMPONENTS: usize = 4;
@@ -46,12 +47,11 @@ pub fn last_fit_step(step: usize) -> usize {
     }
 }
 
-/// One component: weight, mean and Cholesky factor of its covariance.
+/// One component: weight, and its mean and covariance.
 #[derive(Clone, Debug)]
 struct Component {
     log_weight: f64,
-    mean: DVector<f64>,
-    chol: Cholesky<f64, Dyn>,
+    shape: Elliptical,
     /// ln |Σ|^{1/2}.
     half_log_det: f64,
 }
@@ -119,10 +119,10 @@ impl Mixture {
             .components
             .into_iter()
             .filter_map(|c| {
-                let l = c.chol.l();
-                let cov = &l * l.transpose() * (factor * factor);
-                let d = c.mean.len() as f64;
-                Some(Component { half_log_det: c.half_log_det + d * factor.ln(), chol: cov.cholesky()?, ..c })
+                let cov = c.shape.covariance() * (factor * factor);
+                let d = c.shape.dim() as f64;
+                let shape = Elliptical::new(Moments { mean: c.shape.mean.clone(), cov })?;
+                Some(Component { half_log_det: c.half_log_det + d * factor.ln(), shape, ..c })
             })
             .collect();
         Mixture { components }
@@ -131,20 +131,7 @@ impl Mixture {
     /// ln q(v) up to a constant shared by every component: Student-t
     /// components with `df` degrees of freedom, or Gaussian.
     pub fn log_q(&self, df: Option<f64>, v: &[f64]) -> f64 {
-        let d = v.len() as f64;
-        let terms: Vec<f64> = self
-            .components
-            .iter()
-            .map(|c| {
-                let r = DVector::from_column_slice(v) - &c.mean;
-                let m = c.chol.l().solve_lower_triangular(&r).map_or(f64::INFINITY, |z| z.norm_squared());
-                let kernel = match df {
-                    Some(nu) => -0.5 * (nu + d) * (m / nu).ln_1p(),
-                    None => -0.5 * m,
-                };
-                c.log_weight - c.half_log_det + kernel
-            })
-            .collect();
+        let terms: Vec<f64> = self.components.iter().map(|c| c.log_weight - c.half_log_det + c.shape.log_kernel(df, v, 1.0)).collect();
         log_sum_exp(&terms)
     }
 
@@ -160,16 +147,7 @@ impl Mixture {
                 break;
             }
         }
-        let d = y.len();
-        let z = DVector::from_fn(d, |_, _| rng.sample::<f64, _>(StandardNormal));
-        let w = match df {
-            Some(nu) => (nu / rng.sample::<f64, _>(ChiSquared::new(nu).expect("df checked positive"))).sqrt(),
-            None => 1.0,
-        };
-        let step = pick.chol.l() * z * w;
-        for i in 0..d {
-            y[i] = pick.mean[i] + step[i];
-        }
+        pick.shape.draw(df, 1.0, rng, y);
     }
 
     /// One component: the mean and covariance of `points` (each of `d`
@@ -178,9 +156,8 @@ impl Mixture {
         if points.len() < 2 * d {
             return None;
         }
-        let f = super::independence::Fitted::of(points, d, 1.0)?;
-        let half_log_det = f.chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
-        Some(Mixture { components: vec![Component { log_weight: 0.0, mean: f.mean, chol: f.chol, half_log_det }] })
+        let shape = super::independence::fitted(points, d)?;
+        Some(Mixture { components: vec![Component { log_weight: 0.0, half_log_det: shape.half_log_det(), shape }] })
     }
 }
 
@@ -215,18 +192,10 @@ fn log_sum_exp(v: &[f64]) -> f64 {
     m + v.iter().map(|t| (t - m).exp()).sum::<f64>().ln()
 }
 
-/// A component of weight `w`, mean `mean` and covariance `cov` (ridged).
-fn component(w: f64, mean: DVector<f64>, mut cov: DMatrix<f64>) -> Option<Component> {
-    let d = mean.len();
-    for i in 0..d {
-        cov[(i, i)] *= 1.0 + RIDGE;
-        if !(cov[(i, i)] > 0.0) {
-            return None;
-        }
-    }
-    let chol = cov.cholesky()?;
-    let half_log_det = chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
-    Some(Component { log_weight: w.ln(), mean, chol, half_log_det })
+/// A component of weight `w` with the `moments` (ridged).
+fn component(w: f64, moments: Moments) -> Option<Component> {
+    let shape = Elliptical::new(moments.ridged(RIDGE)?)?;
+    Some(Component { log_weight: w.ln(), half_log_det: shape.half_log_det(), shape })
 }
 
 /// EM for a k-component Gaussian mixture from a k-means++ start; the
@@ -265,13 +234,8 @@ fn em(x: &[DVector<f64>], k: usize, rng: &mut impl rand::Rng) -> Option<(f64, Mi
             if nj < (d + 2) as f64 {
                 return None;
             }
-            let mean = x.iter().zip(&resp).fold(DVector::zeros(d), |acc, (p, r)| acc + p * r[j]) / nj;
-            let mut cov = DMatrix::zeros(d, d);
-            for (p, r) in x.iter().zip(&resp) {
-                let v = p - &mean;
-                cov += &v * v.transpose() * r[j];
-            }
-            comps.push(component(nj / n as f64, mean, cov / nj)?);
+            let moments = Moments::weighted(x.iter().zip(&resp).map(|(p, r)| (p.as_slice(), r[j])), d);
+            comps.push(component(nj / n as f64, moments)?);
         }
         let m = Mixture { components: comps };
         // E step
@@ -281,8 +245,7 @@ fn em(x: &[DVector<f64>], k: usize, rng: &mut impl rand::Rng) -> Option<(f64, Mi
                 .components
                 .iter()
                 .map(|c| {
-                    let z = c.chol.l().solve_lower_triangular(&(p - &c.mean)).map_or(f64::INFINITY, |z| z.norm_squared());
-                    c.log_weight - c.half_log_det - 0.5 * z
+                    c.log_weight - c.half_log_det + c.shape.log_kernel(None, p.as_slice(), 1.0)
                 })
                 .collect();
             let total = log_sum_exp(&t);
@@ -304,6 +267,7 @@ fn em(x: &[DVector<f64>], k: usize, rng: &mut impl rand::Rng) -> Option<(f64, Mi
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand_distr::StandardNormal;
 
     /// `points` split among 8 walkers, as the sampler hands them over.
     fn walkers(points: &[f64], d: usize) -> Vec<Vec<f64>> {
@@ -346,8 +310,8 @@ mod tests {
             m.components
                 .iter()
                 .map(|c| {
-                    let s = c.chol.l()[(0, 0)];
-                    c.log_weight.exp() * StudentsT::new(c.mean[0], s, 7.0).unwrap().pdf(v)
+                    let s = c.shape.factor()[(0, 0)];
+                    c.log_weight.exp() * StudentsT::new(c.shape.mean[0], s, 7.0).unwrap().pdf(v)
                 })
                 .sum::<f64>()
                 .ln()
