@@ -38,3 +38,9 @@ coverage:
 sbc:
     cargo run --release -- study plan target/studies/sbc --sbc 200 --config studies/sbc-prior.toml --rpm 200 --cycles 1 --rate 1000 --noise-displacement 2e-6
     cargo run --release -- study run target/studies/sbc
+
+# the same with the discrepancy model: each replicate draws its discrepancy's
+# scale and time scale from their priors too (docs/calibration.md)
+sbc-discrepancy:
+    cargo run --release -- study plan target/studies/sbc-discrepancy --sbc 200 --config studies/sbc-prior.toml --rpm 200 --cycles 1 --rate 1000 --noise-displacement 2e-6 --noise discrepancy
+    cargo run --release -- study run target/studies/sbc-discrepancy

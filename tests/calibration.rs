@@ -251,3 +251,50 @@ fn errors_in_variables_holds_a_g_the_exact_input_likelihood_misses() {
     let (lo, hi, z) = interval(true);
     assert!(lo <= g && g <= hi, "errors in variables: [{lo:.1}, {hi:.1}] misses G = {g} (z {z:.2})");
 }
+
+/// A truncated prior narrower than the road from the start: the SBC box
+/// (`studies/sbc-prior.toml`, ±2 sd about the 1 A reference) with the
+/// discrepancy model, and a truth inside it (one SBC replicate's draw)
+/// whose identification lies outside (R1 and m2 1.9× and 5.7× too large).
+/// The MAP search must pass outside the box's walls on its way: its optimum
+/// must equal the one found with the same log-normal priors truncated only
+/// at the physical range (inside the box the two densities are the same,
+/// and that optimum is inside the box), to 1 nat and 0.2 Laplace sd in
+/// every ln θ. A search that stops at a wall ends about 7 000 nats below.
+#[test]
+fn map_search_crosses_the_walls_of_a_truncated_prior() {
+    use mrbp::calibrate::start;
+    use mrbp::noise::NoiseKind;
+    use mrbp::posterior::Prior;
+    let dir = tempfile::tempdir().unwrap();
+    let synth = "name = \"rd1005-3-virtual\"\ncurrents_a = [1.0]\nrpms = [200.0]\ncycles = 1.0\nrate_hz = 1000.0\n\
+        noise_force_n = 11.94165727843972\nnoise_displacement_m = 0.000002\nseed = 20261138\n\
+        [geometry]\narea_m2 = 0.05\ngap_m = 0.001\n[crank]\nradius_m = 0.00675\nrod_m = 0.15\n[law]\nsaturation_a = 1.0\n\
+        [law.at_1a]\nG = 172496.75706683312\nR0 = 102006.3265807785\nR1 = 217448.55301004904\nD1 = 32219.54262014495\n\
+        m1 = 0.000004175361632627412\nm2 = 0.00020080274956810803\nn = 1.5308949205631517\n\
+        [extra_force]\nsmooth_sd_n = [12.851426152844803]\nsmooth_time_s = [0.03915090130688959]\nkernel = \"matern32\"\nviscous_n_s_per_m = 0.0\n";
+    std::fs::write(dir.path().join("synth.toml"), synth).unwrap();
+    write_campaign(&SynthSettings::read(&dir.path().join("synth.toml")).unwrap(), dir.path()).unwrap();
+    let campaign = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
+    let mut boxed = CalibrationSettings::read(std::path::Path::new("studies/sbc-prior.toml")).unwrap();
+    boxed.likelihood.noise = NoiseKind::Discrepancy;
+    let mut open = boxed.clone();
+    let physical = CalibrationSettings::default().prior;
+    for (name, prior) in open.prior.iter_mut() {
+        let (lo, hi) = physical[name].bounds();
+        if let Prior::LogNormal { lower, upper, .. } = prior {
+            (*lower, *upper) = (lo, hi);
+        }
+    }
+    let a = start(&campaign, &boxed, &mut |_| {}).unwrap();
+    let b = start(&campaign, &open, &mut |_| {}).unwrap();
+    let identification = a.identification.params.to_array();
+    let (_, hi) = boxed.prior["R1"].bounds();
+    assert!(identification[2] > hi, "the premise: the identification's R1 {} is outside the box", identification[2]);
+    assert!((a.map.log_density - b.map.log_density).abs() < 1.0, "MAP log-density {} in the box, {} without", a.map.log_density, b.map.log_density);
+    let (la, lb) = (a.posterior.layout.log_theta(&a.map.x), b.posterior.layout.log_theta(&b.map.x));
+    let sd = b.map.log_theta_sd(&b.posterior.layout);
+    for i in 0..7 {
+        assert!((la[i] - lb[i]).abs() < 0.2 * sd[i], "ln θ[{i}]: {} in the box, {} without (sd {})", la[i], lb[i], sd[i]);
+    }
+}

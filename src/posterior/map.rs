@@ -119,14 +119,27 @@ fn residuals_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<Vec<f64>>
 /// The noise model's whitening of each run's residuals.
 type Whitening = [Arc<dyn Whiten>];
 
+/// Where the MAP search may evaluate the posterior.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Support {
+    /// Inside the priors' truncation bounds only: points outside are
+    /// infeasible (the curvature at a MAP on a bound differences backwards).
+    Truncated,
+    /// Anywhere the model integrates, the log-normal priors continued past
+    /// their bounds: a search path that must pass outside the box (a
+    /// truncated prior narrower than the road from the start) is not
+    /// walled in.
+    Open,
+}
+
 /// Whitened residuals at the fitted point `x` (θ and the model terms) from
 /// its run residuals: each run's as its noise model whitens them (divided
 /// by σ, say), then (ln θ − centre)/scale for every log-normal prior and
-/// value/sd for every term's. Points outside the prior support are
-/// infeasible.
-fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<Vec<Vec<f64>>>) -> Option<Vec<f64>> {
+/// value/sd for every term's. With [`Support::Truncated`], points outside
+/// the prior support are infeasible.
+fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<Vec<Vec<f64>>>, support: Support) -> Option<Vec<f64>> {
     let log_theta = post.layout.log_theta(x);
-    if post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
+    if support == Support::Truncated && post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
         return None;
     }
     let res = residuals?;
@@ -145,16 +158,16 @@ fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<
     Some(out)
 }
 
-fn whitened(post: &Posterior, whitening: &Whitening, x: &[f64]) -> Option<Vec<f64>> {
+fn whitened(post: &Posterior, whitening: &Whitening, x: &[f64], support: Support) -> Option<Vec<f64>> {
     let res = residuals_many(post, std::slice::from_ref(&x.to_vec())).pop().flatten();
-    whiten(post, whitening, x, res)
+    whiten(post, whitening, x, res, support)
 }
 
 /// The Jacobian of the whitened residuals at `x` by forward differences,
 /// every point integrated in one batch; a coordinate whose forward point
 /// leaves the prior's support (a MAP at a truncation bound) is
 /// differenced backwards instead.
-fn jacobian(post: &Posterior, whitening: &Whitening, x: &[f64]) -> Option<DMatrix<f64>> {
+fn jacobian(post: &Posterior, whitening: &Whitening, x: &[f64], support: Support) -> Option<DMatrix<f64>> {
     let n = x.len();
     let displaced = |sign: f64, which: &[usize]| -> Vec<Vec<f64>> {
         which
@@ -170,11 +183,11 @@ fn jacobian(post: &Posterior, whitening: &Whitening, x: &[f64]) -> Option<DMatri
     };
     let all: Vec<usize> = (0..=n).collect();
     let points = displaced(1.0, &all);
-    let mut white: Vec<Option<Vec<f64>>> = residuals_many(post, &points).into_iter().zip(&points).map(|(r, q)| whiten(post, whitening, q, r)).collect();
+    let mut white: Vec<Option<Vec<f64>>> = residuals_many(post, &points).into_iter().zip(&points).map(|(r, q)| whiten(post, whitening, q, r, support)).collect();
     let r0 = white[0].take()?;
     let outside: Vec<usize> = (1..=n).filter(|&j| white[j].is_none()).collect();
     let back_points = displaced(-1.0, &outside);
-    let back: Vec<Option<Vec<f64>>> = residuals_many(post, &back_points).into_iter().zip(&back_points).map(|(r, q)| whiten(post, whitening, q, r)).collect();
+    let back: Vec<Option<Vec<f64>>> = residuals_many(post, &back_points).into_iter().zip(&back_points).map(|(r, q)| whiten(post, whitening, q, r, support)).collect();
     let mut jac = DMatrix::zeros(r0.len(), n);
     for j in 1..=n {
         let column: Vec<f64> = match &white[j] {
@@ -203,25 +216,51 @@ pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
     let whitening_of = |profiles: Vec<Profile>| -> (Vec<f64>, Vec<Arc<dyn Whiten>>) { profiles.into_iter().map(|p| (p.scale, p.whitening)).unzip() };
     let (mut scales, mut whitening) = whitening_of(profiles(post, &x)?);
     let mut converged = false;
-    for _ in 0..4 {
-        let f = |p: &[f64]| whitened(post, &whitening, p);
-        let j = |p: &[f64]| jacobian(post, &whitening, p);
-        let fit = least_squares(&x, &f, Some(&j));
-        let moved = fit.params.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        x = fit.params;
-        converged = fit.converged;
-        let (new_scales, new_whitening) = whitening_of(profiles(post, &x)?);
-        let scale_change = new_scales.iter().zip(&scales).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
-        (scales, whitening) = (new_scales, new_whitening);
-        if moved < 1e-6 && scale_change < 1e-3 {
-            break;
+    // the search crosses the box where it must; an optimum outside it is
+    // brought to the box's edge and searched again inside
+    for support in [Support::Open, Support::Truncated] {
+        if support == Support::Truncated {
+            let log_theta = post.layout.log_theta(&x);
+            let inside = project(post, &log_theta);
+            if inside == log_theta {
+                break;
+            }
+            x[post.layout.theta.clone()].copy_from_slice(&post.layout.theta_coordinates(&inside));
+            (scales, whitening) = whitening_of(profiles(post, &x)?);
+        }
+        for _ in 0..4 {
+            let f = |p: &[f64]| whitened(post, &whitening, p, support);
+            let j = |p: &[f64]| jacobian(post, &whitening, p, support);
+            let fit = least_squares(&x, &f, Some(&j));
+            let moved = fit.params.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            x = fit.params;
+            converged = fit.converged;
+            let (new_scales, new_whitening) = whitening_of(profiles(post, &x)?);
+            let scale_change = new_scales.iter().zip(&scales).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
+            (scales, whitening) = (new_scales, new_whitening);
+            if moved < 1e-6 && scale_change < 1e-3 {
+                break;
+            }
         }
     }
-    let jac = jacobian(post, &whitening, &x)?;
+    let jac = jacobian(post, &whitening, &x, Support::Truncated)?;
     let cov = (jac.transpose() * &jac).try_inverse()?;
     let full = with_noise(post, &x)?;
     let log_density = post.log_density(&full);
     Some(MapEstimate { x: full, cov, jacobian: jac, whitening, log_density, converged })
+}
+
+/// ln θ brought into the priors' truncation bounds, coordinate by
+/// coordinate.
+fn project(post: &Posterior, log_theta: &[f64]) -> Vec<f64> {
+    post.priors
+        .iter()
+        .zip(log_theta)
+        .map(|(p, v)| {
+            let (lo, hi) = p.bounds();
+            v.clamp(lo.ln(), hi.ln())
+        })
+        .collect()
 }
 
 /// Each run's noise fitted to its residuals at the fitted point `x`.
@@ -307,8 +346,8 @@ pub fn step_shift_limit(extrapolated: bool) -> f64 {
 fn shift(map: &MapEstimate, post: &Posterior, finer: &Posterior) -> Option<DVector<f64>> {
     let nt = post.layout.fitted.len();
     let theta = &map.x[..nt];
-    let coarse = whitened(post, &map.whitening, theta)?;
-    let fine = whitened(finer, &map.whitening, theta)?;
+    let coarse = whitened(post, &map.whitening, theta, Support::Truncated)?;
+    let fine = whitened(finer, &map.whitening, theta, Support::Truncated)?;
     let delta = DVector::from_iterator(coarse.len(), fine.iter().zip(&coarse).map(|(f, c)| f - c));
     // the residuals are data minus model: the optimum moves by −(JᵀJ)⁻¹ Jᵀ Δr
     Some(-(&map.cov * (map.jacobian.transpose() * delta)))
