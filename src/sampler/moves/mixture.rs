@@ -52,8 +52,6 @@ pub fn last_fit_step(step: usize) -> usize {
 struct Component {
     log_weight: f64,
     shape: Elliptical,
-    /// ln |Σ|^{1/2}.
-    half_log_det: f64,
 }
 
 /// A fitted mixture, used with Student-t components of `df` degrees of
@@ -120,9 +118,8 @@ impl Mixture {
             .into_iter()
             .filter_map(|c| {
                 let cov = c.shape.covariance() * (factor * factor);
-                let d = c.shape.dim() as f64;
                 let shape = Elliptical::new(Moments { mean: c.shape.mean.clone(), cov })?;
-                Some(Component { half_log_det: c.half_log_det + d * factor.ln(), shape, ..c })
+                Some(Component { shape, ..c })
             })
             .collect();
         Mixture { components }
@@ -131,7 +128,7 @@ impl Mixture {
     /// ln q(v) up to a constant shared by every component: Student-t
     /// components with `df` degrees of freedom, or Gaussian.
     pub fn log_q(&self, df: Option<f64>, v: &[f64]) -> f64 {
-        let terms: Vec<f64> = self.components.iter().map(|c| c.log_weight - c.half_log_det + c.shape.log_kernel(df, v, 1.0)).collect();
+        let terms: Vec<f64> = self.components.iter().map(|c| c.log_weight - c.shape.half_log_det() + c.shape.log_kernel(df, v, 1.0)).collect();
         log_sum_exp(&terms)
     }
 
@@ -157,7 +154,7 @@ impl Mixture {
             return None;
         }
         let shape = super::independence::fitted(points, d)?;
-        Some(Mixture { components: vec![Component { log_weight: 0.0, half_log_det: shape.half_log_det(), shape }] })
+        Some(Mixture { components: vec![Component { log_weight: 0.0, shape }] })
     }
 }
 
@@ -194,8 +191,7 @@ fn log_sum_exp(v: &[f64]) -> f64 {
 
 /// A component of weight `w` with the `moments` (ridged).
 fn component(w: f64, moments: Moments) -> Option<Component> {
-    let shape = Elliptical::new(moments.ridged(RIDGE)?)?;
-    Some(Component { log_weight: w.ln(), half_log_det: shape.half_log_det(), shape })
+    Some(Component { log_weight: w.ln(), shape: Elliptical::new(moments.ridged(RIDGE)?)? })
 }
 
 /// EM for a k-component Gaussian mixture from a k-means++ start; the
@@ -240,14 +236,10 @@ fn em(x: &[DVector<f64>], k: usize, rng: &mut impl rand::Rng) -> Option<(f64, Mi
         let m = Mixture { components: comps };
         // E step
         let mut new_ll = 0.0;
+        // ln w − ln |Σ|^{1/2} of each component, once per step
+        let base: Vec<f64> = m.components.iter().map(|c| c.log_weight - c.shape.half_log_det()).collect();
         for (p, r) in x.iter().zip(resp.iter_mut()) {
-            let t: Vec<f64> = m
-                .components
-                .iter()
-                .map(|c| {
-                    c.log_weight - c.half_log_det + c.shape.log_kernel(None, p.as_slice(), 1.0)
-                })
-                .collect();
+            let t: Vec<f64> = m.components.iter().zip(&base).map(|(c, b)| b + c.shape.log_kernel(None, p.as_slice(), 1.0)).collect();
             let total = log_sum_exp(&t);
             new_ll += total;
             for (rj, tj) in r.iter_mut().zip(&t) {
