@@ -143,7 +143,7 @@ impl Default for SamplingSettings {
             min_ess: 400.0,
             check_every: 10,
             burn_in: 0,
-            coordinates: Coordinates::SaturationShare,
+            coordinates: Coordinates::Hardening,
         }
     }
 }

@@ -139,6 +139,10 @@ enum Support {
 /// the prior support are infeasible.
 fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<Vec<Vec<f64>>>, support: Support) -> Option<Vec<f64>> {
     let log_theta = post.layout.log_theta(x);
+    // outside what the coordinates can reach (no positive R1, say)
+    if log_theta.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
     if support == Support::Truncated && post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
         return None;
     }
@@ -208,11 +212,42 @@ fn jacobian(post: &Posterior, whitening: &Whitening, x: &[f64], support: Support
 /// Maximises the posterior over θ from `start` (θ coordinates), with each
 /// run's noise profiled (fitted to its residuals and the fit repeated until
 /// the noise scales settle), by Levenberg-Marquardt on the whitened
-/// residuals. Then sets the noise coordinates from the residuals at the
-/// optimum and computes the Laplace covariance (JᵀJ)⁻¹ of θ.
+/// residuals, in the layout's search coordinates ([`Layout::searched`]).
+/// Then sets the noise coordinates from the residuals at the optimum and
+/// computes the Laplace covariance (JᵀJ)⁻¹ of θ in the layout's own.
 pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
     let nt = post.layout.fitted.len();
+    let searched = post.layout.searched().map(|layout| Posterior { layout, ..post.clone() });
+    let search = searched.as_ref().unwrap_or(post);
     let mut x: Vec<f64> = start[..nt].to_vec();
+    carry(&mut x, &post.layout, &search.layout);
+    let Found { mut x, whitening, converged } = search_from(search, x)?;
+    carry(&mut x, &search.layout, &post.layout);
+    let jac = jacobian(post, &whitening, &x, Support::Truncated)?;
+    let cov = (jac.transpose() * &jac).try_inverse()?;
+    let full = with_noise(post, &x)?;
+    let log_density = post.log_density(&full);
+    Some(MapEstimate { x: full, cov, jacobian: jac, whitening, log_density, converged })
+}
+
+/// The θ block of `x` carried from the coordinates of `from` to those of `to`.
+fn carry(x: &mut [f64], from: &Layout, to: &Layout) {
+    if from != to {
+        let theta = to.theta_coordinates(&from.log_theta(x));
+        x[to.theta.clone()].copy_from_slice(&theta);
+    }
+}
+
+/// The optimum of a Levenberg-Marquardt search, its runs' whitening and
+/// whether the last fit converged.
+struct Found {
+    x: Vec<f64>,
+    whitening: Vec<Arc<dyn Whiten>>,
+    converged: bool,
+}
+
+/// The Levenberg-Marquardt search of [`refine`] from the fitted point `x`.
+fn search_from(post: &Posterior, mut x: Vec<f64>) -> Option<Found> {
     let whitening_of = |profiles: Vec<Profile>| -> (Vec<f64>, Vec<Arc<dyn Whiten>>) { profiles.into_iter().map(|p| (p.scale, p.whitening)).unzip() };
     let (mut scales, mut whitening) = whitening_of(profiles(post, &x)?);
     let mut converged = false;
@@ -243,11 +278,7 @@ pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
             }
         }
     }
-    let jac = jacobian(post, &whitening, &x, Support::Truncated)?;
-    let cov = (jac.transpose() * &jac).try_inverse()?;
-    let full = with_noise(post, &x)?;
-    let log_density = post.log_density(&full);
-    Some(MapEstimate { x: full, cov, jacobian: jac, whitening, log_density, converged })
+    Some(Found { x, whitening, converged })
 }
 
 /// ln θ brought into the priors' truncation bounds, coordinate by

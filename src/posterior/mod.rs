@@ -28,7 +28,7 @@ use crate::data::{Campaign, RunData};
 use crate::model::{FieldLaw, Integrator, Params, LANES};
 use crate::noise::{NoiseModel, NoiseValues, MAX_PARAMETERS};
 use crate::sampler::LogDensity;
-pub use layout::{unit_of, Coordinates, Layout};
+pub use layout::{unit_of, Coordinates, Hardening, Layout};
 pub use likelihood::{run_log_likelihood, LaneParams, LikelihoodSettings};
 pub use parameters::{ModelKind, ParameterModel, CURVE_NAMES, LAW_NAMES};
 pub use prior::Prior;
@@ -68,8 +68,12 @@ impl Posterior {
             campaign.runs.iter().map(|r| RunData::from_run(r, likelihood.part, likelihood.smooth_strain_ms)).collect();
         let ids: Vec<String> = runs.iter().map(|r| r.id.clone()).collect();
         let noise = likelihood.noise_model(sigma_bounds);
+        let mut layout = Layout::new(&model, &ids, noise.as_ref(), coordinates, terms);
+        if coordinates == Coordinates::Hardening {
+            layout.harden(&model, Hardening::reference_work(&runs));
+        }
         Posterior {
-            layout: Layout::new(&model, &ids, noise.as_ref(), coordinates, terms),
+            layout,
             noise,
             terms: terms.clone(),
             runs,
@@ -112,12 +116,17 @@ impl Posterior {
         LaneParams::Fixed(std::array::from_fn(|lane| self.params_at_current(point(lane), run.current_a)))
     }
 
-    /// Log-prior of the coordinates (the priors are densities of ln θ, and
-    /// the θ coordinates map to ln θ with Jacobian 1; the noise model's
-    /// priors carry their own Jacobians).
+    /// Log-prior of the coordinates (the priors are densities of ln θ,
+    /// carried to the θ coordinates by the layout's Jacobian; the noise
+    /// model's priors carry their own Jacobians).
     pub fn log_prior(&self, x: &[f64]) -> f64 {
         let l = &self.layout;
-        let mut lp: f64 = self.priors.iter().zip(&l.log_theta(x)).map(|(p, v)| p.log_density(*v)).sum();
+        let log_theta = l.log_theta(x);
+        let mut lp: f64 = self.priors.iter().zip(&log_theta).map(|(p, v)| p.log_density(*v)).sum();
+        if lp == f64::NEG_INFINITY {
+            return lp;
+        }
+        lp += l.log_jacobian(x, &log_theta);
         // zero-mean normal priors of the model terms
         let normal = |v: f64, sd: f64| -0.5 * (v / sd) * (v / sd);
         lp += x[l.spring.clone()].iter().map(|v| normal(*v, self.terms.gas_spring_sd_n_per_m)).sum::<f64>();
