@@ -88,9 +88,7 @@ impl Hardening {
 
     /// ln θ of R0, D1, R1 from the coordinates `x`, into `log`.
     fn log_theta(&self, x: &[f64], log: &mut [f64]) {
-        let (u, v) = (x[self.r0], x[self.d1]);
-        log[self.r0] = u - softplus(v);
-        log[self.d1] = u - softplus(-v);
+        (log[self.r0], log[self.d1]) = parts(x[self.r0], x[self.d1]);
         let (e1, e2) = (self.hardened(x[self.m1]), self.hardened(x[self.m2]));
         let r1 = (x[self.r1].exp() - log[self.r0].exp() * (1.0 - e1) - log[self.d1].exp() * e2) / e1;
         log[self.r1] = if r1 > 0.0 && r1.is_finite() { r1.ln() } else { f64::NEG_INFINITY };
@@ -99,8 +97,7 @@ impl Hardening {
     /// The coordinates of ln θ `log`, into `x` (inverse of [`Self::log_theta`]).
     fn coordinates(&self, log: &[f64], x: &mut [f64]) {
         let (a, b) = (log[self.r0], log[self.d1]);
-        x[self.r0] = a.max(b) + (-(a - b).abs()).exp().ln_1p();
-        x[self.d1] = b - a;
+        (x[self.r0], x[self.d1]) = sum_and_share(a, b);
         let (e1, e2) = (self.hardened(log[self.m1]), self.hardened(log[self.m2]));
         x[self.r1] = (log[self.r1].exp() * e1 + a.exp() * (1.0 - e1) + b.exp() * e2).ln();
     }
@@ -133,14 +130,25 @@ pub struct Layout {
     /// saturation and share (one pair, or one per anchor of the curves).
     share: Vec<(usize, usize)>,
     /// The drag stress walked in [`Coordinates::Hardening`] (set by
-    /// [`Self::harden`]; it takes precedence over `share`, which the MAP
-    /// search keeps walking: [`Self::searched`]).
+    /// [`Self::harden`]); where set, `share` is not walked but kept for
+    /// the MAP search ([`Self::searched`]).
     hardening: Option<Hardening>,
 }
 
 /// ln(1 + eᵛ), without overflow.
 fn softplus(v: f64) -> f64 {
     v.max(0.0) + (-v.abs()).exp().ln_1p()
+}
+
+/// ln(a + b) and ln(b/a) of `log_a` = ln a, `log_b` = ln b: a sum and a
+/// share (Jacobian 1).
+fn sum_and_share(log_a: f64, log_b: f64) -> (f64, f64) {
+    (log_a.max(log_b) + softplus(-(log_a - log_b).abs()), log_b - log_a)
+}
+
+/// ln a and ln b of their sum and share (inverse of [`sum_and_share`]).
+fn parts(sum: f64, share: f64) -> (f64, f64) {
+    (sum - softplus(share), sum - softplus(-share))
 }
 
 impl Layout {
@@ -280,15 +288,19 @@ impl Layout {
                 _ => format!("ln {n}"),
             })
             .collect();
-        for &(r1, d1) in &self.share {
-            let (a, b) = (&self.names[r1], &self.names[d1]);
-            names[r1] = format!("ln ({a} + {b})");
-            names[d1] = format!("ln ({b} / {a})");
-        }
-        if let Some(h) = &self.hardening {
-            names[h.r0] = "ln (R0 + D1)".to_string();
-            names[h.d1] = "ln (D1 / R0)".to_string();
-            names[h.r1] = format!("ln (R + D after {:.3e} Pa of work)", h.work);
+        match &self.hardening {
+            Some(h) => {
+                names[h.r0] = "ln (R0 + D1)".to_string();
+                names[h.d1] = "ln (D1 / R0)".to_string();
+                names[h.r1] = format!("ln (R + D after {:.3e} Pa of work)", h.work);
+            }
+            None => {
+                for &(r1, d1) in &self.share {
+                    let (a, b) = (&self.names[r1], &self.names[d1]);
+                    names[r1] = format!("ln ({a} + {b})");
+                    names[d1] = format!("ln ({b} / {a})");
+                }
+            }
         }
         names
     }
@@ -296,13 +308,13 @@ impl Layout {
     /// ln θ at the sampler's coordinates `x` (θ first).
     pub fn log_theta(&self, x: &[f64]) -> Vec<f64> {
         let mut log = x[self.theta.clone()].to_vec();
-        for &(r1, d1) in &self.share {
-            let (u, v) = (x[r1], x[d1]);
-            log[r1] = u - softplus(v);
-            log[d1] = u - softplus(-v);
-        }
-        if let Some(h) = &self.hardening {
-            h.log_theta(x, &mut log);
+        match &self.hardening {
+            Some(h) => h.log_theta(x, &mut log),
+            None => {
+                for &(r1, d1) in &self.share {
+                    (log[r1], log[d1]) = parts(x[r1], x[d1]);
+                }
+            }
         }
         log
     }
@@ -310,13 +322,13 @@ impl Layout {
     /// The sampler's θ coordinates of ln θ (inverse of [`Self::log_theta`]).
     pub fn theta_coordinates(&self, log_theta: &[f64]) -> Vec<f64> {
         let mut x = log_theta.to_vec();
-        for &(r1, d1) in &self.share {
-            let (a, b) = (log_theta[r1], log_theta[d1]);
-            x[r1] = a.max(b) + (-(a - b).abs()).exp().ln_1p();
-            x[d1] = b - a;
-        }
-        if let Some(h) = &self.hardening {
-            h.coordinates(log_theta, &mut x);
+        match &self.hardening {
+            Some(h) => h.coordinates(log_theta, &mut x),
+            None => {
+                for &(r1, d1) in &self.share {
+                    (x[r1], x[d1]) = sum_and_share(log_theta[r1], log_theta[d1]);
+                }
+            }
         }
         x
     }
