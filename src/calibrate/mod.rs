@@ -169,7 +169,9 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
             resumed
         }
         None => {
-            let init = map::initial_walkers(posterior, &start.map, s.walkers * s.ensembles, s.seed);
+            let surrogate = map::laplace(posterior, &start.map);
+            let laplace = crate::posterior::mode::newton(posterior, &surrogate).map_or(surrogate, |m| m.laplace);
+            let init = map::initial_walkers(posterior, &laplace, s.walkers * s.ensembles, s.seed);
             Sampler::new(posterior, sampler_settings, &init)?
         }
     };

@@ -216,12 +216,28 @@ fn jacobian(post: &Posterior, whitening: &Whitening, x: &[f64], support: Support
 /// Then sets the noise coordinates from the residuals at the optimum and
 /// computes the Laplace covariance (JᵀJ)⁻¹ of θ in the layout's own.
 pub fn refine(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
+    refine_fitting(post, start, SETTLING_FITS)
+}
+
+/// Levenberg-Marquardt fits at most, each with the noise profiled afresh,
+/// until the noise scales settle.
+const SETTLING_FITS: usize = 4;
+
+/// One Levenberg-Marquardt fit from `start` with the noise profiled there:
+/// a point in the basin of the posterior's mode, with its Gauss-Newton
+/// curvature, for [`super::mode::newton`] to finish (which reaches the
+/// mode itself, where the noise's dependence on θ moves it).
+pub fn basin(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
+    refine_fitting(post, start, 1).filter(|m| m.log_density.is_finite())
+}
+
+fn refine_fitting(post: &Posterior, start: &[f64], fits: usize) -> Option<MapEstimate> {
     let nt = post.layout.fitted.len();
     let searched = post.layout.searched().map(|layout| Posterior { layout, ..post.clone() });
     let search = searched.as_ref().unwrap_or(post);
     let mut x: Vec<f64> = start[..nt].to_vec();
     carry(&mut x, &post.layout, &search.layout);
-    let Found { mut x, whitening, converged } = search_from(search, x)?;
+    let Found { mut x, whitening, converged } = search_from(search, x, fits)?;
     carry(&mut x, &search.layout, &post.layout);
     let jac = jacobian(post, &whitening, &x, Support::Truncated)?;
     let cov = (jac.transpose() * &jac).try_inverse()?;
@@ -247,7 +263,7 @@ struct Found {
 }
 
 /// The Levenberg-Marquardt search of [`refine`] from the fitted point `x`.
-fn search_from(post: &Posterior, mut x: Vec<f64>) -> Option<Found> {
+fn search_from(post: &Posterior, mut x: Vec<f64>, fits: usize) -> Option<Found> {
     let whitening_of = |profiles: Vec<Profile>| -> (Vec<f64>, Vec<Arc<dyn Whiten>>) { profiles.into_iter().map(|p| (p.scale, p.whitening)).unzip() };
     let (mut scales, mut whitening) = whitening_of(profiles(post, &x)?);
     let mut converged = false;
@@ -263,7 +279,7 @@ fn search_from(post: &Posterior, mut x: Vec<f64>) -> Option<Found> {
             x[post.layout.theta.clone()].copy_from_slice(&post.layout.theta_coordinates(&inside));
             (scales, whitening) = whitening_of(profiles(post, &x)?);
         }
-        for _ in 0..4 {
+        for _ in 0..fits {
             let f = |p: &[f64]| whitened(post, &whitening, p, support);
             let j = |p: &[f64]| jacobian(post, &whitening, p, support);
             let fit = least_squares(&x, &f, Some(&j));
@@ -447,23 +463,23 @@ pub fn euler_steps(post: &Posterior, x: &[f64]) -> u64 {
 /// onto the posterior, not ones that started on it.
 const START_SPREAD: f64 = 1.0;
 
-/// Initial walker positions from the [`laplace`] approximation, spread by
-/// [`START_SPREAD`], every one with a finite log-density (redrawn up to 100
-/// times, then a tiny ball around the MAP).
-pub fn initial_walkers(post: &Posterior, map: &MapEstimate, count: usize, seed: u64) -> Vec<Vec<f64>> {
+/// Initial walker positions from a Gaussian approximation of the
+/// posterior (the [`laplace`] one, say), spread by [`START_SPREAD`], every
+/// one with a finite log-density (redrawn up to 100 times, then a tiny ball
+/// around its mean).
+pub fn initial_walkers(post: &Posterior, start: &Elliptical, count: usize, seed: u64) -> Vec<Vec<f64>> {
     let d = post.dim();
-    let laplace = laplace(post, map);
     (0..count)
         .map(|c| {
             let mut rng = crate::rng::stream(seed, &[u64::MAX - 1, c as u64]);
             for attempt in 0..100 {
                 let z: Vec<f64> = (0..d).map(|_| StandardNormal.sample(&mut rng)).collect();
-                let x = laplace.point(&z, if attempt < 90 { START_SPREAD } else { 1e-4 });
+                let x = start.point(&z, if attempt < 90 { START_SPREAD } else { 1e-4 });
                 if post.log_density(&x).is_finite() {
                     return x;
                 }
             }
-            map.x.clone()
+            start.mean.as_slice().to_vec()
         })
         .collect()
 }

@@ -9,6 +9,8 @@
 //!   whose residuals the noise model ([`crate::noise`]) scores;
 //! * [`prior`]: priors of θ;
 //! * [`map`]: the start of sampling: MAP, Laplace approximation, step rule;
+//! * [`mode`]: the mode and curvature of the log-density itself, from the
+//!   MAP's Laplace approximation by Newton's method;
 //! * [`sample`]: a posterior sample in SI units and its draws.
 //!
 //! The model side knows nothing of MCMC: the likelihood integrates the B-P
@@ -17,6 +19,7 @@
 pub mod layout;
 pub mod likelihood;
 pub mod map;
+pub mod mode;
 pub mod parameters;
 pub mod prior;
 pub mod sample;

@@ -20,3 +20,17 @@ pub trait LogDensity: Sync {
         }
     }
 }
+
+/// Points evaluated together in one [`LogDensity::log_density_batch`] call
+/// by [`log_densities`]: fixed, so that no result depends on the threads.
+const BATCH: usize = 8;
+
+/// The log-densities at `points` (each `target.dim()` coordinates, one
+/// after another), batches of [`BATCH`] evaluated in parallel.
+pub fn log_densities(target: &impl LogDensity, points: &[f64]) -> Vec<f64> {
+    use rayon::prelude::*;
+    let d = target.dim().max(1);
+    let mut out = vec![0.0; points.len() / d];
+    points.par_chunks(BATCH * d).zip(out.par_chunks_mut(BATCH)).for_each(|(x, o)| target.log_density_batch(x, o));
+    out
+}

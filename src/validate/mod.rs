@@ -6,9 +6,10 @@
 //! 1/p(y_j | θ), the run's likelihood with its noise level profiled out. A
 //! run that carries so much of the information that these weights cannot be
 //! trusted (k̂ > 0.7) is reached by importance sampling from the Laplace
-//! approximation of the posterior without it (a Student-t about its MAP,
-//! searched from the reweighted draws' mean), and where that k̂ is too large
-//! too, by sampling that posterior afresh. The held-out run's noise is not
+//! approximation of the posterior without it (a Student-t about its mode,
+//! found by Newton's method on the log-density, [`crate::posterior::mode`],
+//! from one Levenberg-Marquardt fit started at the reweighted draws' mean),
+//! and where that k̂ is too large too, by sampling that posterior afresh. The held-out run's noise is not
 //! known to that posterior; the prediction pools the other runs' at the
 //! run's current ([`crate::posterior::Layout::noise_at_current`]).
 
@@ -25,8 +26,8 @@ use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
 use crate::data::{RecordPart, RunData};
-use crate::posterior::map::{self, MapEstimate};
-use crate::model::LANES;
+use crate::posterior::map;
+use crate::posterior::mode;
 use crate::posterior::{Draw, Draws, Posterior};
 use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictOptions, PredictSettings, RunBands, RunPrediction};
 use crate::sampler::elliptical::t_factor;
@@ -73,7 +74,7 @@ pub enum HeldOutBy {
     /// The full posterior's draws, Pareto-smoothed importance weights.
     Reweighting,
     /// Importance sampling from the Laplace approximation of the held-out
-    /// posterior (a Student-t around its MAP), moved to the weighted draws'
+    /// posterior (a Student-t around its mode), moved to the weighted draws'
     /// moments where its weights cannot be trusted; Pareto-smoothed.
     LaplaceImportance,
     /// Ensemble MCMC of the held-out posterior.
@@ -188,18 +189,19 @@ enum Weighed<'a> {
 }
 
 /// A held-out run whose importance weights cannot be trusted: its
-/// posterior without the run, that posterior's MAP, and the row so far.
+/// posterior without the run, that posterior's Laplace approximation, and
+/// the row so far.
 struct Pending<'a> {
     target: Target<'a>,
     posterior: Posterior,
-    map: MapEstimate,
+    laplace: Elliptical,
     row: LooRow,
 }
 
 impl Pending<'_> {
     /// 3. the held-out posterior sampled afresh.
     fn sample(mut self: Box<Self>, settings: &CalibrationSettings, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<HeldOut> {
-        let (prediction, max_rhat) = sample_afresh(&self.target, &self.posterior, &self.map, settings, loo, observe)?;
+        let (prediction, max_rhat) = sample_afresh(&self.target, &self.posterior, &self.laplace, settings, loo, observe)?;
         (self.row.by, self.row.max_rhat) = (HeldOutBy::Sampling, max_rhat);
         self.row.coverage = prediction.coverage.clone();
         Ok(HeldOut { prediction, row: self.row })
@@ -233,20 +235,24 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         let draws: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw_without(s, c, left_out.id(), current)).collect();
         target.weighted_bands(&draws, &paths, &reweighted.weights, loo.draws)?
     } else {
-        // 2. and 3. need the held-out posterior, from the weighted draws' mean
+        // 2. and 3. need the held-out posterior and its Laplace
+        // approximation: Newton's method on its log-density from the basin
+        // of its mode, searched from the weighted draws' mean
         let kept = full.campaign.filtered(|r| r.id() != left_out.id());
         let posterior = settings.posterior(&kept, target.predict.integrator);
         let start = weighted_mean_theta(full, &posterior, &positions, &reweighted.weights);
-        let map = map::best_map(&posterior, &[start])
+        let map = map::basin(&posterior, &start)
             .ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the MAP search failed", left_out.id())))?;
-        let (k_hat, by_laplace) = laplace_importance(&target, &posterior, &map, settings.sampler.seed, loo)?;
+        let surrogate = map::laplace(&posterior, &map);
+        let laplace = mode::newton(&posterior, &surrogate).map_or(surrogate, |m| m.laplace);
+        let (k_hat, by_laplace) = laplace_importance(&target, &posterior, &laplace, settings.sampler.seed, loo)?;
         row.pareto_k_laplace = k_hat;
         match by_laplace {
             Some(prediction) => {
                 row.by = HeldOutBy::LaplaceImportance;
                 prediction
             }
-            None => return Ok(Weighed::ToSample(Box::new(Pending { target, posterior, map, row }))),
+            None => return Ok(Weighed::ToSample(Box::new(Pending { target, posterior, laplace, row }))),
         }
     };
     row.coverage = prediction.coverage.clone();
@@ -254,13 +260,13 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
 }
 
 /// Importance sampling from the held-out posterior's Laplace approximation
-/// around its MAP, adapted where its weights cannot be trusted: the
+/// around its mode, adapted where its weights cannot be trusted: the
 /// proposal moved to the weighted draws' mean and covariance and drawn
 /// again, up to [`ADAPTATIONS`] times (adaptive importance sampling by
 /// moment matching). The last k̂, and the prediction if its weights can be
 /// trusted.
-fn laplace_importance(target: &Target, posterior: &Posterior, map: &MapEstimate, seed: u64, loo: &LooSettings) -> Result<(f64, Option<RunPrediction>)> {
-    let mut proposal = map::laplace(posterior, map);
+fn laplace_importance(target: &Target, posterior: &Posterior, laplace: &Elliptical, seed: u64, loo: &LooSettings) -> Result<(f64, Option<RunPrediction>)> {
+    let mut proposal = laplace.clone();
     let mut round = 0;
     loop {
         // the first round on the stream it always had
@@ -313,19 +319,19 @@ fn weighted_moments(points: &[Vec<f64>], weights: &[f64]) -> Option<Elliptical> 
     Elliptical::new(Moments::weighted(points.iter().map(Vec::as_slice).zip(weights.iter().copied()), d))
 }
 
-/// The held-out posterior sampled afresh, from walkers around its MAP, on
+/// The held-out posterior sampled afresh, from walkers around its mode, on
 /// a random stream of its own: the prediction and the largest R̂.
 fn sample_afresh(
     target: &Target,
     posterior: &Posterior,
-    map: &MapEstimate,
+    laplace: &Elliptical,
     settings: &CalibrationSettings,
     loo: &LooSettings,
     observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>,
 ) -> Result<(RunPrediction, f64)> {
     let s = &settings.sampler;
     let seed = s.seed ^ (0x100 + target.j as u64);
-    let init = map::initial_walkers(posterior, map, s.walkers * s.ensembles, seed);
+    let init = map::initial_walkers(posterior, laplace, s.walkers * s.ensembles, seed);
     let mut observers = observe(target.run.id());
     let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
     let mut sampler = Sampler::new(posterior, s.sampler(s.walkers, seed), &init)?;
@@ -356,10 +362,7 @@ fn weighted_mean_theta(full: &Full, posterior: &Posterior, positions: &[(usize, 
 /// Log-densities of `points`, in parallel batches.
 fn log_densities(posterior: &impl LogDensity, points: &[Vec<f64>]) -> Vec<f64> {
     let flat: Vec<f64> = points.iter().flatten().copied().collect();
-    let d = posterior.dim();
-    let mut out = vec![0.0; points.len()];
-    flat.par_chunks(LANES * d).zip(out.par_chunks_mut(LANES)).for_each(|(x, o)| posterior.log_density_batch(x, o));
-    out
+    crate::sampler::density::log_densities(posterior, &flat)
 }
 
 /// The draw at coordinates `x` of a posterior that did not see the run:
