@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use crate::data::{Campaign, Geometry, Manifest};
 use crate::error::{Error, Result};
-use crate::posterior::map;
+use crate::posterior::{map, mode};
 use crate::posterior::{Draws, PosteriorSample, SummaryRow};
 use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
@@ -169,8 +169,7 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
             resumed
         }
         None => {
-            let surrogate = map::laplace(posterior, &start.map);
-            let laplace = crate::posterior::mode::newton(posterior, &surrogate).map_or(surrogate, |m| m.laplace);
+            let laplace = mode::laplace_from(posterior, &start.map);
             let init = map::initial_walkers(posterior, &laplace, s.walkers * s.ensembles, s.seed);
             Sampler::new(posterior, sampler_settings, &init)?
         }

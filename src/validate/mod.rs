@@ -9,9 +9,9 @@
 //! approximation of the posterior without it (a Student-t about its mode,
 //! found by Newton's method on the log-density, [`crate::posterior::mode`],
 //! from one Levenberg-Marquardt fit started at the reweighted draws' mean),
-//! and where that k̂ is too large too, by sampling that posterior afresh. The held-out run's noise is not
-//! known to that posterior; the prediction pools the other runs' at the
-//! run's current ([`crate::posterior::Layout::noise_at_current`]).
+//! and where that k̂ is too large too, by sampling that posterior afresh.
+//! The held-out run's noise is not known to that posterior; the prediction
+//! pools the other runs' at the run's current ([`crate::posterior::Layout::noise_at_current`]).
 
 pub mod consistency;
 pub mod psis;
@@ -243,8 +243,7 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         let start = weighted_mean_theta(full, &posterior, &positions, &reweighted.weights);
         let map = map::basin(&posterior, &start)
             .ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the MAP search failed", left_out.id())))?;
-        let surrogate = map::laplace(&posterior, &map);
-        let laplace = mode::newton(&posterior, &surrogate).map_or(surrogate, |m| m.laplace);
+        let laplace = mode::laplace_from(&posterior, &map);
         let (k_hat, by_laplace) = laplace_importance(&target, &posterior, &laplace, settings.sampler.seed, loo)?;
         row.pareto_k_laplace = k_hat;
         match by_laplace {
