@@ -5,7 +5,7 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use mrbp::model::{Integrator, Params, Scheme};
-use mrbp::sampler::{LogDensity, Move, RunControl, Sampler, SamplerSettings};
+use mrbp::sampler::{Elliptical, LogDensity, Moments, Move, RunControl, Sampler, SamplerSettings};
 
 /// Best of `repeats` timings of `f`, in seconds.
 fn best_of(repeats: usize, mut f: impl FnMut()) -> f64 {
@@ -87,11 +87,14 @@ fn sampler_overhead() {
     let mixtures = [
         ("DE 0.8 + snooker 0.2", vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)]),
         ("independence 0.9 + DE 0.1", vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)]),
+        ("anchored 0.9 + DE 0.1 (the default)", vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)]),
     ];
+    // the anchored move's reference: the target itself, N(0, I)
+    let reference = Elliptical::new(Moments { mean: nalgebra::DVector::zeros(10), cov: nalgebra::DMatrix::identity(10, 10) }).unwrap();
     for (name, moves) in mixtures {
         let settings = SamplerSettings { moves, ..SamplerSettings::default() };
         let secs = best_of(3, || {
-            let mut s = Sampler::new(&Cheap, settings.clone(), &init).unwrap();
+            let mut s = Sampler::new(&Cheap, settings.clone(), &init).unwrap().with_reference(reference.clone());
             s.run(&RunControl::fixed(steps), &mut []).unwrap();
             black_box(s.chains.positions.len());
         });

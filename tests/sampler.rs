@@ -3,7 +3,7 @@
 //! effective sample size; seeds are fixed.
 
 use mrbp::sampler::diagnostics::{ess_bulk, ess_tail, quantile};
-use mrbp::sampler::{Checkpointer, Diagnostics, LogDensity, Move, RunControl, Sampler, SamplerSettings};
+use mrbp::sampler::{Checkpointer, Diagnostics, Elliptical, LogDensity, Moments, Move, RunControl, Sampler, SamplerSettings};
 use nalgebra::{DMatrix, DVector};
 
 /// Tolerance in Monte Carlo standard errors: a correct sampler fails a single
@@ -48,6 +48,18 @@ fn pooled(traces: &[Vec<f64>]) -> Vec<f64> {
 }
 
 fn check_gaussian(moves: Vec<(Move, f64)>, steps: usize) {
+    check_gaussian_with(moves, steps, None);
+}
+
+/// A reference distribution of `d` coordinates: `mean` for every
+/// coordinate, covariance `cov`.
+fn reference(mean: &[f64], cov: DMatrix<f64>) -> Elliptical {
+    Elliptical::new(Moments { mean: DVector::from_column_slice(mean), cov }).unwrap()
+}
+
+/// [`check_gaussian`] with the sampler given a fixed `reference` for the
+/// anchored move.
+fn check_gaussian_with(moves: Vec<(Move, f64)>, steps: usize, reference: Option<Elliptical>) {
     let d = 10;
     let cov = correlated_covariance(d);
     let target = Gaussian {
@@ -61,6 +73,9 @@ fn check_gaussian(moves: Vec<(Move, f64)>, steps: usize) {
     };
     let init = start_ball(d, 128, &vec![0.0; d], 1.0);
     let mut s = Sampler::new(&target, settings, &init).unwrap();
+    if let Some(r) = reference {
+        s = s.with_reference(r);
+    }
     // run until converged (≥ 50 τ, R̂ < 1.01, τ stable), within a budget
     let control = RunControl {
         until_converged: true,
@@ -103,6 +118,20 @@ fn correlated_gaussian_10d_independence_mixture() {
     check_gaussian(vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)], 5000);
 }
 
+/// The calibration's default mixture: the independence move anchored on a
+/// reference, here a poor one (each variance off by a factor 2 or 1/2 in
+/// turn, the mean 0.5 sd off): the chain must stay exact whatever the
+/// reference.
+#[test]
+fn correlated_gaussian_10d_anchored_mixture() {
+    let d = 10;
+    let cov = correlated_covariance(d);
+    let scale = DVector::from_fn(d, |i, _| 2f64.powi(i as i32 % 3 - 1).sqrt());
+    let wrong = DMatrix::from_diagonal(&scale) * &cov * DMatrix::from_diagonal(&scale);
+    let mean: Vec<f64> = (0..d).map(|i| 0.5 * cov[(i, i)].sqrt()).collect();
+    check_gaussian_with(vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 5000, Some(reference(&mean, wrong)));
+}
+
 /// The history move: a Student-t mixture fitted to each ensemble's past
 /// steps, with a little DE.
 #[test]
@@ -141,10 +170,25 @@ fn rosenbrock_banana_with_history_mixture() {
     banana_moments(vec![(Move::history(), 0.8), (Move::differential_evolution(), 0.2)], 6000);
 }
 
+/// The anchored move on the banana, its reference a Gaussian at the mode
+/// that knows nothing of the curve.
+#[test]
+fn rosenbrock_banana_with_anchored_mixture() {
+    let r = reference(&[1.0, 1.0], DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 4.0])));
+    banana_moments_with(vec![(Move::anchored(), 0.7), (Move::differential_evolution(), 0.3)], 10000, Some(r));
+}
+
 fn banana_moments(moves: Vec<(Move, f64)>, steps: usize) {
+    banana_moments_with(moves, steps, None);
+}
+
+fn banana_moments_with(moves: Vec<(Move, f64)>, steps: usize, reference: Option<Elliptical>) {
     let settings = SamplerSettings { walkers: 32, ensembles: 4, moves, seed: 3 };
     let init = start_ball(2, 128, &[1.0, 1.0], 0.1);
     let mut s = Sampler::new(&Banana, settings, &init).unwrap();
+    if let Some(r) = reference {
+        s = s.with_reference(r);
+    }
     s.run(&RunControl::fixed(steps), &mut []).unwrap();
     let diag = s.diagnostics();
     assert!(diag.converged(400.0), "{:?}", diag.warnings);
@@ -193,6 +237,13 @@ fn lognormal_quantiles() {
 fn lognormal_quantiles_with_independence_mixture() {
     let dist = statrs::distribution::LogNormal::new(0.0, 1.0).unwrap();
     check_quantiles(&LogNormal2, &dist, vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+}
+
+#[test]
+fn lognormal_quantiles_with_anchored_mixture() {
+    let dist = statrs::distribution::LogNormal::new(0.0, 1.0).unwrap();
+    let r = reference(&[1.0, 1.0], DMatrix::identity(2, 2));
+    check_quantiles_with(&LogNormal2, &dist, vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000, Some(r));
 }
 
 #[test]
@@ -266,6 +317,12 @@ fn truncated_quantiles_with_independence_mixture() {
 }
 
 #[test]
+fn truncated_quantiles_with_anchored_mixture() {
+    let r = reference(&[0.9, 0.9], DMatrix::identity(2, 2) * 0.25);
+    check_quantiles_with(&Truncated2, &TruncatedNormal, vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000, Some(r));
+}
+
+#[test]
 fn truncated_quantiles_with_history_mixture() {
     check_quantiles(&Truncated2, &TruncatedNormal, vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
 }
@@ -291,6 +348,13 @@ impl LogDensity for StudentT2 {
 }
 
 #[test]
+fn heavy_tailed_quantiles_with_anchored_mixture() {
+    let dist = statrs::distribution::StudentsT::new(0.0, 1.0, 3.0).unwrap();
+    let r = reference(&[0.0, 0.0], DMatrix::identity(2, 2));
+    check_quantiles_with(&StudentT2, &dist, vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000, Some(r));
+}
+
+#[test]
 fn heavy_tailed_quantiles_with_independence_mixture() {
     let dist = statrs::distribution::StudentsT::new(0.0, 1.0, 3.0).unwrap();
     check_quantiles(&StudentT2, &dist, vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
@@ -302,9 +366,20 @@ fn check_quantiles<D>(target: &impl LogDensity, dist: &D, moves: Vec<(Move, f64)
 where
     D: statrs::distribution::Continuous<f64, f64> + statrs::distribution::ContinuousCDF<f64, f64>,
 {
+    check_quantiles_with(target, dist, moves, walkers, steps, None);
+}
+
+/// [`check_quantiles`] with a fixed `reference` for the anchored move.
+fn check_quantiles_with<D>(target: &impl LogDensity, dist: &D, moves: Vec<(Move, f64)>, walkers: usize, steps: usize, reference: Option<Elliptical>)
+where
+    D: statrs::distribution::Continuous<f64, f64> + statrs::distribution::ContinuousCDF<f64, f64>,
+{
     let settings = SamplerSettings { walkers, ensembles: 4, moves: moves.clone(), seed: 8 };
     let init = start_ball(2, 4 * walkers, &[1.0, 1.0], 0.2);
     let mut s = Sampler::new(target, settings, &init).unwrap();
+    if let Some(r) = reference {
+        s = s.with_reference(r);
+    }
     s.run(&RunControl::fixed(steps), &mut []).unwrap();
     let diag = s.diagnostics();
     assert!(diag.converged(400.0), "{moves:?}: {:?}", diag.warnings);
@@ -328,11 +403,18 @@ fn small_run(threads: usize, steps: usize) -> Vec<f64> {
         let settings = SamplerSettings {
             walkers: 8,
             ensembles: 3,
-            moves: vec![(Move::Stretch { a: 2.0 }, 0.3), (Move::differential_evolution(), 0.2), (Move::snooker(), 0.2), (Move::independence(), 0.1), (Move::history(), 0.2)],
+            moves: vec![
+                (Move::Stretch { a: 2.0 }, 0.3),
+                (Move::differential_evolution(), 0.2),
+                (Move::snooker(), 0.2),
+                (Move::independence(), 0.1),
+                (Move::history(), 0.1),
+                (Move::anchored(), 0.1),
+            ],
             seed: 42,
         };
         let init = start_ball(2, 24, &[1.0, 1.0], 0.1);
-        let mut s = Sampler::new(&Banana, settings, &init).unwrap();
+        let mut s = Sampler::new(&Banana, settings, &init).unwrap().with_reference(reference(&[1.0, 1.0], DMatrix::identity(2, 2)));
         s.run(&RunControl::fixed(steps), &mut []).unwrap();
         s.chains.positions.clone()
     })

@@ -160,7 +160,11 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
     let posterior = &start.posterior;
     let s = &start.settings.sampler;
     let sampler_settings = s.sampler(s.walkers, s.seed);
-    let mut sampler = match resume_from {
+    // the walkers start about the Laplace approximation at the mode, and
+    // the anchored move proposes with it (a function of the start alone, so
+    // a resumed run has the same)
+    let laplace = mode::laplace_from(posterior, &start.map);
+    let sampler = match resume_from {
         Some(path) => {
             let resumed = Sampler::resume(posterior, path)?;
             if resumed.settings != sampler_settings {
@@ -169,11 +173,11 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
             resumed
         }
         None => {
-            let laplace = mode::laplace_from(posterior, &start.map);
             let init = map::initial_walkers(posterior, &laplace, s.walkers * s.ensembles, s.seed);
             Sampler::new(posterior, sampler_settings, &init)?
         }
     };
+    let mut sampler = sampler.with_reference(laplace);
     let sampled = sampling::run(posterior, &mut sampler, &s.control(), s.burn_in, observers)?;
     let record = CalibrationRecord::of(campaign, &start, &sampled);
     let calibration = Calibration {

@@ -137,7 +137,7 @@ impl Default for SamplingSettings {
             walkers: 0,
             ensembles: 4,
             seed: 1,
-            moves: vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)],
+            moves: vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)],
             steps: 0,
             max_steps: 5_000,
             min_ess: 400.0,

@@ -9,8 +9,9 @@ use rayon::prelude::*;
 use super::chains::Chains;
 use super::checkpoint;
 use super::diagnostics::Diagnostics;
+use super::elliptical::Elliptical;
 use super::moves::mixture::last_fit_step;
-use super::moves::{Mixture, Move};
+use super::moves::{Fit, Mixture, Move};
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
 use super::stranded;
@@ -78,6 +79,9 @@ pub struct Sampler<'t, T: LogDensity> {
     /// Each ensemble's mixture fitted to its history, and the step of the
     /// fit (0: none yet), for [`Move::History`].
     history: (usize, Vec<Option<Mixture>>),
+    /// A fixed distribution close to the target (the Laplace approximation
+    /// at the mode), for [`Move::Anchored`].
+    reference: Option<Elliptical>,
 }
 
 impl<'t, T: LogDensity> Sampler<'t, T> {
@@ -119,6 +123,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 accepted: vec![false; nc],
                 },
             history: (0, vec![None; settings.ensembles]),
+            reference: None,
             settings,
         })
     }
@@ -128,7 +133,15 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let (settings, chains) = checkpoint::load(path, target.dim())?;
         settings.check(target.dim())?;
         let history = (0, vec![None; settings.ensembles]);
-        Ok(Sampler { target, settings, chains, history })
+        Ok(Sampler { target, settings, chains, history, reference: None })
+    }
+
+    /// The sampler with a fixed reference distribution for
+    /// [`Move::Anchored`] (in the sampler's coordinates); a reference of
+    /// another dimension is ignored.
+    pub fn with_reference(mut self, reference: Elliptical) -> Self {
+        self.reference = (reference.dim() == self.chains.dim).then_some(reference);
+        self
     }
 
     /// Steps until `control` says stop, telling `observers` what happens;
@@ -201,6 +214,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let moves: Vec<Move> = (0..ne).map(|e| self.pick_move(e as u64, step)).collect();
         self.fit_history(step as usize);
         let history = &self.history.1;
+        let reference = self.reference.as_ref();
         let mut pos = self.chains.last_positions().to_vec();
         let mut lp = self.chains.last_log_prob().to_vec();
         for redraw in stranded::due(&self.chains, step as usize) {
@@ -213,6 +227,13 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             let movers: Vec<usize> = (0..ne).flat_map(|e| (0..half).map(move |w| e * nw + h * half + w)).collect();
             let snapshot = &pos;
             let target = self.target;
+            // each ensemble's move fitted once to its other half
+            let fits: Vec<Fit> = (0..ne)
+                .map(|e| {
+                    let other_start = e * nw + (1 - h) * half;
+                    moves[e].fit(&snapshot[other_start * d..(other_start + half) * d], d, history[e].as_ref(), reference)
+                })
+                .collect();
             let results: Vec<(Vec<f64>, Vec<f64>, Vec<bool>)> = movers
                 .par_chunks(BATCH)
                 .map(|chunk| {
@@ -224,13 +245,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                         let other_start = e * nw + (1 - h) * half;
                         let others = &snapshot[other_start * d..(other_start + half) * d];
                         let mut rng = crate::rng::stream(seed, &[e as u64, step, w as u64]);
-                        factors[k] = moves[e].propose(
-                            &snapshot[c * d..(c + 1) * d],
-                            others,
-                            history[e].as_ref(),
-                            &mut rng,
-                            &mut proposals[k * d..(k + 1) * d],
-                        );
+                        factors[k] = moves[e].propose(&fits[e], &snapshot[c * d..(c + 1) * d], others, &mut rng, &mut proposals[k * d..(k + 1) * d]);
                         log_u[k] = rng.random::<f64>().ln();
                     }
                     let mut new_lp = vec![0.0; chunk.len()];

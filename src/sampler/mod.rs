@@ -2,7 +2,8 @@
 //! over any log-density.
 //!
 //! * [`density`]: what a target implements ([`LogDensity`]: one point, or a batch);
-//! * [`moves`]: the stretch, differential-evolution, snooker and independence moves;
+//! * [`moves`]: the stretch, differential-evolution, snooker, independence,
+//!   history and anchored moves;
 //! * [`elliptical`]: a Student-t or Gaussian fitted to points (the
 //!   independence proposals, the Laplace approximation);
 //! * [`ensemble`]: several independent ensembles stepped with the parallel

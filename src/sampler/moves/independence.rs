@@ -22,11 +22,12 @@ pub(super) fn fitted(others: &[f64], d: usize) -> Option<Elliptical> {
     Elliptical::or_diagonal(Moments::of(others, d).ridged(RIDGE)?, n)
 }
 
-/// y from the Student-t (`df`; Gaussian without) fitted to `others`, its
-/// covariance scaled by `scale`²; the factor q(x)/q(y).
-pub fn propose(df: Option<f64>, scale: f64, x: &[f64], others: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
-    let Some(fit) = fitted(others, x.len()) else {
-        // a degenerate half (every walker at one point): stay
+/// y from `fit`, the Student-t (`df`; Gaussian without) fitted to the
+/// complementary half by [`fitted`], its covariance scaled by `scale`²; the
+/// factor q(x)/q(y). Without a fit (a degenerate half: every walker at one
+/// point) the walker stays.
+pub fn propose(df: Option<f64>, scale: f64, fit: Option<&Elliptical>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+    let Some(fit) = fit else {
         y.copy_from_slice(x);
         return 0.0;
     };
@@ -45,8 +46,8 @@ mod tests {
         let mut rng = crate::rng::stream(5, &[]);
         let x = [0.3, -0.2];
         let mut y = [0.0; 2];
-        let f = propose(Some(5.0), 1.2, &x, &others, &mut rng, &mut y);
         let fit = fitted(&others, 2).unwrap();
+        let f = propose(Some(5.0), 1.2, Some(&fit), &x, &mut rng, &mut y);
         let expected = fit.log_kernel(Some(5.0), &x, 1.2) - fit.log_kernel(Some(5.0), &y, 1.2);
         assert!((f - expected).abs() < 1e-12);
     }

@@ -147,9 +147,15 @@ impl Mixture {
         pick.shape.draw(df, 1.0, rng, y);
     }
 
+    /// The equal-weight mixture of `parts`.
+    pub(super) fn equal(parts: Vec<Elliptical>) -> Mixture {
+        let log_weight = -(parts.len() as f64).ln();
+        Mixture { components: parts.into_iter().map(|shape| Component { log_weight, shape }).collect() }
+    }
+
     /// One component: the mean and covariance of `points` (each of `d`
     /// coordinates), as the independence move fits the complementary half.
-    fn of_points(points: &[f64], d: usize) -> Option<Mixture> {
+    pub(super) fn of_points(points: &[f64], d: usize) -> Option<Mixture> {
         if points.len() < 2 * d {
             return None;
         }
@@ -165,10 +171,10 @@ impl Mixture {
 pub const HISTORY_SHARE: f64 = 0.7;
 
 /// The proposal: y from the history's mixture (share [`HISTORY_SHARE`])
-/// or from the complementary half's fit `others`; factor q(x)/q(y) of the
-/// two together.
-pub fn propose(history: &Mixture, df: Option<f64>, x: &[f64], others: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
-    let Some(current) = Mixture::of_points(others, x.len()) else {
+/// or from `current`, the complementary half's fit ([`Mixture::of_points`]);
+/// factor q(x)/q(y) of the two together.
+pub fn propose(history: &Mixture, current: Option<&Mixture>, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+    let Some(current) = current else {
         history.draw(df, rng, y);
         return history.log_q(df, x) - history.log_q(df, y);
     };

@@ -3,6 +3,7 @@
 //! half moves, which keeps every move exact), writes the proposal and
 //! returns the log of its Metropolis-Hastings correction factor.
 
+mod anchored;
 mod differential_evolution;
 mod independence;
 pub mod mixture;
@@ -10,6 +11,8 @@ mod snooker;
 mod stretch;
 
 pub use mixture::Mixture;
+
+use super::elliptical::Elliptical;
 
 use serde::{Deserialize, Serialize};
 
@@ -38,6 +41,14 @@ pub enum Move {
     /// blended with the complementary half's fit ([`mixture`]); factor
     /// q(x)/q(y). Before the first fit, [`Move::Independence`].
     History { df: Option<f64> },
+    /// The independence proposal anchored on a fixed reference (the
+    /// calibration's Laplace approximation at the mode): an equal mixture
+    /// of the complementary half's Student-t (`df`; Gaussian without) and
+    /// one with the half's covariance taken in the reference's whitened
+    /// coordinates, its off-diagonal part shrunk by the Ledoit–Wolf weight
+    /// ([`anchored`]); factor q(x)/q(y). Without a reference,
+    /// [`Move::Independence`] with scale 1.
+    Anchored { df: Option<f64> },
 }
 
 impl Default for Move {
@@ -63,11 +74,15 @@ impl Move {
         Move::History { df: Some(10.0) }
     }
 
+    pub fn anchored() -> Self {
+        Move::Anchored { df: Some(10.0) }
+    }
+
     /// Smallest complementary half the move can work with.
     pub fn min_complement(&self) -> usize {
         match self {
             Move::Stretch { .. } => 1,
-            Move::DifferentialEvolution { .. } | Move::Independence { .. } | Move::History { .. } => 2,
+            Move::DifferentialEvolution { .. } | Move::Independence { .. } | Move::History { .. } | Move::Anchored { .. } => 2,
             Move::Snooker { .. } => 3,
         }
     }
@@ -78,7 +93,7 @@ impl Move {
             Move::DifferentialEvolution { gamma0: Some(g), .. } if !(g > 0.0) => Err(format!("DE gamma0 = {g} must be positive")),
             Move::DifferentialEvolution { sigma, .. } if !(sigma >= 0.0) => Err(format!("DE sigma = {sigma} must be non-negative")),
             Move::Snooker { gamma } if !(gamma > 0.0) => Err(format!("snooker gamma = {gamma} must be positive")),
-            Move::Independence { df: Some(df), .. } | Move::History { df: Some(df) } if !(df > 0.0) => Err(format!("independence df = {df} must be positive")),
+            Move::Independence { df: Some(df), .. } | Move::History { df: Some(df) } | Move::Anchored { df: Some(df) } if !(df > 0.0) => Err(format!("independence df = {df} must be positive")),
             Move::Independence { scale, .. } if !(scale > 0.0 && scale.is_finite()) => {
                 Err(format!("independence scale = {scale} must be positive"))
             }
@@ -91,22 +106,68 @@ impl Move {
         matches!(self, Move::History { .. })
     }
 
-    /// Writes the proposal for walker position `x` into `y`, with the other
-    /// half of the ensemble `others` (points of `x.len()` coordinates one
-    /// after another) and the mixture fitted to the ensemble's history, if
-    /// there is one yet; returns ln of the proposal's correction factor.
-    pub fn propose(&self, x: &[f64], others: &[f64], history: Option<&Mixture>, rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+    /// The degrees of freedom of an independence proposal's Student-t
+    /// (`None`: Gaussian, or a move that has none).
+    fn df(&self) -> Option<f64> {
         match *self {
-            Move::History { df } => match history {
-                Some(m) => mixture::propose(m, df, x, others, rng, y),
-                None => independence::propose(df, 1.0, x, others, rng, y),
-            },
-            Move::Stretch { a } => stretch::propose(a, x, others, rng, y),
-            Move::DifferentialEvolution { gamma0, sigma } => differential_evolution::propose(gamma0, sigma, x, others, rng, y),
-            Move::Snooker { gamma } => snooker::propose(gamma, x, others, rng, y),
-            Move::Independence { df, scale } => independence::propose(df, scale, x, others, rng, y),
+            Move::Independence { df, .. } | Move::History { df } | Move::Anchored { df } => df,
+            _ => None,
         }
     }
+
+    /// The scale of an independence proposal's covariance (1 but for
+    /// [`Move::Independence`]).
+    fn scale(&self) -> f64 {
+        match *self {
+            Move::Independence { scale, .. } => scale,
+            _ => 1.0,
+        }
+    }
+
+    /// What the move fits to the complementary half `others` of an
+    /// ensemble (points of `d` coordinates one after another), given the
+    /// mixture fitted to the ensemble's history, if there is one yet, and
+    /// the sampler's fixed reference distribution, if it has one: done once
+    /// per ensemble and half-step, before its walkers propose.
+    pub fn fit<'h>(&self, others: &[f64], d: usize, history: Option<&'h Mixture>, reference: Option<&Elliptical>) -> Fit<'h> {
+        let own = || Fit::Single(independence::fitted(others, d));
+        match *self {
+            Move::Stretch { .. } | Move::DifferentialEvolution { .. } | Move::Snooker { .. } => Fit::Points,
+            Move::Independence { .. } => own(),
+            Move::Anchored { .. } => reference.and_then(|r| anchored::proposal(others, d, r)).map_or_else(own, Fit::Anchored),
+            Move::History { .. } => history.map_or_else(own, |h| Fit::History(h, Mixture::of_points(others, d))),
+        }
+    }
+
+    /// Writes the proposal for walker position `x` into `y`, with the other
+    /// half of the ensemble `others` and what the move fitted to it
+    /// ([`Move::fit`]); returns ln of the proposal's correction factor.
+    pub fn propose(&self, fit: &Fit, x: &[f64], others: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+        match (*self, fit) {
+            (Move::Stretch { a }, _) => stretch::propose(a, x, others, rng, y),
+            (Move::DifferentialEvolution { gamma0, sigma }, _) => differential_evolution::propose(gamma0, sigma, x, others, rng, y),
+            (Move::Snooker { gamma }, _) => snooker::propose(gamma, x, others, rng, y),
+            (_, Fit::Single(f)) => independence::propose(self.df(), self.scale(), f.as_ref(), x, rng, y),
+            (_, Fit::Anchored(q)) => anchored::propose(q, self.df(), x, rng, y),
+            (_, Fit::History(h, current)) => mixture::propose(h, current.as_ref(), self.df(), x, rng, y),
+            // an independence move given no fit fits the half itself
+            (_, Fit::Points) => independence::propose(self.df(), self.scale(), independence::fitted(others, x.len()).as_ref(), x, rng, y),
+        }
+    }
+}
+
+/// What a move fitted to the complementary half of an ensemble
+/// ([`Move::fit`]).
+#[derive(Clone, Debug)]
+pub enum Fit<'h> {
+    /// Nothing: the move uses the half's points themselves.
+    Points,
+    /// The half's Student-t (`None`: a degenerate half, the walker stays).
+    Single(Option<Elliptical>),
+    /// The anchored move's mixture ([`anchored::proposal`]).
+    Anchored(Mixture),
+    /// The history's mixture and the half's own fit.
+    History(&'h Mixture, Option<Mixture>),
 }
 
 /// The `j`-th of the points stored one after another in `points`.
