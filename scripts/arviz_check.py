@@ -30,6 +30,17 @@ def ensemble_rhat(idata):
             for v in p.data_vars}
 
 
+def tail_ess(x):
+    """ArviZ's tail ESS (the smaller of the split-chain ESS of the 5 % and
+    95 % quantiles' indicators) with numpy's type-7 quantile. ArviZ takes the
+    quantile from scipy's mquantiles, (1 - g) a + g b, which between two tied
+    draws (a = b: a rejected proposal repeats a walker's position) can land
+    one ulp below them and so leave the tied draws out of the indicator;
+    numpy's a + g (b - a), like mrbp's, is exact there."""
+    from arviz.stats.diagnostics import _ess, _split_chains
+    return min(_ess(_split_chains((x <= np.quantile(x, p)).astype(float))) for p in (0.05, 0.95))
+
+
 def close(a, b, rel, what):
     if not abs(a - b) <= rel * max(abs(a), abs(b), 1e-300):
         sys.exit(f"{what}: ArviZ {a!r} vs mrbp {b!r} (tolerance {rel:.0e} relative)")
@@ -53,7 +64,7 @@ def main(folder):
         close(t["sd"], row["sd"], 1e-9, f"{name} sd")
         # ESS and MCSE: the same estimators on the same draws (agree to ~1e-14)
         close(t["ess_bulk"], row["ess_bulk"], 1e-9, f"{name} ess_bulk")
-        close(t["ess_tail"], row["ess_tail"], 1e-9, f"{name} ess_tail")
+        close(tail_ess(idata.posterior[name].values), row["ess_tail"], 1e-9, f"{name} ess_tail")
         close(t["mcse_mean"], row["mcse_mean"], 1e-9, f"{name} mcse_mean")
         close(rhat[name], row["r_hat"], 1e-9, f"{name} ensemble R-hat")
 
