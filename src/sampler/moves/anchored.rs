@@ -47,13 +47,6 @@ pub(super) fn proposal(others: &[f64], d: usize, reference: &Elliptical) -> Opti
     Some(Mixture::equal(vec![super::independence::fitted(others, d)?, anchored_fit(others, d, reference)?]))
 }
 
-/// y from the mixture `q` ([`proposal`]) with Student-t components (`df`;
-/// Gaussian without); the factor q(x)/q(y).
-pub fn propose(q: &Mixture, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
-    q.draw(df, rng, y);
-    q.log_q(df, x) - q.log_q(df, y)
-}
-
 /// The half's mean, and its covariance in the whitened coordinates of
 /// `reference` (z = L⁻¹(x − μ)) with the off-diagonal part shrunk by the
 /// Ledoit–Wolf weight, mapped back. `None` where the half lies more than
@@ -168,7 +161,7 @@ mod tests {
         let others = points(&mut rng, &reference, 6);
         let x = [0.3, -0.2];
         let mut y = [0.0; 2];
-        let f = propose(&proposal(&others, 2, &reference).unwrap(), Some(5.0), &x, &mut rng, &mut y);
+        let f = proposal(&others, 2, &reference).unwrap().propose(Some(5.0), &x, &mut rng, &mut y);
         let parts = [super::super::independence::fitted(&others, 2).unwrap(), anchored_fit(&others, 2, &reference).unwrap()];
         let ln_q = |v: &[f64]| {
             let a: Vec<f64> = parts.iter().map(|p| 0.5f64.ln() - p.half_log_det() + p.log_kernel(Some(5.0), v, 1.0)).collect();

@@ -147,6 +147,13 @@ impl Mixture {
         pick.shape.draw(df, 1.0, rng, y);
     }
 
+    /// y drawn from the mixture (Student-t components with `df`; Gaussian
+    /// without); the independence factor q(x)/q(y).
+    pub(super) fn propose(&self, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+        self.draw(df, rng, y);
+        self.log_q(df, x) - self.log_q(df, y)
+    }
+
     /// The equal-weight mixture of `parts`.
     pub(super) fn equal(parts: Vec<Elliptical>) -> Mixture {
         let log_weight = -(parts.len() as f64).ln();
@@ -175,8 +182,7 @@ pub const HISTORY_SHARE: f64 = 0.7;
 /// factor q(x)/q(y) of the two together.
 pub fn propose(history: &Mixture, current: Option<&Mixture>, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
     let Some(current) = current else {
-        history.draw(df, rng, y);
-        return history.log_q(df, x) - history.log_q(df, y);
+        return history.propose(df, x, rng, y);
     };
     if rng.random::<f64>() < HISTORY_SHARE {
         history.draw(df, rng, y);

@@ -46,8 +46,8 @@ pub enum Move {
     /// of the complementary half's Student-t (`df`; Gaussian without) and
     /// one with the half's covariance taken in the reference's whitened
     /// coordinates, its off-diagonal part shrunk by the Ledoit–Wolf weight
-    /// ([`anchored`]); factor q(x)/q(y). Without a reference,
-    /// [`Move::Independence`] with scale 1.
+    /// ([`anchored`]); factor q(x)/q(y). Without a reference, or where the
+    /// half lies far from it, [`Move::Independence`] with scale 1.
     Anchored { df: Option<f64> },
 }
 
@@ -148,7 +148,7 @@ impl Move {
             (Move::DifferentialEvolution { gamma0, sigma }, _) => differential_evolution::propose(gamma0, sigma, x, others, rng, y),
             (Move::Snooker { gamma }, _) => snooker::propose(gamma, x, others, rng, y),
             (_, Fit::Single(f)) => independence::propose(self.df(), self.scale(), f.as_ref(), x, rng, y),
-            (_, Fit::Anchored(q)) => anchored::propose(q, self.df(), x, rng, y),
+            (_, Fit::Anchored(q)) => q.propose(self.df(), x, rng, y),
             (_, Fit::History(h, current)) => mixture::propose(h, current.as_ref(), self.df(), x, rng, y),
             // an independence move given no fit fits the half itself
             (_, Fit::Points) => independence::propose(self.df(), self.scale(), independence::fitted(others, x.len()).as_ref(), x, rng, y),
