@@ -24,6 +24,7 @@ pub fn render(e: Event) -> (bool, String) {
         }
         Event::LeftOneOut { rows, seconds } => out(text::leave_one_out(rows, seconds)),
         Event::Consistency(parameters) => out(text::consistency(parameters)),
+        Event::NewTestLeftOut { rows, seconds } => out(text::new_test_left_out(rows, seconds)),
         Event::Wrote(path) => out(format!("wrote {}\n", path.display())),
         Event::Said { to_stderr, text } => (to_stderr, text.to_string()),
     }

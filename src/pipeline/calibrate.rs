@@ -10,7 +10,12 @@ use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings
 use crate::report;
 use crate::sampler::{Checkpointer, Observer};
 use crate::store;
-use crate::validate::consistency::{consistency, ParameterConsistency};
+use crate::validate::between_runs::{self, BetweenRuns, GibbsSettings, LayerRun};
+use crate::validate::consistency::consistency;
+use crate::validate::LooSettings;
+use crate::predict::CoverageRow;
+use crate::data::RunData;
+use std::time::Instant;
 
 /// Steps between two checkpoints of the sampler.
 pub const CHECKPOINT_EVERY: usize = 100;
@@ -100,28 +105,30 @@ impl Pipeline<'_> {
             Some(c) => vec![c],
             None => campaign.currents(),
         };
-        let mut folders = Vec::new();
+        let mut stages = Vec::new();
         for &c in &currents {
             let dir = if currents.len() > 1 { out.join(current_tag(c)) } else { out.to_path_buf() };
-            let group = campaign.at_current(c);
-            let what = format!("{} run(s) at {c} A", group.runs.len());
-            let joint = self.calibrate_into(&group, &dir, request, &what)?;
-            if request.per_run {
-                self.per_run(&group, &joint, request)?;
-            }
-            folders.push(joint);
+            stages.push(self.calibrate_current(campaign, c, &dir, request)?);
         }
-        Ok(folders)
+        if request.per_run {
+            self.between_runs(&stages, None)?;
+        }
+        Ok(stages.into_iter().map(|s| s.joint).collect())
+    }
+
+    /// The runs of `campaign` at current `c` calibrated together into
+    /// `dir`, and with `--per-run` each alone into `dir/runs/<run>/`.
+    pub fn calibrate_current(&mut self, campaign: &Campaign, c: f64, dir: &Path, request: &SampleRequest) -> Result<CurrentCalibrations> {
+        let runs = campaign.at_current(c);
+        let what = format!("{} run(s) at {c} A", runs.runs.len());
+        let joint = self.calibrate_into(&runs, dir, request, &what)?;
+        let alone = if request.per_run { self.runs_alone(&runs, &joint, request)? } else { Vec::new() };
+        Ok(CurrentCalibrations { joint, runs, alone })
     }
 
     /// Each run of `campaign` calibrated alone as `request` says, into
-    /// `runs/<run>/` of the joint calibration's folder, and the runs'
-    /// consistency with `joint` (`consistency.parquet` there).
-    pub fn per_run(&mut self, campaign: &Campaign, joint: &Calibration, request: &SampleRequest) -> Result<Vec<ParameterConsistency>> {
-        if campaign.runs.len() < 2 {
-            self.note("  --per-run: a single run, nothing to compare it with");
-            return Ok(Vec::new());
-        }
+    /// `runs/<run>/` of the joint calibration's folder.
+    pub fn runs_alone(&mut self, campaign: &Campaign, joint: &Calibration, request: &SampleRequest) -> Result<Vec<(String, Calibration)>> {
         let mut alone = Vec::new();
         for run in &campaign.runs {
             let id = run.id().to_string();
@@ -135,11 +142,60 @@ impl Pipeline<'_> {
                 self.note(&format!("  --per-run: {id} alone did not converge (largest R̂ {rhat:.3}): its row in the consistency table is not to be trusted (more --steps, or the history move: docs/calibration.md)"));
             }
         }
-        let parameters = consistency(joint, &alone);
-        let ids: Vec<(String, String)> = alone.iter().map(|(run, cal)| (run.clone(), cal.record.calibration_id.clone())).collect();
-        store::consistency::write(&joint.dir, &parameters, &joint.record.calibration_id, &ids)?;
-        self.emit(Event::Consistency(&parameters));
-        Ok(parameters)
+        Ok(alone)
+    }
+
+    /// The between-run layer fitted to every run calibrated alone in
+    /// `stages` (at every current), and in each current's folder what it
+    /// says there: the runs' consistency with the joint calibration and the
+    /// layer's interval for a new test (`consistency.parquet`), the layer's
+    /// draws (`between_runs.parquet`), and, with `loo`, each run predicted
+    /// as a new test by the layer fitted without it (`loo_new_test.parquet`).
+    pub fn between_runs(&mut self, stages: &[CurrentCalibrations], loo: Option<&LooSettings>) -> Result<()> {
+        let Some(first) = stages.iter().find(|s| !s.alone.is_empty()) else {
+            return Ok(());
+        };
+        if !stages.iter().any(|s| s.alone.len() >= 2) {
+            self.note("  --per-run: a single run at each current, nothing to compare it with");
+            return Ok(());
+        }
+        let lik = &first.joint.settings.likelihood;
+        let datas: Vec<Vec<RunData>> = stages.iter().map(|s| s.runs.runs.iter().map(|r| RunData::from_run(r, lik.part, lik.smooth_strain_ms)).collect()).collect();
+        let layer_runs: Vec<LayerRun> = stages
+            .iter()
+            .zip(&datas)
+            .flat_map(|(s, datas)| {
+                s.alone.iter().filter_map(move |(id, cal)| {
+                    let j = s.runs.runs.iter().position(|r| r.id() == id)?;
+                    Some(LayerRun { id, current_a: s.runs.runs[j].spec.current_a, cal, data: &datas[j] })
+                })
+            })
+            .collect();
+        let layer = BetweenRuns::fit(&layer_runs, GibbsSettings::default(), first.joint.settings.sampler.seed)?;
+        let folders: Vec<(&Path, &str)> = layer_runs.iter().map(|r| (r.cal.dir.as_path(), r.cal.record.calibration_id.as_str())).collect();
+        for stage in stages.iter().filter(|s| !s.alone.is_empty()) {
+            let joint = &stage.joint;
+            let Some(group) = layer.group(joint.record.current_a) else { continue };
+            self.prepare(&joint.dir, "--out", &[], &[], true)?;
+            let meta = store::between_runs::layer_runs(&joint.dir, &folders);
+            store::between_runs::write(&joint.dir, &layer, group, &joint.record.calibration_id, &meta)?;
+            if stage.alone.len() >= 2 {
+                let parameters = consistency(joint, &stage.alone, &layer);
+                let ids: Vec<(String, String)> = stage.alone.iter().map(|(run, cal)| (run.clone(), cal.record.calibration_id.clone())).collect();
+                store::consistency::write(&joint.dir, &parameters, &joint.record.calibration_id, &ids, &meta)?;
+                self.emit(Event::Consistency(&parameters));
+            }
+            if let Some(loo) = loo {
+                let clock = Instant::now();
+                let rows: Vec<CoverageRow> =
+                    between_runs::leave_one_out(joint, &stage.runs, &layer_runs, loo.draws, loo.replicates, loo.seed)?.into_iter().map(|p| p.coverage).collect();
+                if !rows.is_empty() {
+                    store::between_runs::write_leave_one_out(&joint.dir, &rows, &joint.record.calibration_id, &meta)?;
+                    self.emit(Event::NewTestLeftOut { rows: &rows, seconds: clock.elapsed().as_secs_f64() });
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Calibrates `campaign` into `dir` as `request` says: identification,
@@ -212,4 +268,15 @@ impl Pipeline<'_> {
         store::folder::write(dir, &mut cal)?;
         Ok(cal)
     }
+}
+
+/// One current's calibrations: the joint one of its runs and, with
+/// `--per-run`, each run alone.
+#[derive(Clone)]
+pub struct CurrentCalibrations {
+    pub joint: Calibration,
+    /// The runs at the current.
+    pub runs: Campaign,
+    /// Each run alone, by id (empty without `--per-run`).
+    pub alone: Vec<(String, Calibration)>,
 }

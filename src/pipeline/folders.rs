@@ -13,7 +13,7 @@ use crate::store;
 
 /// The files of a calibration folder derived from its chains: a new
 /// calibration removes them, since they would describe the old one.
-pub const DERIVED: [&str; 10] = [
+pub const DERIVED: [&str; 12] = [
     store::prediction::BANDS,
     store::inference::FILE,
     store::prediction::COVERAGE,
@@ -23,6 +23,8 @@ pub const DERIVED: [&str; 10] = [
     store::coverage::LOO_BANDS,
     crate::report::html::REPORT,
     store::consistency::FILE,
+    store::between_runs::FILE,
+    store::between_runs::LOO,
     RUNS,
 ];
 

@@ -246,12 +246,13 @@ impl Pipeline<'_> {
         self.write_report(&cal, &campaign, &prediction, loo.as_ref())
     }
 
-    fn write_report(&mut self, cal: &Calibration, campaign: &Campaign, prediction: &Prediction, loo: Option<&LeaveOneOut>) -> Result<PathBuf> {
+    pub(super) fn write_report(&mut self, cal: &Calibration, campaign: &Campaign, prediction: &Prediction, loo: Option<&LeaveOneOut>) -> Result<PathBuf> {
         let consistency = match cal.dir.join(store::consistency::FILE).exists() {
             true => Some(store::consistency::read(&cal.dir, &cal.record.calibration_id)?),
             false => None,
         };
-        let report = CalibrationReport { cal, campaign: &cal.used_runs(campaign), prediction, loo, consistency: consistency.as_deref() };
+        let new_test_loo = store::between_runs::read_leave_one_out(&cal.dir, &cal.record.calibration_id)?;
+        let report = CalibrationReport { cal, campaign: &cal.used_runs(campaign), prediction, loo, consistency: consistency.as_deref(), new_test_loo: new_test_loo.as_deref() };
         let path = report::calibration::write(&report)?;
         self.emit(Event::Wrote(&path));
         Ok(path)

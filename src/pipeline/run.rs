@@ -7,7 +7,9 @@ use crate::data::{current_tag, Campaign};
 use crate::error::Result;
 use crate::posterior::ModelKind;
 use crate::report::comparison::Entry;
-use crate::validate::LooSettings;
+use crate::validate::{LeaveOneOut, LooSettings};
+use crate::predict::Prediction;
+use super::calibrate::CurrentCalibrations;
 
 impl Pipeline<'_> {
     /// The whole job on one campaign: one calibration folder per current in
@@ -49,9 +51,22 @@ impl Pipeline<'_> {
         let mut reports = Vec::new();
         let mut entries = Vec::new();
         let stages = self.side_by_side(&currents, |p, &c| p.at_current(&campaign, out, c, options, loo.as_ref()))?;
-        for (r, e) in stages {
-            reports.extend(r);
-            entries.extend(e);
+        let (done, deferred): (Vec<CurrentStage>, Vec<CurrentStage>) = stages.into_iter().partition(|s| s.deferred.is_none());
+        for stage in done {
+            reports.extend(stage.reports);
+            entries.extend(stage.entries);
+        }
+        // with --per-run, the between-run layer takes every current's runs
+        // alone before each current's report shows what it says
+        let deferred: Vec<Deferred> = deferred.into_iter().filter_map(|s| s.deferred).collect();
+        if !deferred.is_empty() {
+            let calibrations: Vec<CurrentCalibrations> = deferred.iter().map(|d| d.calibrations.clone()).collect();
+            self.between_runs(&calibrations, loo.as_ref())?;
+            for d in deferred {
+                let joint = d.calibrations.joint;
+                reports.push(self.write_report(&joint, &campaign, &d.prediction, d.loo.as_ref())?);
+                entries.push(compare::entry(joint, Some(d.prediction)));
+            }
         }
         if several {
             if options.current_law {
@@ -72,21 +87,43 @@ impl Pipeline<'_> {
     }
 
     /// One current of the whole job: its calibration, bands, leave-one-out
-    /// (if `loo`) and report, in `out/I<current>A/`.
+    /// (if `loo`) and report, in `out/I<current>A/`; with `--per-run` also
+    /// each run alone, and the report left for after the between-run layer.
     fn at_current(&mut self, campaign: &Campaign, out: &Path, c: f64, options: &RunOptions, loo: Option<&LooSettings>) -> Result<CurrentStage> {
-        let mut request = SampleRequest { current: Some(c), ..options.sample.clone() };
+        let mut request = SampleRequest { current: Some(c), per_run: false, ..options.sample.clone() };
         request.settings.model = ModelKind::PerCurrent;
-        let mut reports = Vec::new();
-        let mut entries = Vec::new();
-        for cal in self.sample(campaign, &out.join(current_tag(c)), &request)? {
-            let (report, prediction) = self.predict_and_report(&cal, campaign, &options.predict, loo)?;
-            reports.push(report);
-            entries.push(compare::entry(cal, Some(prediction)));
+        let mut stage = CurrentStage { reports: Vec::new(), entries: Vec::new(), deferred: None };
+        for joint in self.sample(campaign, &out.join(current_tag(c)), &request)? {
+            if options.sample.per_run {
+                let runs = campaign.at_current(c);
+                let alone = self.runs_alone(&runs, &joint, &request)?;
+                let prediction = self.predict(&joint, campaign, &joint.dir, &options.predict)?;
+                let loo = match loo {
+                    Some(settings) => self.leave_one_out(&joint, campaign, settings)?,
+                    None => None,
+                };
+                stage.deferred = Some(Deferred { calibrations: CurrentCalibrations { joint, runs, alone }, prediction, loo });
+                continue;
+            }
+            let (report, prediction) = self.predict_and_report(&joint, campaign, &options.predict, loo)?;
+            stage.reports.push(report);
+            stage.entries.push(compare::entry(joint, Some(prediction)));
         }
-        Ok((reports, entries))
+        Ok(stage)
     }
 }
 
 /// What one current's stage wrote: its reports, and its calibrations as the
-/// comparison takes them.
-type CurrentStage = (Vec<PathBuf>, Vec<Entry>);
+/// comparison takes them; with `--per-run`, what its report waits for.
+struct CurrentStage {
+    reports: Vec<PathBuf>,
+    entries: Vec<Entry>,
+    deferred: Option<Deferred>,
+}
+
+/// A current whose report waits for the between-run layer.
+struct Deferred {
+    calibrations: CurrentCalibrations,
+    prediction: Prediction,
+    loo: Option<LeaveOneOut>,
+}

@@ -42,6 +42,9 @@ pub struct CalibrationReport<'a> {
     pub loo: Option<&'a LeaveOneOut>,
     /// Each run calibrated alone against this calibration (`--per-run`).
     pub consistency: Option<&'a [ParameterConsistency]>,
+    /// Each run predicted as a new test by the between-run layer fitted
+    /// without it (`--per-run --leave-one-out`).
+    pub new_test_loo: Option<&'a [CoverageRow]>,
 }
 
 /// Writes the figures and `report.html` into the calibration's folder.
@@ -68,6 +71,9 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
     campaign_section(&mut page, r);
     identification_section(&mut page, r.cal);
     posterior_section(&mut page, r.cal);
+    if let Some(parameters) = r.consistency {
+        disagreement_note(&mut page, parameters);
+    }
     page.section("diagnostics", "Diagnostics");
     let rows: Vec<Vec<String>> = checks.iter().map(|(what, mark, detail)| vec![esc(what), mark.html().into(), esc(detail)]).collect();
     page.table(&["check", "", "measured"], &rows);
@@ -211,6 +217,24 @@ fn identification_section(page: &mut Page, cal: &Calibration) {
     page.table(&["parameter", "identification", "MAP", "posterior median", "90 % credible interval"], &rows);
 }
 
+/// Below the posterior summary: the parameters on which the runs
+/// calibrated alone disagree, with the interval a new test should quote.
+fn disagreement_note(page: &mut Page, parameters: &[ParameterConsistency]) {
+    let disagree: Vec<String> = parameters
+        .iter()
+        .filter(|p| p.disagrees())
+        .map(|p| format!("{} {} – {} (χ²/ν = {:.1})", p.parameter, num(p.new_test.q05, 3), num(p.new_test.q95, 3), p.chi2_nu))
+        .collect();
+    if !disagree.is_empty() {
+        page.note(&format!(
+            "These intervals describe these records together. The runs calibrated alone disagree beyond their own intervals on {} of {} parameters, so for a new test of this damper quote the between-run layer's 90 % intervals: {} (\"Consistency across runs\" below).",
+            disagree.len(),
+            parameters.len(),
+            disagree.join("; ")
+        ));
+    }
+}
+
 fn posterior_section(page: &mut Page, cal: &Calibration) {
     page.section("posterior", "Posterior summary");
     let min_ess = cal.settings.sampler.min_ess;
@@ -290,7 +314,7 @@ fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
         return Ok(());
     };
     page.para(&format!(
-        "Each run calibrated alone, beside the joint calibration. For each parameter, χ²/ν of the run-wise posterior means of ln θ about their precision-weighted mean, with their own sds (ν = runs − 1): about 1 when one parameter set describes every run and the intervals are honest; the runs are said to disagree when its p-value is below {}. Where they disagree, the joint interval describes these records, not a new test: the between-run layer (run-level ln θ normal about a population value, with a spread per parameter; docs/calibration.md) gives the interval for a new test of this damper.",
+        "Each run calibrated alone, beside the joint calibration. For each parameter, χ²/ν of the run-wise posterior means of ln θ about their precision-weighted mean, with their own sds (ν = runs − 1): about 1 when one parameter set describes every run and the intervals are honest; the runs are said to disagree when its p-value is below {}. Where they disagree, the joint interval describes these records, not a new test. The between-run layer takes each test as a draw from a population of tests of this damper: each current its own centre, one between-test covariance learned from every run calibrated alone at every current (docs/calibration.md); its interval for a new test is the one to quote, and its spread is how much one test's parameter differs from the next (a factor, 1 sd).",
         crate::validate::consistency::DISAGREE_P
     ));
     let rows: Vec<Vec<String>> = parameters
@@ -308,9 +332,12 @@ fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
             ]
         })
         .collect();
-    page.table(&["parameter", "χ²/ν", "p", "", "joint 90 %", "new test 90 %", "spread between runs"], &rows);
+    page.table(&["parameter", "χ²/ν", "p", "", "joint 90 %", "new test 90 %", "spread between tests"], &rows);
     for p in parameters.iter().filter(|p| p.disagrees()) {
         page.note(&p.verdict());
+    }
+    if let Some(rows) = r.new_test_loo {
+        new_test_table(page, rows, r.loo);
     }
     let mut figs = Figures::default();
     figures::consistency(&r.cal.dir, parameters, &mut figs)?;
@@ -318,6 +345,34 @@ fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
         page.figure(&r.cal.dir.join(format!("{stem}.png")), caption)?;
     }
     Ok(())
+}
+
+/// Each run held out and predicted as a new test by the between-run layer,
+/// beside its prediction by the joint calibration of the other runs.
+fn new_test_table(page: &mut Page, rows: &[CoverageRow], loo: Option<&LeaveOneOut>) {
+    page.para("Each run predicted as a new test of this damper: the between-run layer fitted to every other run calibrated alone, at every current, draws the run's parameters and noise, which the integrator carries along its record. Beside it, where the leave-one-out study was run, the same run predicted by the joint calibration of the other runs at its current. A predictive band that holds about 95 % of every held-out run is honest about what a test the calibration never saw will do; the log predictive density per sample scores sharpness and honesty together (higher is better).");
+    let per_sample = |c: &CoverageRow| c.lppd / c.samples.max(1) as f64;
+    let joint = |run: &str| loo.and_then(|l| l.rows.iter().find(|r| r.coverage.run == run)).map(|r| &r.coverage);
+    let table: Vec<Vec<String>> = rows
+        .iter()
+        .map(|c| {
+            let j = joint(&c.run);
+            vec![
+                esc(&c.run),
+                format!("{:.1}", 100.0 * c.inside_p95),
+                j.map_or("–".into(), |j| format!("{:.1}", 100.0 * j.inside_p95)),
+                format!("{:.0}", c.rmse_q50_pa),
+                j.map_or("–".into(), |j| format!("{:.0}", j.rmse_q50_pa)),
+                format!("{:.3}", per_sample(c)),
+                j.map_or("–".into(), |j| format!("{:.3}", per_sample(j))),
+                Mark::of(c.inside_p95 >= 0.9).html().into(),
+            ]
+        })
+        .collect();
+    page.table(
+        &["held out", "new test: inside 95 % (%)", "joint: inside 95 % (%)", "new test: RMS to median (Pa)", "joint: RMS to median (Pa)", "new test: lppd per sample", "joint: lppd per sample", ""],
+        &table,
+    );
 }
 
 fn figures_section(page: &mut Page, cal: &Calibration, figs: &Figures) -> Result<()> {

@@ -17,7 +17,9 @@ const RUN: &str = "run";
 
 /// Writes the consistency of the runs of calibration `id` (the joint one),
 /// each calibrated alone (`alone`: run and calibration id), into its folder.
-pub fn write(dir: &Path, parameters: &[ParameterConsistency], id: &str, alone: &[(String, String)]) -> Result<()> {
+/// `layer_runs` names the calibrations alone the between-run layer was
+/// fitted to ([`super::between_runs::layer_runs`]).
+pub fn write(dir: &Path, parameters: &[ParameterConsistency], id: &str, alone: &[(String, String)], layer_runs: &str) -> Result<()> {
     let alone: Vec<String> = alone.iter().map(|(run, id)| format!("{run}={id}")).collect();
     let rows: Vec<(&ParameterConsistency, &str, &Estimate)> = parameters
         .iter()
@@ -29,6 +31,7 @@ pub fn write(dir: &Path, parameters: &[ParameterConsistency], id: &str, alone: &
         Table::new()
             .derived_from(id)
             .meta(RUN_IDS, &alone.join(","))
+            .meta(super::between_runs::LAYER_RUNS, layer_runs)
             .str("parameter", rows.iter().map(|r| r.0.parameter.clone()).collect())
             .str("kind", rows.iter().map(|r| r.1.to_string()).collect())
             .str("label", rows.iter().map(|r| r.2.label.clone()).collect())
@@ -50,11 +53,12 @@ pub const RUNS: &str = "runs";
 pub const RUN_IDS: &str = "mrbp.run_calibration_ids";
 
 /// Refuses the consistency table in `dir` unless it was derived from
-/// calibration `id` and from the run-alone calibrations now in `runs/`.
+/// calibration `id` and from the run-alone calibrations now in `runs/` (and,
+/// for its new test, in every folder the between-run layer took).
 pub fn check(dir: &Path, id: &str) -> Result<()> {
     let path = dir.join(FILE);
     let rebuild = "mrbp sample MANIFEST --out DIR --per-run --force";
-    super::check_derived(&path, id, rebuild)?;
+    super::between_runs::check(&path, dir, id)?;
     if let Some(alone) = super::parquet_meta(&path, RUN_IDS)? {
         for pair in alone.split(',').filter(|p| !p.is_empty()) {
             let (run, made) = pair.split_once('=').unwrap_or((pair, ""));

@@ -15,6 +15,7 @@
 //! | `prediction.toml` | [`prediction`] |
 //! | `comparison.parquet`, `differences.parquet` | [`comparison`] |
 //! | `consistency.parquet` | [`consistency`] |
+//! | `between_runs.parquet`, `loo_new_test.parquet` | [`between_runs`] |
 //! | `against_current.parquet` (a law) | [`against_current`] |
 //! | `inference.zarr` (ArviZ) | [`inference`] |
 //!
@@ -24,6 +25,7 @@
 pub mod adequacy;
 pub mod against_current;
 pub mod bands;
+pub mod between_runs;
 pub mod chains;
 pub mod comparison;
 pub mod consistency;

@@ -214,6 +214,14 @@ fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
             problems.push(e.to_string());
         }
     }
+    for file in [super::between_runs::FILE, super::between_runs::LOO] {
+        let path = dir.join(file);
+        if path.exists() {
+            if let Err(e) = super::between_runs::check(&path, dir, &id) {
+                problems.push(e.to_string());
+            }
+        }
+    }
     check_report(dir, std::slice::from_ref(&id), "mrbp report DIR", problems);
 }
 

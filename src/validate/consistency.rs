@@ -9,17 +9,13 @@
 //!   precision-weighted mean, each with its own sd s_i (ν = runs − 1). With
 //!   one θ behind every run and honest intervals it is about 1; its p-value
 //!   is the χ²_ν tail.
-//! - **A between-run layer** (random effects, partial pooling): the
-//!   run-wise posteriors as normal likelihoods of run-level values,
-//!   y_i ~ N(ln θ_i, s_i²), ln θ_i ~ N(μ, τ²), μ flat, the spread τ
-//!   half-Cauchy(0, 1) (one e-fold between tests at one prior sd). μ is
-//!   integrated exactly and τ on a grid. Its predictive interval for
-//!   ln θ of **a new test of this damper**, N(μ, τ²) mixed over the
-//!   posterior of (μ, τ), is what a user should quote when the runs
-//!   disagree.
+//! - **The between-run layer**'s interval for **a new test of this damper**
+//!   ([`super::between_runs`]: the runs as draws from a population of
+//!   tests), what a user should quote when the runs disagree.
 
-use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
+use statrs::distribution::{ChiSquared, ContinuousCDF};
 
+use super::between_runs::BetweenRuns;
 use crate::calibrate::Calibration;
 use crate::model::PARAM_NAMES;
 use crate::sampler::quantile_sorted;
@@ -54,10 +50,15 @@ impl Estimate {
     fn of(calibration: &Calibration, positions: &[(usize, usize)], parameter: &str, label: &str) -> Option<Estimate> {
         let mut values = calibration.sample.values(parameter, positions)?;
         values.retain(|v| *v > 0.0 && v.is_finite());
+        values.sort_by(f64::total_cmp);
+        Estimate::of_sorted(&values, label)
+    }
+
+    /// Of sorted positive values, labelled `label`.
+    fn of_sorted(values: &[f64], label: &str) -> Option<Estimate> {
         if values.len() < 2 {
             return None;
         }
-        values.sort_by(f64::total_cmp);
         let logs: Vec<f64> = values.iter().map(|v| v.ln()).collect();
         let n = logs.len() as f64;
         let mean_log = logs.iter().sum::<f64>() / n;
@@ -66,9 +67,9 @@ impl Estimate {
             label: label.to_string(),
             mean_log,
             sd_log,
-            q05: quantile_sorted(&values, 0.05),
-            q50: quantile_sorted(&values, 0.5),
-            q95: quantile_sorted(&values, 0.95),
+            q05: quantile_sorted(values, 0.05),
+            q50: quantile_sorted(values, 0.5),
+            q95: quantile_sorted(values, 0.95),
         })
     }
 
@@ -88,7 +89,7 @@ pub struct ParameterConsistency {
     pub joint: Estimate,
     pub chi2_nu: f64,
     pub p_value: f64,
-    /// Posterior median of the between-run spread τ of ln θ.
+    /// The between-test sd of ln θ ([`BetweenRuns::spread_of`]).
     pub spread_log: f64,
     /// The between-run layer's predictive for a new test.
     pub new_test: Estimate,
@@ -131,35 +132,27 @@ fn short(v: f64) -> String {
 }
 
 /// The consistency of every B-P parameter of `joint` across the
-/// calibrations of its runs one by one (`runs`, labelled by run id).
-pub fn consistency(joint: &Calibration, runs: &[(String, Calibration)]) -> Vec<ParameterConsistency> {
+/// calibrations of its runs one by one (`runs`, labelled by run id), with
+/// the new test of `layer` at `joint`'s current.
+pub fn consistency(joint: &Calibration, runs: &[(String, Calibration)], layer: &BetweenRuns) -> Vec<ParameterConsistency> {
     let joint_draws = joint.draw_positions(DRAWS);
     let run_draws: Vec<Vec<(usize, usize)>> = runs.iter().map(|(_, c)| c.draw_positions(DRAWS)).collect();
+    let Some(group) = layer.group(joint.record.current_a) else {
+        return Vec::new();
+    };
     PARAM_NAMES
         .iter()
-        .filter_map(|name| {
+        .enumerate()
+        .filter_map(|(k, name)| {
             let joint = Estimate::of(joint, &joint_draws, name, JOINT)?;
             let runs: Vec<Estimate> = runs.iter().zip(&run_draws).map(|((id, c), at)| Estimate::of(c, at, name, id)).collect::<Option<_>>()?;
-            Some(of_estimates(name, runs, joint))
+            let new_test = Estimate::of_sorted(&layer.new_test_sorted(group, k), NEW_TEST)?;
+            let y: Vec<f64> = runs.iter().map(|r| r.mean_log).collect();
+            let s: Vec<f64> = runs.iter().map(|r| r.sd_log.max(1e-12)).collect();
+            let (chi2_nu, p_value) = chi2_per_dof(&y, &s);
+            Some(ParameterConsistency { parameter: name.to_string(), runs, joint, chi2_nu, p_value, spread_log: layer.spread_of(group, k), new_test })
         })
         .collect()
-}
-
-/// χ²/ν and the between-run layer of run-wise estimates.
-pub fn of_estimates(parameter: &str, runs: Vec<Estimate>, joint: Estimate) -> ParameterConsistency {
-    let y: Vec<f64> = runs.iter().map(|r| r.mean_log).collect();
-    let s: Vec<f64> = runs.iter().map(|r| r.sd_log.max(1e-12)).collect();
-    let (chi2_nu, p_value) = chi2_per_dof(&y, &s);
-    let layer = RandomEffects::fit(&y, &s);
-    let new_test = Estimate {
-        label: NEW_TEST.to_string(),
-        mean_log: layer.mean(),
-        sd_log: layer.sd(),
-        q05: layer.quantile(0.05).exp(),
-        q50: layer.quantile(0.5).exp(),
-        q95: layer.quantile(0.95).exp(),
-    };
-    ParameterConsistency { parameter: parameter.to_string(), runs, joint, chi2_nu, p_value, spread_log: layer.spread_median(), new_test }
 }
 
 /// χ²/ν of `y` about its precision-weighted mean with sds `s`, and the
@@ -176,82 +169,6 @@ pub fn chi2_per_dof(y: &[f64], s: &[f64]) -> (f64, f64) {
     (chi2 / nu, p)
 }
 
-/// The normal-normal random-effects model on a grid of the spread τ: at
-/// each τ the weight p(τ | y) and the new test's normal predictive
-/// N(μ̂(τ), V(τ) + τ²).
-pub struct RandomEffects {
-    /// (τ, weight, predictive mean, predictive variance).
-    grid: Vec<(f64, f64, f64, f64)>,
-}
-
-/// Points of the τ grid.
-const GRID: usize = 4001;
-
-impl RandomEffects {
-    pub fn fit(y: &[f64], s: &[f64]) -> RandomEffects {
-        let spread = y.iter().fold(f64::NEG_INFINITY, |a, b| a.max(*b)) - y.iter().fold(f64::INFINITY, |a, b| a.min(*b));
-        let top = 20.0 * (spread + s.iter().fold(0.0f64, |a, b| a.max(*b))).max(1e-6);
-        let mut grid: Vec<(f64, f64, f64, f64)> = (0..GRID)
-            .map(|i| {
-                let tau = top * i as f64 / (GRID - 1) as f64;
-                let w: Vec<f64> = s.iter().map(|s| 1.0 / (s * s + tau * tau)).collect();
-                let sw: f64 = w.iter().sum();
-                let mu = y.iter().zip(&w).map(|(y, w)| y * w).sum::<f64>() / sw;
-                // ln p(y | τ) with μ integrated over a flat prior, and the half-Cauchy prior
-                let log_marginal = 0.5 * w.iter().map(|w| w.ln()).sum::<f64>() - 0.5 * sw.ln() - 0.5 * y.iter().zip(&w).map(|(y, w)| (y - mu).powi(2) * w).sum::<f64>();
-                let log_prior = -(1.0 + tau * tau).ln();
-                (tau, log_marginal + log_prior, mu, 1.0 / sw + tau * tau)
-            })
-            .collect();
-        let top_log = grid.iter().map(|g| g.1).fold(f64::NEG_INFINITY, f64::max);
-        let total: f64 = grid.iter().map(|g| (g.1 - top_log).exp()).sum();
-        for g in &mut grid {
-            g.1 = (g.1 - top_log).exp() / total;
-        }
-        RandomEffects { grid }
-    }
-
-    pub fn mean(&self) -> f64 {
-        self.grid.iter().map(|(_, w, m, _)| w * m).sum()
-    }
-
-    pub fn sd(&self) -> f64 {
-        let mean = self.mean();
-        self.grid.iter().map(|(_, w, m, v)| w * (v + (m - mean).powi(2))).sum::<f64>().sqrt()
-    }
-
-    /// The posterior median of τ.
-    pub fn spread_median(&self) -> f64 {
-        let mut acc = 0.0;
-        for (tau, w, _, _) in &self.grid {
-            acc += w;
-            if acc >= 0.5 {
-                return *tau;
-            }
-        }
-        self.grid.last().map(|g| g.0).unwrap_or(0.0)
-    }
-
-    fn cdf(&self, x: f64) -> f64 {
-        self.grid.iter().map(|(_, w, m, v)| w * Normal::new(*m, v.sqrt()).map(|d| d.cdf(x)).unwrap_or(0.5)).sum()
-    }
-
-    /// The `p` quantile of the new test's ln θ, by bisection.
-    pub fn quantile(&self, p: f64) -> f64 {
-        let (mean, sd) = (self.mean(), self.sd());
-        let (mut lo, mut hi) = (mean - 20.0 * sd, mean + 20.0 * sd);
-        for _ in 0..80 {
-            let mid = 0.5 * (lo + hi);
-            if self.cdf(mid) < p {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        0.5 * (lo + hi)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -265,36 +182,5 @@ mod tests {
         assert!((p - (-1.0f64).exp()).abs() < 1e-9, "{p}");
         let (c, p) = chi2_per_dof(&[-10.0, 0.0, 10.0], &[1.0, 1.0, 1.0]);
         assert!((c - 100.0).abs() < 1e-9 && p < 1e-40);
-    }
-
-    #[test]
-    fn the_spread_vanishes_for_identical_runs_and_the_predictive_is_the_pooled_mean() {
-        let layer = RandomEffects::fit(&[0.3, 0.3, 0.3, 0.3], &[0.1, 0.1, 0.1, 0.1]);
-        // τ's posterior is the prior times a marginal falling in τ: its median is well below the runs' sd
-        assert!(layer.spread_median() < 0.1, "{}", layer.spread_median());
-        assert!((layer.mean() - 0.3).abs() < 1e-9);
-        // the 90 % interval of a new test is at least the pooled mean's (sd 0.05) and below the run sds' scale ×3
-        let half = layer.quantile(0.95) - layer.quantile(0.5);
-        assert!(half > 1.645 * 0.05 && half < 3.0 * 1.645 * 0.1, "{half}");
-    }
-
-    /// With precise runs far apart, the new test's 90 % interval against an
-    /// independent computation: 2·10⁶ Monte Carlo draws of (τ, μ, θ_new)
-    /// from the same model (τ on a fine log grid, numpy) gave quantiles
-    /// ±1.3049 about the mean (Monte Carlo se about 0.002; the classical
-    /// flat-prior t interval, 1.234, is a little narrower since its prior
-    /// on the spread is 1/τ). Tolerance 1 %: five Monte Carlo se and the grid.
-    #[test]
-    fn the_new_test_interval_of_spread_runs_matches_monte_carlo() {
-        let y = [-0.6, -0.1, 0.2, 0.5];
-        let s = [0.001; 4];
-        let layer = RandomEffects::fit(&y, &s);
-        let mean = y.iter().sum::<f64>() / 4.0;
-        let half = 0.5 * (layer.quantile(0.95) - layer.quantile(0.05));
-        assert!((half / 1.3049 - 1.0).abs() < 0.01, "{half}");
-        assert!((layer.quantile(0.5) - mean).abs() < 1e-3, "{}", layer.quantile(0.5));
-        // the predictive's weights sum to 1: its distribution function runs from 0 to 1
-        let (below, above) = (layer.cdf(mean - 1e4), layer.cdf(mean + 1e4));
-        assert!(below < 1e-9 && (above - 1.0).abs() < 1e-9, "{below} {above}");
     }
 }

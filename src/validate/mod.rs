@@ -13,6 +13,7 @@
 //! The held-out run's noise is not known to that posterior; the prediction
 //! pools the other runs' at the run's current ([`crate::posterior::Layout::noise_at_current`]).
 
+pub mod between_runs;
 pub mod consistency;
 pub mod psis;
 

@@ -1,0 +1,153 @@
+//! The between-run layer's files in a calibration folder (`--per-run`):
+//!
+//! - `between_runs.parquet`: draws of the layer at the folder's current —
+//!   a new test's parameters (B-P, terms, noise; SI) and the centre's B-P
+//!   parameters (`centre_<p>`, the typical test there), one row per draw.
+//!   The draws of every current's folder from one fit share their `draw`
+//!   index, so centres at two currents can be compared draw by draw;
+//! - `loo_new_test.parquet`: each run predicted as a new test by the layer
+//!   fitted without it (the columns of `coverage.parquet`).
+//!
+//! Both name the joint calibration (`mrbp.calibration_id`) and every
+//! calibration alone the layer was fitted to (`mrbp.layer_runs`: each run's
+//! folder relative to this one, `=` its calibration id); a reader refuses
+//! them when any of those has been calibrated again since.
+
+use std::path::{Component, Path, PathBuf};
+
+use super::parquet::{check_derived, f64_column, parquet_meta, read_parquet, write_parquet, Table};
+use crate::error::{Error, Result};
+use crate::model::PARAM_NAMES;
+use crate::predict::CoverageRow;
+use crate::validate::between_runs::BetweenRuns;
+
+pub const FILE: &str = "between_runs.parquet";
+pub const LOO: &str = "loo_new_test.parquet";
+
+/// The metadata key naming the calibrations alone the layer was fitted to.
+pub const LAYER_RUNS: &str = "mrbp.layer_runs";
+
+/// Rows of `between_runs.parquet`: draws spread evenly over the layer's.
+pub const ROWS: usize = 4000;
+
+const REBUILD: &str = "mrbp sample MANIFEST --out DIR --per-run --force (or mrbp run … --per-run)";
+
+/// The calibrations alone a layer was fitted to, as metadata: each folder
+/// relative to `dir`, `=` its calibration id.
+pub fn layer_runs(dir: &Path, folders: &[(&Path, &str)]) -> String {
+    folders.iter().map(|(folder, id)| format!("{}={id}", relative(dir, folder).display())).collect::<Vec<_>>().join(",")
+}
+
+/// Writes the layer's draws at the current of the joint calibration `id`
+/// in `dir` (group `group` of `layer`).
+pub fn write(dir: &Path, layer: &BetweenRuns, group: usize, id: &str, runs: &str) -> Result<()> {
+    let picks = crate::posterior::evenly_spaced(layer.draws.len(), ROWS);
+    let mut table = Table::new()
+        .derived_from(id)
+        .meta(LAYER_RUNS, runs)
+        .meta("mrbp.layer_currents_a", &layer.currents.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(","))
+        .meta("mrbp.layer_acceptance", &layer.acceptance.to_string())
+        .i64("draw", picks.iter().map(|&i| i as i64).collect());
+    let theta = |z: &[f64]| layer.theta(z).filter(|t| layer.in_support(t)).unwrap_or([f64::NAN; 7]);
+    for (k, name) in PARAM_NAMES.iter().enumerate() {
+        table = table.f64(name, picks.iter().map(|&i| theta(&layer.draws[i].new_tests[group])[k]).collect());
+    }
+    for (k, c) in layer.coordinates.iter().enumerate().skip(PARAM_NAMES.len()) {
+        table = table.f64(&c.name, picks.iter().map(|&i| c.scale.to_si(layer.draws[i].new_tests[group][k])).collect());
+    }
+    for (k, name) in PARAM_NAMES.iter().enumerate() {
+        table = table.f64(&format!("centre_{name}"), picks.iter().map(|&i| theta(&layer.draws[i].means[group])[k]).collect());
+    }
+    write_parquet(&dir.join(FILE), table)
+}
+
+/// A new test's B-P parameters and the centre's, read back: per B-P
+/// parameter, its values over the draws.
+pub struct LayerTable {
+    pub draw: Vec<f64>,
+    pub new_test: Vec<Vec<f64>>,
+    pub centre: Vec<Vec<f64>>,
+}
+
+/// The layer's draws in `dir`, derived from calibration `id`; refused if
+/// stale.
+pub fn read(dir: &Path, id: &str) -> Result<LayerTable> {
+    let path = dir.join(FILE);
+    check(&path, dir, id)?;
+    let df = read_parquet(&path)?;
+    let col = |n: &str| f64_column(&df, n, &path);
+    Ok(LayerTable {
+        draw: col("draw")?,
+        new_test: PARAM_NAMES.iter().map(|n| col(n)).collect::<Result<_>>()?,
+        centre: PARAM_NAMES.iter().map(|n| col(&format!("centre_{n}"))).collect::<Result<_>>()?,
+    })
+}
+
+/// Writes the layer's leave-one-out coverage of the runs of calibration
+/// `id` into `dir`.
+pub fn write_leave_one_out(dir: &Path, rows: &[CoverageRow], id: &str, runs: &str) -> Result<()> {
+    write_parquet(&dir.join(LOO), super::coverage::table(rows).derived_from(id).meta(LAYER_RUNS, runs))
+}
+
+/// The layer's leave-one-out coverage in `dir`, if there is one; refused if
+/// stale.
+pub fn read_leave_one_out(dir: &Path, id: &str) -> Result<Option<Vec<CoverageRow>>> {
+    let path = dir.join(LOO);
+    if !path.exists() {
+        return Ok(None);
+    }
+    check(&path, dir, id)?;
+    super::coverage::read(&path).map(Some)
+}
+
+/// Refuses `path` (a file of folder `dir`) unless it was derived from
+/// calibration `id` and from the calibrations alone now in the folders its
+/// metadata names.
+pub fn check(path: &Path, dir: &Path, id: &str) -> Result<()> {
+    check_derived(path, id, REBUILD)?;
+    let Some(runs) = parquet_meta(path, LAYER_RUNS)? else {
+        return Ok(());
+    };
+    for pair in runs.split(',').filter(|p| !p.is_empty()) {
+        let (folder, made) = pair.rsplit_once('=').unwrap_or((pair, ""));
+        let record = dir.join(folder).join(super::folder::RECORD);
+        let now = super::record::read(&record).map(|r| r.calibration_id).unwrap_or_default();
+        if now != made {
+            return Err(Error::input(path, format!("stale: the run in {folder} has been calibrated alone again since (or its folder is incomplete); rebuild it with `{REBUILD}`")));
+        }
+    }
+    Ok(())
+}
+
+/// `to` relative to `from` (both folders), through their canonical forms
+/// where they exist.
+fn relative(from: &Path, to: &Path) -> PathBuf {
+    let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let (from, to) = (canonical(from), canonical(to));
+    let a: Vec<Component> = from.components().collect();
+    let b: Vec<Component> = to.components().collect();
+    let common = a.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    let mut out = PathBuf::new();
+    for _ in common..a.len() {
+        out.push("..");
+    }
+    for c in &b[common..] {
+        out.push(c.as_os_str());
+    }
+    if out.as_os_str().is_empty() {
+        out.push(".");
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_paths_climb_and_descend() {
+        assert_eq!(relative(Path::new("/a/b/I1.0A"), Path::new("/a/b/I1.0A/runs/r1")), PathBuf::from("runs/r1"));
+        assert_eq!(relative(Path::new("/a/b/I1.0A"), Path::new("/a/b/I0.5A/runs/r2")), PathBuf::from("../I0.5A/runs/r2"));
+        assert_eq!(relative(Path::new("/a/b"), Path::new("/a/b")), PathBuf::from("."));
+    }
+}
