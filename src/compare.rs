@@ -21,7 +21,26 @@ pub struct Entry<'a> {
     pub positions: Vec<(usize, usize)>,
     /// The currents a law calibration saw (A); empty for one current.
     pub law_currents: Vec<f64>,
+    /// The between-run layer's centre at this calibration's current
+    /// (`--per-run`): per B-P parameter its values over the layer's draws,
+    /// and the fit they came from.
+    pub layer: Option<LayerCentre>,
 }
+
+/// The centre of the between-run layer at one current: the typical test
+/// there, draw by draw.
+pub struct LayerCentre {
+    /// The layer's draw indices.
+    pub draw: Vec<f64>,
+    /// Per B-P parameter, its values at the draws (SI; NaN where none).
+    pub centre: Vec<Vec<f64>>,
+    /// Which fit: equal for the currents of one fit, whose draws pair.
+    pub fit: String,
+}
+
+/// The suffix of a calibration's label in the rows that compare the
+/// between-run layer's centres.
+pub const TYPICAL_TEST: &str = " (typical test)";
 
 /// One row of `comparison.parquet`: a calibration's summary of one parameter.
 #[derive(Clone, Debug, PartialEq)]
@@ -89,8 +108,47 @@ impl Comparison {
         for law in entries.iter().filter(|e| !e.law_currents.is_empty()) {
             differences.extend(law_differences(&law.label, law.sample, &law.positions, &currents));
         }
+        differences.extend(layer_differences(entries));
         Comparison { rows, differences }
     }
+}
+
+/// How the between-run layer's centres (the typical test at each current)
+/// differ between each pair of entries whose layers come from one fit:
+/// draw by draw (one posterior of the layer), labelled "`label` (typical
+/// test)". Draws where either centre has no θ are left out.
+pub fn layer_differences(entries: &[Entry]) -> Vec<DifferenceRow> {
+    let mut rows = Vec::new();
+    for (i, a) in entries.iter().enumerate() {
+        let Some(la) = &a.layer else { continue };
+        for b in &entries[i + 1..] {
+            if let Some(lb) = &b.layer {
+                rows.extend(centre_differences(&a.label, la, &b.label, lb).unwrap_or_default());
+            }
+        }
+    }
+    rows
+}
+
+/// [`layer_differences`] of one pair; `None` unless both come from one
+/// fit (their draws pair).
+pub fn centre_differences(label_a: &str, a: &LayerCentre, label_b: &str, b: &LayerCentre) -> Option<Vec<DifferenceRow>> {
+    if a.fit != b.fit || a.draw != b.draw {
+        return None;
+    }
+    let mut rows = Vec::new();
+    for (k, parameter) in PARAM_NAMES.iter().enumerate() {
+        let (x, y): (Vec<f64>, Vec<f64>) = a.centre[k].iter().zip(&b.centre[k]).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)).unzip();
+        if x.len() >= 2 {
+            rows.push(DifferenceRow {
+                a: format!("{label_a}{TYPICAL_TEST}"),
+                b: format!("{label_b}{TYPICAL_TEST}"),
+                parameter: parameter.to_string(),
+                difference: paired_difference(&x, &y),
+            });
+        }
+    }
+    Some(rows)
 }
 
 /// How a law's B-P parameters differ between each pair of `currents_a`:
@@ -294,6 +352,28 @@ mod tests {
     fn normal_draws(mean: f64, sd: f64, n: usize, seed: u64) -> Vec<f64> {
         let mut rng = crate::rng::stream(seed, &[]);
         (0..n).map(|_| mean + sd * rng.sample::<f64, _>(StandardNormal)).collect()
+    }
+
+    /// The layer's centres at two currents pair by draw: b = a − 0.1 in
+    /// every draw is P(a > b) = 1 although their marginals (sd 1) overlap
+    /// almost wholly (as independent posteriors, P would be about 0.53);
+    /// centres of two fits do not pair at all; a draw without θ (NaN) is
+    /// left out.
+    #[test]
+    fn layer_centres_compare_draw_by_draw_within_one_fit() {
+        let x = normal_draws(0.0, 1.0, 1000, 3);
+        let centre = |shift: f64, fit: &str| LayerCentre {
+            draw: (0..1000).map(|i| i as f64).collect(),
+            centre: (0..7).map(|_| x.iter().enumerate().map(|(i, v)| if i == 7 { f64::NAN } else { 10.0 + v + shift }).collect()).collect(),
+            fit: fit.to_string(),
+        };
+        let (a, b) = (centre(0.0, "f"), centre(-0.1, "f"));
+        let rows = centre_differences("a", &a, "b", &b).expect("one fit");
+        assert_eq!(rows.len(), 7);
+        assert_eq!(rows[0].a, "a (typical test)");
+        assert!(rows.iter().all(|r| r.difference.p_greater == 1.0 && (r.difference.diff_q50 - 0.1).abs() < 1e-9), "{:?}", rows[0]);
+        assert!(difference(&a.centre[0][..7], &b.centre[0][..7]).p_greater < 0.9, "the premise: the marginals overlap");
+        assert!(centre_differences("a", &a, "b", &centre(-0.1, "g")).is_none(), "two fits do not pair");
     }
 
     /// a ~ N(1.0, 0.3²), b ~ N(0.8, 0.4²): a − b ~ N(0.2, 0.5²), so

@@ -19,6 +19,16 @@ pub(super) fn entry(cal: Calibration, prediction: Option<Prediction>) -> Entry {
     Entry { label: cal.label(), positions: cal.draw_positions(DRAWS), cal, prediction }
 }
 
+/// The between-run layer's centre in a calibration's folder, where it has
+/// a whole one (`--per-run`) derived from it.
+fn layer_centre(cal: &Calibration) -> Option<compare::LayerCentre> {
+    if !cal.dir.join(store::between_runs::FILE).exists() {
+        return None;
+    }
+    let table = store::between_runs::read(&cal.dir, &cal.record.calibration_id).ok()?;
+    Some(compare::LayerCentre { draw: table.draw, centre: table.centre, fit: table.fit })
+}
+
 impl Pipeline<'_> {
     /// `comparison.parquet`, `differences.parquet`, the figures and
     /// `report.html` of the calibrations in `dirs`, into `out`. `rpm` picks
@@ -61,6 +71,7 @@ impl Pipeline<'_> {
                 sample: &e.cal.sample,
                 positions: e.positions.clone(),
                 law_currents: if e.cal.is_current_law() { e.cal.record.currents.clone() } else { Vec::new() },
+                layer: layer_centre(&e.cal),
             })
             .collect();
         let comparison = Comparison::of(&tables);

@@ -68,6 +68,7 @@ pub fn write(out: &Path, entries: &[Entry], comparison: &Comparison, rpm: Option
     calibrations_section(&mut page, entries);
     parameters_section(&mut page, entries);
     differences_section(&mut page, comparison);
+    typical_test_section(&mut page, comparison);
     adequacy_section(&mut page, entries);
     page.section("current-law", "Current law and held-out currents");
     law_section(&mut page, entries);
@@ -162,6 +163,33 @@ fn differences_section(page: &mut Page, comparison: &Comparison) {
         })
         .collect();
     page.table(&["a", "b", "parameter", "a − b: median [5 %, 95 %]", "a / b: median [5 %, 95 %]", "P(a > b)"], &table);
+}
+
+/// P(a > b) between currents by the joint calibrations beside the same by
+/// the between-run layer's centres, where the folders hold one fit.
+fn typical_test_section(page: &mut Page, comparison: &Comparison) {
+    let layer: Vec<&compare::DifferenceRow> = comparison.differences.iter().filter(|r| r.a.ends_with(compare::TYPICAL_TEST)).collect();
+    if layer.is_empty() {
+        return;
+    }
+    page.para("Between currents for a typical test: the between-run layer's centres (each current's typical test of this damper, `--per-run`), compared draw by draw within its one posterior, beside the joint calibrations' comparison. Where the tests of a current disagree, the joint calibrations' P(a > b) rests on intervals that describe these records only; the layer's says how sure one may be that the damper itself differs between the currents.");
+    let joint = |a: &str, b: &str, p: &str| comparison.differences.iter().find(|r| r.a == a && r.b == b && r.parameter == p).map(|r| r.difference.p_greater);
+    let table: Vec<Vec<String>> = layer
+        .iter()
+        .map(|r| {
+            let (a, b) = (r.a.trim_end_matches(compare::TYPICAL_TEST), r.b.trim_end_matches(compare::TYPICAL_TEST));
+            let d = &r.difference;
+            vec![
+                esc(a),
+                esc(b),
+                esc(&r.parameter),
+                joint(a, b, &r.parameter).map_or("–".into(), |p| format!("{p:.3}")),
+                format!("{:.3}", d.p_greater),
+                format!("{} [{}, {}]", num(d.ratio_q50, 3), num(d.ratio_q05, 3), num(d.ratio_q95, 3)),
+            ]
+        })
+        .collect();
+    page.table(&["a", "b", "parameter", "P(a > b), joint", "P(a > b), typical test", "a / b, typical test: median [5 %, 95 %]"], &table);
 }
 
 fn reproduce_section(page: &mut Page, entries: &[Entry]) {

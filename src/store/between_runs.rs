@@ -62,11 +62,14 @@ pub fn write(dir: &Path, layer: &BetweenRuns, group: usize, id: &str, runs: &str
 }
 
 /// A new test's B-P parameters and the centre's, read back: per B-P
-/// parameter, its values over the draws.
+/// parameter, its values over the draws; and which fit they came from
+/// (the calibration ids of the runs it took, sorted: the same in every
+/// current's folder of one fit).
 pub struct LayerTable {
     pub draw: Vec<f64>,
     pub new_test: Vec<Vec<f64>>,
     pub centre: Vec<Vec<f64>>,
+    pub fit: String,
 }
 
 /// The layer's draws in `dir`, derived from calibration `id`; refused if
@@ -76,10 +79,13 @@ pub fn read(dir: &Path, id: &str) -> Result<LayerTable> {
     check(&path, dir, id)?;
     let df = read_parquet(&path)?;
     let col = |n: &str| f64_column(&df, n, &path);
+    let mut ids: Vec<String> = parquet_meta(&path, LAYER_RUNS)?.unwrap_or_default().split(',').filter_map(|p| p.rsplit_once('=').map(|(_, id)| id.to_string())).collect();
+    ids.sort();
     Ok(LayerTable {
         draw: col("draw")?,
         new_test: PARAM_NAMES.iter().map(|n| col(n)).collect::<Result<_>>()?,
         centre: PARAM_NAMES.iter().map(|n| col(&format!("centre_{n}"))).collect::<Result<_>>()?,
+        fit: ids.join(","),
     })
 }
 
