@@ -10,10 +10,9 @@ use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings
 use crate::report;
 use crate::sampler::{Checkpointer, Observer};
 use crate::store;
-use crate::validate::between_runs::{self, BetweenRuns, GibbsSettings, LayerRun};
+use crate::validate::between_runs::{self, BetweenRuns, GibbsSettings, LayerRun, LeftOut};
 use crate::validate::consistency::consistency;
 use crate::validate::LooSettings;
-use crate::predict::CoverageRow;
 use crate::data::RunData;
 use std::time::Instant;
 
@@ -171,7 +170,19 @@ impl Pipeline<'_> {
                 })
             })
             .collect();
-        let layer = BetweenRuns::fit(&layer_runs, GibbsSettings::default(), first.joint.settings.sampler.seed)?;
+        let clock = Instant::now();
+        let layer = BetweenRuns::fit(&layer_runs, &[], GibbsSettings::default(), first.joint.settings.sampler.seed)?;
+        let settled = layer.max_rhat < 1.01 && layer.min_ess >= 400.0;
+        self.note(&format!(
+            "\nbetween-run layer: {} runs alone at {:?} A, {} Gibbs chains: largest R̂ {:.4}, smallest ESS {:.0} ({:.1} s){}",
+            layer_runs.len(),
+            layer.currents,
+            between_runs::CHAINS,
+            layer.max_rhat,
+            layer.min_ess,
+            clock.elapsed().as_secs_f64(),
+            if settled { "" } else { " — not converged: its new-test intervals are not to be trusted" }
+        ));
         let folders: Vec<(&Path, &str)> = layer_runs.iter().map(|r| (r.cal.dir.as_path(), r.cal.record.calibration_id.as_str())).collect();
         for stage in stages.iter().filter(|s| !s.alone.is_empty()) {
             let joint = &stage.joint;
@@ -187,8 +198,10 @@ impl Pipeline<'_> {
             }
             if let Some(loo) = loo {
                 let clock = Instant::now();
-                let rows: Vec<CoverageRow> =
-                    between_runs::leave_one_out(joint, &stage.runs, &layer_runs, loo.draws, loo.replicates, loo.seed)?.into_iter().map(|p| p.coverage).collect();
+                let mut rows = Vec::new();
+                for left_out in [LeftOut::Run, LeftOut::Current] {
+                    rows.extend(between_runs::leave_out(joint, &stage.runs, &layer_runs, left_out, loo.draws, loo.replicates, loo.seed)?);
+                }
                 if !rows.is_empty() {
                     store::between_runs::write_leave_one_out(&joint.dir, &rows, &joint.record.calibration_id, &meta)?;
                     self.emit(Event::NewTestLeftOut { rows: &rows, seconds: clock.elapsed().as_secs_f64() });

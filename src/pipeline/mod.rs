@@ -24,7 +24,8 @@ use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::CurrentIdentification;
 use crate::sampler::{Observer, Progress};
-use crate::predict::{CoverageRow, PredictionRecord};
+use crate::predict::PredictionRecord;
+use crate::validate::between_runs::NewTestRow;
 use crate::validate::consistency::ParameterConsistency;
 use crate::validate::{LooRow, LooSettings};
 
@@ -46,8 +47,8 @@ pub enum Event<'a> {
     /// The runs of a calibration, each calibrated alone, against the joint one.
     Consistency(&'a [ParameterConsistency]),
     /// Each run predicted as a new test by the between-run layer fitted
-    /// without it.
-    NewTestLeftOut { rows: &'a [CoverageRow], seconds: f64 },
+    /// without it, or without its current.
+    NewTestLeftOut { rows: &'a [NewTestRow], seconds: f64 },
     /// A file of results (a report) was written.
     Wrote(&'a Path),
     /// What a stage that ran beside another said, as the pipeline's

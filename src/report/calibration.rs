@@ -18,6 +18,7 @@ use crate::calibrate::Calibration;
 use crate::predict::{CoverageRow, Prediction};
 use crate::sampler::diagnostics::MIN_TAU_MULTIPLE;
 use crate::validate::consistency::ParameterConsistency;
+use crate::validate::between_runs::{LeftOut, NewTestRow};
 use crate::validate::LeaveOneOut;
 
 /// The share of observations a 95 % predictive band should hold for the
@@ -43,8 +44,8 @@ pub struct CalibrationReport<'a> {
     /// Each run calibrated alone against this calibration (`--per-run`).
     pub consistency: Option<&'a [ParameterConsistency]>,
     /// Each run predicted as a new test by the between-run layer fitted
-    /// without it (`--per-run --leave-one-out`).
-    pub new_test_loo: Option<&'a [CoverageRow]>,
+    /// without it, or without its current (`--per-run --leave-one-out`).
+    pub new_test_loo: Option<&'a [NewTestRow]>,
 }
 
 /// Writes the figures and `report.html` into the calibration's folder.
@@ -348,14 +349,17 @@ fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
 }
 
 /// Each run held out and predicted as a new test by the between-run layer,
-/// beside its prediction by the joint calibration of the other runs.
-fn new_test_table(page: &mut Page, rows: &[CoverageRow], loo: Option<&LeaveOneOut>) {
+/// beside its prediction by the joint calibration of the other runs; then
+/// each run predicted from the other currents alone.
+fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut>) {
     page.para("Each run predicted as a new test of this damper: the between-run layer fitted to every other run calibrated alone, at every current, draws the run's parameters and noise, which the integrator carries along its record. Beside it, where the leave-one-out study was run, the same run predicted by the joint calibration of the other runs at its current. A predictive band that holds about 95 % of every held-out run is honest about what a test the calibration never saw will do; the log predictive density per sample scores sharpness and honesty together (higher is better).");
     let per_sample = |c: &CoverageRow| c.lppd / c.samples.max(1) as f64;
     let joint = |run: &str| loo.and_then(|l| l.rows.iter().find(|r| r.coverage.run == run)).map(|r| &r.coverage);
     let table: Vec<Vec<String>> = rows
         .iter()
-        .map(|c| {
+        .filter(|r| r.left_out == LeftOut::Run)
+        .map(|r| {
+            let c = &r.coverage;
             let j = joint(&c.run);
             vec![
                 esc(&c.run),
@@ -373,6 +377,18 @@ fn new_test_table(page: &mut Page, rows: &[CoverageRow], loo: Option<&LeaveOneOu
         &["held out", "new test: inside 95 % (%)", "joint: inside 95 % (%)", "new test: RMS to median (Pa)", "joint: RMS to median (Pa)", "new test: lppd per sample", "joint: lppd per sample", ""],
         &table,
     );
+    let by_current: Vec<Vec<String>> = rows
+        .iter()
+        .filter(|r| r.left_out == LeftOut::Current)
+        .map(|r| {
+            let c = &r.coverage;
+            vec![esc(&c.run), format!("{:.1}", 100.0 * c.inside_p95), format!("{:.1}", 100.0 * c.inside_q95), format!("{:.0}", c.rmse_q50_pa), format!("{:.3}", per_sample(c)), Mark::of(c.inside_p95 >= 0.85).html().into()]
+        })
+        .collect();
+    if !by_current.is_empty() {
+        page.para("A current the layer never saw: every run at this current left out, the layer fitted to the runs at the other currents, its centre here read off its curve in the current (docs/calibration.md), and each run predicted as a new test there.");
+        page.table(&["held out with its current", "inside 95 % (%)", "inside model band (%)", "RMS to median (Pa)", "lppd per sample", ""], &by_current);
+    }
 }
 
 fn figures_section(page: &mut Page, cal: &Calibration, figs: &Figures) -> Result<()> {

@@ -8,7 +8,8 @@ use crate::calibrate::Calibration;
 use crate::data::Campaign;
 use crate::identify::CurrentIdentification;
 use crate::posterior::ParameterModel;
-use crate::predict::{CoverageRow, PredictionRecord};
+use crate::predict::PredictionRecord;
+use crate::validate::between_runs::{LeftOut, NewTestRow};
 use crate::validate::consistency::ParameterConsistency;
 use crate::validate::LooRow;
 
@@ -192,13 +193,18 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
 }
 
 /// Each run predicted as a new test by the between-run layer fitted
-/// without it.
-pub fn new_test_left_out(rows: &[CoverageRow], seconds: f64) -> String {
+/// without it (or without its current).
+pub fn new_test_left_out(rows: &[NewTestRow], seconds: f64) -> String {
     let mut out = String::new();
     row!(out, "\nleave-one-out, each run as a new test of the between-run layer ({seconds:.1} s):");
-    row!(out, "{:<16} {:>12} {:>12} {:>12} {:>10}", "held out", "in_p95_%", "in_q95_%", "rmse_q50_pa", "lppd/sample");
-    for c in rows {
-        row!(out, "{:<16} {:>12.1} {:>12.1} {:>12.1} {:>10.3}", c.run, 100.0 * c.inside_p95, 100.0 * c.inside_q95, c.rmse_q50_pa, c.lppd / c.samples.max(1) as f64);
+    row!(out, "{:<16} {:>12} {:>12} {:>12} {:>12} {:>10} {:>8}", "held out", "without", "in_p95_%", "in_q95_%", "rmse_q50_pa", "lppd/sample", "max_R̂");
+    for r in rows {
+        let c = &r.coverage;
+        let without = match r.left_out {
+            LeftOut::Run => "the run",
+            LeftOut::Current => "its current",
+        };
+        row!(out, "{:<16} {:>12} {:>12.1} {:>12.1} {:>12.1} {:>10.3} {:>8.4}", c.run, without, 100.0 * c.inside_p95, 100.0 * c.inside_q95, c.rmse_q50_pa, c.lppd / c.samples.max(1) as f64, r.max_rhat);
     }
     out
 }

@@ -6,7 +6,9 @@
 //!   The draws of every current's folder from one fit share their `draw`
 //!   index, so centres at two currents can be compared draw by draw;
 //! - `loo_new_test.parquet`: each run predicted as a new test by the layer
-//!   fitted without it (the columns of `coverage.parquet`).
+//!   fitted without it (`left_out` = `run`), and without every run at its
+//!   current (`current`): the columns of `coverage.parquet`, `left_out` and
+//!   `max_r_hat` (of the layer's chains fitted without it).
 //!
 //! Both name the joint calibration (`mrbp.calibration_id`) and every
 //! calibration alone the layer was fitted to (`mrbp.layer_runs`: each run's
@@ -15,11 +17,11 @@
 
 use std::path::{Component, Path, PathBuf};
 
-use super::parquet::{check_derived, f64_column, parquet_meta, read_parquet, write_parquet, Table};
+use super::parquet::{check_derived, f64_column, parquet_meta, read_parquet, str_column, write_parquet, Table};
 use crate::error::{Error, Result};
 use crate::model::PARAM_NAMES;
 use crate::predict::CoverageRow;
-use crate::validate::between_runs::BetweenRuns;
+use crate::validate::between_runs::{BetweenRuns, LeftOut, NewTestRow};
 
 pub const FILE: &str = "between_runs.parquet";
 pub const LOO: &str = "loo_new_test.parquet";
@@ -46,7 +48,8 @@ pub fn write(dir: &Path, layer: &BetweenRuns, group: usize, id: &str, runs: &str
         .derived_from(id)
         .meta(LAYER_RUNS, runs)
         .meta("mrbp.layer_currents_a", &layer.currents.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(","))
-        .meta("mrbp.layer_acceptance", &layer.acceptance.to_string())
+        .meta("mrbp.layer_max_r_hat", &layer.max_rhat.to_string())
+        .meta("mrbp.layer_min_ess", &layer.min_ess.to_string())
         .i64("draw", picks.iter().map(|&i| i as i64).collect());
     let theta = |z: &[f64]| layer.theta(z).filter(|t| layer.in_support(t)).unwrap_or([f64::NAN; 7]);
     for (k, name) in PARAM_NAMES.iter().enumerate() {
@@ -91,19 +94,37 @@ pub fn read(dir: &Path, id: &str) -> Result<LayerTable> {
 
 /// Writes the layer's leave-one-out coverage of the runs of calibration
 /// `id` into `dir`.
-pub fn write_leave_one_out(dir: &Path, rows: &[CoverageRow], id: &str, runs: &str) -> Result<()> {
-    write_parquet(&dir.join(LOO), super::coverage::table(rows).derived_from(id).meta(LAYER_RUNS, runs))
+pub fn write_leave_one_out(dir: &Path, rows: &[NewTestRow], id: &str, runs: &str) -> Result<()> {
+    let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
+    let table = super::coverage::table(&coverage)
+        .str("left_out", rows.iter().map(|r| r.left_out.label().to_string()).collect())
+        .f64("max_r_hat", rows.iter().map(|r| r.max_rhat).collect());
+    write_parquet(&dir.join(LOO), table.derived_from(id).meta(LAYER_RUNS, runs))
 }
 
 /// The layer's leave-one-out coverage in `dir`, if there is one; refused if
 /// stale.
-pub fn read_leave_one_out(dir: &Path, id: &str) -> Result<Option<Vec<CoverageRow>>> {
+pub fn read_leave_one_out(dir: &Path, id: &str) -> Result<Option<Vec<NewTestRow>>> {
     let path = dir.join(LOO);
     if !path.exists() {
         return Ok(None);
     }
     check(&path, dir, id)?;
-    super::coverage::read(&path).map(Some)
+    let coverage = super::coverage::read(&path)?;
+    let df = read_parquet(&path)?;
+    let left_out = str_column(&df, "left_out", &path)?;
+    let rhat = f64_column(&df, "max_r_hat", &path)?;
+    coverage
+        .into_iter()
+        .zip(left_out)
+        .zip(rhat)
+        .enumerate()
+        .map(|(i, ((coverage, l), max_rhat))| match LeftOut::parse(&l) {
+            Some(left_out) => Ok(NewTestRow { coverage, left_out, max_rhat }),
+            None => Err(Error::input(&path, format!("row {}: unknown left_out '{l}'", i + 1))),
+        })
+        .collect::<Result<Vec<_>>>()
+        .map(Some)
 }
 
 /// Refuses `path` (a file of folder `dir`) unless it was derived from
