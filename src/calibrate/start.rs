@@ -141,7 +141,8 @@ fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
                 format!(
                     "{}: the MAP residuals have a lag-1 autocorrelation of {rho:.2}, but the noise model takes them as independent; \
                      parameter intervals are too narrow by about {factor:.1}× (see the report's model adequacy section); \
-                     `--noise discrepancy` models this memory as a force the law lacks (docs/calibration.md, \"Model discrepancy\")",
+                     `--noise discrepancy` models this memory as a force the law lacks, and `--per-run` gives intervals that hold for a new test of this damper \
+                     (docs/calibration.md, \"Model discrepancy\", \"The between-run layer\")",
                     run.id
                 )
             }

@@ -311,7 +311,7 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
 fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
     page.section("consistency", "Consistency across runs");
     let Some(parameters) = r.consistency.filter(|p| !p.is_empty()) else {
-        page.para("Not run for this calibration: `mrbp sample MANIFEST --out DIR --per-run` also calibrates each run alone and compares them here.");
+        page.para("Not run for this calibration: `mrbp run MANIFEST --out DIR --per-run --leave-one-out` also calibrates each run alone, compares them here, and fits the between-run layer, whose intervals and bands hold for a new test of the damper (every current of the campaign at once: it learns how tests differ from all of them).");
         return Ok(());
     };
     page.para(&format!(
