@@ -224,7 +224,13 @@ fn disagreement_note(page: &mut Page, parameters: &[ParameterConsistency]) {
     let disagree: Vec<String> = parameters
         .iter()
         .filter(|p| p.disagrees())
-        .map(|p| format!("{} {} – {} (χ²/ν = {:.1})", p.parameter, num(p.new_test.q05, 3), num(p.new_test.q95, 3), p.chi2_nu))
+        .map(|p| {
+            let unit = match crate::posterior::unit_of(&p.parameter) {
+                "-" | "" => String::new(),
+                u => format!(" {u}"),
+            };
+            format!("{} {} – {}{unit} (χ²/ν = {:.1})", p.parameter, num(p.new_test.q05, 3), num(p.new_test.q95, 3), p.chi2_nu)
+        })
         .collect();
     if !disagree.is_empty() {
         page.note(&format!(
