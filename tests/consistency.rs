@@ -83,6 +83,11 @@ fn per_run_calibrations_find_the_run_with_another_g() {
     ok(&mrbp(&["sample", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "--substeps", "2", "--steps", "20", "--force"]));
     assert!(!out.join("consistency.parquet").exists() && !out.join("runs").exists() && !out.join("consistency.png").exists());
     assert!(!out.join("between_runs.parquet").exists());
+    // without the layer there are no new tests to simulate
+    let csv = dir.path().join("a100").join(std::fs::read_dir(dir.path().join("a100")).unwrap().flatten().map(|e| e.file_name()).find(|n| n.to_string_lossy().ends_with(".csv")).unwrap());
+    let refused = mrbp(&["simulate", out.to_str().unwrap(), "--input", csv.to_str().unwrap(), "--new-test"]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--per-run"), "{}", String::from_utf8_lossy(&refused.stderr));
 }
 
 /// Leave-one-out with the between-run layer (`mrbp run --per-run
@@ -127,6 +132,19 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
     }
     let html = std::fs::read_to_string(folder.join("report.html")).unwrap();
     assert!(html.contains("new test: inside 95 %"), "the report shows the table");
+    // a new test of the damper along an excitation of one's own: its model
+    // band carries the between-test spread the posterior's does not
+    let input = dir.path().join("g15").join(std::fs::read_dir(dir.path().join("g15")).unwrap().flatten().map(|e| e.file_name()).find(|n| n.to_string_lossy().ends_with(".csv")).unwrap());
+    let width = |sim: &Path| {
+        let t = read_parquet(&sim.join("simulation.parquet")).unwrap();
+        let (hi, lo) = (mrbp::store::f64_column(&t, "q975", sim).unwrap(), mrbp::store::f64_column(&t, "q025", sim).unwrap());
+        hi.iter().zip(&lo).map(|(h, l)| h - l).sum::<f64>() / hi.len() as f64
+    };
+    let (new, posterior) = (folder.join("simulation-new"), folder.join("simulation-posterior"));
+    ok(&mrbp(&["simulate", folder.to_str().unwrap(), "--input", input.to_str().unwrap(), "--new-test", "--draws", "100", "--out", new.to_str().unwrap()]));
+    ok(&mrbp(&["simulate", folder.to_str().unwrap(), "--input", input.to_str().unwrap(), "--draws", "100", "--out", posterior.to_str().unwrap()]));
+    assert!(width(&new) > 3.0 * width(&posterior), "model band of a new test {} against the posterior's {}", width(&new), width(&posterior));
+    assert!(std::fs::read_to_string(new.join("simulation.toml")).unwrap().contains("layer_runs"));
     let status = mrbp(&["status", out.to_str().unwrap()]);
     assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stdout));
     // a run calibrated alone again makes the layer's files stale

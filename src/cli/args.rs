@@ -133,6 +133,11 @@ pub enum Command {
         /// DIR/simulation-<input file name>)
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Draw new tests of the damper from the folder's between-run layer
+        /// (between_runs.parquet, made with --per-run) instead of the
+        /// calibration's posterior: the band a test not yet run would fall in
+        #[arg(long)]
+        new_test: bool,
         #[command(flatten)]
         options: PredictOptions,
     },

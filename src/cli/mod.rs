@@ -78,11 +78,11 @@ fn dispatch(cli: Cli) -> Result<()> {
                 None => pipeline.predict(&cal, &cal.full_campaign()?, out.as_deref().unwrap_or(&dir), &options).map(drop),
             }
         }
-        Some(Command::Simulate { dir, input, current, out, options }) => {
+        Some(Command::Simulate { dir, input, current, out, options, new_test }) => {
             let cal = crate::store::folder::read(&dir)?;
             let stem = input.file_stem().map_or_else(|| "input".to_string(), |s| s.to_string_lossy().into_owned());
             let out = out.unwrap_or_else(|| dir.join(format!("simulation-{stem}")));
-            pipeline.simulate(&cal, &input, current, &out, &options).map(drop)
+            pipeline.simulate(&cal, &input, current, &out, &options, new_test).map(drop)
         }
         Some(Command::Report { dir, predict, validation }) => {
             let loo = validation.steps().map(|steps| pipeline.loo_settings(steps, &predict));

@@ -13,6 +13,15 @@ use crate::error::{Error, Result};
 use crate::predict::bands;
 use crate::store::simulation::{Simulation, SimulationRecord};
 
+/// Where a simulation's draws come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Source {
+    /// The calibration's posterior.
+    Posterior,
+    /// New tests of the damper from its between-run layer.
+    NewTest,
+}
+
 /// How far a current-law simulation may reach beyond the calibrated
 /// currents before it is refused (share of the calibrated span).
 const EXTRAPOLATION_LIMIT: f64 = 0.5;
@@ -24,10 +33,18 @@ impl Pipeline<'_> {
     /// the file's current, else the calibration's own): the model and
     /// predictive bands of the stress and of the force into `out`
     /// (`simulation.parquet`, `simulation.toml`, a figure).
-    pub fn simulate(&mut self, cal: &Calibration, input: &Path, current: Option<f64>, out: &Path, options: &PredictOptions) -> Result<Simulation> {
+    /// With `new_test`, the draws are new tests of the damper from the
+    /// folder's between-run layer (`between_runs.parquet`, `--per-run`),
+    /// not the calibration's posterior: the band a test not yet run at this
+    /// current would fall in.
+    pub fn simulate(&mut self, cal: &Calibration, input: &Path, current: Option<f64>, out: &Path, options: &PredictOptions, new_test: bool) -> Result<Simulation> {
         let c = Columns::default();
         let record = Record::read(input, &ColumnMap::of(&c, false))?;
-        let simulation = self.simulation(cal, input, record, current, options, Some(out))?;
+        let source = match new_test {
+            true => Source::NewTest,
+            false => Source::Posterior,
+        };
+        let simulation = self.simulation_from(cal, input, record, current, options, Some(out), source)?;
         crate::report::simulation::write(out, &simulation, &cal.label())?;
         crate::store::simulation::write(out, &simulation)?;
         let path = out.join(crate::store::simulation::FILE);
@@ -38,8 +55,21 @@ impl Pipeline<'_> {
     /// [`Pipeline::simulate`] of a record in memory (time, displacement and
     /// optionally current; its force is ignored) named by `input` in
     /// messages, without writing anything but holding `out` if given.
-    pub fn simulation(&mut self, cal: &Calibration, input: &Path, mut record: Record, current: Option<f64>, options: &PredictOptions, out: Option<&Path>) -> Result<Simulation> {
+    pub fn simulation(&mut self, cal: &Calibration, input: &Path, record: Record, current: Option<f64>, options: &PredictOptions, out: Option<&Path>) -> Result<Simulation> {
+        self.simulation_from(cal, input, record, current, options, out, Source::Posterior)
+    }
+
+    /// [`Pipeline::simulation`] with the draws from `source`.
+    #[allow(clippy::too_many_arguments)]
+    fn simulation_from(&mut self, cal: &Calibration, input: &Path, mut record: Record, current: Option<f64>, options: &PredictOptions, out: Option<&Path>, source: Source) -> Result<Simulation> {
         options.check()?;
+        let layer = match source {
+            Source::Posterior => None,
+            Source::NewTest if cal.is_current_law() => {
+                return Err(Error::Usage(format!("--new-test draws new tests from the between-run layer of a per-current calibration; {} holds a law", cal.dir.display())))
+            }
+            Source::NewTest => Some(crate::store::between_runs::new_tests(&cal.dir, &cal.record.calibration_id, &cal.sample.layout)?),
+        };
         let c = Columns::default();
         let map = ColumnMap::of(&c, false);
         record.force = vec![f64::NAN; record.len()];
@@ -68,9 +98,12 @@ impl Pipeline<'_> {
         }
         let clock = Instant::now();
         let data = RunData::from_run(&run, RecordPart::WholeRecord, cal.settings.likelihood.smooth_strain_ms);
-        let positions = cal.draw_positions(options.draws);
-        // a new test: the typical noise level and force offset of the runs seen
-        let draws: Vec<_> = positions.iter().map(|&(s, c)| cal.sample.draw_without(s, c, &id, current_a)).collect();
+        let draws: Vec<_> = match &layer {
+            // new tests of the damper, spread evenly over the layer's draws
+            Some((tests, _)) => crate::posterior::evenly_spaced(tests.len(), options.draws).into_iter().map(|i| tests[i].clone()).collect(),
+            // the posterior with the typical noise level and force offset of the runs seen
+            None => cal.draw_positions(options.draws).iter().map(|&(s, c)| cal.sample.draw_without(s, c, &id, current_a)).collect(),
+        };
         let settings = cal.predict_settings(options.replicates, options.seed);
         let bar = self.bar(draws.len() as u64);
         let b = bands(&data, 0, &draws, &settings, &|| bar.inc(1))?;
@@ -89,6 +122,7 @@ impl Pipeline<'_> {
             seconds: clock.elapsed().as_secs_f64(),
             calibration_id: cal.record.calibration_id.clone(),
             extrapolated,
+            layer_runs: layer.map(|(_, runs)| runs).unwrap_or_default(),
         };
         if b.failed > 0 {
             self.note(&format!("{} of {} posterior draws could not be integrated along {} (left out of the bands)", b.failed, b.failed + b.draws, input.display()));

@@ -92,6 +92,45 @@ pub fn read(dir: &Path, id: &str) -> Result<LayerTable> {
     })
 }
 
+/// New tests of the damper from the layer's draws in `dir` (derived from
+/// calibration `id`, whose `layout` names its noise parameters): each a
+/// draw of the B-P parameters, terms and noise; draws outside the prior's
+/// support (NaN) left out. Also the layer's `mrbp.layer_runs`. Refused if
+/// missing or stale.
+pub fn new_tests(dir: &Path, id: &str, layout: &crate::posterior::Layout) -> Result<(Vec<crate::posterior::Draw>, String)> {
+    let path = dir.join(FILE);
+    if !path.exists() {
+        return Err(Error::Usage(format!(
+            "{} has no between-run layer ({FILE}): calibrate each run alone too, `mrbp run MANIFEST --out DIR --per-run` (docs/calibration.md)",
+            dir.display()
+        )));
+    }
+    check(&path, dir, id)?;
+    let df = read_parquet(&path)?;
+    let col = |n: &str| f64_column(&df, n, &path);
+    let theta: Vec<Vec<f64>> = PARAM_NAMES.iter().map(|n| col(n)).collect::<Result<_>>()?;
+    let optional = |n: &str| if df.column(n).is_ok() { col(n).map(Some) } else { Ok(None) };
+    let (spring, offset) = (optional("gas_spring_n_per_m")?, optional("force_offset_n")?);
+    let noise: Vec<Vec<f64>> = layout.noise_parameters.iter().map(|p| col(p.name)).collect::<Result<_>>()?;
+    let draws = (0..theta[0].len())
+        .filter(|&i| theta.iter().all(|t| t[i].is_finite()))
+        .map(|i| {
+            let mut values = [0.0; crate::noise::MAX_PARAMETERS];
+            for (v, column) in values.iter_mut().zip(&noise) {
+                *v = column[i];
+            }
+            crate::posterior::Draw {
+                params: crate::model::Params::from_array(std::array::from_fn(|k| theta[k][i])),
+                field: None,
+                spring_n_per_m: spring.as_ref().map_or(0.0, |c| c[i]),
+                offset_n: offset.as_ref().map_or(0.0, |c| c[i]),
+                noise: values,
+            }
+        })
+        .collect();
+    Ok((draws, parquet_meta(&path, LAYER_RUNS)?.unwrap_or_default()))
+}
+
 /// Writes the layer's leave-one-out coverage of the runs of calibration
 /// `id` into `dir`.
 pub fn write_leave_one_out(dir: &Path, rows: &[NewTestRow], id: &str, runs: &str) -> Result<()> {

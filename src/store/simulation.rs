@@ -53,6 +53,11 @@ pub struct SimulationRecord {
     pub calibration_id: String,
     /// Whether a current law extrapolates beyond its calibrated currents.
     pub extrapolated: bool,
+    /// For new tests of the damper (`--new-test`): the run-alone
+    /// calibrations of the between-run layer they came from (its
+    /// `mrbp.layer_runs`); empty for the calibration's posterior.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub layer_runs: String,
 }
 
 /// The columns of `simulation.parquet`, in order: what the file and the

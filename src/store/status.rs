@@ -139,13 +139,23 @@ fn check_simulation(dir: &Path, problems: &mut Vec<String>) {
     if !dir.join(simulation::RECORD).exists() {
         return problems.push(format!("{}: missing, the simulation is incomplete (stopped while written); rebuild it with `{rebuild}`", simulation::RECORD));
     }
-    let made_from = match simulation::read_record(dir) {
-        Ok(r) => r.calibration_id,
+    let (made_from, layer_runs) = match simulation::read_record(dir) {
+        Ok(r) => (r.calibration_id, r.layer_runs),
         Err(e) => return problems.push(e.to_string()),
     };
     check_table(&dir.join(simulation::FILE), &made_from, rebuild, problems);
     if let Some(id) = enclosing(dir).filter(|id| *id != made_from) {
         problems.push(stale(&dir.join(simulation::FILE), &made_from, &id, rebuild));
+    }
+    // new tests of the damper: from the between-run layer now in the folder
+    if let (false, Some(parent)) = (layer_runs.is_empty(), dir.parent().filter(|_| enclosing(dir).is_some())) {
+        let now = parquet_meta(&parent.join(super::between_runs::FILE), super::between_runs::LAYER_RUNS).ok().flatten();
+        if now.as_deref() != Some(layer_runs.as_str()) {
+            problems.push(format!(
+                "{}: stale, its new tests came from a between-run layer since fitted again or removed; rebuild it with `mrbp simulate CALIBRATION --input FILE --new-test --out DIR`",
+                simulation::FILE
+            ));
+        }
     }
 }
 
