@@ -100,7 +100,7 @@ impl Pipeline<'_> {
         let data = RunData::from_run(&run, RecordPart::WholeRecord, cal.settings.likelihood.smooth_strain_ms);
         let draws: Vec<_> = match &layer {
             // new tests of the damper, spread evenly over the layer's draws
-            Some((tests, _)) => crate::posterior::evenly_spaced(tests.len(), options.draws).into_iter().map(|i| tests[i].clone()).collect(),
+            Some((tests, _)) => crate::posterior::evenly_spaced(tests.len(), options.draws).into_iter().map(|i| tests[i]).collect(),
             // the posterior with the typical noise level and force offset of the runs seen
             None => cal.draw_positions(options.draws).iter().map(|&(s, c)| cal.sample.draw_without(s, c, &id, current_a)).collect(),
         };
