@@ -19,7 +19,7 @@ use crate::model::{tangent_stiffness, Integrator, LANES};
 use crate::noise::{Explained, NoiseModel, NoiseValues};
 use crate::posterior::Draw;
 use crate::rng;
-use crate::sampler::quantile_sorted;
+
 
 /// How the bands are computed.
 #[derive(Clone, Debug)]
@@ -171,19 +171,40 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
         if k > 0 && run.tau[k].is_finite() {
             lppd += log_mean_exp(&log_p);
         }
-        at_k.sort_unstable_by(f64::total_cmp);
-        pred_k.sort_unstable_by(f64::total_cmp);
-        for (band, p) in model.iter_mut().zip(MODEL_PROBS) {
-            band[k] = quantile_sorted(&at_k, p);
+        for (band, q) in model.iter_mut().zip(selected_quantiles(&mut at_k, &MODEL_PROBS)) {
+            band[k] = q;
         }
-        for (band, p) in predictive.iter_mut().zip(PREDICTIVE_PROBS) {
-            band[k] = quantile_sorted(&pred_k, p);
+        for (band, q) in predictive.iter_mut().zip(selected_quantiles(&mut pred_k, &PREDICTIVE_PROBS)) {
+            band[k] = q;
         }
     }
     // no measured force (a simulated excitation): nothing to explain
     let measured = run.tau.iter().all(|t| t.is_finite());
     let explained = if measured { explain_median(run, kept, &model[2], noise) } else { None };
     Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed, lppd, explained })
+}
+
+/// The quantiles `probs` (increasing) of `v`, as [`crate::sampler::quantile_sorted`] of
+/// `v` sorted gives them — the same values — by selection instead of a
+/// sort: each needs the order statistics at ⌊h⌋ and ⌊h⌋ + 1, and those of
+/// increasing probabilities lie ever further right. Reorders `v`.
+fn selected_quantiles<const N: usize>(v: &mut [f64], probs: &[f64; N]) -> [f64; N] {
+    let n = v.len();
+    let mut out = [f64::NAN; N];
+    if n == 0 {
+        return out;
+    }
+    let mut start = 0;
+    for (o, &p) in out.iter_mut().zip(probs) {
+        let h = (n - 1) as f64 * p.clamp(0.0, 1.0);
+        let lo = (h.floor() as usize).max(start);
+        let (_, at, right) = v[start..].select_nth_unstable_by(lo - start, f64::total_cmp);
+        let low = *at;
+        let high = if lo + 1 < n { right.iter().copied().min_by(f64::total_cmp).unwrap_or(low) } else { low };
+        *o = low + (h - lo as f64) * (high - low);
+        start = lo;
+    }
+    out
 }
 
 /// [`NoiseModel::explain`] at the median: the residuals about the median
@@ -318,6 +339,25 @@ mod tests {
 
     /// One fixed parameter set: the model band collapses onto the
     /// trajectory, and the predictive band is that trajectory ± 1.96 σ up to
+    /// Quantiles by selection equal those of the sorted values, bit for bit,
+    /// ties and all.
+    #[test]
+    fn selected_quantiles_equal_sorted_ones() {
+        use crate::sampler::quantile_sorted;
+        let mut rng = crate::rng::stream(5, &[]);
+        for n in [1usize, 2, 3, 10, 400, 4001] {
+            let v: Vec<f64> = (0..n).map(|i| if i % 7 == 0 { 1.5 } else { rand::RngExt::random::<f64>(&mut rng) }).collect();
+            let mut sorted = v.clone();
+            sorted.sort_unstable_by(f64::total_cmp);
+            let probs = [0.025, 0.25, 0.5, 0.75, 0.975];
+            let mut w = v.clone();
+            let got = selected_quantiles(&mut w, &probs);
+            for (g, p) in got.iter().zip(probs) {
+                assert_eq!(g.to_bits(), quantile_sorted(&sorted, p).to_bits(), "n {n}, p {p}");
+            }
+        }
+    }
+
     /// the Monte Carlo error of the 2.5 % quantile of 4000 normals
     /// (sd ≈ 0.05 σ; 0.2 σ is four of them).
     #[test]
