@@ -44,3 +44,11 @@ sbc:
 sbc-discrepancy:
     cargo run --release -- study plan target/studies/sbc-discrepancy --sbc 200 --config studies/sbc-prior.toml --rpm 200 --cycles 1 --rate 1000 --noise-displacement 2e-6 --noise discrepancy
     cargo run --release -- study run target/studies/sbc-discrepancy
+
+# coverage of the between-run layer's new-test intervals: 40 virtual
+# populations of five tests whose G and n vary from test to test, four
+# calibrated alone, the fifth the new test (docs/calibration.md; needs
+# polars: pip install polars)
+layer-coverage:
+    cargo build --release
+    python3 scripts/layer_coverage.py target/release/mrbp target/studies/layer-coverage 40 2
