@@ -183,4 +183,33 @@ fn a_current_left_out_is_predicted_from_the_others() {
     }
     let html = std::fs::read_to_string(folder.join("report.html")).unwrap();
     assert!(html.contains("held out with its current"), "the report shows the table");
+
+    // the typical test against the current: at the folder's own current its
+    // median is the median of the layer's centre draws in
+    // between_runs.parquet (the same draws, drawn again where a centre falls
+    // outside the priors' support: within a tenth of the 90 % interval), a
+    // new test is wider than the typical test, and the grid runs from 0 A
+    // beyond the highest current
+    let typical = mrbp::store::between_runs::read_typical(&folder, &joint.calibration_id).unwrap().expect("written");
+    let layer = read_parquet(&folder.join("between_runs.parquet")).unwrap();
+    for (k, parameter) in mrbp::model::PARAM_NAMES.iter().enumerate() {
+        let rows: Vec<_> = typical.iter().filter(|r| r.parameter == *parameter).collect();
+        assert!(rows.first().unwrap().current_a == 0.0 && rows.last().unwrap().current_a > 1.5, "{parameter}: {rows:?}");
+        let here = rows.iter().find(|r| (r.current_a - 1.0).abs() < 1e-9).expect("the folder's current is on the grid");
+        assert_eq!(here.kind, mrbp::compare::CurrentKind::Calibrated);
+        let mut centre: Vec<f64> = layer.column(&format!("centre_{parameter}")).unwrap().f64().unwrap().into_no_null_iter().filter(|v| v.is_finite()).collect();
+        centre.sort_by(f64::total_cmp);
+        let median = centre[centre.len() / 2];
+        let width = here.centre[2] - here.centre[0];
+        assert!((here.centre[1] - median).abs() < 0.1 * width, "{parameter} (#{k}): median {} vs the draws' {median}", here.centre[1]);
+        for r in &rows {
+            assert!(r.centre[0] <= r.centre[1] && r.centre[1] <= r.centre[2], "{r:?}");
+            assert!(r.new_test[2] - r.new_test[0] >= 0.9 * (r.centre[2] - r.centre[0]), "a new test is not narrower than the typical test: {r:?}");
+        }
+    }
+    for other in ["I0.5A", "I1.5A"] {
+        let cal = mrbp::store::record::read(&out.join(other).join("calibration.toml")).unwrap();
+        let there = mrbp::store::between_runs::read_typical(&out.join(other), &cal.calibration_id).unwrap().expect("written in every current's folder");
+        assert_eq!(there, typical, "the same rows in every folder");
+    }
 }

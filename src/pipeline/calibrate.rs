@@ -184,12 +184,16 @@ impl Pipeline<'_> {
             if settled { "" } else { " — not converged: its new-test intervals are not to be trusted" }
         ));
         let folders: Vec<(&Path, &str)> = layer_runs.iter().map(|r| (r.cal.dir.as_path(), r.cal.record.calibration_id.as_str())).collect();
+        let typical = layer.against_current(store::between_runs::ROWS, first.joint.settings.sampler.seed);
         for stage in stages.iter().filter(|s| !s.alone.is_empty()) {
             let joint = &stage.joint;
             let Some(group) = layer.group(joint.record.current_a) else { continue };
             self.prepare(&joint.dir, "--out", &[], &[], true)?;
             let meta = store::between_runs::layer_runs(&joint.dir, &folders);
             store::between_runs::write(&joint.dir, &layer, group, &joint.record.calibration_id, &meta)?;
+            if let Some(rows) = &typical {
+                store::between_runs::write_typical(&joint.dir, rows, &joint.record.calibration_id, &meta)?;
+            }
             if stage.alone.len() >= 2 {
                 let parameters = consistency(joint, &stage.alone, &layer);
                 let ids: Vec<(String, String)> = stage.alone.iter().map(|(run, cal)| (run.clone(), cal.record.calibration_id.clone())).collect();

@@ -77,7 +77,10 @@ impl Pipeline<'_> {
         let comparison = Comparison::of(&tables);
         store::comparison::retire(out)?;
         store::comparison::write(out, &comparison, &store::comparison::ids_text(&record))?;
-        let path = crate::report::comparison::write(out, &entries, &comparison, rpm)?;
+        // the between-run layer's typical test against the current, from the
+        // first folder that holds one
+        let typical = entries.iter().find_map(|e| store::between_runs::read_typical(&e.cal.dir, &e.cal.record.calibration_id).ok().flatten());
+        let path = crate::report::comparison::write(out, &entries, &comparison, rpm, typical.as_deref())?;
         store::comparison::write_record(out, &record)?;
         self.emit(Event::Wrote(&path));
         Ok(path)

@@ -13,7 +13,7 @@ use crate::store;
 
 /// The files of a calibration folder derived from its chains: a new
 /// calibration removes them, since they would describe the old one.
-pub const DERIVED: [&str; 12] = [
+pub const DERIVED: [&str; 13] = [
     store::prediction::BANDS,
     store::inference::FILE,
     store::prediction::COVERAGE,
@@ -25,6 +25,7 @@ pub const DERIVED: [&str; 12] = [
     store::consistency::FILE,
     store::between_runs::FILE,
     store::between_runs::LOO,
+    store::between_runs::TYPICAL,
     RUNS,
 ];
 

@@ -130,8 +130,8 @@ fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
             Some(rows) => rows,
             None => crate::compare::against_current(&cal.sample, &cal.draw_positions(crate::store::folder::CURRENT_DRAWS), &rec.currents),
         };
-        let law = figures::LawCurves { label: "law", rows: &rows, calibrated_a: &rec.currents };
-        figures::against_current(dir, &[law], &[], &mut figs)?;
+        let law = figures::LawCurves { label: "law", rows: &rows, calibrated_a: &rec.currents, color: None };
+        figures::against_current(dir, &[law], &[], " The values are in against_current.parquet.", &mut figs)?;
     }
     let positions = cal.draw_positions(PLOT_DRAWS);
     // θ and the noise scales, as long as the matrix stays readable

@@ -15,6 +15,7 @@ use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 use crate::posterior::unit_of;
 use crate::predict::{Prediction, RunBands};
 use crate::calibrate::Calibration;
+use crate::validate::between_runs::TypicalRow;
 use crate::store::command_line;
 
 /// One calibration in a comparison: its folder, the draws compared, and
@@ -53,11 +54,13 @@ fn rpm_of(time: &[f64], displacement: &[f64]) -> f64 {
 /// Writes the figures and `report.html` of the comparison of `entries`
 /// (whose tables are `comparison`) into `out`. `rpm` picks the runs whose
 /// bands are overlaid.
-pub fn write(out: &Path, entries: &[Entry], comparison: &Comparison, rpm: Option<f64>) -> Result<PathBuf> {
+/// `typical`: the between-run layer's typical test against the current,
+/// where the folders hold one (`--per-run`).
+pub fn write(out: &Path, entries: &[Entry], comparison: &Comparison, rpm: Option<f64>, typical: Option<&[TypicalRow]>) -> Result<PathBuf> {
     atomic::remove(&out.join(super::html::REPORT))?;
     let mut figs = Figures::default();
     forest(out, entries, &mut figs)?;
-    against_current(out, entries, &mut figs)?;
+    against_current(out, entries, typical, &mut figs)?;
     overlay(out, entries, rpm, &mut figs)?;
     held_out_figures(out, entries, &mut figs)?;
 
@@ -329,14 +332,32 @@ fn forest(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
 }
 
 /// Each B-P parameter against the coil current: every law's band beside
-/// the per-current calibrations.
-fn against_current(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
+/// the per-current calibrations, and the between-run layer's typical test
+/// and new test where there is one.
+fn against_current(out: &Path, entries: &[Entry], typical: Option<&[TypicalRow]>, figs: &mut Figures) -> Result<()> {
     let laws: Vec<(&Entry, Vec<CurrentRow>)> = entries
         .iter()
         .filter(|e| e.is_law())
         .map(|e| (e, compare::against_current(&e.cal.sample, &e.positions, &e.cal.record.currents)))
         .collect();
-    let curves: Vec<LawCurves> = laws.iter().map(|(e, rows)| LawCurves { label: &e.label, rows, calibrated_a: &e.cal.record.currents }).collect();
+    let mut curves: Vec<LawCurves> = laws.iter().map(|(e, rows)| LawCurves { label: &e.label, rows, calibrated_a: &e.cal.record.currents, color: None }).collect();
+    // the layer's two bands, as a law's rows (quantiles only)
+    let as_rows = |pick: fn(&TypicalRow) -> [f64; 3]| -> Vec<CurrentRow> {
+        typical
+            .unwrap_or_default()
+            .iter()
+            .map(|r| {
+                let [q05, q50, q95] = pick(r);
+                CurrentRow { parameter: r.parameter.clone(), current_a: r.current_a, kind: r.kind, mean: f64::NAN, sd: f64::NAN, q05, q50, q95 }
+            })
+            .collect()
+    };
+    let (centre, new_test) = (as_rows(|r| r.centre), as_rows(|r| r.new_test));
+    let calibrated: Vec<f64> = centre.iter().filter(|r| r.kind == compare::CurrentKind::Calibrated && r.parameter == PARAM_NAMES[0]).map(|r| r.current_a).collect();
+    if typical.is_some() {
+        curves.push(LawCurves { label: "a new test (between-run layer)", rows: &new_test, calibrated_a: &calibrated, color: Some(PALETTE[3]) });
+        curves.push(LawCurves { label: "typical test (between-run layer)", rows: &centre, calibrated_a: &calibrated, color: Some(PALETTE[2]) });
+    }
     let per_current: Vec<AtCurrent> = entries
         .iter()
         .filter(|e| !e.is_law())
@@ -345,7 +366,14 @@ fn against_current(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<
             quantiles: PARAM_NAMES.map(|name| e.cal.summary.iter().find(|r| r.parameter == name).map(|r| [r.q05, r.q50, r.q95])),
         })
         .collect();
-    super::figures::against_current(out, &curves, &per_current, figs)
+    let mut more = String::new();
+    if !laws.is_empty() {
+        more.push_str(" A law's values are in against_current.parquet of its folder.");
+    }
+    if typical.is_some() {
+        more.push_str(" The between-run layer (each run calibrated alone, --per-run): a typical test of this damper (the layer's centre, green) and a new test (centre and between-test spread, purple), read off its curve in the current between and beyond the calibrated currents; the values are in typical_test.parquet of each current's folder.");
+    }
+    super::figures::against_current(out, &curves, &per_current, &more, figs)
 }
 
 /// The predictive bands of every per-current calibration at one crank

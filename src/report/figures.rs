@@ -561,6 +561,8 @@ pub struct LawCurves<'a> {
     pub rows: &'a [CurrentRow],
     /// The currents it was calibrated on (A).
     pub calibrated_a: &'a [f64],
+    /// Its colour; `None`: the next of the laws' colours.
+    pub color: Option<plot::RGBColor>,
 }
 
 /// A per-current estimate drawn beside the laws: its current, and per B-P
@@ -573,7 +575,8 @@ pub struct AtCurrent {
 /// Each B-P parameter against the coil current: every law's 90 % band and
 /// median over its grid (its calibrated currents marked), and the
 /// per-current estimates as medians with 90 % bars, into `dir/against_current`.
-pub fn against_current(dir: &Path, laws: &[LawCurves], per_current: &[AtCurrent], figs: &mut Figures) -> Result<()> {
+/// `more`: a sentence added to the caption (the bands beside the laws').
+pub fn against_current(dir: &Path, laws: &[LawCurves], per_current: &[AtCurrent], more: &str, figs: &mut Figures) -> Result<()> {
     let top = laws.iter().flat_map(|l| l.rows.iter().map(|r| r.current_a)).chain(per_current.iter().map(|p| p.current_a)).fold(0.0f64, f64::max);
     if top <= 0.0 {
         return Ok(());
@@ -584,7 +587,7 @@ pub fn against_current(dir: &Path, laws: &[LawCurves], per_current: &[AtCurrent]
         for (j, law) in laws.iter().enumerate() {
             let rows: Vec<&CurrentRow> = law.rows.iter().filter(|r| r.parameter == *name).collect();
             let x: Vec<f64> = rows.iter().map(|r| r.current_a).collect();
-            let color = PALETTE[(4 + j) % 8];
+            let color = law.color.unwrap_or(PALETTE[(4 + j) % 8]);
             let label = format!("{} (90 %)", law.label);
             c.series.push(Series::band(Some(label), color, x.clone(), rows.iter().map(|r| r.q05).collect(), rows.iter().map(|r| r.q95).collect()).with_opacity(0.3));
             c.series.push(Series::line(None, color, x, rows.iter().map(|r| r.q50).collect()).with_width(2));
@@ -620,7 +623,7 @@ pub fn against_current(dir: &Path, laws: &[LawCurves], per_current: &[AtCurrent]
     let per = if per_current.is_empty() { "" } else { "; per-current calibrations as medians with 90 % bars" };
     figs.push(
         "against_current",
-        &format!("Each B-P parameter against the coil current: the law's median and 90 % credible band from the off-state (0 A) to 1.2× its highest calibrated current (dots: the currents it was calibrated on; grey dashes: extrapolated beyond them){per}. The values are in against_current.parquet."),
+        &format!("Each B-P parameter against the coil current: median and 90 % credible band from the off-state (0 A) to 1.2× the highest calibrated current (dots: the currents calibrated on; grey dashes: extrapolated beyond them){per}.{more}"),
     );
     Ok(())
 }

@@ -10,7 +10,12 @@
 //!   current (`current`): the columns of `coverage.parquet`, `left_out` and
 //!   `max_r_hat` (of the layer's chains fitted without it).
 //!
-//! Both name the joint calibration (`mrbp.calibration_id`) and every
+//! - `typical_test.parquet` (runs at two currents or more): each B-P
+//!   parameter of the typical test (the centre) and of a new test against
+//!   the coil current, from 0 A to 1.2× the highest calibrated current, the
+//!   same rows in every current's folder of one fit.
+//!
+//! All name the joint calibration (`mrbp.calibration_id`) and every
 //! calibration alone the layer was fitted to (`mrbp.layer_runs`: each run's
 //! folder relative to this one, `=` its calibration id); a reader refuses
 //! them when any of those has been calibrated again since.
@@ -21,10 +26,12 @@ use super::parquet::{check_derived, f64_column, parquet_meta, read_parquet, str_
 use crate::error::{Error, Result};
 use crate::model::PARAM_NAMES;
 use crate::predict::CoverageRow;
-use crate::validate::between_runs::{BetweenRuns, LeftOut, NewTestRow};
+use crate::compare::CurrentKind;
+use crate::validate::between_runs::{BetweenRuns, LeftOut, NewTestRow, TypicalRow};
 
 pub const FILE: &str = "between_runs.parquet";
 pub const LOO: &str = "loo_new_test.parquet";
+pub const TYPICAL: &str = "typical_test.parquet";
 
 /// The metadata key naming the calibrations alone the layer was fitted to.
 pub const LAYER_RUNS: &str = "mrbp.layer_runs";
@@ -129,6 +136,50 @@ pub fn new_tests(dir: &Path, id: &str, layout: &crate::posterior::Layout) -> Res
         })
         .collect();
     Ok((draws, parquet_meta(&path, LAYER_RUNS)?.unwrap_or_default()))
+}
+
+/// Writes the typical test against the current into the folder `dir` of
+/// the joint calibration `id`.
+pub fn write_typical(dir: &Path, rows: &[TypicalRow], id: &str, runs: &str) -> Result<()> {
+    let q = |f: fn(&TypicalRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
+    write_parquet(
+        &dir.join(TYPICAL),
+        Table::new()
+            .derived_from(id)
+            .meta(LAYER_RUNS, runs)
+            .str("parameter", rows.iter().map(|r| r.parameter.clone()).collect())
+            .f64("current_a", q(|r| r.current_a))
+            .str("kind", rows.iter().map(|r| r.kind.name().to_string()).collect())
+            .f64("centre_q05", q(|r| r.centre[0]))
+            .f64("centre_q50", q(|r| r.centre[1]))
+            .f64("centre_q95", q(|r| r.centre[2]))
+            .f64("new_test_q05", q(|r| r.new_test[0]))
+            .f64("new_test_q50", q(|r| r.new_test[1]))
+            .f64("new_test_q95", q(|r| r.new_test[2])),
+    )
+}
+
+/// The typical test against the current in `dir`, if there is one;
+/// refused if stale.
+pub fn read_typical(dir: &Path, id: &str) -> Result<Option<Vec<TypicalRow>>> {
+    let path = dir.join(TYPICAL);
+    if !path.exists() {
+        return Ok(None);
+    }
+    check(&path, dir, id)?;
+    let df = read_parquet(&path)?;
+    let (parameter, kind) = (str_column(&df, "parameter", &path)?, str_column(&df, "kind", &path)?);
+    let col = |n: &str| f64_column(&df, n, &path);
+    let current = col("current_a")?;
+    let centre = [col("centre_q05")?, col("centre_q50")?, col("centre_q95")?];
+    let new_test = [col("new_test_q05")?, col("new_test_q50")?, col("new_test_q95")?];
+    (0..parameter.len())
+        .map(|i| {
+            let kind = CurrentKind::parse(&kind[i]).ok_or_else(|| Error::input_at(&path, Some(i + 1), Some("kind"), format!("'{}' is not calibrated, between or outside", kind[i])))?;
+            Ok(TypicalRow { parameter: parameter[i].clone(), current_a: current[i], kind, centre: centre.each_ref().map(|c| c[i]), new_test: new_test.each_ref().map(|c| c[i]) })
+        })
+        .collect::<Result<Vec<_>>>()
+        .map(Some)
 }
 
 /// Writes the layer's leave-one-out coverage of the runs of calibration

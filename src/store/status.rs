@@ -224,7 +224,7 @@ fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
             problems.push(e.to_string());
         }
     }
-    for file in [super::between_runs::FILE, super::between_runs::LOO] {
+    for file in [super::between_runs::FILE, super::between_runs::LOO, super::between_runs::TYPICAL] {
         let path = dir.join(file);
         if path.exists() {
             if let Err(e) = super::between_runs::check(&path, dir, &id) {

@@ -46,6 +46,8 @@ pub struct LayerDraw {
     pub means: Vec<Vec<f64>>,
     pub factor: Vec<f64>,
     pub new_tests: Vec<Vec<f64>>,
+    /// The curve's amplitudes η_k (empty without a curve).
+    pub eta: Vec<f64>,
 }
 
 impl LayerDraw {
@@ -196,7 +198,8 @@ impl<'a> Chain<'a> {
         }
         let factor = cholesky(&self.sigma);
         let new_tests = all.iter().map(|mean| (mean + &factor * normals(rng, d)).as_slice().to_vec()).collect();
-        LayerDraw { means: all.iter().map(|m| m.as_slice().to_vec()).collect(), factor: factor.as_slice().to_vec(), new_tests }
+        let eta = if self.curve.is_some() { self.eta.clone() } else { Vec::new() };
+        LayerDraw { means: all.iter().map(|m| m.as_slice().to_vec()).collect(), factor: factor.as_slice().to_vec(), new_tests, eta }
     }
 }
 

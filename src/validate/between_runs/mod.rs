@@ -50,6 +50,7 @@ pub mod likelihood;
 use rayon::prelude::*;
 
 use crate::calibrate::Calibration;
+use crate::compare::CurrentKind;
 use crate::data::{same_current, RunData};
 use crate::error::{Error, Result};
 use crate::model::{Params, PARAM_NAMES};
@@ -155,6 +156,10 @@ pub struct BetweenRuns {
     pub runs: Vec<String>,
     /// The calibrations' priors of θ, whose support a new test keeps to.
     pub priors: [Prior; 7],
+    /// The centres' curve in the current (runs at two currents or more),
+    /// and the coordinates' prior scales it was fitted with.
+    pub curve: Option<CurrentCurve>,
+    pub scales: Vec<f64>,
     pub draws: Vec<LayerDraw>,
     /// Convergence of the Gibbs chains: the largest R̂ and the smallest
     /// bulk or tail ESS over every centre and between-test sd.
@@ -253,7 +258,7 @@ impl BetweenRuns {
         let draws: Vec<LayerDraw> = chains.into_iter().flatten().collect();
         let calibrated = currents.len();
         currents.extend(predicted);
-        Ok(BetweenRuns { coordinates, places, layout, currents, calibrated, runs: runs.iter().map(|r| r.id.to_string()).collect(), priors, draws, max_rhat, min_ess })
+        Ok(BetweenRuns { coordinates, places, layout, currents, calibrated, runs: runs.iter().map(|r| r.id.to_string()).collect(), priors, curve, scales, draws, max_rhat, min_ess })
     }
 
     /// The position of current `current_a` among the layer's currents.
@@ -304,6 +309,57 @@ impl BetweenRuns {
             .collect();
         d.sort_by(f64::total_cmp);
         quantile_sorted(&d, 0.5) / 0.674_489_750_196_081_7
+    }
+
+    /// The typical test (the centre) and a new test of each B-P parameter
+    /// against the coil current, from `count` of the draws spread evenly:
+    /// at the calibrated currents and on the comparison's grid from 0 A to
+    /// 1.2× the highest ([`crate::compare::current_grid`]), the centre off
+    /// the curve between and beyond the calibrated ones (its marginal at
+    /// each current). `None` without a curve (runs at one current).
+    pub fn against_current(&self, count: usize, seed: u64) -> Option<Vec<TypicalRow>> {
+        let curve = self.curve.as_ref()?;
+        let calibrated = &self.currents[..self.calibrated];
+        let (lo, hi) = (calibrated[0], calibrated[self.calibrated - 1]);
+        let grid = crate::compare::current_grid(calibrated);
+        let d = self.coordinates.len();
+        let picks = evenly_spaced(self.draws.len(), count);
+        let mut rows = Vec::new();
+        for (g, &current_a) in grid.iter().enumerate() {
+            let at = calibrated.iter().position(|c| same_current(*c, current_a));
+            let kind = match at {
+                Some(_) => CurrentKind::Calibrated,
+                None if current_a > lo && current_a < hi => CurrentKind::Between,
+                None => CurrentKind::Outside,
+            };
+            let here = CurrentCurve { x: curve.x.clone(), predict: vec![current_coordinate(current_a)] };
+            let mut centres: Vec<[f64; 7]> = Vec::new();
+            let mut tests: Vec<[f64; 7]> = Vec::new();
+            for (i, &pick) in picks.iter().enumerate() {
+                let draw = &self.draws[pick];
+                let mut rng = crate::rng::stream(seed, &[0xB9, g as u64, i as u64]);
+                let centre: Vec<f64> = match at {
+                    Some(c) => draw.means[c].clone(),
+                    None => {
+                        let means: Vec<nalgebra::DVector<f64>> = draw.means[..self.calibrated].iter().map(|m| nalgebra::DVector::from_column_slice(m)).collect();
+                        curve::predict_centres(&here, &means, &draw.eta, &self.scales, &mut rng).remove(0).as_slice().to_vec()
+                    }
+                };
+                let e: Vec<f64> = (0..d).map(|_| rng.sample::<f64, _>(StandardNormal)).collect();
+                let test: Vec<f64> = (0..d).map(|k| centre[k] + (0..=k).map(|j| draw.factor[j * d + k] * e[j]).sum::<f64>()).collect();
+                centres.extend(self.theta(&centre).filter(|t| self.in_support(t)));
+                tests.extend(self.theta(&test).filter(|t| self.in_support(t)));
+            }
+            for (k, parameter) in PARAM_NAMES.iter().enumerate() {
+                let q = |v: &[[f64; 7]]| {
+                    let mut x: Vec<f64> = v.iter().map(|t| t[k]).collect();
+                    x.sort_by(f64::total_cmp);
+                    [0.05, 0.5, 0.95].map(|p| quantile_sorted(&x, p))
+                };
+                rows.push(TypicalRow { parameter: parameter.to_string(), current_a, kind, centre: q(&centres), new_test: q(&tests) });
+            }
+        }
+        Some(rows)
     }
 
     /// `count` draws of a new test at current `group` for the run `data`
@@ -384,6 +440,18 @@ fn convergence(chains: &[Vec<LayerDraw>], calibrated: usize) -> (f64, f64) {
     let trace = Chains { dim, ensembles: chains.len(), walkers: 1, positions, log_prob: vec![0.0; n], accepted: vec![true; n] };
     let diagnostics = Diagnostics::compute(&trace, 0);
     (diagnostics.max_rhat(), diagnostics.min_ess())
+}
+
+/// One row of `typical_test.parquet`: a B-P parameter at one coil current,
+/// the 5, 50 and 95 % quantiles of the typical test there (the layer's
+/// centre) and of a new test (SI).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TypicalRow {
+    pub parameter: String,
+    pub current_a: f64,
+    pub kind: CurrentKind,
+    pub centre: [f64; 3],
+    pub new_test: [f64; 3],
 }
 
 /// Tries at a new test inside the priors' support per kept iteration.
