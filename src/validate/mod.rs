@@ -174,7 +174,26 @@ impl Target<'_> {
     /// Bands from weighted draws with their paths: `count` of them
     /// resampled by the weights.
     fn weighted_bands(&self, draws: &[Draw], paths: &[Option<Vec<f64>>], weights: &[f64], count: usize) -> Result<RunPrediction> {
+        self.bands_of_picks(draws, paths, &systematic_resample(weights, count))
+    }
+
+    /// Bands from `count` of weighted draws resampled by the weights, whose
+    /// paths are integrated for the picked draws only (a resample holds a
+    /// fraction of them where the weights are uneven).
+    fn resampled_bands(&self, draws: &[Draw], weights: &[f64], count: usize) -> Result<RunPrediction> {
         let picks = systematic_resample(weights, count);
+        let mut unique = picks.clone();
+        unique.dedup();
+        let picked: Vec<Draw> = unique.iter().map(|&i| draws[i].clone()).collect();
+        let mut paths = vec![None; draws.len()];
+        for (i, path) in unique.iter().zip(model_paths(&self.data, &picked, &self.predict.integrator, &|| {})) {
+            paths[*i] = path;
+        }
+        self.bands_of_picks(draws, &paths, &picks)
+    }
+
+    /// Bands from the draws at `picks` (with repeats) and their paths.
+    fn bands_of_picks(&self, draws: &[Draw], paths: &[Option<Vec<f64>>], picks: &[usize]) -> Result<RunPrediction> {
         let kept: Vec<(&Draw, &[f64])> = picks.iter().filter_map(|&i| paths[i].as_deref().map(|p| (&draws[i], p))).collect();
         let bands = bands_of(&self.data, self.j, &kept, picks.len() - kept.len(), &self.predict)?;
         let coverage = CoverageRow::of(self.run, &bands, &bands.coverage(&self.data.tau), false);
@@ -275,8 +294,7 @@ fn laplace_importance(target: &Target, posterior: &Posterior, laplace: &Elliptic
         if smoothed.k_hat <= psis::K_THRESHOLD {
             let current = target.run.spec.current_a;
             let draws: Vec<Draw> = proposals.iter().map(|x| unseen_draw(posterior, x, current)).collect();
-            let paths = model_paths(&target.data, &draws, &target.predict.integrator, &|| {});
-            return Ok((smoothed.k_hat, Some(target.weighted_bands(&draws, &paths, &smoothed.weights, loo.draws)?)));
+            return Ok((smoothed.k_hat, Some(target.resampled_bands(&draws, &smoothed.weights, loo.draws)?)));
         }
         round += 1;
         match weighted_moments(&proposals, &smoothed.weights) {
