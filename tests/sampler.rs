@@ -491,6 +491,31 @@ fn stuck_walker_is_detected() {
     assert!(diag.warnings.iter().any(|w| w.contains("stuck")));
 }
 
+/// A run whose proposals are rarely accepted is flagged (whatever R̂ and ESS
+/// say); the same run as sampled, accepting about a third, is not.
+#[test]
+fn rarely_accepted_proposals_are_flagged() {
+    let settings = SamplerSettings { walkers: 16, ensembles: 2, ..SamplerSettings::default() };
+    let init = start_ball(2, 32, &[1.0, 1.0], 0.1);
+    let mut s = Sampler::new(&Banana, settings, &init).unwrap();
+    s.run(&RunControl::fixed(300), &mut []).unwrap();
+    let flagged = |d: &Diagnostics| d.warnings.iter().any(|w| w.contains("proposals were accepted at a median rate"));
+    let diag = Diagnostics::compute(&s.chains, 50);
+    assert!(!flagged(&diag) && diag.acceptance.iter().sum::<f64>() / 32.0 > mrbp::sampler::diagnostics::LOW_ACCEPTANCE, "{:?}", diag.warnings);
+    // keep one accepted proposal in twenty (the positions are left as they
+    // are: the diagnostic reads the acceptance record only)
+    let nc = s.chains.chains();
+    for step in 0..s.chains.steps() {
+        for c in 0..nc {
+            if (step + c) % 20 != 0 {
+                s.chains.accepted[step * nc + c] = false;
+            }
+        }
+    }
+    let diag = Diagnostics::compute(&s.chains, 50);
+    assert!(flagged(&diag), "{:?}", diag.warnings);
+}
+
 /// Two unit normals in 3-d, centred at 0 and at (20, 20, 20) with weight
 /// e^−`minor` (log-density: the log of their sum; a barrier of over 100
 /// nats between them).

@@ -184,7 +184,7 @@ impl Target<'_> {
         let picks = systematic_resample(weights, count);
         let mut unique = picks.clone();
         unique.dedup();
-        let picked: Vec<Draw> = unique.iter().map(|&i| draws[i].clone()).collect();
+        let picked: Vec<Draw> = unique.iter().map(|&i| draws[i]).collect();
         let mut paths = vec![None; draws.len()];
         for (i, path) in unique.iter().zip(model_paths(&self.data, &picked, &self.predict.integrator, &|| {})) {
             paths[*i] = path;
