@@ -463,7 +463,8 @@ impl Diagnostics {
         }
         if median < LOW_ACCEPTANCE {
             warnings.push(format!(
-                "proposals were accepted at a median rate of {median:.3} per walker and step (below {LOW_ACCEPTANCE}): the posterior is far from the shapes the moves propose (curved, skewed or against a bound), and R̂ and ESS can pass before the walkers have visited a region they rarely reach; check the parameters that matter with a longer run, e.g. `--steps` several times these (docs/calibration.md, \"Convergence\")"
+                "proposals were accepted at a median rate of {median:.3} per walker and step (below {LOW_ACCEPTANCE}): the posterior is far from the shapes the moves propose (curved, skewed or against a bound), and R̂ and ESS can pass before the walkers have visited a region they rarely reach; check the parameters that matter with a run three times as long, `--steps {}` (docs/calibration.md, \"Convergence\")",
+                3 * total.saturating_sub(1).max(1)
             ));
         }
         if !stuck.is_empty() {
