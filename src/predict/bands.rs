@@ -20,7 +20,6 @@ use crate::noise::{Explained, NoiseModel, NoiseValues};
 use crate::posterior::Draw;
 use crate::rng;
 
-
 /// How the bands are computed.
 #[derive(Clone, Debug)]
 pub struct PredictSettings {
@@ -337,8 +336,6 @@ mod tests {
         PredictSettings { integrator, noise, replicates, seed }
     }
 
-    /// One fixed parameter set: the model band collapses onto the
-    /// trajectory, and the predictive band is that trajectory ± 1.96 σ up to
     /// Quantiles by selection equal those of the sorted values, bit for bit,
     /// ties and all.
     #[test]
@@ -358,6 +355,8 @@ mod tests {
         }
     }
 
+    /// One fixed parameter set: the model band collapses onto the
+    /// trajectory, and the predictive band is that trajectory ± 1.96 σ up to
     /// the Monte Carlo error of the 2.5 % quantile of 4000 normals
     /// (sd ≈ 0.05 σ; 0.2 σ is four of them).
     #[test]

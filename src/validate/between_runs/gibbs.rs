@@ -59,8 +59,15 @@ impl LayerDraw {
 
     /// A new test at current `group` from standard normals `e`: μ + L e.
     pub(super) fn new_test(&self, group: usize, e: &[f64]) -> Vec<f64> {
+        self.new_test_about(&self.means[group], e)
+    }
+
+    /// A new test about the centre `centre` (e.g. one read off the curve
+    /// at a current between the calibrated ones) from standard normals
+    /// `e`: centre + L e.
+    pub(super) fn new_test_about(&self, centre: &[f64], e: &[f64]) -> Vec<f64> {
         let d = e.len();
-        (0..d).map(|k| self.means[group][k] + (0..=k).map(|j| self.factor[j * d + k] * e[j]).sum::<f64>()).collect()
+        (0..d).map(|k| centre[k] + (0..=k).map(|j| self.factor[j * d + k] * e[j]).sum::<f64>()).collect()
     }
 }
 

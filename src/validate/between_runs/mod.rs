@@ -324,6 +324,9 @@ impl BetweenRuns {
         let grid = crate::compare::current_grid(calibrated);
         let d = self.coordinates.len();
         let picks = evenly_spaced(self.draws.len(), count);
+        // each picked draw's calibrated centres, as the curve reads them
+        let means: Vec<Vec<nalgebra::DVector<f64>>> =
+            picks.iter().map(|&pick| self.draws[pick].means[..self.calibrated].iter().map(|m| nalgebra::DVector::from_column_slice(m)).collect()).collect();
         let mut rows = Vec::new();
         for (g, &current_a) in grid.iter().enumerate() {
             let at = calibrated.iter().position(|c| same_current(*c, current_a));
@@ -340,13 +343,10 @@ impl BetweenRuns {
                 let mut rng = crate::rng::stream(seed, &[0xB9, g as u64, i as u64]);
                 let centre: Vec<f64> = match at {
                     Some(c) => draw.means[c].clone(),
-                    None => {
-                        let means: Vec<nalgebra::DVector<f64>> = draw.means[..self.calibrated].iter().map(|m| nalgebra::DVector::from_column_slice(m)).collect();
-                        curve::predict_centres(&here, &means, &draw.eta, &self.scales, &mut rng).remove(0).as_slice().to_vec()
-                    }
+                    None => curve::predict_centres(&here, &means[i], &draw.eta, &self.scales, &mut rng).remove(0).as_slice().to_vec(),
                 };
                 let e: Vec<f64> = (0..d).map(|_| rng.sample::<f64, _>(StandardNormal)).collect();
-                let test: Vec<f64> = (0..d).map(|k| centre[k] + (0..=k).map(|j| draw.factor[j * d + k] * e[j]).sum::<f64>()).collect();
+                let test = draw.new_test_about(&centre, &e);
                 centres.extend(self.theta(&centre).filter(|t| self.in_support(t)));
                 tests.extend(self.theta(&test).filter(|t| self.in_support(t)));
             }
