@@ -20,6 +20,7 @@ use crate::data::RunData;
 use crate::fit::least_squares;
 use crate::model::{Integrator, LANES};
 use crate::noise::{Profile, Whiten};
+use crate::sampler::density::log_densities;
 use crate::sampler::{Elliptical, LogDensity};
 
 /// The MAP point and the Laplace approximation of θ around it.
@@ -467,20 +468,33 @@ const START_SPREAD: f64 = 1.0;
 /// Initial walker positions from a Gaussian approximation of the
 /// posterior (the [`laplace`] one, say), spread by [`START_SPREAD`], every
 /// one with a finite log-density (redrawn up to 100 times, then a tiny ball
-/// around its mean).
+/// around its mean). Each walker draws from its own stream, attempt after
+/// attempt; the attempts of all walkers still without a position are
+/// evaluated together, in batches on every thread (one at a time they cost
+/// a real calibration seconds: 264 walkers × 30 ms at 0.25 A).
 pub fn initial_walkers(post: &Posterior, start: &Elliptical, count: usize, seed: u64) -> Vec<Vec<f64>> {
     let d = post.dim();
-    (0..count)
-        .map(|c| {
-            let mut rng = crate::rng::stream(seed, &[u64::MAX - 1, c as u64]);
-            for attempt in 0..100 {
-                let z: Vec<f64> = (0..d).map(|_| StandardNormal.sample(&mut rng)).collect();
-                let x = start.point(&z, if attempt < 90 { START_SPREAD } else { 1e-4 });
-                if post.log_density(&x).is_finite() {
-                    return x;
-                }
+    let mut rngs: Vec<_> = (0..count).map(|c| crate::rng::stream(seed, &[u64::MAX - 1, c as u64])).collect();
+    let mut placed: Vec<Option<Vec<f64>>> = vec![None; count];
+    for attempt in 0..100 {
+        let waiting: Vec<usize> = (0..count).filter(|&c| placed[c].is_none()).collect();
+        if waiting.is_empty() {
+            break;
+        }
+        let spread = if attempt < 90 { START_SPREAD } else { 1e-4 };
+        let points: Vec<f64> = waiting
+            .iter()
+            .flat_map(|&c| {
+                let z: Vec<f64> = (0..d).map(|_| StandardNormal.sample(&mut rngs[c])).collect();
+                start.point(&z, spread)
+            })
+            .collect();
+        let values = log_densities(post, &points);
+        for ((&c, x), v) in waiting.iter().zip(points.chunks_exact(d)).zip(values) {
+            if v.is_finite() {
+                placed[c] = Some(x.to_vec());
             }
-            start.mean.as_slice().to_vec()
-        })
-        .collect()
+        }
+    }
+    placed.into_iter().map(|x| x.unwrap_or_else(|| start.mean.as_slice().to_vec())).collect()
 }
