@@ -163,6 +163,7 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
     // the walkers start about the Laplace approximation at the mode, and
     // the anchored move proposes with it (a function of the start alone, so
     // a resumed run has the same)
+    let clock = std::time::Instant::now();
     let laplace = mode::laplace_from(posterior, &start.map);
     let sampler = match resume_from {
         Some(path) => {
@@ -179,7 +180,9 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
     };
     let mut sampler = sampler.with_reference(laplace);
     let sampled = sampling::run(posterior, &mut sampler, &s.control(), s.burn_in, observers)?;
-    let record = CalibrationRecord::of(campaign, &start, &sampled);
+    let mut record = CalibrationRecord::of(campaign, &start, &sampled);
+    // the Laplace approximation and the walkers' start belong to the start
+    record.seconds_start += clock.elapsed().as_secs_f64() - sampled.seconds;
     let calibration = Calibration {
         dir: PathBuf::new(),
         settings: start.settings.clone(),

@@ -136,7 +136,7 @@ pub fn calibration(cal: &Calibration) -> String {
     for w in rec.warnings.iter().chain(&rec.model_warnings) {
         row!(out, "warning: {w}");
     }
-    row!(out, "wall time: {seconds:.1} s (identification, MAP and step rule {:.1} s, sampling {:.1} s)", rec.seconds_start, rec.seconds_sampling);
+    row!(out, "wall time: {seconds:.1} s (identification, MAP, step rule and walkers' start {:.1} s, sampling {:.1} s)", rec.seconds_start, rec.seconds_sampling);
     out
 }
 
