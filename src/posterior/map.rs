@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use super::{Layout, Posterior};
 use crate::data::RunData;
-use crate::fit::least_squares;
+use crate::fit::least_squares_to;
 use crate::model::{Integrator, LANES};
 use crate::noise::{Profile, Whiten};
 use crate::sampler::density::log_densities;
@@ -263,6 +263,16 @@ struct Found {
     converged: bool,
 }
 
+/// The relative gain in ½ Σ r² below which a Levenberg-Marquardt fit of
+/// the search stops (MINPACK's √ε). The whitened residuals of a real
+/// record sum to thousands and carry the integrator's rounding: with the
+/// solver's default, 30 ε, each fit crept on for 200–500 iterations along
+/// the posterior's ridges (a single measured record's MAP and refit: 21 s
+/// of its 23 s wall) for a few tenths of a nat that the Newton steps of
+/// [`super::mode`] take anyway; with √ε the mode they reach is the same to
+/// 1e-4 nats and the posterior to 4e-4 of a sd (docs/performance.md).
+const SEARCH_FTOL: f64 = 1.49e-8;
+
 /// The Levenberg-Marquardt search of [`refine`] from the fitted point `x`.
 fn search_from(post: &Posterior, mut x: Vec<f64>, fits: usize) -> Option<Found> {
     let whitening_of = |profiles: Vec<Profile>| -> (Vec<f64>, Vec<Arc<dyn Whiten>>) { profiles.into_iter().map(|p| (p.scale, p.whitening)).unzip() };
@@ -283,7 +293,7 @@ fn search_from(post: &Posterior, mut x: Vec<f64>, fits: usize) -> Option<Found> 
         for _ in 0..fits {
             let f = |p: &[f64]| whitened(post, &whitening, p, support);
             let j = |p: &[f64]| jacobian(post, &whitening, p, support);
-            let fit = least_squares(&x, &f, Some(&j));
+            let fit = least_squares_to(SEARCH_FTOL, &x, &f, Some(&j));
             let moved = fit.params.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
             x = fit.params;
             converged = fit.converged;
