@@ -180,9 +180,8 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
     };
     let mut sampler = sampler.with_reference(laplace);
     let sampled = sampling::run(posterior, &mut sampler, &s.control(), s.burn_in, observers)?;
-    let mut record = CalibrationRecord::of(campaign, &start, &sampled);
-    // the Laplace approximation and the walkers' start belong to the start
-    record.seconds_start += clock.elapsed().as_secs_f64() - sampled.seconds;
+    // the Laplace approximation and the walkers' start count with the start
+    let record = CalibrationRecord::of(campaign, &start, clock.elapsed().as_secs_f64() - sampled.seconds, &sampled);
     let calibration = Calibration {
         dir: PathBuf::new(),
         settings: start.settings.clone(),

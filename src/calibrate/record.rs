@@ -88,9 +88,12 @@ pub fn command_line() -> String {
 }
 
 impl CalibrationRecord {
-    /// The record of a calibration of `campaign` that started at `start`
-    /// and sampled `sampled`.
-    pub fn of(campaign: &Campaign, start: &Start, sampled: &Sampled) -> CalibrationRecord {
+    /// The record of a calibration of `campaign` that started at `start`,
+    /// took `walkers_start` seconds more to place its walkers (the Laplace
+    /// approximation at the mode and the initial positions) and sampled
+    /// `sampled`.
+    pub fn of(campaign: &Campaign, start: &Start, walkers_start: f64, sampled: &Sampled) -> CalibrationRecord {
+        let seconds_start = start.seconds + walkers_start;
         let names = &start.posterior.layout.names;
         let coordinates = start.posterior.layout.coordinate_names();
         let named = |v: &[f64]| names.iter().zip(v).map(|(n, v)| (n.clone(), *v)).collect();
@@ -124,9 +127,9 @@ impl CalibrationRecord {
             ensembles: start.settings.sampler.ensembles,
             steps: sampled.diagnostics.steps,
             burn_in: sampled.diagnostics.burn_in,
-            seconds_start: start.seconds,
+            seconds_start,
             seconds_sampling: sampled.seconds,
-            ess_bulk_per_second: names.iter().zip(&sampled.diagnostics.coordinates).map(|(n, d)| (n.clone(), d.ess_bulk / (start.seconds + sampled.seconds))).collect(),
+            ess_bulk_per_second: names.iter().zip(&sampled.diagnostics.coordinates).map(|(n, d)| (n.clone(), d.ess_bulk / (seconds_start + sampled.seconds))).collect(),
             warnings: sampled.diagnostics.warnings.clone(),
             model_warnings: start.warnings.clone(),
             geometry: Some(campaign.geometry),
