@@ -179,9 +179,10 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
         }
     };
     let mut sampler = sampler.with_reference(laplace);
-    let sampled = sampling::run(posterior, &mut sampler, &s.control(), s.burn_in, observers)?;
     // the Laplace approximation and the walkers' start count with the start
-    let record = CalibrationRecord::of(campaign, &start, clock.elapsed().as_secs_f64() - sampled.seconds, &sampled);
+    let walkers_start = clock.elapsed().as_secs_f64();
+    let sampled = sampling::run(posterior, &mut sampler, &s.control(), s.burn_in, observers)?;
+    let record = CalibrationRecord::of(campaign, &start, walkers_start, &sampled);
     let calibration = Calibration {
         dir: PathBuf::new(),
         settings: start.settings.clone(),
