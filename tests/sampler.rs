@@ -139,6 +139,17 @@ fn correlated_gaussian_10d_history_mixture() {
     check_gaussian(vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 3000);
 }
 
+/// The curved move (a tube fitted to the complementary half, the half's
+/// own Student-t, the anchored fit to a poor reference) on a Gaussian,
+/// where the tube is an ellipsoid: exact whatever it fits.
+#[test]
+fn correlated_gaussian_10d_curved_mixture() {
+    let d = 10;
+    let cov = correlated_covariance(d);
+    let mean: Vec<f64> = (0..d).map(|i| 0.5 * cov[(i, i)].sqrt()).collect();
+    check_gaussian_with(vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], 5000, Some(reference(&mean, cov * 2.0)));
+}
+
 /// x1 ~ N(1, 1), x2 | x1 ~ N(x1², 0.5²): a banana whose moments are known:
 /// E x2 = 1 + 1 = 2, Var x2 = 0.25 + 4·1·1 + 2·1 = 6.25.
 struct Banana;
@@ -176,6 +187,12 @@ fn rosenbrock_banana_with_history_mixture() {
 fn rosenbrock_banana_with_anchored_mixture() {
     let r = reference(&[1.0, 1.0], DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 4.0])));
     banana_moments_with(vec![(Move::anchored(), 0.7), (Move::differential_evolution(), 0.3)], 10000, Some(r));
+}
+
+/// The curved move on the banana: its tube bends along x1.
+#[test]
+fn rosenbrock_banana_with_curved_mixture() {
+    banana_moments(vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], 5000);
 }
 
 fn banana_moments(moves: Vec<(Move, f64)>, steps: usize) {
@@ -244,6 +261,12 @@ fn lognormal_quantiles_with_anchored_mixture() {
     let dist = statrs::distribution::LogNormal::new(0.0, 1.0).unwrap();
     let r = reference(&[1.0, 1.0], DMatrix::identity(2, 2));
     check_quantiles_with(&LogNormal2, &dist, vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000, Some(r));
+}
+
+#[test]
+fn lognormal_quantiles_with_curved_mixture() {
+    let dist = statrs::distribution::LogNormal::new(0.0, 1.0).unwrap();
+    check_quantiles(&LogNormal2, &dist, vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
 }
 
 #[test]
@@ -323,6 +346,11 @@ fn truncated_quantiles_with_anchored_mixture() {
 }
 
 #[test]
+fn truncated_quantiles_with_curved_mixture() {
+    check_quantiles(&Truncated2, &TruncatedNormal, vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+}
+
+#[test]
 fn truncated_quantiles_with_history_mixture() {
     check_quantiles(&Truncated2, &TruncatedNormal, vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
 }
@@ -352,6 +380,12 @@ fn heavy_tailed_quantiles_with_anchored_mixture() {
     let dist = statrs::distribution::StudentsT::new(0.0, 1.0, 3.0).unwrap();
     let r = reference(&[0.0, 0.0], DMatrix::identity(2, 2));
     check_quantiles_with(&StudentT2, &dist, vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000, Some(r));
+}
+
+#[test]
+fn heavy_tailed_quantiles_with_curved_mixture() {
+    let dist = statrs::distribution::StudentsT::new(0.0, 1.0, 3.0).unwrap();
+    check_quantiles(&StudentT2, &dist, vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
 }
 
 #[test]

@@ -10,7 +10,8 @@
 //! * [`sampling`]: one run of the sampler, for a calibration and for each
 //!   held-out calibration of leave-one-out alike.
 
-pub mod record;
+pub mod probe;
+mod record;
 pub mod sampling;
 pub mod settings;
 pub mod start;
@@ -19,7 +20,6 @@ use std::path::{Path, PathBuf};
 
 use crate::data::{Campaign, Geometry, Manifest};
 use crate::error::{Error, Result};
-use crate::posterior::{map, mode};
 use crate::posterior::{Draws, PosteriorSample, SummaryRow};
 use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
@@ -156,7 +156,7 @@ pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings) -> Result<
 
 /// Samples the posterior from `start`: from walkers around the MAP, or from
 /// the checkpoint at `resume_from`. `observers` watch the sampler.
-pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, observers: &mut [&mut dyn Observer]) -> Result<Calibrated> {
+pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBuf>, observers: &mut [&mut dyn Observer]) -> Result<Calibrated> {
     let posterior = &start.posterior;
     let s = &start.settings.sampler;
     let sampler_settings = s.sampler(s.walkers, s.seed);
@@ -164,24 +164,32 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
     // the anchored move proposes with it (a function of the start alone, so
     // a resumed run has the same)
     let clock = std::time::Instant::now();
-    let laplace = mode::laplace_from(posterior, &start.map);
+    // the walkers start about the Laplace approximation at the mode, judged
+    // in their first steps (a resumed run judges the same start the same way)
+    let probed = probe::walkers_start(posterior, &start.map, sampler_settings, s.walkers * s.ensembles)?;
     let sampler = match resume_from {
         Some(path) => {
             let resumed = Sampler::resume(posterior, path)?;
-            if resumed.settings != sampler_settings {
+            if resumed.settings != probed.sampler.settings {
                 return Err(Error::input(path, "checkpoint of a sampler with other settings (walkers, ensembles, moves or seed)"));
             }
-            resumed
+            resumed.with_reference(probed.laplace)
         }
-        None => {
-            let init = map::initial_walkers(posterior, &laplace, s.walkers * s.ensembles, s.seed);
-            Sampler::new(posterior, sampler_settings, &init)?
-        }
+        None => probed.sampler,
     };
-    let mut sampler = sampler.with_reference(laplace);
+    let mut sampler = sampler;
     // the Laplace approximation and the walkers' start count with the start
     let walkers_start = clock.elapsed().as_secs_f64();
-    let sampled = sampling::run(posterior, &mut sampler, &s.control(), s.burn_in, observers)?;
+    let mut control = s.control();
+    if probed.misfit.is_some() {
+        control.min_tau_multiple = probe::FAR_TAU_MULTIPLE;
+    }
+    let mut sampled = sampling::run(posterior, &mut sampler, &control, s.burn_in, observers)?;
+    sampled.diagnostics.warnings.extend(probe::warnings(&probed.higher, probed.misfit, &sampler.settings.moves != &s.moves));
+    start.settings.sampler.moves = sampler.settings.moves.clone();
+    if let Some(map) = probed.map {
+        start.map = map;
+    }
     let record = CalibrationRecord::of(campaign, &start, walkers_start, &sampled);
     let calibration = Calibration {
         dir: PathBuf::new(),
@@ -192,3 +200,4 @@ pub fn sample(campaign: &Campaign, start: Start, resume_from: Option<&PathBuf>, 
     };
     Ok(Calibrated { calibration, start, chains: sampled.chains, diagnostics: sampled.diagnostics })
 }
+

@@ -501,12 +501,22 @@ impl Diagnostics {
     /// long after burn-in, so that those estimates rest on more than a few
     /// autocorrelation times.
     pub fn converged(&self, min_ess: f64) -> bool {
-        self.coordinates.iter().all(|c| c.r_hat < RHAT_THRESHOLD) && self.min_ess() >= min_ess && self.long_enough()
+        self.converged_for(min_ess, MIN_TAU_MULTIPLE)
+    }
+
+    /// [`Self::converged`] with the chains at least `tau_multiple` τ_max
+    /// long after burn-in.
+    pub fn converged_for(&self, min_ess: f64, tau_multiple: f64) -> bool {
+        self.coordinates.iter().all(|c| c.r_hat < RHAT_THRESHOLD) && self.min_ess() >= min_ess && self.long_enough_for(tau_multiple)
     }
 
     /// At least [`MIN_TAU_MULTIPLE`] τ_max after burn-in.
     pub fn long_enough(&self) -> bool {
-        (self.steps + 1).saturating_sub(self.burn_in) as f64 >= MIN_TAU_MULTIPLE * self.tau_max
+        self.long_enough_for(MIN_TAU_MULTIPLE)
+    }
+
+    fn long_enough_for(&self, tau_multiple: f64) -> bool {
+        (self.steps + 1).saturating_sub(self.burn_in) as f64 >= tau_multiple * self.tau_max
     }
 }
 

@@ -38,6 +38,9 @@ pub struct RunControl {
     pub check_every: usize,
     /// Convergence also needs this bulk and tail ESS for every coordinate.
     pub min_ess: f64,
+    /// ... and the chains this many τ_max long after burn-in
+    /// ([`Diagnostics::converged_for`]).
+    pub min_tau_multiple: f64,
 }
 
 impl RunControl {
@@ -64,6 +67,7 @@ impl RunControl {
             until_converged: false,
             check_every: 500,
             min_ess: 0.0,
+            min_tau_multiple: super::diagnostics::MIN_TAU_MULTIPLE,
         }
     }
 }
@@ -175,7 +179,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 for o in observers.iter_mut() {
                     o.checked(&state, &diag);
                 }
-                if diag.converged(control.min_ess) {
+                if diag.converged_for(control.min_ess, control.min_tau_multiple) {
                     break;
                 }
             }

@@ -353,7 +353,7 @@ fn sample_afresh(
     let mut observers = observe(target.run.id());
     let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
     let mut sampler = Sampler::new(posterior, s.sampler(s.walkers, seed), &init)?.with_reference(laplace.clone());
-    let control = RunControl { max_steps: loo.steps, until_converged: true, check_every: s.check_every, min_ess: s.min_ess };
+    let control = RunControl { max_steps: loo.steps, until_converged: true, check_every: s.check_every, ..s.control() };
     let held = sampling::run(posterior, &mut sampler, &control, 0, &mut refs)?;
     let positions = held.draws().positions(&held.sample.chains, loo.draws);
     let draws = held.sample.draws(&positions, target.run.id(), target.run.spec.current_a);

@@ -4,6 +4,7 @@
 //! returns the log of its Metropolis-Hastings correction factor.
 
 mod anchored;
+pub mod curved;
 mod differential_evolution;
 mod independence;
 pub mod mixture;
@@ -49,6 +50,13 @@ pub enum Move {
     /// ([`anchored`]); factor q(x)/q(y). Without a reference, or where the
     /// half lies far from it, [`Move::Independence`] with scale 1.
     Anchored { df: Option<f64> },
+    /// An independence proposal that follows a curved ridge: an equal
+    /// mixture of a *tube* fitted to the complementary half (one coordinate
+    /// along the ridge, drawn from a kernel density; the others across it,
+    /// Student-t about a quadratic curve with a width that varies along
+    /// it), the half's own Student-t, and the anchored fit where the
+    /// reference is near ([`curved`]); factor q(x)/q(y).
+    Curved { df: Option<f64> },
 }
 
 impl Default for Move {
@@ -78,11 +86,15 @@ impl Move {
         Move::Anchored { df: Some(10.0) }
     }
 
+    pub fn curved() -> Self {
+        Move::Curved { df: Some(10.0) }
+    }
+
     /// Smallest complementary half the move can work with.
     pub fn min_complement(&self) -> usize {
         match self {
             Move::Stretch { .. } => 1,
-            Move::DifferentialEvolution { .. } | Move::Independence { .. } | Move::History { .. } | Move::Anchored { .. } => 2,
+            Move::DifferentialEvolution { .. } | Move::Independence { .. } | Move::History { .. } | Move::Anchored { .. } | Move::Curved { .. } => 2,
             Move::Snooker { .. } => 3,
         }
     }
@@ -93,7 +105,7 @@ impl Move {
             Move::DifferentialEvolution { gamma0: Some(g), .. } if !(g > 0.0) => Err(format!("DE gamma0 = {g} must be positive")),
             Move::DifferentialEvolution { sigma, .. } if !(sigma >= 0.0) => Err(format!("DE sigma = {sigma} must be non-negative")),
             Move::Snooker { gamma } if !(gamma > 0.0) => Err(format!("snooker gamma = {gamma} must be positive")),
-            Move::Independence { df: Some(df), .. } | Move::History { df: Some(df) } | Move::Anchored { df: Some(df) } if !(df > 0.0) => Err(format!("independence df = {df} must be positive")),
+            Move::Independence { df: Some(df), .. } | Move::History { df: Some(df) } | Move::Anchored { df: Some(df) } | Move::Curved { df: Some(df) } if !(df > 0.0) => Err(format!("independence df = {df} must be positive")),
             Move::Independence { scale, .. } if !(scale > 0.0 && scale.is_finite()) => {
                 Err(format!("independence scale = {scale} must be positive"))
             }
@@ -110,7 +122,7 @@ impl Move {
     /// (`None`: Gaussian, or a move that has none).
     fn df(&self) -> Option<f64> {
         match *self {
-            Move::Independence { df, .. } | Move::History { df } | Move::Anchored { df } => df,
+            Move::Independence { df, .. } | Move::History { df } | Move::Anchored { df } | Move::Curved { df } => df,
             _ => None,
         }
     }
@@ -136,6 +148,7 @@ impl Move {
             Move::Independence { .. } => own(),
             Move::Anchored { .. } => reference.and_then(|r| anchored::proposal(others, d, r)).map_or_else(own, Fit::Anchored),
             Move::History { .. } => history.map_or_else(own, |h| Fit::History(h, Mixture::of_points(others, d))),
+            Move::Curved { .. } => Fit::Curved(curved::Proposal::fit(others, d, reference)),
         }
     }
 
@@ -150,6 +163,11 @@ impl Move {
             (_, Fit::Single(f)) => independence::propose(self.df(), self.scale(), f.as_ref(), x, rng, y),
             (_, Fit::Anchored(q)) => q.propose(self.df(), x, rng, y),
             (_, Fit::History(h, current)) => mixture::propose(h, current.as_ref(), self.df(), x, rng, y),
+            (_, Fit::Curved(Some(q))) => q.propose(self.df(), x, rng, y),
+            (_, Fit::Curved(None)) => {
+                y.copy_from_slice(x);
+                0.0
+            }
             // an independence move given no fit fits the half itself
             (_, Fit::Points) => independence::propose(self.df(), self.scale(), independence::fitted(others, x.len()).as_ref(), x, rng, y),
         }
@@ -168,6 +186,9 @@ pub enum Fit<'h> {
     Anchored(Mixture),
     /// The history's mixture and the half's own fit.
     History(&'h Mixture, Option<Mixture>),
+    /// The curved move's mixture (`None`: a degenerate half, the walker
+    /// stays).
+    Curved(Option<curved::Proposal>),
 }
 
 /// The `j`-th of the points stored one after another in `points`.
