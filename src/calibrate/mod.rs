@@ -160,14 +160,12 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
     let posterior = &start.posterior;
     let s = &start.settings.sampler;
     let sampler_settings = s.sampler(s.walkers, s.seed);
-    // the walkers start about the Laplace approximation at the mode, and
-    // the anchored move proposes with it (a function of the start alone, so
-    // a resumed run has the same)
+    // the walkers start about the Laplace approximation at the mode, which
+    // the anchored move proposes with, and their first steps judge the start
+    // (a function of the start alone, so a resumed run judges it the same)
     let clock = std::time::Instant::now();
-    // the walkers start about the Laplace approximation at the mode, judged
-    // in their first steps (a resumed run judges the same start the same way)
     let probed = probe::walkers_start(posterior, &start.map, sampler_settings, s.walkers * s.ensembles)?;
-    let sampler = match resume_from {
+    let mut sampler = match resume_from {
         Some(path) => {
             let resumed = Sampler::resume(posterior, path)?;
             if resumed.settings != probed.sampler.settings {
@@ -177,8 +175,8 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
         }
         None => probed.sampler,
     };
-    let mut sampler = sampler;
-    // the Laplace approximation and the walkers' start count with the start
+    // the Laplace approximation and the walkers' start (with its probe's
+    // steps) count with the start
     let walkers_start = clock.elapsed().as_secs_f64();
     let mut control = s.control();
     if probed.misfit.is_some() {

@@ -7,10 +7,8 @@
 //! start is sound pays a single extra log-density and keeps its chains bit
 //! for bit.
 
-use crate::posterior::map;
-use crate::posterior::mode;
-use crate::posterior::Posterior;
 use crate::error::Result;
+use crate::posterior::{map, mode, Posterior};
 use crate::sampler::{Chains, Elliptical, LogDensity, Move, Sampler, SamplerSettings};
 
 /// The walkers' start, judged.
@@ -43,7 +41,7 @@ pub(super) fn walkers_start<'t>(posterior: &'t Posterior, map: &map::MapEstimate
         let init = map::initial_walkers(posterior, &laplace, count, settings.seed);
         let mut sampler = Sampler::new(posterior, settings.clone(), &init)?.with_reference(laplace.clone());
         let misfit = Some(laplace_misfit(&sampler.chains, &laplace)).filter(|m| *m > FAR_FROM_LAPLACE);
-        if misfit.is_some() && settings.moves == crate::calibrate::settings::SamplingSettings::default().moves {
+        if misfit.is_some() && settings.moves == super::settings::SamplingSettings::default().moves {
             sampler.settings.moves = curved_moves();
         }
         let done = |sampler, laplace, new_map, higher| Ok(Probed { sampler, laplace, map: new_map, higher, misfit });
