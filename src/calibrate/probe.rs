@@ -78,7 +78,7 @@ pub(super) fn warnings(higher: &Option<HigherGround>, misfit: Option<f64>, moves
 
 /// Steps the walkers take from the Laplace approximation at the mode
 /// before the start is judged ([`higher_ground`]).
-const PROBE_STEPS: usize = 5;
+const PROBE_STEPS: usize = 10;
 
 /// How far (nats) above the mode a walker must climb within
 /// [`PROBE_STEPS`] for the mode to be taken as a local one: at a mode no

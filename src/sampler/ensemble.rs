@@ -168,6 +168,21 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         for o in observers.iter_mut() {
             o.started(&self.state(control, accepted))?;
         }
+        // steps taken before this run (a probe of the start, a resumed
+        // run's) are checked where an uninterrupted run would have checked
+        let state = self.state(control, accepted);
+        if control.until_converged && state.step > 0 && control.checks_at(state.step) {
+            let diag = diagnose(&self.chains);
+            for o in observers.iter_mut() {
+                o.checked(&state, &diag);
+            }
+            if diag.converged_for(control.min_ess, control.min_tau_multiple) {
+                for o in observers.iter_mut() {
+                    o.finished(&self.state(control, accepted))?;
+                }
+                return Ok(());
+            }
+        }
         while self.chains.steps() < control.max_steps + 1 {
             accepted = self.step();
             let state = self.state(control, accepted);
