@@ -82,25 +82,26 @@ const PROBE_STEPS: usize = 10;
 
 /// How far (nats) above the mode a walker must climb within
 /// [`PROBE_STEPS`] for the mode to be taken as a local one: at a mode no
-/// walker should rise above it at all (the twelve measured records and the
-/// bundled campaigns: at most 0.7 nats in 40 steps, from rounding).
+/// walker should rise above it at all (on the eleven other measured
+/// records and the bundled campaigns the walkers' best log-density rises
+/// by at most 0.7 nats over their first 40 steps).
 const HIGHER_GROUND: f64 = 5.0;
 
 /// Searches from a walker's higher ground at most.
-pub(super) const MAX_SEARCHES: usize = 3;
+const MAX_SEARCHES: usize = 3;
 
 /// The search's mode was a local one: the walkers found higher ground and
 /// the MAP was searched again from there.
 pub(super) struct HigherGround {
     /// How much higher (nats) the mode finally used lies.
-    pub gain: f64,
-    pub searches: usize,
+    gain: f64,
+    searches: usize,
     /// The log-density of the first MAP.
-    pub first_map: f64,
+    first_map: f64,
 }
 
 impl HigherGround {
-    pub(super) fn message(&self) -> String {
+    fn message(&self) -> String {
         format!(
             "within {PROBE_STEPS} steps the walkers climbed more than {HIGHER_GROUND} nats above the mode the MAP search had found (log-density {:.1}): it was a local one, so the search was repeated from the highest walker ({} time(s)) and the walkers started about a mode {:.1} nats higher (docs/calibration.md, \"The start\")",
             self.first_map, self.searches, self.gain
@@ -114,7 +115,7 @@ impl HigherGround {
 /// and reaches its mode: that MAP and the Laplace approximation at its
 /// mode, if the mode is higher ground too; otherwise `None`, and the
 /// sampler goes on from where it is.
-pub(super) fn higher_ground(posterior: &Posterior, sampler: &mut Sampler<Posterior>, top: f64) -> Option<(map::MapEstimate, Elliptical)> {
+fn higher_ground(posterior: &Posterior, sampler: &mut Sampler<Posterior>, top: f64) -> Option<(map::MapEstimate, Elliptical)> {
     for _ in 0..PROBE_STEPS {
         sampler.step();
     }
@@ -145,13 +146,13 @@ pub(super) const FAR_FROM_LAPLACE: f64 = 8.0;
 /// ensembles, does not see it.
 pub(super) const FAR_TAU_MULTIPLE: f64 = 50.0;
 
-/// The sd of ln p(x) − ln q(x) over the walkers of the chains' first step
-/// (draws of the Laplace approximation `laplace`, q, whose own constant
-/// does not matter).
+/// The sd of ln p(x) − ln q(x) over the walkers of the chains' first step,
+/// draws of q: the Laplace approximation `laplace` spread by
+/// [`map::START_SPREAD`] (q's own constant does not matter).
 pub(super) fn laplace_misfit(chains: &Chains, laplace: &Elliptical) -> f64 {
     let d = chains.dim;
     let walkers = chains.last_log_prob().len();
-    let w: Vec<f64> = (0..walkers).map(|c| chains.log_prob[c] - laplace.log_kernel(None, &chains.positions[c * d..(c + 1) * d], 1.0)).filter(|v| v.is_finite()).collect();
+    let w: Vec<f64> = (0..walkers).map(|c| chains.log_prob[c] - laplace.log_kernel(None, &chains.positions[c * d..(c + 1) * d], map::START_SPREAD)).filter(|v| v.is_finite()).collect();
     if w.len() < 2 {
         return 0.0;
     }

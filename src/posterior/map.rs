@@ -473,7 +473,7 @@ pub fn euler_steps(post: &Posterior, x: &[f64]) -> u64 {
 /// walkers start on the approximate posterior; what R̂ then compares is
 /// how the ensembles move from there (the SBC studies and the 160-step
 /// check of docs/performance.md found no bias left by this start).
-const START_SPREAD: f64 = 1.0;
+pub const START_SPREAD: f64 = 1.0;
 
 /// Initial walker positions from a Gaussian approximation of the
 /// posterior (the [`laplace`] one, say), spread by [`START_SPREAD`], every

@@ -29,6 +29,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use rand::RngExt;
 
 use super::super::elliptical::{t_factor, Elliptical};
+use super::mixture::log_sum_exp;
 
 /// The narrowest and widest the tube may become along the ridge, as a
 /// share of its mean width² (v(t) is clamped to this range): a quadratic
@@ -210,14 +211,6 @@ fn log_elliptical(df: Option<f64>, k: f64, m: f64) -> f64 {
 /// Gaussian without).
 fn log_density_of(e: &Elliptical, df: Option<f64>, x: &[f64]) -> f64 {
     log_elliptical(df, x.len() as f64, e.mahalanobis(x, 1.0)) - e.half_log_det()
-}
-
-fn log_sum_exp(v: &[f64]) -> f64 {
-    let m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    if !m.is_finite() {
-        return m;
-    }
-    m + v.iter().map(|x| (x - m).exp()).sum::<f64>().ln()
 }
 
 /// The curved move's proposal: an equal mixture of the tube and the

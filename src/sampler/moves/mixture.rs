@@ -193,7 +193,7 @@ pub fn propose(history: &Mixture, current: Option<&Mixture>, df: Option<f64>, x:
     q(x) - q(y)
 }
 
-fn log_sum_exp(v: &[f64]) -> f64 {
+pub(super) fn log_sum_exp(v: &[f64]) -> f64 {
     let m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if !m.is_finite() {
         return m;
