@@ -164,28 +164,36 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
     // the anchored move proposes with, and their first steps judge the start
     // (a function of the start alone, so a resumed run judges it the same)
     let clock = std::time::Instant::now();
-    let probed = probe::walkers_start(posterior, &start.map, sampler_settings, s.walkers * s.ensembles)?;
-    let mut sampler = match resume_from {
+    let mut control = s.control();
+    let probed = match resume_from {
         Some(path) => {
+            // the start judged again, unobserved: a checkpoint saved before
+            // the walkers started afresh about a higher mode is of a start
+            // the run left, and the run goes on from the new one instead
+            let probed = probe::walkers_start(posterior, &start.map, sampler_settings, s.walkers * s.ensembles, &control, &mut [])?;
             let resumed = Sampler::resume(posterior, path)?;
-            if resumed.settings != probed.sampler.settings {
+            let first = |c: &Chains| c.positions[..c.chains() * c.dim].to_vec();
+            if first(&resumed.chains) != first(&probed.sampler.chains) {
+                probed
+            } else if resumed.settings != probed.sampler.settings {
                 return Err(Error::input(path, "checkpoint of a sampler with other settings (walkers, ensembles, moves or seed)"));
+            } else {
+                probe::Probed { sampler: resumed.with_reference(probed.laplace.clone()), ..probed }
             }
-            resumed.with_reference(probed.laplace)
         }
-        None => probed.sampler,
+        None => probe::walkers_start(posterior, &start.map, sampler_settings, s.walkers * s.ensembles, &control, observers)?,
     };
     // the Laplace approximation and the walkers' start (with its probe's
     // steps) count with the start
     let walkers_start = clock.elapsed().as_secs_f64();
-    let mut control = s.control();
     if probed.misfit.is_some() {
         control.min_tau_multiple = probe::FAR_TAU_MULTIPLE;
     }
+    let probe::Probed { mut sampler, map, higher, misfit, .. } = probed;
     let mut sampled = sampling::run(posterior, &mut sampler, &control, s.burn_in, observers)?;
-    sampled.diagnostics.warnings.extend(probe::warnings(&probed.higher, probed.misfit, &sampler.settings.moves != &s.moves));
+    sampled.diagnostics.warnings.extend(probe::warnings(&higher, misfit, sampler.settings.moves != s.moves));
     start.settings.sampler.moves = sampler.settings.moves.clone();
-    if let Some(map) = probed.map {
+    if let Some(map) = map {
         start.map = map;
     }
     let record = CalibrationRecord::of(campaign, &start, walkers_start, &sampled);

@@ -9,7 +9,7 @@
 
 use crate::error::Result;
 use crate::posterior::{map, mode, Posterior};
-use crate::sampler::{Chains, Elliptical, LogDensity, Move, Sampler, SamplerSettings};
+use crate::sampler::{Chains, Elliptical, LogDensity, Move, Observer, RunControl, Sampler, SamplerSettings};
 
 /// The walkers' start, judged.
 pub(super) struct Probed<'t> {
@@ -31,9 +31,17 @@ pub(super) struct Probed<'t> {
 /// the walkers start afresh about its mode (at most [`MAX_SEARCHES`]
 /// times). Where the posterior is far from the Laplace approximation there
 /// and `settings` has the default moves, the sampler walks with the curved
-/// move instead ([`curved_moves`]). A function of the start and the seed
-/// alone.
-pub(super) fn walkers_start<'t>(posterior: &'t Posterior, map: &map::MapEstimate, settings: SamplerSettings, count: usize) -> Result<Probed<'t>> {
+/// move instead ([`curved_moves`]). The probe's steps are the run's first
+/// (at most `control`'s length), told to `observers`. A function of the
+/// start and the seed alone.
+pub(super) fn walkers_start<'t>(
+    posterior: &'t Posterior,
+    map: &map::MapEstimate,
+    settings: SamplerSettings,
+    count: usize,
+    control: &RunControl,
+    observers: &mut [&mut dyn Observer],
+) -> Result<Probed<'t>> {
     let mut laplace = mode::laplace_from(posterior, map);
     let mut higher: Option<HigherGround> = None;
     let mut new_map = None;
@@ -49,7 +57,7 @@ pub(super) fn walkers_start<'t>(posterior: &'t Posterior, map: &map::MapEstimate
             return done(sampler, laplace, new_map, higher);
         }
         let top = posterior.log_density(laplace.mean.as_slice());
-        match higher_ground(posterior, &mut sampler, top) {
+        match higher_ground(posterior, &mut sampler, top, control, observers)? {
             Some((found, better)) => {
                 let gain = higher.as_ref().map_or(0.0, |h| h.gain) + posterior.log_density(better.mean.as_slice()) - top;
                 let searches = higher.as_ref().map_or(0, |h| h.searches) + 1;
@@ -109,25 +117,31 @@ impl HigherGround {
     }
 }
 
-/// Steps `sampler` [`PROBE_STEPS`] times and, if a walker has climbed more
+/// Steps `sampler` [`PROBE_STEPS`] times (told to `observers`) and, if a walker has climbed more
 /// than [`HIGHER_GROUND`] above `top` (the log-density at the mode the
 /// walkers started about), searches the MAP again from the highest walker
 /// and reaches its mode: that MAP and the Laplace approximation at its
 /// mode, if the mode is higher ground too; otherwise `None`, and the
 /// sampler goes on from where it is.
-fn higher_ground(posterior: &Posterior, sampler: &mut Sampler<Posterior>, top: f64) -> Option<(map::MapEstimate, Elliptical)> {
-    for _ in 0..PROBE_STEPS {
-        sampler.step();
+fn higher_ground(
+    posterior: &Posterior,
+    sampler: &mut Sampler<Posterior>,
+    top: f64,
+    control: &RunControl,
+    observers: &mut [&mut dyn Observer],
+) -> Result<Option<(map::MapEstimate, Elliptical)>> {
+    for _ in 0..PROBE_STEPS.min(control.max_steps) {
+        sampler.step_observed(control, observers)?;
     }
     let d = posterior.dim();
     let chains = &sampler.chains;
     let (best, lp) = chains.log_prob.iter().enumerate().fold((0, f64::NEG_INFINITY), |b, (i, &v)| if v > b.1 { (i, v) } else { b });
     if !(lp > top + HIGHER_GROUND) {
-        return None;
+        return Ok(None);
     }
-    let map = map::refine(posterior, &chains.positions[best * d..(best + 1) * d])?;
+    let Some(map) = map::refine(posterior, &chains.positions[best * d..(best + 1) * d]) else { return Ok(None) };
     let laplace = mode::laplace_from(posterior, &map);
-    (posterior.log_density(laplace.mean.as_slice()) > top + HIGHER_GROUND).then_some((map, laplace))
+    Ok((posterior.log_density(laplace.mean.as_slice()) > top + HIGHER_GROUND).then_some((map, laplace)))
 }
 
 /// The spread (sd, nats) of ln p/q over the initial walkers above which
@@ -151,7 +165,7 @@ pub(super) const FAR_TAU_MULTIPLE: f64 = 50.0;
 /// [`map::START_SPREAD`] (q's own constant does not matter).
 pub(super) fn laplace_misfit(chains: &Chains, laplace: &Elliptical) -> f64 {
     let d = chains.dim;
-    let walkers = chains.last_log_prob().len();
+    let walkers = chains.chains();
     let w: Vec<f64> = (0..walkers).map(|c| chains.log_prob[c] - laplace.log_kernel(None, &chains.positions[c * d..(c + 1) * d], map::START_SPREAD)).filter(|v| v.is_finite()).collect();
     if w.len() < 2 {
         return 0.0;
@@ -166,4 +180,46 @@ fn far_message(misfit: f64, moves_changed: bool) -> String {
     format!(
         "the posterior is far from its Laplace approximation at the mode (ln p/q over the initial walkers spreads by {misfit:.1} nats, above {FAR_FROM_LAPLACE}): walkers that start on that approximation fill a curved or skewed posterior slowly and together, which R̂ does not see, so {moves}the run went on to {FAR_TAU_MULTIPLE} τ after burn-in (docs/calibration.md, \"Convergence\")"
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampler::Moments;
+    use nalgebra::{DMatrix, DVector};
+
+    /// Walkers drawn from q with log-densities ln q + c: ln p/q is constant
+    /// and its spread 0; with ln p = ln q + c + ½ z₁² (a posterior wider than
+    /// q along one axis) the spread is that of ½ z₁², sd 1/√2 (over 2 000
+    /// walkers a sample sd of ½ χ²₁, kurtosis 15, has se 0.03: tolerance
+    /// 5 se); and the walkers of later steps do not count.
+    #[test]
+    fn the_misfit_is_the_spread_of_ln_p_over_q() {
+        let q = Elliptical::new(Moments { mean: DVector::from_vec(vec![1.0, -2.0]), cov: DMatrix::from_row_slice(2, 2, &[2.0, 0.5, 0.5, 1.0]) }).unwrap();
+        let mut rng = crate::rng::stream(7, &[]);
+        let n = 2000;
+        let mut positions = vec![0.0; 2 * n];
+        for p in positions.chunks_exact_mut(2) {
+            q.draw(None, map::START_SPREAD, &mut rng, p);
+        }
+        let exact: Vec<f64> = positions.chunks_exact(2).map(|x| 3.0 + q.log_kernel(None, x, map::START_SPREAD)).collect();
+        let wider: Vec<f64> = positions
+            .chunks_exact(2)
+            .map(|x| {
+                let z = q.factor().solve_lower_triangular(&(DVector::from_column_slice(x) - &q.mean)).unwrap();
+                3.0 + q.log_kernel(None, x, map::START_SPREAD) + 0.5 * z[0] * z[0]
+            })
+            .collect();
+        let chains = |first: &[f64]| {
+            // a second step far off, which must not count
+            let mut log_prob = first.to_vec();
+            log_prob.extend(std::iter::repeat_n(-1e6, n));
+            let mut pos = positions.clone();
+            pos.extend(std::iter::repeat_n(50.0, 2 * n));
+            Chains { dim: 2, ensembles: 4, walkers: n / 4, positions: pos, log_prob, accepted: vec![false; 2 * n] }
+        };
+        assert!(laplace_misfit(&chains(&exact), &q) < 1e-9);
+        let m = laplace_misfit(&chains(&wider), &q);
+        assert!((m - 0.5f64.sqrt()).abs() < 0.15, "misfit {m}");
+    }
 }

@@ -86,6 +86,8 @@ pub struct Sampler<'t, T: LogDensity> {
     /// A fixed distribution close to the target (the Laplace approximation
     /// at the mode), for [`Move::Anchored`].
     reference: Option<Elliptical>,
+    /// Whether observers were told that this run started.
+    announced: bool,
 }
 
 impl<'t, T: LogDensity> Sampler<'t, T> {
@@ -129,6 +131,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             history: (0, vec![None; settings.ensembles]),
             reference: None,
             settings,
+            announced: false,
         })
     }
 
@@ -137,7 +140,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let (settings, chains) = checkpoint::load(path, target.dim())?;
         settings.check(target.dim())?;
         let history = (0, vec![None; settings.ensembles]);
-        Ok(Sampler { target, settings, chains, history, reference: None })
+        Ok(Sampler { target, settings, chains, history, reference: None, announced: false })
     }
 
     /// The sampler with a fixed reference distribution for
@@ -165,9 +168,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         diagnose: &dyn Fn(&Chains) -> Diagnostics,
     ) -> Result<()> {
         let mut accepted = 0;
-        for o in observers.iter_mut() {
-            o.started(&self.state(control, accepted))?;
-        }
+        self.announce(control, observers)?;
         // steps taken before this run (a probe of the start, a resumed
         // run's) are checked where an uninterrupted run would have checked
         let state = self.state(control, accepted);
@@ -184,11 +185,8 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             }
         }
         while self.chains.steps() < control.max_steps + 1 {
-            accepted = self.step();
+            accepted = self.step_observed(control, observers)?;
             let state = self.state(control, accepted);
-            for o in observers.iter_mut() {
-                o.stepped(&state)?;
-            }
             if control.until_converged && control.checks_at(state.step) {
                 let diag = diagnose(&self.chains);
                 for o in observers.iter_mut() {
@@ -203,6 +201,32 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             o.finished(&self.state(control, accepted))?;
         }
         Ok(())
+    }
+
+    /// Tells `observers` that the run started, once: a run continued by
+    /// [`Sampler::run_until`] after steps taken with [`Sampler::step_observed`]
+    /// is the same run.
+    pub fn announce(&mut self, control: &RunControl, observers: &mut [&mut dyn Observer]) -> Result<()> {
+        if !self.announced {
+            let state = self.state(control, 0);
+            for o in observers.iter_mut() {
+                o.started(&state)?;
+            }
+            self.announced = true;
+        }
+        Ok(())
+    }
+
+    /// One [`Sampler::step`], told to `observers` (which may stop the run:
+    /// a checkpoint at Ctrl-C); the number of accepted proposals.
+    pub fn step_observed(&mut self, control: &RunControl, observers: &mut [&mut dyn Observer]) -> Result<usize> {
+        self.announce(control, observers)?;
+        let accepted = self.step();
+        let state = self.state(control, accepted);
+        for o in observers.iter_mut() {
+            o.stepped(&state)?;
+        }
+        Ok(accepted)
     }
 
     fn state(&self, control: &RunControl, accepted: usize) -> RunState<'_> {
