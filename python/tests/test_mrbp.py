@@ -331,3 +331,33 @@ def test_a_calibration_from_frames_saves_its_records(calibration, tmp_path):
     cli("status", folder)
     pd.testing.assert_frame_equal(pd.read_parquet(folder / "bands.parquet"), cal.predict(draws=20, replicates=2).bands, check_exact=True)
     pd.testing.assert_frame_equal(cal.draws, calibration.draws, check_exact=True)
+
+
+def test_ctrl_c_before_a_second_search_resumes_from_the_new_start(tmp_path):
+    # the measured 1 A 25 mm / 0.25 Hz record alone: its MAP search ends on
+    # a local optimum, the walkers' first ten steps climb above it and the
+    # start is searched again from the highest walker (docs/calibration.md,
+    # "The start"). Ctrl-C at step 5 saves a checkpoint of the start the
+    # run then leaves; resumed, the run goes on from the new start and its
+    # chains are those of a run never stopped.
+    data = ROOT / "data" / "utfsm-mts"
+    (tmp_path / "I1.00_25mm_0.25Hz.csv").write_bytes((data / "I1.00_25mm_0.25Hz.csv").read_bytes())
+    manifest = tmp_path / "campaign.toml"
+    manifest.write_text(
+        'name = "one"\n[geometry]\narea_m2 = 0.05\ngap_m = 0.001\n'
+        '[[run]]\nid = "I1.00_25mm_0.25Hz"\nfile = "I1.00_25mm_0.25Hz.csv"\ncurrent_a = 1.0\n'
+    )
+    one = mrbp.Campaign.load(manifest)
+    checkpoint = tmp_path / "sampler.checkpoint"
+    options = dict(seed=1, steps=14, config=data / "mrbp.toml")
+
+    def interrupt(stage, step, max_steps, ess, ess_target, r_hat, acceptance):
+        if stage == "step" and step == 5:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt, match="interrupted after step 5"):
+        mrbp.calibrate(one, progress=interrupt, checkpoint=checkpoint, **options)
+    resumed = mrbp.calibrate(one, checkpoint=checkpoint, resume=True, **options)
+    whole = mrbp.calibrate(one, **options)
+    assert any("climbed" in w for w in whole.warnings), whole.warnings
+    pd.testing.assert_frame_equal(resumed.draws, whole.draws, check_exact=True)
