@@ -6,12 +6,14 @@
 //!
 //! * [`settings`]: what defines a calibration besides the data (the
 //!   `config.toml` format);
+//! * [`probe`]: the walkers' first steps judge the start (a local mode, a
+//!   posterior far from its Laplace approximation);
 //! * [`record`]: what a calibration did (`calibration.toml`);
 //! * [`sampling`]: one run of the sampler, for a calibration and for each
 //!   held-out calibration of leave-one-out alike.
 
 pub mod probe;
-mod record;
+pub mod record;
 pub mod sampling;
 pub mod settings;
 pub mod start;

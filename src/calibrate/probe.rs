@@ -31,7 +31,7 @@ pub(super) struct Probed<'t> {
 /// the walkers start afresh about its mode (at most [`MAX_SEARCHES`]
 /// times). Where the posterior is far from the Laplace approximation there
 /// and `settings` has the default moves, the sampler walks with the curved
-/// move instead ([`curved_moves`]). The probe's steps are the run's first
+/// move instead ([`moves_far_from_laplace`]). The probe's steps are the run's first
 /// (at most `control`'s length), told to `observers`. A function of the
 /// start and the seed alone.
 pub(super) fn walkers_start<'t>(
@@ -49,8 +49,8 @@ pub(super) fn walkers_start<'t>(
         let init = map::initial_walkers(posterior, &laplace, count, settings.seed);
         let mut sampler = Sampler::new(posterior, settings.clone(), &init)?.with_reference(laplace.clone());
         let misfit = Some(laplace_misfit(&sampler.chains, &laplace)).filter(|m| *m > FAR_FROM_LAPLACE);
-        if misfit.is_some() && settings.moves == super::settings::SamplingSettings::default().moves {
-            sampler.settings.moves = curved_moves();
+        if let Some(moves) = misfit.and_then(|_| moves_far_from_laplace(&settings.moves)) {
+            sampler.settings.moves = moves;
         }
         let done = |sampler, laplace, new_map, higher| Ok(Probed { sampler, laplace, map: new_map, higher, misfit });
         if higher.as_ref().is_some_and(|h| h.searches == MAX_SEARCHES) {
@@ -70,11 +70,12 @@ pub(super) fn walkers_start<'t>(
     }
 }
 
-/// The moves where the posterior is far from its Laplace approximation:
-/// the curved move in the anchored move's place (docs/performance.md, "A
-/// start far from equilibrium").
-pub(super) fn curved_moves() -> Vec<(Move, f64)> {
-    vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)]
+/// The moves a sampler set to `moves` walks with where the posterior is far
+/// from its Laplace approximation: with the default moves, the curved move
+/// in the anchored move's place (docs/performance.md, "A start far from
+/// equilibrium"); other moves, a user's choice, are kept (`None`).
+pub fn moves_far_from_laplace(moves: &[(Move, f64)]) -> Option<Vec<(Move, f64)>> {
+    (moves == super::settings::SamplingSettings::default().moves.as_slice()).then(|| vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)])
 }
 
 /// What the start's judgement tells the user.

@@ -21,8 +21,9 @@ pub const CHECKPOINT_EVERY: usize = 100;
 
 
 /// Checks a checkpoint against the options before any work: readable, the
-/// same sampler (ensembles, walkers where given, moves, seed), and not
-/// longer than a fixed `--steps`.
+/// same sampler (ensembles, walkers where given, moves — or the curved
+/// ones a start far from its Laplace approximation took instead — seed),
+/// and not longer than a fixed `--steps`.
 pub fn check_resumable(checkpoint: &Path, settings: &CalibrationSettings) -> Result<()> {
     if !checkpoint.exists() {
         return Ok(());
@@ -41,7 +42,9 @@ pub fn check_resumable(checkpoint: &Path, settings: &CalibrationSettings) -> Res
     if s.walkers != 0 && saved.walkers != s.walkers {
         return mismatch("--walkers", saved.walkers.to_string(), s.walkers.to_string());
     }
-    if saved.moves != s.moves {
+    // the moves asked for, or those a start far from its Laplace
+    // approximation walks with instead (docs/calibration.md, "The start")
+    if saved.moves != s.moves && crate::calibrate::probe::moves_far_from_laplace(&s.moves).is_none_or(|m| m != saved.moves) {
         return mismatch("moves", format!("{:?}", saved.moves), format!("{:?}", s.moves));
     }
     let done = chains.steps().saturating_sub(1);
