@@ -174,8 +174,8 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
             // the run left, and the run goes on from the new one instead
             let probed = probe::walkers_start(posterior, &start.map, sampler_settings, s.walkers * s.ensembles, &control, &mut [])?;
             let resumed = Sampler::resume(posterior, path)?;
-            let first = |c: &Chains| c.positions[..c.chains() * c.dim].to_vec();
-            if first(&resumed.chains) != first(&probed.sampler.chains) {
+            let first = resumed.chains.chains() * resumed.chains.dim;
+            if resumed.chains.positions.get(..first) != probed.sampler.chains.positions.get(..first) {
                 probed
             } else if resumed.settings != probed.sampler.settings {
                 return Err(Error::input(path, "checkpoint of a sampler with other settings (walkers, ensembles, moves or seed)"));
@@ -208,4 +208,3 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
     };
     Ok(Calibrated { calibration, start, chains: sampled.chains, diagnostics: sampled.diagnostics })
 }
-

@@ -43,6 +43,8 @@ pub(super) fn walkers_start<'t>(
     observers: &mut [&mut dyn Observer],
 ) -> Result<Probed<'t>> {
     let mut laplace = mode::laplace_from(posterior, map);
+    // the log-density at the mode the walkers start about
+    let mut top = posterior.log_density(laplace.mean.as_slice());
     let mut higher: Option<HigherGround> = None;
     let mut new_map = None;
     loop {
@@ -56,14 +58,13 @@ pub(super) fn walkers_start<'t>(
         if higher.as_ref().is_some_and(|h| h.searches == MAX_SEARCHES) {
             return done(sampler, laplace, new_map, higher);
         }
-        let top = posterior.log_density(laplace.mean.as_slice());
         match higher_ground(posterior, &mut sampler, top, control, observers)? {
-            Some((found, better)) => {
-                let gain = higher.as_ref().map_or(0.0, |h| h.gain) + posterior.log_density(better.mean.as_slice()) - top;
+            Some((found, better, better_top)) => {
+                let gain = higher.as_ref().map_or(0.0, |h| h.gain) + better_top - top;
                 let searches = higher.as_ref().map_or(0, |h| h.searches) + 1;
                 higher = Some(HigherGround { gain, searches, first_map: higher.map_or(map.log_density, |h| h.first_map) });
                 new_map = Some(found);
-                laplace = better;
+                (laplace, top) = (better, better_top);
             }
             None => return done(sampler, laplace, new_map, higher),
         }
@@ -121,16 +122,16 @@ impl HigherGround {
 /// Steps `sampler` [`PROBE_STEPS`] times (told to `observers`) and, if a walker has climbed more
 /// than [`HIGHER_GROUND`] above `top` (the log-density at the mode the
 /// walkers started about), searches the MAP again from the highest walker
-/// and reaches its mode: that MAP and the Laplace approximation at its
-/// mode, if the mode is higher ground too; otherwise `None`, and the
-/// sampler goes on from where it is.
+/// and reaches its mode: that MAP, the Laplace approximation at its mode
+/// and the log-density there, if the mode is higher ground too; otherwise
+/// `None`, and the sampler goes on from where it is.
 fn higher_ground(
     posterior: &Posterior,
     sampler: &mut Sampler<Posterior>,
     top: f64,
     control: &RunControl,
     observers: &mut [&mut dyn Observer],
-) -> Result<Option<(map::MapEstimate, Elliptical)>> {
+) -> Result<Option<(map::MapEstimate, Elliptical, f64)>> {
     for _ in 0..PROBE_STEPS.min(control.max_steps) {
         sampler.step_observed(control, observers)?;
     }
@@ -142,7 +143,8 @@ fn higher_ground(
     }
     let Some(map) = map::refine(posterior, &chains.positions[best * d..(best + 1) * d]) else { return Ok(None) };
     let laplace = mode::laplace_from(posterior, &map);
-    Ok((posterior.log_density(laplace.mean.as_slice()) > top + HIGHER_GROUND).then_some((map, laplace)))
+    let new_top = posterior.log_density(laplace.mean.as_slice());
+    Ok((new_top > top + HIGHER_GROUND).then_some((map, laplace, new_top)))
 }
 
 /// The spread (sd, nats) of ln p/q over the initial walkers above which
@@ -171,8 +173,7 @@ pub(super) fn laplace_misfit(chains: &Chains, laplace: &Elliptical) -> f64 {
     if w.len() < 2 {
         return 0.0;
     }
-    let m = w.iter().sum::<f64>() / w.len() as f64;
-    (w.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / (w.len() - 1) as f64).sqrt()
+    crate::sampler::diagnostics::variance(&w).sqrt()
 }
 
 /// The warning for a posterior far from its Laplace approximation.

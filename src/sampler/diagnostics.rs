@@ -106,11 +106,13 @@ pub fn integrated_time(chains: &[Vec<f64>]) -> f64 {
     tau.max(1.0)
 }
 
-fn mean(x: &[f64]) -> f64 {
+/// The mean of `x`.
+pub fn mean(x: &[f64]) -> f64 {
     x.iter().sum::<f64>() / x.len() as f64
 }
 
-fn variance(x: &[f64]) -> f64 {
+/// The sample variance of `x` (divisor n − 1).
+pub fn variance(x: &[f64]) -> f64 {
     let m = mean(x);
     x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (x.len() as f64 - 1.0)
 }

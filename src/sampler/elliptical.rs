@@ -152,6 +152,14 @@ impl Elliptical {
     }
 
     /// ln of the density at `x` of the Student-t with `df` degrees of
+    /// freedom (Gaussian without) and scale matrix spread² L Lᵀ, normalised
+    /// (where distributions of different shapes are mixed).
+    pub fn log_density(&self, df: Option<f64>, x: &[f64], spread: f64) -> f64 {
+        let d = x.len() as f64;
+        standard_log_density(df, d, self.mahalanobis(x, spread)) - self.half_log_det() - d * spread.ln()
+    }
+
+    /// ln of the density at `x` of the Student-t with `df` degrees of
     /// freedom (Gaussian without) and scale matrix spread² L Lᵀ, up to a
     /// constant that depends on d, `df`, `spread` and L only.
     pub fn log_kernel(&self, df: Option<f64>, x: &[f64], spread: f64) -> f64 {
@@ -160,6 +168,16 @@ impl Elliptical {
             Some(nu) => -0.5 * (nu + x.len() as f64) * (m / nu).ln_1p(),
             None => -0.5 * m,
         }
+    }
+}
+
+/// ln of the density of a k-dimensional standard Student-t with `df`
+/// degrees of freedom (standard Gaussian without) at squared norm `m`.
+pub fn standard_log_density(df: Option<f64>, k: f64, m: f64) -> f64 {
+    use statrs::function::gamma::ln_gamma;
+    match df {
+        Some(nu) => ln_gamma(0.5 * (nu + k)) - ln_gamma(0.5 * nu) - 0.5 * k * (nu * std::f64::consts::PI).ln() - 0.5 * (nu + k) * (m / nu).ln_1p(),
+        None => -0.5 * k * (2.0 * std::f64::consts::PI).ln() - 0.5 * m,
     }
 }
 

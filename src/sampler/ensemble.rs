@@ -171,36 +171,29 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         self.announce(control, observers)?;
         // steps taken before this run (a probe of the start, a resumed
         // run's) are checked where an uninterrupted run would have checked
-        let state = self.state(control, accepted);
-        if control.until_converged && state.step > 0 && control.checks_at(state.step) {
-            let diag = diagnose(&self.chains);
-            for o in observers.iter_mut() {
-                o.checked(&state, &diag);
-            }
-            if diag.converged_for(control.min_ess, control.min_tau_multiple) {
-                for o in observers.iter_mut() {
-                    o.finished(&self.state(control, accepted))?;
-                }
-                return Ok(());
-            }
-        }
-        while self.chains.steps() < control.max_steps + 1 {
+        let mut converged = self.chains.steps() > 1 && self.converged_now(control, accepted, observers, diagnose);
+        while !converged && self.chains.steps() < control.max_steps + 1 {
             accepted = self.step_observed(control, observers)?;
-            let state = self.state(control, accepted);
-            if control.until_converged && control.checks_at(state.step) {
-                let diag = diagnose(&self.chains);
-                for o in observers.iter_mut() {
-                    o.checked(&state, &diag);
-                }
-                if diag.converged_for(control.min_ess, control.min_tau_multiple) {
-                    break;
-                }
-            }
+            converged = self.converged_now(control, accepted, observers, diagnose);
         }
         for o in observers.iter_mut() {
             o.finished(&self.state(control, accepted))?;
         }
         Ok(())
+    }
+
+    /// Whether the run has converged, where `control` checks at the current
+    /// step (telling `observers` what the check found).
+    fn converged_now(&self, control: &RunControl, accepted: usize, observers: &mut [&mut dyn Observer], diagnose: &dyn Fn(&Chains) -> Diagnostics) -> bool {
+        let state = self.state(control, accepted);
+        if !(control.until_converged && control.checks_at(state.step)) {
+            return false;
+        }
+        let diag = diagnose(&self.chains);
+        for o in observers.iter_mut() {
+            o.checked(&state, &diag);
+        }
+        diag.converged_for(control.min_ess, control.min_tau_multiple)
     }
 
     /// Tells `observers` that the run started, once: a run continued by

@@ -31,7 +31,7 @@ const MAX_POINTS: usize = 4000;
 /// The proposal's components are the fitted ones widened by this factor:
 /// an independence proposal must not be lighter than the target in any
 /// direction, or a walker that reaches such a tail stays there.
-const SPREAD: f64 = 1.15;
+pub(super) const SPREAD: f64 = 1.15;
 
 /// Share of each variance added to a covariance's diagonal: keeps a
 /// component of few points positive definite.
