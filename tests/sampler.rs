@@ -602,3 +602,54 @@ fn an_ensemble_stranded_in_a_negligible_mode_is_drawn_afresh() {
     assert!(stranded::history(&s.chains).is_empty());
     assert!(s.diagnostics().max_rhat() > 1.5, "two modes, one per half of the ensembles: R̂ must say so");
 }
+
+/// A curved ridge with a long, thin end in six dimensions: x0 Gumbel
+/// (ln p = −x0 − e^(−x0): a short lower and a long upper tail), x1 | x0 ~
+/// N(0.3 x0², 0.05²) (the ridge bends, and its far end lies where few
+/// walkers are), x2…x5 standard normal. The shape of the measured
+/// `I1.00_25mm_0.25Hz` posterior's m1 end, with a known answer.
+struct SkewedRidge;
+
+impl LogDensity for SkewedRidge {
+    fn dim(&self) -> usize {
+        6
+    }
+    fn log_density(&self, x: &[f64]) -> f64 {
+        let r = (x[1] - 0.3 * x[0] * x[0]) / 0.05;
+        -x[0] - (-x[0]).exp() - 0.5 * r * r - 0.5 * x[2..].iter().map(|v| v * v).sum::<f64>()
+    }
+}
+
+/// The curved move's quantiles of x0 on [`SkewedRidge`], the far end's
+/// included (Gumbel quantiles −ln(−ln p)), within [`Z`] standard errors
+/// from the bulk and tail ESS, in a run that stops by the calibration's
+/// rule for posteriors far from Gaussian (R̂, ESS and
+/// `calibrate::probe::FAR_TAU_MULTIPLE` τ after burn-in), started in a
+/// small ball at the mode as a calibration starts. Over 12 seeds the 95 %
+/// quantile averaged 2.975 (truth 2.970; 2.911 when runs stopped at 50 τ).
+#[test]
+fn skewed_ridge_quantiles_with_curved_mixture() {
+    let settings = SamplerSettings { walkers: 64, ensembles: 4, moves: vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], seed: 8 };
+    let init: Vec<Vec<f64>> = start_ball(6, 256, &[0.0; 6], 0.05)
+        .into_iter()
+        .map(|mut x| {
+            x[1] = 0.3 * x[0] * x[0];
+            x
+        })
+        .collect();
+    let mut s = Sampler::new(&SkewedRidge, settings, &init).unwrap();
+    let control = RunControl { max_steps: 5000, until_converged: true, check_every: 10, min_ess: 400.0, min_tau_multiple: mrbp::calibrate::probe::FAR_TAU_MULTIPLE };
+    s.run(&control, &mut []).unwrap();
+    let diag = s.diagnostics();
+    assert!(diag.converged(400.0), "{:?}", diag.warnings);
+    let traces = s.chains.traces(0, diag.burn_in);
+    let all = pooled(&traces);
+    let ess = ess_tail(&traces).min(ess_bulk(&traces));
+    for p in [0.05, 0.5, 0.95, 0.99] {
+        let q = -(-(p as f64).ln()).ln();
+        let density = (-q - (-q).exp()).exp();
+        let se = (p * (1.0 - p) / ess).sqrt() / density;
+        let est = quantile(&all, p);
+        assert!((est - q).abs() < Z * se, "q{p}: {est} vs {q} (se {se})");
+    }
+}

@@ -11,7 +11,7 @@ use super::checkpoint;
 use super::diagnostics::Diagnostics;
 use super::elliptical::Elliptical;
 use super::moves::mixture::last_fit_step;
-use super::moves::{Fit, Mixture, Move};
+use super::moves::{Fit, Learned, Move};
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
 use super::stranded;
@@ -80,9 +80,9 @@ pub struct Sampler<'t, T: LogDensity> {
     target: &'t T,
     pub settings: SamplerSettings,
     pub chains: Chains,
-    /// Each ensemble's mixture fitted to its history, and the step of the
-    /// fit (0: none yet), for [`Move::History`].
-    history: (usize, Vec<Option<Mixture>>),
+    /// What each ensemble learned from its history, and the step of the
+    /// fit (0: none yet), for [`Move::History`] and [`Move::Curved`].
+    history: (usize, Vec<Option<Learned>>),
     /// A fixed distribution close to the target (the Laplace approximation
     /// at the mode), for [`Move::Anchored`].
     reference: Option<Elliptical>,
@@ -359,12 +359,12 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             return;
         }
         let (d, nw, seed) = (self.chains.dim, self.settings.walkers, self.settings.seed);
-        let chains = &self.chains;
+        let (chains, moves) = (&self.chains, &self.settings.moves);
         self.history.1 = (0..self.settings.ensembles)
             .into_par_iter()
             .map(|e| {
                 let walkers: Vec<Vec<f64>> = (e * nw..(e + 1) * nw).map(|c| (at / 2..at).flat_map(|s| chains.point(s, c).iter().copied()).collect()).collect();
-                Mixture::fit(&walkers, d, &mut crate::rng::stream(seed, &[e as u64, at as u64, FIT_STREAM]))
+                Some(Learned::fit(moves, &walkers, d, &mut crate::rng::stream(seed, &[e as u64, at as u64, FIT_STREAM])))
             })
             .collect();
         self.history.0 = at;

@@ -4,15 +4,15 @@
 //! The complementary half of an ensemble is a few dozen points: in twenty
 //! dimensions it pins down a covariance poorly, and not a skew or a curve
 //! at all. The ensemble's last steps hold thousands of points of the same
-//! distribution. At steps 8, 16, 32, … (a doubling schedule, so adaptation
-//! diminishes) each ensemble fits a Gaussian mixture by EM to its walkers'
-//! positions over the second half of the steps so far — the number of
-//! components (one to [`MAX_COMPONENTS`]) chosen by held-out likelihood —
-//! and proposes from
-//! the same mixture with Student-t components until the next fit. Between
-//! fits the proposal is fixed, so each stretch is an exact
-//! Metropolis-Hastings independence sampler (factor q(x)/q(y)); each fit
-//! depends on the stored chains only, so a resumed run refits the same.
+//! distribution. At steps 8, 16, 32, … up to [`LAST_FIT`] (a doubling
+//! schedule, then none: adaptation stops) each ensemble fits a Gaussian
+//! mixture by EM to its walkers' positions over the second half of the
+//! steps so far — the number of components (one to [`MAX_COMPONENTS`])
+//! chosen by held-out likelihood — and proposes from the same mixture with
+//! Student-t components until the next fit. Between fits the proposal is
+//! fixed, so each stretch is an exact Metropolis-Hastings independence
+//! sampler (factor q(x)/q(y)); each fit depends on the stored chains only,
+//! so a resumed run refits the same.
 
 use nalgebra::DVector;
 use rand::RngExt;
@@ -37,14 +37,38 @@ pub(super) const SPREAD: f64 = 1.15;
 /// component of few points positive definite.
 const RIDGE: f64 = 1e-6;
 
+/// The last step at which the fits to the history are made: from then on
+/// the proposal is fixed and the chain an exact Metropolis-Hastings chain,
+/// and the burn-in (at least half the last fit's step) stops growing with
+/// the run.
+pub const LAST_FIT: usize = 1024;
+
 /// The last step at or before `step` at which the proposal is fitted anew
-/// (8, 16, 32, …; 0: none yet).
+/// (8, 16, 32, …, [`LAST_FIT`]; 0: none yet).
 pub fn last_fit_step(step: usize) -> usize {
     if step < 8 {
         0
     } else {
-        1usize << (usize::BITS - 1 - step.leading_zeros())
+        (1usize << (usize::BITS - 1 - step.leading_zeros())).min(LAST_FIT)
     }
+}
+
+/// A walker's points (`d` coordinates one after another, in time order)
+/// with each repeated position (a rejected proposal) counted once.
+pub(super) fn distinct(walker: &[f64], d: usize) -> Vec<DVector<f64>> {
+    let mut out: Vec<DVector<f64>> = Vec::new();
+    for p in walker.chunks_exact(d) {
+        if out.last().is_none_or(|last| last.as_slice() != p) {
+            out.push(DVector::from_column_slice(p));
+        }
+    }
+    out
+}
+
+/// At most `max` of `points`, evenly thinned.
+pub(super) fn thinned(points: Vec<DVector<f64>>, max: usize) -> Vec<DVector<f64>> {
+    let stride = points.len().div_ceil(max).max(1);
+    points.into_iter().step_by(stride).collect()
 }
 
 /// One component: weight, and its mean and covariance.
@@ -72,20 +96,8 @@ impl Mixture {
     /// it is then fitted to all. `None` if the points cannot carry even one
     /// full-covariance component.
     pub fn fit(walkers: &[Vec<f64>], d: usize, rng: &mut impl rand::Rng) -> Option<Mixture> {
-        let distinct = |w: &Vec<f64>| -> Vec<DVector<f64>> {
-            let mut out: Vec<DVector<f64>> = Vec::new();
-            for p in w.chunks_exact(d) {
-                if out.last().is_none_or(|last| last.as_slice() != p) {
-                    out.push(DVector::from_column_slice(p));
-                }
-            }
-            out
-        };
-        let per: Vec<Vec<DVector<f64>>> = walkers.iter().map(distinct).collect();
-        let thin = |v: Vec<DVector<f64>>| -> Vec<DVector<f64>> {
-            let stride = v.len().div_ceil(MAX_POINTS).max(1);
-            v.into_iter().step_by(stride).collect()
-        };
+        let per: Vec<Vec<DVector<f64>>> = walkers.iter().map(|w| distinct(w, d)).collect();
+        let thin = |v: Vec<DVector<f64>>| thinned(v, MAX_POINTS);
         let all = thin(per.iter().flatten().cloned().collect());
         if all.len() < 2 * d + 2 {
             return None;
@@ -344,5 +356,6 @@ mod tests {
     fn the_schedule_doubles() {
         assert_eq!((last_fit_step(4), last_fit_step(7), last_fit_step(8), last_fit_step(12)), (0, 0, 8, 8));
         assert_eq!((last_fit_step(16), last_fit_step(31), last_fit_step(32), last_fit_step(1024)), (16, 16, 32, 1024));
+        assert_eq!((last_fit_step(2047), last_fit_step(2048), last_fit_step(5000)), (1024, 1024, 1024));
     }
 }

@@ -38,7 +38,7 @@ pub enum Move {
     Independence { df: Option<f64>, scale: f64 },
     /// Independence proposal from a Student-t mixture (`df`; Gaussian
     /// without) fitted to the ensemble's own positions over the second half
-    /// of its steps, refitted at steps 8, 16, 32, … and fixed in between,
+    /// of its steps, refitted at steps 8, 16, 32, …, 1024 and fixed in between,
     /// blended with the complementary half's fit ([`mixture`]); factor
     /// q(x)/q(y). Before the first fit, [`Move::Independence`].
     History { df: Option<f64> },
@@ -55,7 +55,9 @@ pub enum Move {
     /// along the ridge, drawn from a kernel density; the others across it,
     /// Student-t about a quadratic curve with a width that varies along
     /// it), the half's own Student-t, and the anchored fit where the
-    /// reference is near ([`curved`]); factor q(x)/q(y).
+    /// reference is near ([`curved`]); factor q(x)/q(y). Once the
+    /// ensemble has a history (steps 8, 16, 32, …, as [`Move::History`]),
+    /// a tube fitted to it proposes too, blended with the half's fit.
     Curved { df: Option<f64> },
 }
 
@@ -115,7 +117,7 @@ impl Move {
 
     /// Whether the move proposes from a fit to the ensemble's history.
     pub fn uses_history(&self) -> bool {
-        matches!(self, Move::History { .. })
+        matches!(self, Move::History { .. } | Move::Curved { .. })
     }
 
     /// The degrees of freedom of an independence proposal's Student-t
@@ -138,17 +140,17 @@ impl Move {
 
     /// What the move fits to the complementary half `others` of an
     /// ensemble (points of `d` coordinates one after another), given the
-    /// mixture fitted to the ensemble's history, if there is one yet, and
-    /// the sampler's fixed reference distribution, if it has one: done once
+    /// fits to the ensemble's history, if there are any yet, and the
+    /// sampler's fixed reference distribution, if it has one: done once
     /// per ensemble and half-step, before its walkers propose.
-    pub fn fit<'h>(&self, others: &[f64], d: usize, history: Option<&'h Mixture>, reference: Option<&Elliptical>) -> Fit<'h> {
+    pub fn fit<'h>(&self, others: &[f64], d: usize, history: Option<&'h Learned>, reference: Option<&Elliptical>) -> Fit<'h> {
         let own = || Fit::Single(independence::fitted(others, d));
         match *self {
             Move::Stretch { .. } | Move::DifferentialEvolution { .. } | Move::Snooker { .. } => Fit::Points,
             Move::Independence { .. } => own(),
             Move::Anchored { .. } => reference.and_then(|r| anchored::proposal(others, d, r)).map_or_else(own, Fit::Anchored),
-            Move::History { .. } => history.map_or_else(own, |h| Fit::History(h, Mixture::of_points(others, d))),
-            Move::Curved { .. } => Fit::Curved(curved::Proposal::fit(others, d, reference)),
+            Move::History { .. } => history.and_then(|h| h.mixture.as_ref()).map_or_else(own, |h| Fit::History(h, Mixture::of_points(others, d))),
+            Move::Curved { .. } => Fit::Curved(curved::Proposal::fit(others, d, reference), history.and_then(|h| h.tube.as_ref())),
         }
     }
 
@@ -163,8 +165,9 @@ impl Move {
             (_, Fit::Single(f)) => independence::propose(self.df(), self.scale(), f.as_ref(), x, rng, y),
             (_, Fit::Anchored(q)) => q.propose(self.df(), x, rng, y),
             (_, Fit::History(h, current)) => mixture::propose(h, current.as_ref(), self.df(), x, rng, y),
-            (_, Fit::Curved(Some(q))) => q.propose(self.df(), x, rng, y),
-            (_, Fit::Curved(None)) => {
+            (_, Fit::Curved(q, Some(tube))) => curved::propose_with_history(tube, q.as_ref(), self.df(), x, rng, y),
+            (_, Fit::Curved(Some(q), None)) => q.propose(self.df(), x, rng, y),
+            (_, Fit::Curved(None, None)) => {
                 y.copy_from_slice(x);
                 0.0
             }
@@ -186,9 +189,31 @@ pub enum Fit<'h> {
     Anchored(Mixture),
     /// The history's mixture and the half's own fit.
     History(&'h Mixture, Option<Mixture>),
-    /// The curved move's mixture (`None`: a degenerate half, the walker
-    /// stays).
-    Curved(Option<curved::Proposal>),
+    /// The curved move's mixture (`None`: a degenerate half) and the tube
+    /// of the ensemble's history, if fitted (neither: the walker stays).
+    Curved(Option<curved::Proposal>, Option<&'h curved::Tube>),
+}
+
+/// What an ensemble learned from its own history at the last fit step
+/// ([`mixture::last_fit_step`]), for the moves that use it: the mixture of
+/// [`Move::History`], the tube of [`Move::Curved`].
+#[derive(Clone, Debug, Default)]
+pub struct Learned {
+    pub mixture: Option<Mixture>,
+    pub tube: Option<curved::Tube>,
+}
+
+impl Learned {
+    /// The fits that `moves` use, to the walkers' positions `walkers` (per
+    /// walker, points of `d` coordinates in time order); the mixture's EM
+    /// starts drawn from `rng`.
+    pub fn fit(moves: &[(Move, f64)], walkers: &[Vec<f64>], d: usize, rng: &mut impl rand::Rng) -> Learned {
+        let uses = |f: fn(&Move) -> bool| moves.iter().any(|(m, _)| f(m));
+        Learned {
+            mixture: if uses(|m| matches!(m, Move::History { .. })) { Mixture::fit(walkers, d, rng) } else { None },
+            tube: if uses(|m| matches!(m, Move::Curved { .. })) { curved::Tube::of_history(walkers, d) } else { None },
+        }
+    }
 }
 
 /// The `j`-th of the points stored one after another in `points`.
