@@ -38,9 +38,10 @@ pub enum Move {
     Independence { df: Option<f64>, scale: f64 },
     /// Independence proposal from a Student-t mixture (`df`; Gaussian
     /// without) fitted to the ensemble's own positions over the second half
-    /// of its steps, refitted at steps 8, 16, 32, …, 1024 and fixed in between,
-    /// blended with the complementary half's fit ([`mixture`]); factor
-    /// q(x)/q(y). Before the first fit, [`Move::Independence`].
+    /// of its steps, refitted at steps 8, 16, 32, …, 1024 and fixed in
+    /// between and after, blended with the complementary half's fit
+    /// ([`mixture`]); factor q(x)/q(y). Before the first fit,
+    /// [`Move::Independence`].
     History { df: Option<f64> },
     /// The independence proposal anchored on a fixed reference (the
     /// calibration's Laplace approximation at the mode): an equal mixture
@@ -56,8 +57,9 @@ pub enum Move {
     /// Student-t about a quadratic curve with a width that varies along
     /// it), the half's own Student-t, and the anchored fit where the
     /// reference is near ([`curved`]); factor q(x)/q(y). Once the
-    /// ensemble has a history (steps 8, 16, 32, …, as [`Move::History`]),
-    /// a tube fitted to it proposes too, blended with the half's fit.
+    /// ensemble has a history (steps 8, 16, 32, …, 1024, as
+    /// [`Move::History`]), a tube fitted to it (a cubic curve) proposes
+    /// too, blended with the half's fit.
     Curved { df: Option<f64> },
 }
 
