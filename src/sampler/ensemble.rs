@@ -82,7 +82,7 @@ pub struct Sampler<'t, T: LogDensity> {
     pub chains: Chains,
     /// What each ensemble learned from its history, and the step of the
     /// fit (0: none yet), for [`Move::History`] and [`Move::Curved`].
-    history: (usize, Vec<Option<Learned>>),
+    history: (usize, Vec<Learned>),
     /// A fixed distribution close to the target (the Laplace approximation
     /// at the mode), for [`Move::Anchored`].
     reference: Option<Elliptical>,
@@ -128,7 +128,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 log_prob,
                 accepted: vec![false; nc],
                 },
-            history: (0, vec![None; settings.ensembles]),
+            history: (0, vec![Learned::default(); settings.ensembles]),
             reference: None,
             settings,
             announced: false,
@@ -139,7 +139,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     pub fn resume(target: &'t T, path: &Path) -> Result<Self> {
         let (settings, chains) = checkpoint::load(path, target.dim())?;
         settings.check(target.dim())?;
-        let history = (0, vec![None; settings.ensembles]);
+        let history = (0, vec![Learned::default(); settings.ensembles]);
         Ok(Sampler { target, settings, chains, history, reference: None, announced: false })
     }
 
@@ -267,7 +267,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             let fits: Vec<Fit> = (0..ne)
                 .map(|e| {
                     let other_start = e * nw + (1 - h) * half;
-                    moves[e].fit(&snapshot[other_start * d..(other_start + half) * d], d, history[e].as_ref(), reference)
+                    moves[e].fit(&snapshot[other_start * d..(other_start + half) * d], d, &history[e], reference)
                 })
                 .collect();
             let results: Vec<(Vec<f64>, Vec<f64>, Vec<bool>)> = movers
@@ -348,7 +348,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         Diagnostics::burn_in_rule(&self.chains, self.adaptive())
     }
 
-    /// Fits each ensemble's mixture to its history at the last fit step
+    /// Makes each ensemble's fits to its history ([`Learned`]) at the last fit step
     /// before `step` (see [`super::moves::mixture`]), if a move uses it and
     /// it is not fitted yet: to the walkers' positions over the steps from
     /// half that step on. A function of the chains and the seed only, so a
@@ -364,7 +364,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             .into_par_iter()
             .map(|e| {
                 let walkers: Vec<Vec<f64>> = (e * nw..(e + 1) * nw).map(|c| (at / 2..at).flat_map(|s| chains.point(s, c).iter().copied()).collect()).collect();
-                Some(Learned::fit(moves, &walkers, d, &mut crate::rng::stream(seed, &[e as u64, at as u64, FIT_STREAM])))
+                Learned::fit(moves, &walkers, d, &mut crate::rng::stream(seed, &[e as u64, at as u64, FIT_STREAM]))
             })
             .collect();
         self.history.0 = at;

@@ -98,6 +98,7 @@ pub(super) fn anchored_fit(others: &[f64], d: usize, reference: &Elliptical) -> 
 mod tests {
     use super::*;
     use crate::sampler::elliptical::Moments;
+    use crate::sampler::moves::{Independent, Learned};
 
     fn points(rng: &mut impl rand::Rng, truth: &Elliptical, n: usize) -> Vec<f64> {
         let mut out = vec![0.0; n * truth.dim()];
@@ -145,8 +146,8 @@ mod tests {
         let anchored = Move::Anchored { df: Some(5.0) };
         for reference in [None, Some(&far)] {
             let (mut y1, mut y2) = ([0.0; 2], [0.0; 2]);
-            let f1 = anchored.propose(&anchored.fit(&others, 2, None, reference), &x, &others, &mut crate::rng::stream(5, &[]), &mut y1);
-            let f2 = independence.propose(&independence.fit(&others, 2, None, None), &x, &others, &mut crate::rng::stream(5, &[]), &mut y2);
+            let f1 = anchored.propose(&anchored.fit(&others, 2, &Learned::default(), reference), &x, &others, &mut crate::rng::stream(5, &[]), &mut y1);
+            let f2 = independence.propose(&independence.fit(&others, 2, &Learned::default(), None), &x, &others, &mut crate::rng::stream(5, &[]), &mut y2);
             assert_eq!((f1, y1), (f2, y2));
         }
         assert!(proposal(&others, 2, &near).is_some() && proposal(&others, 2, &far).is_none());

@@ -35,7 +35,7 @@
 //! sampler fits a tube to it as well ([`Tube::of_history`], cubic, on the
 //! history move's schedule), and the move proposes from that tube 70 % of
 //! the time and from the half's mixture the rest
-//! ([`propose_with_history`]; fixed between fits, so each stretch is an
+//! ([`super::mixture::propose`]; fixed between fits, so each stretch is an
 //! exact Metropolis-Hastings chain).
 
 use nalgebra::{DMatrix, DVector};
@@ -43,7 +43,8 @@ use rand::RngExt;
 
 use super::super::diagnostics::{mean, variance};
 use super::super::elliptical::{standard_log_density, t_factor, Elliptical};
-use super::mixture::{distinct, log_sum_exp, thinned, HISTORY_SHARE, SPREAD};
+use super::mixture::{distinct, log_sum_exp, thinned, SPREAD};
+use super::Independent;
 
 /// The narrowest and widest the tube may become along the ridge, as a
 /// share of its mean width² (v(t) is clamped to this range): a quadratic
@@ -162,9 +163,11 @@ impl Tube {
     fn centre_at(&self, t: f64) -> DVector<f64> {
         self.centre.tr_mul(&DVector::from_fn(self.centre.nrows(), |k, _| t.powi(k as i32)))
     }
+}
 
-    /// ln q(x), normalised, with Student-t (`df`) or Gaussian cross-sections.
-    pub fn log_density(&self, df: Option<f64>, x: &[f64]) -> f64 {
+impl Independent for Tube {
+    /// Normalised, with Student-t (`df`) or Gaussian cross-sections.
+    fn log_q(&self, df: Option<f64>, x: &[f64]) -> f64 {
         let Some(z) = self.frame.factor().solve_lower_triangular(&(DVector::from_column_slice(x) - &self.frame.mean)) else {
             return f64::NEG_INFINITY;
         };
@@ -183,8 +186,9 @@ impl Tube {
         log_t + standard_log_density(df, k, m) - log_det - self.frame.half_log_det()
     }
 
-    /// A draw into `y`: t from the kernel density, then w given t.
-    pub fn draw(&self, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]) {
+    /// t from the kernel density (or the heavy-tailed share), then w given
+    /// t.
+    fn draw(&self, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]) {
         let z: f64 = rng.sample(rand_distr::StandardNormal);
         let t = if rng.random::<f64>() < REACH {
             self.spread_t.0 + self.spread_t.1 * z * t_factor(Some(REACH_DF), rng)
@@ -270,49 +274,25 @@ impl Proposal {
     fn count(&self) -> usize {
         self.parts.len() + usize::from(self.tube.is_some())
     }
+}
 
-    /// ln q(x) of the mixture.
-    pub fn log_q(&self, df: Option<f64>, x: &[f64]) -> f64 {
-        let mut terms: Vec<f64> = self.parts.iter().map(|p| p.log_density(df, x, 1.0)).collect();
-        if let Some(tube) = &self.tube {
-            terms.push(tube.log_density(df, x));
-        }
-        log_sum_exp(&terms) - (self.count() as f64).ln()
-    }
-
-    /// y drawn from the mixture; the independence factor q(x)/q(y).
-    pub fn propose(&self, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
-        let pick = rng.random_range(0..self.count());
-        self.draw_part(pick, df, rng, y);
-        self.log_q(df, x) - self.log_q(df, y)
-    }
-
-    /// y drawn from the mixture's `pick`-th part (the tube last).
-    fn draw_part(&self, pick: usize, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]) {
-        match self.parts.get(pick) {
+impl Independent for Proposal {
+    /// A part chosen uniformly (the tube last), then its draw.
+    fn draw(&self, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]) {
+        match self.parts.get(rng.random_range(0..self.count())) {
             Some(p) => p.draw(df, 1.0, rng, y),
             None => self.tube.as_ref().expect("counted").draw(df, rng, y),
         }
     }
-}
 
-/// The curved move once its ensemble has a history: y from the tube fitted
-/// to the history (share [`HISTORY_SHARE`]) or from `current`, the curved
-/// proposal fitted to the complementary half (a defensive mixture, as
-/// [`super::mixture::propose`]); factor q(x)/q(y) of the two together.
-pub fn propose_with_history(history: &Tube, current: Option<&Proposal>, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
-    let Some(current) = current else {
-        history.draw(df, rng, y);
-        return history.log_density(df, x) - history.log_density(df, y);
-    };
-    if rng.random::<f64>() < HISTORY_SHARE {
-        history.draw(df, rng, y);
-    } else {
-        let pick = rng.random_range(0..current.count());
-        current.draw_part(pick, df, rng, y);
+    /// Normalised.
+    fn log_q(&self, df: Option<f64>, x: &[f64]) -> f64 {
+        let mut terms: Vec<f64> = self.parts.iter().map(|p| p.log_density(df, x, 1.0)).collect();
+        if let Some(tube) = &self.tube {
+            terms.push(tube.log_q(df, x));
+        }
+        log_sum_exp(&terms) - (self.count() as f64).ln()
     }
-    let q = |v: &[f64]| log_sum_exp(&[HISTORY_SHARE.ln() + history.log_density(df, v), (1.0 - HISTORY_SHARE).ln() + current.log_q(df, v)]);
-    q(x) - q(y)
 }
 
 #[cfg(test)]
@@ -343,7 +323,7 @@ mod tests {
         let ratios: Vec<f64> = (0..200_000)
             .map(|_| {
                 g.draw(Some(2.0), 1.0, &mut rng, &mut y);
-                (tube.log_density(Some(10.0), &y) - g.log_density(Some(2.0), &y, 1.0)).exp()
+                (tube.log_q(Some(10.0), &y) - g.log_density(Some(2.0), &y, 1.0)).exp()
             })
             .collect();
         (mean(&ratios), (variance(&ratios) / ratios.len() as f64).sqrt())

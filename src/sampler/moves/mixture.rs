@@ -18,6 +18,7 @@ use nalgebra::DVector;
 use rand::RngExt;
 
 use super::super::elliptical::{Elliptical, Moments};
+use super::Independent;
 
 /// The most components a fit may have.
 pub const MAX_COMPONENTS: usize = 4;
@@ -137,35 +138,6 @@ impl Mixture {
         Mixture { components }
     }
 
-    /// ln q(v) up to a constant shared by every component: Student-t
-    /// components with `df` degrees of freedom, or Gaussian.
-    pub fn log_q(&self, df: Option<f64>, v: &[f64]) -> f64 {
-        let terms: Vec<f64> = self.components.iter().map(|c| c.log_weight - c.shape.half_log_det() + c.shape.log_kernel(df, v, 1.0)).collect();
-        log_sum_exp(&terms)
-    }
-
-    /// A draw: a component by weight, then its Student-t (or Gaussian).
-    pub fn draw(&self, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]) {
-        let u: f64 = rng.random();
-        let mut acc = 0.0;
-        let mut pick = &self.components[self.components.len() - 1];
-        for c in &self.components {
-            acc += c.log_weight.exp();
-            if u < acc {
-                pick = c;
-                break;
-            }
-        }
-        pick.shape.draw(df, 1.0, rng, y);
-    }
-
-    /// y drawn from the mixture (Student-t components with `df`; Gaussian
-    /// without); the independence factor q(x)/q(y).
-    pub(super) fn propose(&self, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
-        self.draw(df, rng, y);
-        self.log_q(df, x) - self.log_q(df, y)
-    }
-
     /// The equal-weight mixture of `parts`.
     pub(super) fn equal(parts: Vec<Elliptical>) -> Mixture {
         let log_weight = -(parts.len() as f64).ln();
@@ -183,16 +155,41 @@ impl Mixture {
     }
 }
 
+impl Independent for Mixture {
+    /// A component by weight, then its Student-t (or Gaussian).
+    fn draw(&self, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]) {
+        let u: f64 = rng.random();
+        let mut acc = 0.0;
+        let mut pick = &self.components[self.components.len() - 1];
+        for c in &self.components {
+            acc += c.log_weight.exp();
+            if u < acc {
+                pick = c;
+                break;
+            }
+        }
+        pick.shape.draw(df, 1.0, rng, y);
+    }
+
+    /// Up to a constant shared by every mixture of Student-t components
+    /// with `df` (or Gaussian ones) in the same dimension.
+    fn log_q(&self, df: Option<f64>, v: &[f64]) -> f64 {
+        let terms: Vec<f64> = self.components.iter().map(|c| c.log_weight - c.shape.half_log_det() + c.shape.log_kernel(df, v, 1.0)).collect();
+        log_sum_exp(&terms)
+    }
+}
+
 /// The history fit's share of the proposal; the rest is the complementary
 /// half's own fit (a defensive mixture: while the ensemble still expands
 /// or moves, its current spread keeps the proposal from being narrower
 /// than the target).
 pub const HISTORY_SHARE: f64 = 0.7;
 
-/// The proposal: y from the history's mixture (share [`HISTORY_SHARE`])
-/// or from `current`, the complementary half's fit ([`Mixture::of_points`]);
-/// factor q(x)/q(y) of the two together.
-pub fn propose(history: &Mixture, current: Option<&Mixture>, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+/// The proposal of a move that learns from its history: y from the
+/// history's fit (share [`HISTORY_SHARE`]: the history move's mixture, the
+/// curved move's tube) or from `current`, the move's fit to the
+/// complementary half; factor q(x)/q(y) of the two together.
+pub fn propose(history: &impl Independent, current: Option<&impl Independent>, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
     let Some(current) = current else {
         return history.propose(df, x, rng, y);
     };

@@ -142,17 +142,17 @@ impl Move {
 
     /// What the move fits to the complementary half `others` of an
     /// ensemble (points of `d` coordinates one after another), given the
-    /// fits to the ensemble's history, if there are any yet, and the
+    /// fits to the ensemble's history (none before the first fit), and the
     /// sampler's fixed reference distribution, if it has one: done once
     /// per ensemble and half-step, before its walkers propose.
-    pub fn fit<'h>(&self, others: &[f64], d: usize, history: Option<&'h Learned>, reference: Option<&Elliptical>) -> Fit<'h> {
+    pub fn fit<'h>(&self, others: &[f64], d: usize, history: &'h Learned, reference: Option<&Elliptical>) -> Fit<'h> {
         let own = || Fit::Single(independence::fitted(others, d));
         match *self {
             Move::Stretch { .. } | Move::DifferentialEvolution { .. } | Move::Snooker { .. } => Fit::Points,
             Move::Independence { .. } => own(),
             Move::Anchored { .. } => reference.and_then(|r| anchored::proposal(others, d, r)).map_or_else(own, Fit::Anchored),
-            Move::History { .. } => history.and_then(|h| h.mixture.as_ref()).map_or_else(own, |h| Fit::History(h, Mixture::of_points(others, d))),
-            Move::Curved { .. } => Fit::Curved(curved::Proposal::fit(others, d, reference), history.and_then(|h| h.tube.as_ref())),
+            Move::History { .. } => history.mixture.as_ref().map_or_else(own, |h| Fit::History(h, Mixture::of_points(others, d))),
+            Move::Curved { .. } => Fit::Curved(curved::Proposal::fit(others, d, reference), history.tube.as_ref()),
         }
     }
 
@@ -166,8 +166,8 @@ impl Move {
             (Move::Snooker { gamma }, _) => snooker::propose(gamma, x, others, rng, y),
             (_, Fit::Single(f)) => independence::propose(self.df(), self.scale(), f.as_ref(), x, rng, y),
             (_, Fit::Anchored(q)) => q.propose(self.df(), x, rng, y),
-            (_, Fit::History(h, current)) => mixture::propose(h, current.as_ref(), self.df(), x, rng, y),
-            (_, Fit::Curved(q, Some(tube))) => curved::propose_with_history(tube, q.as_ref(), self.df(), x, rng, y),
+            (_, Fit::History(h, current)) => mixture::propose(*h, current.as_ref(), self.df(), x, rng, y),
+            (_, Fit::Curved(q, Some(tube))) => mixture::propose(*tube, q.as_ref(), self.df(), x, rng, y),
             (_, Fit::Curved(Some(q), None)) => q.propose(self.df(), x, rng, y),
             (_, Fit::Curved(None, None)) => {
                 y.copy_from_slice(x);
@@ -176,6 +176,24 @@ impl Move {
             // an independence move given no fit fits the half itself
             (_, Fit::Points) => independence::propose(self.df(), self.scale(), independence::fitted(others, x.len()).as_ref(), x, rng, y),
         }
+    }
+}
+
+/// A proposal that draws independently of the walker's position: the
+/// independence-type moves' fits (a mixture, a tube, the curved mixture).
+pub trait Independent {
+    /// A draw into `y`, Student-t parts with `df` degrees of freedom
+    /// (Gaussian without).
+    fn draw(&self, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]);
+
+    /// ln q(v), up to a constant shared with every proposal of the same
+    /// kind (normalised where kinds are mixed).
+    fn log_q(&self, df: Option<f64>, v: &[f64]) -> f64;
+
+    /// y drawn from the proposal; the independence factor q(x)/q(y).
+    fn propose(&self, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+        self.draw(df, rng, y);
+        self.log_q(df, x) - self.log_q(df, y)
     }
 }
 
