@@ -36,7 +36,9 @@
 //! history move's schedule), and the move proposes from that tube 70 % of
 //! the time and from the half's mixture the rest
 //! ([`super::mixture::propose`]; fixed between fits, so each stretch is an
-//! exact Metropolis-Hastings chain).
+//! exact Metropolis-Hastings chain). A history tube also carries *local
+//! kernels* ([`LOCAL`]): its centres' own residuals about the centre curve,
+//! which follow a cross-section that changes shape along the ridge.
 
 use nalgebra::{DMatrix, DVector};
 use rand::RngExt;
@@ -71,6 +73,19 @@ const HISTORY_DEGREE: usize = 3;
 const REACH: f64 = 0.2;
 const REACH_DF: f64 = 3.0;
 
+/// The share of a history tube's proposals whose cross-section is a kernel
+/// density of the points' own residuals about the centre curve (each
+/// centre's, moved along the curve with its t) instead of one Student-t
+/// shape scaled along the ridge: where the ridge's cross-section changes
+/// shape toward an end (a coordinate's spread growing as the others'
+/// narrow), one scaled shape proposes too rarely there. On the slow record
+/// of docs/performance.md the far end of m1 (its last 2 % of mass) was a
+/// third short against an independent importance-sampling estimate; with
+/// half of the kernel share local, a sixth. A share of the kernel density's,
+/// not of the heavy-tailed [`REACH`]: local kernels end where the points
+/// end.
+const LOCAL: f64 = 0.5;
+
 /// The most points of an ensemble's history a tube is fitted to.
 const MAX_HISTORY_POINTS: usize = 2000;
 
@@ -100,6 +115,20 @@ pub struct Tube {
     /// The mean and sd of the points' t, for the heavy-tailed share of t
     /// ([`REACH`]).
     spread_t: (f64, f64),
+    /// A history tube's kernel density of its centres' (t, residual).
+    local: Option<Local>,
+}
+
+/// The kernels of a history tube's local share ([`LOCAL`]): one per centre
+/// (t_i, ρ_i), ρ_i its residual about the centre curve whitened by S;
+/// (t, w) ~ N(t_i, h_t²) · N(μ(t) + S^{1/2}(ρ_i + κ e)), e standard normal.
+/// h_t and κ are Scott's factor n^(−1/(d+4)) of the spreads (t's sd, and
+/// 1 for the whitened residuals), widened by [`SPREAD`].
+#[derive(Clone, Debug)]
+struct Local {
+    residuals: Vec<DVector<f64>>,
+    bandwidth_t: f64,
+    kappa: f64,
 }
 
 impl Tube {
@@ -107,7 +136,7 @@ impl Tube {
     /// another); `None` with fewer than d + 4 points, in one dimension, or
     /// where a fit is singular.
     pub fn fit(others: &[f64], d: usize) -> Option<Tube> {
-        Tube::fit_curve(others, d, 2)
+        Tube::fit_curve(others, d, 2).map(|t| Tube { local: None, ..t })
     }
 
     /// The tube of `others` with a centre polynomial in t of `degree`.
@@ -140,10 +169,17 @@ impl Tube {
         if !width.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let ts: Vec<f64> = ts.iter().copied().step_by(n.div_ceil(MAX_CENTRES)).collect();
+        let every = n.div_ceil(MAX_CENTRES);
+        let ts: Vec<f64> = ts.iter().copied().step_by(every).collect();
         let bandwidth = 1.06 * variance(&ts).sqrt() * (ts.len() as f64).powf(-0.2) * SPREAD;
         let spread_t = (mean(&ts), variance(&ts).sqrt() * SPREAD);
-        (bandwidth > 0.0 && spread_t.0.is_finite()).then_some(Tube { frame, along, across, centre, spread, width, ts, bandwidth, spread_t })
+        let scott = (ts.len() as f64).powf(-1.0 / (d as f64 + 4.0)) * SPREAD;
+        let local = Local {
+            residuals: residuals.iter().step_by(every).map(|r| spread.solve_lower_triangular(r)).collect::<Option<_>>()?,
+            bandwidth_t: scott * variance(&ts).sqrt(),
+            kappa: scott,
+        };
+        (bandwidth > 0.0 && local.bandwidth_t > 0.0 && spread_t.0.is_finite()).then_some(Tube { frame, along, across, centre, spread, width, ts, bandwidth, spread_t, local: Some(local) })
     }
 
     /// The tube of an ensemble's history: its walkers' positions (per
@@ -166,38 +202,65 @@ impl Tube {
 }
 
 impl Independent for Tube {
-    /// Normalised, with Student-t (`df`) or Gaussian cross-sections.
+    /// Normalised, with Student-t (`df`) or Gaussian cross-sections (and a
+    /// history tube's local kernels, [`LOCAL`]).
     fn log_q(&self, df: Option<f64>, x: &[f64]) -> f64 {
         let Some(z) = self.frame.factor().solve_lower_triangular(&(DVector::from_column_slice(x) - &self.frame.mean)) else {
             return f64::NEG_INFINITY;
         };
         let t = z.dot(&self.along);
-        let w = self.across.tr_mul(&z);
+        let Some(r) = self.spread.solve_lower_triangular(&(self.across.tr_mul(&z) - self.centre_at(t))) else {
+            return f64::NEG_INFINITY;
+        };
         let h = self.bandwidth;
         let kernels: Vec<f64> = self.ts.iter().map(|c| -0.5 * ((t - c) / h).powi(2)).collect();
         let log_kde = log_sum_exp(&kernels) - (self.ts.len() as f64).ln() - h.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln();
         let (c, s) = self.spread_t;
         let log_reach = standard_log_density(Some(REACH_DF), 1.0, ((t - c) / s).powi(2)) - s.ln();
-        let log_t = log_sum_exp(&[(1.0 - REACH).ln() + log_kde, REACH.ln() + log_reach]);
         let v = self.width_at(t);
-        let k = (w.len()) as f64;
-        let m = self.spread.solve_lower_triangular(&(w - self.centre_at(t))).map_or(f64::INFINITY, |r| r.norm_squared() / v);
-        let log_det = self.spread.diagonal().iter().map(|s| s.ln()).sum::<f64>() + 0.5 * k * v.ln();
-        log_t + standard_log_density(df, k, m) - log_det - self.frame.half_log_det()
+        let k = r.len() as f64;
+        let log_s = self.spread.diagonal().iter().map(|s| s.ln()).sum::<f64>();
+        let cross = standard_log_density(df, k, r.norm_squared() / v) - 0.5 * k * v.ln();
+        // the heavy-tailed share of t keeps its weight; the kernel density's
+        // is split with the local kernels where there are any
+        let local_share = if self.local.is_some() { LOCAL } else { 0.0 };
+        let mut parts = vec![REACH.ln() + log_reach + cross, ((1.0 - REACH) * (1.0 - local_share)).ln() + log_kde + cross];
+        if let Some(local) = &self.local {
+            let (ht, kappa) = (local.bandwidth_t, local.kappa);
+            let terms: Vec<f64> = self
+                .ts
+                .iter()
+                .zip(&local.residuals)
+                .map(|(ti, ri)| -0.5 * (((t - ti) / ht).powi(2) + r.iter().zip(ri.iter()).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / (kappa * kappa)))
+                .collect();
+            let log_local = log_sum_exp(&terms) - (self.ts.len() as f64).ln() - 0.5 * (k + 1.0) * (2.0 * std::f64::consts::PI).ln() - ht.ln() - k * kappa.ln();
+            parts.push(((1.0 - REACH) * local_share).ln() + log_local);
+        }
+        log_sum_exp(&parts) - log_s - self.frame.half_log_det()
     }
 
     /// t from the kernel density (or the heavy-tailed share), then w given
-    /// t.
+    /// t; or, a history tube's local share, a centre's kernel.
     fn draw(&self, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]) {
         let z: f64 = rng.sample(rand_distr::StandardNormal);
-        let t = if rng.random::<f64>() < REACH {
-            self.spread_t.0 + self.spread_t.1 * z * t_factor(Some(REACH_DF), rng)
-        } else {
-            self.ts[rng.random_range(0..self.ts.len())] + self.bandwidth * z
-        };
         let k = self.across.ncols();
         let e = DVector::from_iterator(k, (0..k).map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal)));
-        let w = self.centre_at(t) + &self.spread * e * (self.width_at(t).sqrt() * t_factor(df, rng));
+        let reach = rng.random::<f64>() < REACH;
+        let (t, w) = match self.local.as_ref().filter(|_| !reach && rng.random::<f64>() < LOCAL) {
+            Some(local) => {
+                let i = rng.random_range(0..self.ts.len());
+                let t = self.ts[i] + local.bandwidth_t * z;
+                (t, self.centre_at(t) + &self.spread * (&local.residuals[i] + e * local.kappa))
+            }
+            None => {
+                let t = if reach {
+                    self.spread_t.0 + self.spread_t.1 * z * t_factor(Some(REACH_DF), rng)
+                } else {
+                    self.ts[rng.random_range(0..self.ts.len())] + self.bandwidth * z
+                };
+                (t, self.centre_at(t) + &self.spread * e * (self.width_at(t).sqrt() * t_factor(df, rng)))
+            }
+        };
         let z = &self.along * t + &self.across * w;
         self.frame.point_into(z.as_slice(), 1.0, y);
     }
