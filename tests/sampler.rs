@@ -647,8 +647,8 @@ fn skewed_ridge_quantiles_with_curved_mixture() {
     let traces = s.chains.traces(0, diag.burn_in);
     let all = pooled(&traces);
     let ess = ess_tail(&traces).min(ess_bulk(&traces));
-    for p in [0.05, 0.5, 0.95, 0.99] {
-        let q = -(-(p as f64).ln()).ln();
+    for p in [0.05_f64, 0.5, 0.95, 0.99] {
+        let q = -(-p.ln()).ln();
         let density = (-q - (-q).exp()).exp();
         let se = (p * (1.0 - p) / ess).sqrt() / density;
         let est = quantile(&all, p);

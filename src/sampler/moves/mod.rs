@@ -152,7 +152,7 @@ impl Move {
             Move::Independence { .. } => own(),
             Move::Anchored { .. } => reference.and_then(|r| anchored::proposal(others, d, r)).map_or_else(own, Fit::Anchored),
             Move::History { .. } => history.mixture.as_ref().map_or_else(own, |h| Fit::History(h, Mixture::of_points(others, d))),
-            Move::Curved { .. } => Fit::Curved(curved::Proposal::fit(others, d, reference), history.tube.as_ref()),
+            Move::Curved { .. } => Fit::Curved(curved::Proposal::fit(others, d, reference).map(Box::new), history.tube.as_ref()),
         }
     }
 
@@ -167,7 +167,7 @@ impl Move {
             (_, Fit::Single(f)) => independence::propose(self.df(), self.scale(), f.as_ref(), x, rng, y),
             (_, Fit::Anchored(q)) => q.propose(self.df(), x, rng, y),
             (_, Fit::History(h, current)) => mixture::propose(*h, current.as_ref(), self.df(), x, rng, y),
-            (_, Fit::Curved(q, Some(tube))) => mixture::propose(*tube, q.as_ref(), self.df(), x, rng, y),
+            (_, Fit::Curved(q, Some(tube))) => mixture::propose(*tube, q.as_deref(), self.df(), x, rng, y),
             (_, Fit::Curved(Some(q), None)) => q.propose(self.df(), x, rng, y),
             (_, Fit::Curved(None, None)) => {
                 y.copy_from_slice(x);
@@ -211,7 +211,7 @@ pub enum Fit<'h> {
     History(&'h Mixture, Option<Mixture>),
     /// The curved move's mixture (`None`: a degenerate half) and the tube
     /// of the ensemble's history, if fitted (neither: the walker stays).
-    Curved(Option<curved::Proposal>, Option<&'h curved::Tube>),
+    Curved(Option<Box<curved::Proposal>>, Option<&'h curved::Tube>),
 }
 
 /// What an ensemble learned from its own history at the last fit step
