@@ -360,4 +360,3 @@ mod tests {
         assert!((cov[(1, 1)] - 1.0 / MIN_CURVATURE).abs() < 1e-6);
     }
 }
-

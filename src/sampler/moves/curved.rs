@@ -136,11 +136,12 @@ impl Tube {
     /// another); `None` with fewer than d + 4 points, in one dimension, or
     /// where a fit is singular.
     pub fn fit(others: &[f64], d: usize) -> Option<Tube> {
-        Tube::fit_curve(others, d, 2).map(|t| Tube { local: None, ..t })
+        Tube::fit_curve(others, d, 2, false)
     }
 
-    /// The tube of `others` with a centre polynomial in t of `degree`.
-    fn fit_curve(others: &[f64], d: usize, degree: usize) -> Option<Tube> {
+    /// The tube of `others` with a centre polynomial in t of `degree`, and
+    /// with [`Local`] kernels if `local`.
+    fn fit_curve(others: &[f64], d: usize, degree: usize, local: bool) -> Option<Tube> {
         let n = others.len() / d;
         if d < 2 || n < d + 2 + degree {
             return None;
@@ -174,12 +175,15 @@ impl Tube {
         let bandwidth = 1.06 * variance(&ts).sqrt() * (ts.len() as f64).powf(-0.2) * SPREAD;
         let spread_t = (mean(&ts), variance(&ts).sqrt() * SPREAD);
         let scott = (ts.len() as f64).powf(-1.0 / (d as f64 + 4.0)) * SPREAD;
-        let local = Local {
-            residuals: residuals.iter().step_by(every).map(|r| spread.solve_lower_triangular(r)).collect::<Option<_>>()?,
-            bandwidth_t: scott * variance(&ts).sqrt(),
-            kappa: scott,
+        let local = match local {
+            true => Some(Local {
+                residuals: residuals.iter().step_by(every).map(|r| spread.solve_lower_triangular(r)).collect::<Option<_>>()?,
+                bandwidth_t: scott * variance(&ts).sqrt(),
+                kappa: scott,
+            }),
+            false => None,
         };
-        (bandwidth > 0.0 && local.bandwidth_t > 0.0 && spread_t.0.is_finite()).then_some(Tube { frame, along, across, centre, spread, width, ts, bandwidth, spread_t, local: Some(local) })
+        (bandwidth > 0.0 && spread_t.0.is_finite()).then_some(Tube { frame, along, across, centre, spread, width, ts, bandwidth, spread_t, local })
     }
 
     /// The tube of an ensemble's history: its walkers' positions (per
@@ -189,7 +193,7 @@ impl Tube {
     pub fn of_history(walkers: &[Vec<f64>], d: usize) -> Option<Tube> {
         let points = thinned(walkers.iter().flat_map(|w| distinct(w, d)).collect(), MAX_HISTORY_POINTS);
         let flat: Vec<f64> = points.iter().flat_map(|p| p.iter().copied()).collect();
-        Tube::fit_curve(&flat, d, HISTORY_DEGREE)
+        Tube::fit_curve(&flat, d, HISTORY_DEGREE, true)
     }
 
     fn width_at(&self, t: f64) -> f64 {
