@@ -130,7 +130,7 @@ fn the_force_quantum_of_every_measured_run_is_found() {
 /// −36 414.0, a 10 000-step run from the old start). The posterior there
 /// is a long curved ridge, far from its Laplace approximation (ln p/q over
 /// the initial walkers spreads by 28–30 nats; the other eleven records
-/// 1.7–3.6): the run says so and walks with the curved move. Ten fixed
+/// 0.2–3.6): the run says so and walks with the curved move. Ten fixed
 /// steps: this checks the start, not the posterior.
 #[test]
 fn a_local_map_is_left_for_higher_ground_and_a_ridge_is_named() {

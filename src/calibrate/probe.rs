@@ -150,9 +150,12 @@ fn higher_ground(
 /// The spread (sd, nats) of ln p/q over the initial walkers above which
 /// the posterior is taken to be far from its Laplace approximation q. At
 /// draws of a q that matches p, ln p/q is constant; the bundled virtual
-/// campaigns give 0.55, the measured records 1.7–3.6 (alone and together),
-/// the one measured record whose posterior is a long curved ridge 28
-/// (docs/performance.md, "A start far from equilibrium").
+/// campaigns give 0.09–0.12, the measured records 0.15–3.6 (alone and
+/// together, with and without the model terms), the one measured record
+/// whose posterior is a long curved ridge 30 with the terms (measured
+/// 2026-11-27; docs/performance.md, "A start far from equilibrium" and
+/// "The Hessian at half the points": the spread is only as good as the
+/// mode's Hessian).
 pub(super) const FAR_FROM_LAPLACE: f64 = 8.0;
 
 /// How many τ_max the chains must hold after burn-in where the posterior
