@@ -89,6 +89,8 @@ fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
 
     let record = std::fs::read_to_string(dir.join("calibration.toml")).unwrap();
     assert!(record.contains("model_warnings") && record.contains("lag-1 autocorrelation"), "{record}");
+    let spread = record.parse::<toml::Table>().unwrap()["laplace_spread_nats"].as_float().unwrap();
+    assert!(spread < 3.0, "ln p/q spread {spread} over the initial walkers (measured 0.92)");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     for needle in ["Model adequacy", "Memory: the residuals are correlated", "force–velocity loop", "Reversals:"] {
         assert!(html.contains(needle), "report lacks '{needle}'");
@@ -152,6 +154,8 @@ fn a_local_map_is_left_for_higher_ground_and_a_ridge_is_named() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let record: toml::Table = std::fs::read_to_string(dir.join("calibration.toml")).unwrap().parse().unwrap();
     let map = record["map_log_density"].as_float().unwrap();
+    let spread = record["laplace_spread_nats"].as_float().unwrap();
+    assert!(spread > 8.0, "ln p/q spread {spread} over the initial walkers (measured 30)");
     assert!(map > -36_416.0, "MAP log-density {map}: still the local optimum (−36 553)");
     let warnings: Vec<&str> = record["warnings"].as_array().unwrap().iter().filter_map(|w| w.as_str()).collect();
     assert!(warnings.iter().any(|w| w.contains("climbed") && w.contains("-36553.3")), "{warnings:?}");

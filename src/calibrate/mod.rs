@@ -191,14 +191,14 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
     if probed.misfit.is_some() {
         control.min_tau_multiple = probe::FAR_TAU_MULTIPLE;
     }
-    let probe::Probed { mut sampler, map, higher, misfit, .. } = probed;
+    let probe::Probed { mut sampler, map, higher, misfit, spread, .. } = probed;
     let mut sampled = sampling::run(posterior, &mut sampler, &control, s.burn_in, observers)?;
     sampled.diagnostics.warnings.extend(probe::warnings(&higher, misfit, sampler.settings.moves != s.moves));
     start.settings.sampler.moves = sampler.settings.moves.clone();
     if let Some(map) = map {
         start.map = map;
     }
-    let record = CalibrationRecord::of(campaign, &start, walkers_start, &sampled);
+    let record = CalibrationRecord::of(campaign, &start, walkers_start, &sampled).with_laplace_spread(spread);
     let calibration = Calibration {
         dir: PathBuf::new(),
         settings: start.settings.clone(),

@@ -23,6 +23,8 @@ pub(super) struct Probed<'t> {
     /// ln p/q's spread over the initial walkers, where it is above
     /// [`FAR_FROM_LAPLACE`].
     pub misfit: Option<f64>,
+    /// ln p/q's spread over the initial walkers (nats), whatever it is.
+    pub spread: f64,
 }
 
 /// The walkers (`count`) started about the Laplace approximation at the
@@ -50,11 +52,12 @@ pub(super) fn walkers_start<'t>(
     loop {
         let init = map::initial_walkers(posterior, &laplace, count, settings.seed);
         let mut sampler = Sampler::new(posterior, settings.clone(), &init)?.with_reference(laplace.clone());
-        let misfit = Some(laplace_misfit(&sampler.chains, &laplace)).filter(|m| *m > FAR_FROM_LAPLACE);
+        let spread = laplace_misfit(&sampler.chains, &laplace);
+        let misfit = Some(spread).filter(|m| *m > FAR_FROM_LAPLACE);
         if let Some(moves) = misfit.and_then(|_| moves_far_from_laplace(&settings.moves)) {
             sampler.settings.moves = moves;
         }
-        let done = |sampler, laplace, new_map, higher| Ok(Probed { sampler, laplace, map: new_map, higher, misfit });
+        let done = |sampler, laplace, new_map, higher| Ok(Probed { sampler, laplace, map: new_map, higher, misfit, spread });
         if higher.as_ref().is_some_and(|h| h.searches == MAX_SEARCHES) {
             return done(sampler, laplace, new_map, higher);
         }

@@ -49,6 +49,13 @@ pub struct CalibrationRecord {
     pub map: BTreeMap<String, f64>,
     pub map_log_density: f64,
     pub laplace_sd_log: BTreeMap<String, f64>,
+    /// The sd (nats) of ln p/q over the initial walkers, draws of the
+    /// Laplace approximation q at the mode: near 0 where q describes the
+    /// posterior; above 8 the run walked as for a posterior far from
+    /// Gaussian (docs/calibration.md, "The start"). Absent in folders
+    /// written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub laplace_spread_nats: Option<f64>,
     pub walkers: usize,
     pub ensembles: usize,
     pub steps: usize,
@@ -123,6 +130,7 @@ impl CalibrationRecord {
             map: named(&start.posterior.layout.to_si(&start.map.x)),
             map_log_density: start.map.log_density,
             laplace_sd_log: named(&start.map.log_theta_sd(&start.posterior.layout)),
+            laplace_spread_nats: None,
             walkers: start.settings.sampler.walkers,
             ensembles: start.settings.sampler.ensembles,
             steps: sampled.diagnostics.steps,
@@ -135,6 +143,11 @@ impl CalibrationRecord {
             geometry: Some(campaign.geometry),
             calibration_id: new_calibration_id(),
         }
+    }
+
+    /// The record with the spread of ln p/q over the initial walkers.
+    pub fn with_laplace_spread(self, spread: f64) -> CalibrationRecord {
+        CalibrationRecord { laplace_spread_nats: spread.is_finite().then_some(spread), ..self }
     }
 
 }
