@@ -188,17 +188,18 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
     // the Laplace approximation and the walkers' start (with its probe's
     // steps) count with the start
     let walkers_start = clock.elapsed().as_secs_f64();
-    if probed.misfit.is_some() {
+    let misfit = probed.far();
+    if misfit.is_some() {
         control.min_tau_multiple = probe::FAR_TAU_MULTIPLE;
     }
-    let probe::Probed { mut sampler, map, higher, misfit, spread, .. } = probed;
+    let probe::Probed { mut sampler, map, higher, spread, .. } = probed;
     let mut sampled = sampling::run(posterior, &mut sampler, &control, s.burn_in, observers)?;
     sampled.diagnostics.warnings.extend(probe::warnings(&higher, misfit, sampler.settings.moves != s.moves));
     start.settings.sampler.moves = sampler.settings.moves.clone();
     if let Some(map) = map {
         start.map = map;
     }
-    let record = CalibrationRecord::of(campaign, &start, walkers_start, &sampled).with_laplace_spread(spread);
+    let record = CalibrationRecord::of(campaign, &start, walkers_start, spread, &sampled);
     let calibration = Calibration {
         dir: PathBuf::new(),
         settings: start.settings.clone(),

@@ -20,11 +20,21 @@ pub(super) struct Probed<'t> {
     /// The MAP searched again from higher ground, if the first was local.
     pub map: Option<map::MapEstimate>,
     pub higher: Option<HigherGround>,
-    /// ln p/q's spread over the initial walkers, where it is above
-    /// [`FAR_FROM_LAPLACE`].
-    pub misfit: Option<f64>,
-    /// ln p/q's spread over the initial walkers (nats), whatever it is.
+    /// ln p/q's spread over the initial walkers (nats).
     pub spread: f64,
+}
+
+impl Probed<'_> {
+    /// Whether the posterior is far from its Laplace approximation: the
+    /// spread, where it is above [`FAR_FROM_LAPLACE`].
+    pub fn far(&self) -> Option<f64> {
+        far(self.spread)
+    }
+}
+
+/// `spread`, where it is above [`FAR_FROM_LAPLACE`].
+fn far(spread: f64) -> Option<f64> {
+    Some(spread).filter(|m| *m > FAR_FROM_LAPLACE)
 }
 
 /// The walkers (`count`) started about the Laplace approximation at the
@@ -53,11 +63,10 @@ pub(super) fn walkers_start<'t>(
         let init = map::initial_walkers(posterior, &laplace, count, settings.seed);
         let mut sampler = Sampler::new(posterior, settings.clone(), &init)?.with_reference(laplace.clone());
         let spread = laplace_misfit(&sampler.chains, &laplace);
-        let misfit = Some(spread).filter(|m| *m > FAR_FROM_LAPLACE);
-        if let Some(moves) = misfit.and_then(|_| moves_far_from_laplace(&settings.moves)) {
+        if let Some(moves) = far(spread).and_then(|_| moves_far_from_laplace(&settings.moves)) {
             sampler.settings.moves = moves;
         }
-        let done = |sampler, laplace, new_map, higher| Ok(Probed { sampler, laplace, map: new_map, higher, misfit, spread });
+        let done = |sampler, laplace, new_map, higher| Ok(Probed { sampler, laplace, map: new_map, higher, spread });
         if higher.as_ref().is_some_and(|h| h.searches == MAX_SEARCHES) {
             return done(sampler, laplace, new_map, higher);
         }

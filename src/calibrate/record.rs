@@ -97,9 +97,9 @@ pub fn command_line() -> String {
 impl CalibrationRecord {
     /// The record of a calibration of `campaign` that started at `start`,
     /// took `walkers_start` seconds more to place its walkers (the Laplace
-    /// approximation at the mode and the initial positions) and sampled
-    /// `sampled`.
-    pub fn of(campaign: &Campaign, start: &Start, walkers_start: f64, sampled: &Sampled) -> CalibrationRecord {
+    /// approximation at the mode and the initial positions, over which
+    /// ln p/q spread by `laplace_spread` nats) and sampled `sampled`.
+    pub fn of(campaign: &Campaign, start: &Start, walkers_start: f64, laplace_spread: f64, sampled: &Sampled) -> CalibrationRecord {
         let seconds_start = start.seconds + walkers_start;
         let names = &start.posterior.layout.names;
         let coordinates = start.posterior.layout.coordinate_names();
@@ -130,7 +130,7 @@ impl CalibrationRecord {
             map: named(&start.posterior.layout.to_si(&start.map.x)),
             map_log_density: start.map.log_density,
             laplace_sd_log: named(&start.map.log_theta_sd(&start.posterior.layout)),
-            laplace_spread_nats: None,
+            laplace_spread_nats: laplace_spread.is_finite().then_some(laplace_spread),
             walkers: start.settings.sampler.walkers,
             ensembles: start.settings.sampler.ensembles,
             steps: sampled.diagnostics.steps,
@@ -144,10 +144,4 @@ impl CalibrationRecord {
             calibration_id: new_calibration_id(),
         }
     }
-
-    /// The record with the spread of ln p/q over the initial walkers.
-    pub fn with_laplace_spread(self, spread: f64) -> CalibrationRecord {
-        CalibrationRecord { laplace_spread_nats: spread.is_finite().then_some(spread), ..self }
-    }
-
 }
