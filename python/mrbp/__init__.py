@@ -367,12 +367,16 @@ def calibrate(
     progress: Union[bool, Callable[..., None]] = False,
     checkpoint: Optional[Path] = None,
     resume: bool = False,
+    memory: Optional[str] = None,
 ) -> Calibration:
     """Calibrates the runs of ``campaign`` at ``current`` (or all runs with
     ``model="current-law"``), as ``mrbp sample`` does with the same options:
     the same seed gives the same chains, bit for bit.
 
     noise: 'gaussian' (default), 'student-t', 'ar1', 'discrepancy';
+    memory: 'independent' (default) or 'tempered' (each run's
+        log-likelihood divided by its residuals' integrated autocorrelation
+        time, as ``--memory tempered``);
     steps: a fixed number of steps (default: until R̂ < 1.01 and ESS ≥ 400);
     config: a settings file (TOML) as ``--config``;
     progress: True for a progress bar (tqdm's where installed, a notebook
@@ -409,6 +413,7 @@ def calibrate(
         progress=progress,
         checkpoint=None if checkpoint is None else str(checkpoint),
         resume=resume,
+        memory=memory,
     )
     return Calibration(inner)
 

@@ -103,7 +103,7 @@ impl Observer for Python_ {
 /// state to `checkpoint` if given (every 100 steps too), which `resume`
 /// continues exactly. `progress` is a callable told of every step.
 #[pyfunction]
-#[pyo3(signature = (campaign, current = None, model = None, noise = None, seed = None, steps = None, walkers = None, ensembles = None, substeps = None, config = None, exact_input = false, progress = None, checkpoint = None, resume = false))]
+#[pyo3(signature = (campaign, current = None, model = None, noise = None, seed = None, steps = None, walkers = None, ensembles = None, substeps = None, config = None, exact_input = false, progress = None, checkpoint = None, resume = false, memory = None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn calibrate(
     py: Python<'_>,
@@ -121,6 +121,7 @@ pub(crate) fn calibrate(
     progress: Option<Py<PyAny>>,
     checkpoint: Option<PathBuf>,
     resume: bool,
+    memory: Option<String>,
 ) -> PyResult<Calibration> {
     let value = |v: Option<String>| v.map(|s| s.trim().to_string()).filter(|s| !s.is_empty());
     let model = match value(model) {
@@ -134,7 +135,11 @@ pub(crate) fn calibrate(
         })?),
         None => None,
     };
-    let overrides = Overrides { config, model, walkers, ensembles, steps, seed, noise, exact_input, substeps, ..Default::default() };
+    let memory = match value(memory) {
+        Some(m) => Some(mrbp::posterior::Memory::from_str(&m, true).map_err(|_| PyValueError::new_err(format!("memory {m:?}: one of 'independent', 'tempered'")))?),
+        None => None,
+    };
+    let overrides = Overrides { config, model, walkers, ensembles, steps, seed, noise, memory, exact_input, substeps, ..Default::default() };
     let settings = overrides.settings().map_err(raise)?;
     let all = campaign.inner.clone();
     let group = if settings.parameter_model().is_current_law() {

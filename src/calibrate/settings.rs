@@ -176,6 +176,11 @@ pub struct Overrides {
     /// Residual model (default: gaussian)
     #[arg(long, value_enum)]
     pub noise: Option<NoiseKind>,
+    /// How the residuals' memory enters the likelihood (default: independent;
+    /// `tempered`: each run counts once per integrated autocorrelation time
+    /// of its MAP residuals, docs/calibration.md)
+    #[arg(long, value_enum)]
+    pub memory: Option<crate::posterior::Memory>,
     /// Samples in the likelihood (default: whole-record)
     #[arg(long, value_enum)]
     pub part: Option<RecordPart>,
@@ -212,6 +217,7 @@ impl Overrides {
         s.sampler.seed = self.seed.unwrap_or(s.sampler.seed);
         s.likelihood.noise = self.noise.unwrap_or(s.likelihood.noise);
         s.likelihood.part = self.part.unwrap_or(s.likelihood.part);
+        s.likelihood.memory = self.memory.unwrap_or(s.likelihood.memory);
         if self.exact_input {
             s.likelihood.errors_in_variables = false;
         }

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::identify::{identify_current, CurrentIdentification};
 use crate::model::{Integrator, Scheme};
 use crate::posterior::map::{self, MapEstimate, StepCheck};
-use crate::posterior::Posterior;
+use crate::posterior::{Memory, Posterior};
 
 /// Where sampling starts: the identification, the MAP, the step chosen and
 /// the posterior with it.
@@ -66,6 +66,7 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     });
     let map = map::best_map(&posterior, &starts)
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
+    let (posterior, map) = temper(campaign, &mut settings, base, posterior, map, log)?;
     log(&format!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64()));
     let schemes: Vec<Scheme> = match integ.scheme {
         SchemeChoice::Auto => vec![Scheme::Explicit, Scheme::LinearlyImplicit],
@@ -112,6 +113,28 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     Ok(Start { current_a, settings, identification, map, step_study, posterior, warnings, seconds: clock.elapsed().as_secs_f64() })
 }
 
+/// With the tempered likelihood ([`Memory::Tempered`]): each run's memory
+/// time k from its whitened residuals at `map` (where not set already),
+/// written into `settings`, and the MAP searched again on the posterior
+/// whose runs' log-likelihoods count 1/k. Otherwise `posterior` and `map`
+/// as they are.
+fn temper(campaign: &Campaign, settings: &mut CalibrationSettings, base: Integrator, posterior: Posterior, map: MapEstimate, log: &mut dyn FnMut(&str)) -> Result<(Posterior, MapEstimate)> {
+    let lik = &mut settings.likelihood;
+    if lik.memory != Memory::Tempered || posterior.runs.iter().all(|r| lik.memory_times.contains_key(&r.id)) {
+        return Ok((posterior, map));
+    }
+    let times = map::memory_times(&posterior, &map).ok_or_else(|| Error::Compute("the residuals at the MAP could not be integrated".into()))?;
+    for (run, k) in posterior.runs.iter().zip(times) {
+        lik.memory_times.entry(run.id.clone()).or_insert(k);
+    }
+    let listed: Vec<String> = posterior.runs.iter().map(|r| format!("{} {:.1}", r.id, lik.memory_times[&r.id])).collect();
+    log(&format!("  memory: each run's log-likelihood counts 1/k, k the integrated autocorrelation time of its whitened MAP residuals (samples): {}", listed.join(", ")));
+    let tempered = settings.posterior(campaign, base);
+    let x = map.x[..tempered.layout.fitted.len()].to_vec();
+    let map = map::refine(&tempered, &x).ok_or_else(|| Error::Compute("the MAP search of the tempered likelihood failed".into()))?;
+    Ok((tempered, map))
+}
+
 /// Lag-1 autocorrelation of the MAP residuals above which independent noise
 /// makes intervals too narrow by more than √3 (AR(1) variance inflation).
 pub const MEMORY_WARNING: f64 = 0.5;
@@ -120,6 +143,10 @@ pub const MEMORY_WARNING: f64 = 0.5;
 /// whitens them, are still correlated in time: the model reads them as
 /// more independent evidence than they are.
 fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
+    // the tempered likelihood has counted the memory in
+    if posterior.likelihood.memory == Memory::Tempered {
+        return Vec::new();
+    }
     let Some(rhos) = map::whitened_autocorrelation(posterior, map) else {
         return Vec::new();
     };

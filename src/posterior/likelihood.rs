@@ -2,6 +2,7 @@
 //! the law along the run for [`LANES`] points at once and hands every
 //! sample's residuals to the noise model's scorer ([`crate::noise`]).
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
@@ -37,6 +38,28 @@ pub struct LikelihoodSettings {
     /// The discrepancy model's kernel and the bounds of its time scale
     /// (`--noise discrepancy`).
     pub discrepancy: DiscrepancySettings,
+    /// How the memory the noise model leaves in a run's residuals enters
+    /// its likelihood (`--memory`; docs/calibration.md, "The tempered
+    /// likelihood").
+    pub memory: Memory,
+    /// With `memory = "tempered"`: each run's integrated autocorrelation
+    /// time k of its whitened MAP residuals (samples), by run id, filled in
+    /// when the calibration starts; the run's log-likelihood counts 1/k.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub memory_times: BTreeMap<String, f64>,
+}
+
+/// How the memory left in a run's residuals enters its likelihood.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Memory {
+    /// Every residual is new evidence (the noise model's own likelihood).
+    #[default]
+    Independent,
+    /// Each run's log-likelihood divided by the integrated autocorrelation
+    /// time of its whitened residuals at the MAP: a run of n correlated
+    /// samples counts as about n/k independent ones.
+    Tempered,
 }
 
 impl Default for LikelihoodSettings {
@@ -48,6 +71,8 @@ impl Default for LikelihoodSettings {
             part: RecordPart::WholeRecord,
             errors_in_variables: true,
             discrepancy: DiscrepancySettings::default(),
+            memory: Memory::Independent,
+            memory_times: BTreeMap::new(),
         }
     }
 }
@@ -57,7 +82,19 @@ impl LikelihoodSettings {
         if !(self.smooth_strain_ms >= 0.0) {
             return Err("smooth_strain_ms must be 0 or positive".into());
         }
+        if let Some((id, k)) = self.memory_times.iter().find(|(_, k)| !(**k >= 1.0 && k.is_finite())) {
+            return Err(format!("memory_times: run {id} has {k}; an integrated autocorrelation time is at least 1"));
+        }
         Ok(())
+    }
+
+    /// The weight of run `id`'s log-likelihood: 1/k with the tempered
+    /// likelihood and the run's memory time k known, else 1.
+    pub fn weight(&self, id: &str) -> f64 {
+        match (self.memory, self.memory_times.get(id)) {
+            (Memory::Tempered, Some(k)) => 1.0 / k,
+            _ => 1.0,
+        }
     }
 
     /// The noise model, with its scales bounded by `sigma_bounds` (Pa).

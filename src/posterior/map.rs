@@ -149,8 +149,13 @@ fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<
     }
     let res = residuals?;
     let mut out: Vec<f64> = Vec::with_capacity(res.iter().map(Vec::len).sum::<usize>() + log_theta.len());
-    for (r, w) in res.iter().zip(whitening) {
+    // a tempered run's residuals count by the square root of its weight
+    for ((r, w), weight) in res.iter().zip(whitening).zip(&post.weights) {
+        let from = out.len();
         w.whiten(r, &mut out);
+        if *weight != 1.0 {
+            out[from..].iter_mut().for_each(|v| *v *= weight.sqrt());
+        }
     }
     for (prior, v) in post.priors.iter().zip(&log_theta) {
         if let Some((c, s)) = prior.centre() {
@@ -345,6 +350,22 @@ fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
 /// is the residuals' own memory (divided by σ); for a model of memory,
 /// what its one-step-ahead innovations keep.
 pub fn whitened_autocorrelation(post: &Posterior, map: &MapEstimate) -> Option<Vec<f64>> {
+    let white = whitened_residuals(post, map)?;
+    Some(white.iter().map(|w| crate::sampler::diagnostics::autocorrelation(w).get(1).copied().unwrap_or(f64::NAN)).collect())
+}
+
+/// Each run's integrated autocorrelation time (samples) of its residuals
+/// at the MAP, whitened as its noise model whitens them: by how much the
+/// residuals' memory shrinks the run's evidence (the variance of a mean
+/// of n such residuals is k/n of one's). The chains' estimator (Sokal's
+/// window, [`crate::sampler::diagnostics::integrated_time`]), at least 1.
+pub fn memory_times(post: &Posterior, map: &MapEstimate) -> Option<Vec<f64>> {
+    let white = whitened_residuals(post, map)?;
+    Some(white.into_iter().map(|w| crate::sampler::diagnostics::integrated_time(&[w])).collect())
+}
+
+/// Each run's residuals at the MAP, whitened by its noise model.
+fn whitened_residuals(post: &Posterior, map: &MapEstimate) -> Option<Vec<Vec<f64>>> {
     let res = residuals_many(post, std::slice::from_ref(&map.x)).pop()??;
     Some(
         res.iter()
@@ -352,7 +373,7 @@ pub fn whitened_autocorrelation(post: &Posterior, map: &MapEstimate) -> Option<V
             .map(|(r, w)| {
                 let mut white = Vec::with_capacity(r.len());
                 w.whiten(r, &mut white);
-                crate::sampler::diagnostics::autocorrelation(&white).get(1).copied().unwrap_or(f64::NAN)
+                white
             })
             .collect(),
     )

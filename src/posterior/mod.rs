@@ -33,7 +33,7 @@ use crate::noise::{NoiseModel, NoiseValues, MAX_PARAMETERS};
 use crate::sampler::LogDensity;
 use layout::Hardening;
 pub use layout::{unit_of, Coordinates, Layout};
-pub use likelihood::{run_log_likelihood, LaneParams, LikelihoodSettings};
+pub use likelihood::{run_log_likelihood, LaneParams, LikelihoodSettings, Memory};
 pub use parameters::{ModelKind, ParameterModel, CURVE_NAMES, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, Draws, PosteriorSample, SummaryRow};
@@ -52,6 +52,8 @@ pub struct Posterior {
     pub integrator: Integrator,
     pub terms: ModelTerms,
     pub layout: Layout,
+    /// Each run's log-likelihood weight ([`LikelihoodSettings::weight`]).
+    pub weights: Vec<f64>,
 }
 
 impl Posterior {
@@ -76,8 +78,10 @@ impl Posterior {
         if coordinates == Coordinates::Hardening {
             layout.harden(&model, Hardening::reference_work(&runs));
         }
+        let weights = runs.iter().map(|r| likelihood.weight(&r.id)).collect();
         Posterior {
             layout,
+            weights,
             noise,
             terms: terms.clone(),
             runs,
@@ -168,9 +172,10 @@ impl Posterior {
                 std::array::from_fn(|lane| if lane < count { l.noise_values(point(lane), i) } else { [0.0; MAX_PARAMETERS] });
             let terms = std::array::from_fn(|lane| if lane < count { l.terms(point(lane), i) } else { (0.0, 0.0) });
             let ll = run_log_likelihood(self.noise.as_ref(), &self.integrator, r, &params, &coordinates, terms);
+            let weight = self.weights[i];
             for (o, ll) in out.iter_mut().zip(ll) {
                 if *o > f64::NEG_INFINITY {
-                    *o = ll.map_or(f64::NEG_INFINITY, |v| *o + v);
+                    *o = ll.map_or(f64::NEG_INFINITY, |v| *o + weight * v);
                 }
             }
         }

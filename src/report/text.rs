@@ -92,6 +92,15 @@ pub fn identification(results: &[CurrentIdentification]) -> String {
     out
 }
 
+/// ", likelihood tempered by the residuals' memory (k a–b)" where it is.
+pub fn tempered_note(lik: &crate::posterior::LikelihoodSettings) -> String {
+    if lik.memory != crate::posterior::Memory::Tempered || lik.memory_times.is_empty() {
+        return String::new();
+    }
+    let (lo, hi) = lik.memory_times.values().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &k| (a.min(k), b.max(k)));
+    format!(", likelihood tempered by the residuals' memory (k {lo:.1}–{hi:.1} samples)")
+}
+
 /// The posterior summary table and the diagnostics' verdict.
 pub fn calibration(cal: &Calibration) -> String {
     let mut out = String::new();
@@ -104,12 +113,13 @@ pub fn calibration(cal: &Calibration) -> String {
     let s = &cal.settings;
     row!(
         out,
-        "\n{at}: {} walkers × {} steps, burn-in {} (τ_max {:.1}), {:?} noise, {} sub-step(s) per sample",
+        "\n{at}: {} walkers × {} steps, burn-in {} (τ_max {:.1}), {:?} noise{}, {} sub-step(s) per sample",
         cal.sample.chains.chains(),
         rec.steps,
         rec.burn_in,
         cal.tau_max(),
         s.likelihood.noise,
+        tempered_note(&s.likelihood),
         s.integrator.substeps
     );
     row!(

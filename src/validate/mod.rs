@@ -151,11 +151,14 @@ struct Target<'a> {
     /// Samples the likelihood compared: a prefix of the whole record.
     compared: usize,
     predict: PredictSettings,
+    /// The weight of the run's log-likelihood in the full posterior
+    /// (below 1 where the likelihood is tempered).
+    weight: f64,
 }
 
 impl Target<'_> {
     /// ln 1/p(y_j | θ) for each model path with its draw's model terms for
-    /// this run (−∞ where the path failed).
+    /// this run, as the full posterior weighs it (−∞ where the path failed).
     fn log_weights(&self, paths: &[Option<Vec<f64>>], draws: &[Draw]) -> Vec<f64> {
         let n = self.compared;
         paths
@@ -164,7 +167,7 @@ impl Target<'_> {
             .map(|(p, d)| match p {
                 Some(p) => {
                     let model: Vec<f64> = (0..n).map(|k| p[k] + self.data.terms_stress(k, d.spring_n_per_m, d.offset_n)).collect();
-                    -self.predict.noise.profile_log_likelihood(&self.data, &residuals(&self.data.tau[..n], &model))
+                    -self.weight * self.predict.noise.profile_log_likelihood(&self.data, &residuals(&self.data.tau[..n], &model))
                 }
                 None => f64::NEG_INFINITY,
             })
@@ -240,6 +243,7 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         data: RunData::from_run(left_out, RecordPart::WholeRecord, lik.smooth_strain_ms),
         compared: RunData::from_run(left_out, lik.part, lik.smooth_strain_ms).time.len(),
         predict: full.cal.predict_settings(loo.replicates, loo.seed),
+        weight: lik.weight(left_out.id()),
     };
     let current = left_out.spec.current_a;
     let sample = &full.cal.sample;
