@@ -11,7 +11,15 @@ use crate::predict::adequacy::{self, AdequacyRow};
 use crate::data::Geometry;
 use crate::error::Result;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
+use crate::posterior::{LikelihoodSettings, Memory};
 use crate::predict::RunBands;
+
+/// The smallest and largest memory time of a tempered likelihood; `None`
+/// where the likelihood takes the residuals as independent.
+fn tempered_range(likelihood: &LikelihoodSettings) -> Option<(f64, f64)> {
+    (likelihood.memory == Memory::Tempered && !likelihood.memory_times.is_empty())
+        .then(|| likelihood.memory_times.values().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &k| (a.min(k), b.max(k))))
+}
 
 /// Lag-1 autocorrelation above which the report says the noise model
 /// ignores the residuals' memory (an AR(1) with ρ = 0.5 makes intervals
@@ -28,13 +36,15 @@ const TREND_SHARE: f64 = 0.2;
 
 /// The section: plain-words findings, the table and one figure per run
 /// (`rows` the adequacy of `bands`, in their order).
-pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[AdequacyRow], geometry: &Geometry) -> Result<()> {
+/// `likelihood` is the calibration's: whether its intervals already allow
+/// for the residuals' memory (the tempered likelihood).
+pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[AdequacyRow], geometry: &Geometry, likelihood: &LikelihoodSettings) -> Result<()> {
     page.section("adequacy", "Model adequacy");
     page.para(
         "Where the calibrated law misses the records, in force (F = τA). The residual is the measured force minus the posterior-median model; \
          reversals are the samples slower than a fifth of the peak speed, where the law times yield.",
     );
-    for finding in findings(rows) {
+    for finding in findings(rows, tempered_range(likelihood)) {
         page.para(&finding);
     }
     let table: Vec<Vec<String>> = rows
@@ -93,12 +103,14 @@ fn spread(lo: f64, hi: f64, digits: usize) -> String {
     }
 }
 
-/// What the numbers say, as sentences a reader can act on.
-pub fn findings(rows: &[AdequacyRow]) -> Vec<String> {
+/// What the numbers say, as sentences a reader can act on; `tempered` the
+/// range of the memory times by which a tempered likelihood divided its
+/// runs' log-likelihoods.
+pub fn findings(rows: &[AdequacyRow], tempered: Option<(f64, f64)>) -> Vec<String> {
     if rows.is_empty() {
         return Vec::new();
     }
-    [size(rows), memory(rows), reversals(rows), missing_force(rows), excitation(rows)].into_iter().flatten().collect()
+    [size(rows), memory(rows, tempered), reversals(rows), missing_force(rows), excitation(rows)].into_iter().flatten().collect()
 }
 
 /// The misfit's size and the band's coverage.
@@ -116,10 +128,18 @@ fn size(rows: &[AdequacyRow]) -> Option<String> {
 
 /// Whether the residuals remember their past, and what that does to the
 /// intervals.
-fn memory(rows: &[AdequacyRow]) -> Option<String> {
+fn memory(rows: &[AdequacyRow], tempered: Option<(f64, f64)>) -> Option<String> {
     let worst = rows.iter().max_by(|a, b| a.lag1_autocorrelation.total_cmp(&b.lag1_autocorrelation))?;
     if rows.iter().all(|a| a.innovation_lag1.is_finite()) {
         return Some(left_memory(rows, worst));
+    }
+    if let Some((lo, hi)) = tempered {
+        return Some(format!(
+            "Memory: the residuals are correlated in time (lag-1 autocorrelation up to {:.2} on {}), and the likelihood was tempered for it: each run's log-likelihood divided by the integrated autocorrelation time of its residuals at the MAP ({} samples), which widens the intervals by its square root. That allows for the memory, not for a bias a missing force puts into θ.",
+            worst.lag1_autocorrelation,
+            esc(&worst.run),
+            spread(lo, hi, 2)
+        ));
     }
     if worst.lag1_autocorrelation <= CORRELATED {
         return Some(format!(

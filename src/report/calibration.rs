@@ -82,7 +82,7 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
         page.note(w);
     }
     coverage_section(&mut page, r);
-    adequacy::section(&mut page, dir, &r.prediction.bands, &r.prediction.adequacy, &r.campaign.geometry)?;
+    adequacy::section(&mut page, dir, &r.prediction.bands, &r.prediction.adequacy, &r.campaign.geometry, &r.cal.settings.likelihood)?;
     validation_section(&mut page, r, &loo_figs)?;
     consistency_section(&mut page, r)?;
     figures_section(&mut page, r.cal, &figs)?;

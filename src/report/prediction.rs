@@ -52,7 +52,7 @@ pub fn write(r: &PredictionReport) -> Result<PathBuf> {
     ));
     page.section("coverage", "Coverage");
     coverage_table(&mut page, &p.coverage, false);
-    adequacy::section(&mut page, dir, &p.bands, &p.adequacy, &geometry)?;
+    adequacy::section(&mut page, dir, &p.bands, &p.adequacy, &geometry, &cal.settings.likelihood)?;
     page.section("figures", "Figures");
     for (stem, caption) in &figs.items {
         page.figure(&dir.join(format!("{stem}.png")), caption)?;
