@@ -53,6 +53,14 @@ def test_same_chains_as_the_command_line(calibration, tmp_path):
     pd.testing.assert_frame_equal(calibration.summary, summary[calibration.summary.columns], check_exact=True)
 
 
+def test_tempered_likelihood_as_the_command_line(campaign, tmp_path):
+    # memory="tempered" is --memory tempered: the same chains, bit for bit
+    cal = mrbp.calibrate(campaign, current=1.0, seed=3, steps=10, memory="tempered")
+    cli("sample", MANIFEST, "--out", tmp_path, "--current", 1.0, "--seed", 3, "--steps", 10, "--memory", "tempered")
+    chains = pd.read_parquet(tmp_path / "chains.parquet")
+    pd.testing.assert_frame_equal(cal.draws, chains, check_exact=True, check_dtype=False)
+
+
 def test_saved_folder_is_the_command_lines(calibration, tmp_path):
     folder = tmp_path / "I1.0A"
     calibration.save(folder)
@@ -112,6 +120,8 @@ def test_bad_options_raise(campaign):
         mrbp.calibrate(campaign, seed=1, steps=10)
     with pytest.raises(ValueError, match='noise "white": one of gaussian'):
         mrbp.calibrate(campaign, current=1.0, noise="white", steps=10)
+    with pytest.raises(ValueError, match='memory "hot": one of'):
+        mrbp.calibrate(campaign, current=1.0, memory="hot", steps=10)
     with pytest.raises(ValueError, match="the campaign has runs at"):
         mrbp.calibrate(campaign, current=2.0, steps=10)
     with pytest.raises(ValueError, match="manifest not found"):

@@ -468,7 +468,8 @@ pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, 
 /// The Laplace approximation of the whole posterior: a Gaussian around the
 /// MAP with the covariance of θ from the surrogate's Hessian and, for the
 /// noise of each run, the sd its noise model gives for n residuals (1/√(2n)
-/// for ln σ, say; nearly independent of θ).
+/// for ln σ, say; nearly independent of θ; √k times that where the run's
+/// likelihood is tempered by k).
 pub fn laplace(post: &Posterior, map: &MapEstimate) -> Elliptical {
     let (d, l) = (post.dim(), &post.layout);
     let nt = l.fitted.len();
@@ -479,7 +480,8 @@ pub fn laplace(post: &Posterior, map: &MapEstimate) -> Elliptical {
     let nr = post.runs.len();
     for i in l.noise.clone() {
         let (p, j) = ((i - l.noise.start) / nr, (i - l.noise.start) % nr);
-        chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p];
+        // a tempered run's noise is known as from n/k samples
+        chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p] / post.weights[j].sqrt();
     }
     Elliptical::from_factor(DVector::from_column_slice(&map.x), chol)
 }
