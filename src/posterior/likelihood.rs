@@ -97,6 +97,14 @@ impl LikelihoodSettings {
         }
     }
 
+    /// The smallest and largest memory time of a tempered likelihood;
+    /// `None` where the residuals are taken as independent (or no time is
+    /// known yet).
+    pub fn memory_range(&self) -> Option<(f64, f64)> {
+        (self.memory == Memory::Tempered && !self.memory_times.is_empty())
+            .then(|| self.memory_times.values().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &k| (a.min(k), b.max(k))))
+    }
+
     /// The noise model, with its scales bounded by `sigma_bounds` (Pa).
     pub fn noise_model(&self, sigma_bounds: (f64, f64)) -> Arc<dyn NoiseModel> {
         self.noise.model(&NoiseOptions {

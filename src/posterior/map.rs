@@ -150,11 +150,13 @@ fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<
     let res = residuals?;
     let mut out: Vec<f64> = Vec::with_capacity(res.iter().map(Vec::len).sum::<usize>() + log_theta.len());
     // a tempered run's residuals count by the square root of its weight
-    for ((r, w), weight) in res.iter().zip(whitening).zip(&post.weights) {
+    for (j, (r, w)) in res.iter().zip(whitening).enumerate() {
         let from = out.len();
         w.whiten(r, &mut out);
-        if *weight != 1.0 {
-            out[from..].iter_mut().for_each(|v| *v *= weight.sqrt());
+        let weight = post.weight(j);
+        if weight != 1.0 {
+            let scale = weight.sqrt();
+            out[from..].iter_mut().for_each(|v| *v *= scale);
         }
     }
     for (prior, v) in post.priors.iter().zip(&log_theta) {
@@ -481,7 +483,7 @@ pub fn laplace(post: &Posterior, map: &MapEstimate) -> Elliptical {
     for i in l.noise.clone() {
         let (p, j) = ((i - l.noise.start) / nr, (i - l.noise.start) % nr);
         // a tempered run's noise is known as from n/k samples
-        chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p] / post.weights[j].sqrt();
+        chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p] / post.weight(j).sqrt();
     }
     Elliptical::from_factor(DVector::from_column_slice(&map.x), chol)
 }

@@ -52,8 +52,6 @@ pub struct Posterior {
     pub integrator: Integrator,
     pub terms: ModelTerms,
     pub layout: Layout,
-    /// Each run's log-likelihood weight ([`LikelihoodSettings::weight`]).
-    pub weights: Vec<f64>,
 }
 
 impl Posterior {
@@ -78,10 +76,8 @@ impl Posterior {
         if coordinates == Coordinates::Hardening {
             layout.harden(&model, Hardening::reference_work(&runs));
         }
-        let weights = runs.iter().map(|r| likelihood.weight(&r.id)).collect();
         Posterior {
             layout,
-            weights,
             noise,
             terms: terms.clone(),
             runs,
@@ -94,6 +90,11 @@ impl Posterior {
 
     pub fn with_integrator(&self, integrator: Integrator) -> Posterior {
         Posterior { integrator, ..self.clone() }
+    }
+
+    /// The weight of run `j`'s log-likelihood ([`LikelihoodSettings::weight`]).
+    pub fn weight(&self, j: usize) -> f64 {
+        self.likelihood.weight(&self.runs[j].id)
     }
 
     /// The B-P parameters at a coil current, from the sampler's coordinates `x`.
@@ -172,7 +173,7 @@ impl Posterior {
                 std::array::from_fn(|lane| if lane < count { l.noise_values(point(lane), i) } else { [0.0; MAX_PARAMETERS] });
             let terms = std::array::from_fn(|lane| if lane < count { l.terms(point(lane), i) } else { (0.0, 0.0) });
             let ll = run_log_likelihood(self.noise.as_ref(), &self.integrator, r, &params, &coordinates, terms);
-            let weight = self.weights[i];
+            let weight = self.weight(i);
             for (o, ll) in out.iter_mut().zip(ll) {
                 if *o > f64::NEG_INFINITY {
                     *o = ll.map_or(f64::NEG_INFINITY, |v| *o + weight * v);

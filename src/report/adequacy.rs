@@ -11,15 +11,8 @@ use crate::predict::adequacy::{self, AdequacyRow};
 use crate::data::Geometry;
 use crate::error::Result;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
-use crate::posterior::{LikelihoodSettings, Memory};
+use crate::posterior::LikelihoodSettings;
 use crate::predict::RunBands;
-
-/// The smallest and largest memory time of a tempered likelihood; `None`
-/// where the likelihood takes the residuals as independent.
-fn tempered_range(likelihood: &LikelihoodSettings) -> Option<(f64, f64)> {
-    (likelihood.memory == Memory::Tempered && !likelihood.memory_times.is_empty())
-        .then(|| likelihood.memory_times.values().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &k| (a.min(k), b.max(k))))
-}
 
 /// Lag-1 autocorrelation above which the report says the noise model
 /// ignores the residuals' memory (an AR(1) with ρ = 0.5 makes intervals
@@ -44,7 +37,7 @@ pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[Adequacy
         "Where the calibrated law misses the records, in force (F = τA). The residual is the measured force minus the posterior-median model; \
          reversals are the samples slower than a fifth of the peak speed, where the law times yield.",
     );
-    for finding in findings(rows, tempered_range(likelihood)) {
+    for finding in findings(rows, likelihood.memory_range()) {
         page.para(&finding);
     }
     let table: Vec<Vec<String>> = rows

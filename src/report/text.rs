@@ -94,11 +94,7 @@ pub fn identification(results: &[CurrentIdentification]) -> String {
 
 /// ", likelihood tempered by the residuals' memory (k a–b)" where it is.
 pub fn tempered_note(lik: &crate::posterior::LikelihoodSettings) -> String {
-    if lik.memory != crate::posterior::Memory::Tempered || lik.memory_times.is_empty() {
-        return String::new();
-    }
-    let (lo, hi) = lik.memory_times.values().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &k| (a.min(k), b.max(k)));
-    format!(", likelihood tempered by the residuals' memory (k {lo:.1}–{hi:.1} samples)")
+    lik.memory_range().map_or_else(String::new, |(lo, hi)| format!(", likelihood tempered by the residuals' memory (k {lo:.1}–{hi:.1} samples)"))
 }
 
 /// The posterior summary table and the diagnostics' verdict.
