@@ -136,7 +136,7 @@ pub(crate) fn calibrate(
         None => None,
     };
     let memory = match value(memory) {
-        Some(m) => Some(mrbp::posterior::Memory::from_str(&m, true).map_err(|_| PyValueError::new_err(format!("memory {m:?}: one of 'independent', 'tempered'")))?),
+        Some(m) => Some(mrbp::posterior::Memory::from_str(&m, true).map_err(|_| PyValueError::new_err(format!("memory {m:?}: one of 'independent', 'tempered', 'adjusted'")))?),
         None => None,
     };
     let overrides = Overrides { config, model, walkers, ensembles, steps, seed, noise, memory, exact_input, substeps, ..Default::default() };

@@ -53,10 +53,12 @@ def test_same_chains_as_the_command_line(calibration, tmp_path):
     pd.testing.assert_frame_equal(calibration.summary, summary[calibration.summary.columns], check_exact=True)
 
 
-def test_tempered_likelihood_as_the_command_line(campaign, tmp_path):
-    # memory="tempered" is --memory tempered: the same chains, bit for bit
-    cal = mrbp.calibrate(campaign, current=1.0, seed=3, steps=10, memory="tempered")
-    cli("sample", MANIFEST, "--out", tmp_path, "--current", 1.0, "--seed", 3, "--steps", 10, "--memory", "tempered")
+@pytest.mark.parametrize("memory", ["tempered", "adjusted"])
+def test_memory_of_the_residuals_as_the_command_line(campaign, tmp_path, memory):
+    # memory="tempered" is --memory tempered (and "adjusted" --memory
+    # adjusted): the same chains, bit for bit
+    cal = mrbp.calibrate(campaign, current=1.0, seed=3, steps=10, memory=memory)
+    cli("sample", MANIFEST, "--out", tmp_path, "--current", 1.0, "--seed", 3, "--steps", 10, "--memory", memory)
     chains = pd.read_parquet(tmp_path / "chains.parquet")
     pd.testing.assert_frame_equal(cal.draws, chains, check_exact=True, check_dtype=False)
 

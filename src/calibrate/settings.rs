@@ -178,7 +178,8 @@ pub struct Overrides {
     pub noise: Option<NoiseKind>,
     /// How the residuals' memory enters the likelihood (default: independent;
     /// `tempered`: each run counts once per integrated autocorrelation time
-    /// of its MAP residuals, docs/calibration.md)
+    /// of its MAP residuals; `adjusted`: each parameter widened by the
+    /// memory of the part of the records that informs it, docs/calibration.md)
     #[arg(long, value_enum)]
     pub memory: Option<crate::posterior::Memory>,
     /// Samples in the likelihood (default: whole-record)
@@ -303,6 +304,16 @@ impl CalibrationSettings {
             return Err("sigma_bounds_pa must be 0 < lower < upper".into());
         }
         self.likelihood.check()?;
+        if let Some(a) = self.likelihood.adjustment() {
+            let d = self.parameter_model().names().len();
+            if self.parameter_model() != ParameterModel::PerCurrent || a.log_theta_centre.len() != d {
+                return Err(format!(
+                    "memory_adjustment: {} parameters, but the adjusted likelihood takes the {} of one parameter set per current (not the current law)",
+                    a.log_theta_centre.len(),
+                    PARAM_NAMES.len()
+                ));
+            }
+        }
         self.noise_model().check()?;
         self.terms.check()?;
         if !(self.reference_current_a > 0.0) {

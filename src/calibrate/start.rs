@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::identify::{identify_current, CurrentIdentification};
 use crate::model::{Integrator, Scheme};
 use crate::posterior::map::{self, MapEstimate, StepCheck};
-use crate::posterior::{Memory, Posterior};
+use crate::posterior::{memory, mode, Memory, ParameterModel, Posterior};
 
 /// Where sampling starts: the identification, the MAP, the step chosen and
 /// the posterior with it.
@@ -32,6 +32,11 @@ pub struct Start {
 pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn FnMut(&str)) -> Result<Start> {
     let clock = Instant::now();
     let mut settings = settings.clone();
+    // an adjustment measured on other runs is measured anew
+    let ids: Vec<&str> = campaign.runs.iter().map(|r| r.id()).collect();
+    if settings.likelihood.memory_adjustment.as_ref().is_some_and(|a| !ids.iter().all(|id| a.runs.iter().any(|r| r == id))) {
+        settings.likelihood.memory_adjustment = None;
+    }
     settings.fill_anchors(&campaign.currents());
     settings.fill_coil_lag(!campaign.varying_runs().is_empty());
     let model = settings.parameter_model();
@@ -67,6 +72,7 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     let map = map::best_map(&posterior, &starts)
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
     let (posterior, map) = temper(campaign, &mut settings, base, posterior, map, log)?;
+    let (posterior, map) = adjust(campaign, &mut settings, base, posterior, map, log)?;
     log(&format!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64()));
     let schemes: Vec<Scheme> = match integ.scheme {
         SchemeChoice::Auto => vec![Scheme::Explicit, Scheme::LinearlyImplicit],
@@ -135,6 +141,30 @@ fn temper(campaign: &Campaign, settings: &mut CalibrationSettings, base: Integra
     Ok((tempered, map))
 }
 
+/// With the adjusted likelihood ([`Memory::Adjusted`]): the curvature
+/// adjustment measured at `map`, the MAP of the independent likelihood
+/// (where not set already), written into `settings`, and the MAP searched
+/// again on the adjusted posterior. Otherwise `posterior` and `map` as they
+/// are.
+fn adjust(campaign: &Campaign, settings: &mut CalibrationSettings, base: Integrator, posterior: Posterior, map: MapEstimate, log: &mut dyn FnMut(&str)) -> Result<(Posterior, MapEstimate)> {
+    if settings.likelihood.memory != Memory::Adjusted || settings.likelihood.memory_adjustment.is_some() {
+        return Ok((posterior, map));
+    }
+    if settings.parameter_model() != ParameterModel::PerCurrent {
+        return Err(Error::Usage("`--memory adjusted` takes one parameter set per current (not the current law); `--memory tempered` takes any".into()));
+    }
+    // centred on the mode of the independent posterior, not the surrogate's optimum
+    let centre = mode::newton(&posterior, &map::laplace(&posterior, &map)).map_or_else(|| map.x.clone(), |m| m.x);
+    let adjustment = memory::adjustment(&posterior, &map, &centre).ok_or_else(|| Error::Compute("the memory adjustment could not be measured at the MAP".into()))?;
+    let (lo, hi) = (adjustment.inflation.last().copied().unwrap_or(1.0), adjustment.inflation.first().copied().unwrap_or(1.0));
+    log(&format!("  memory: the likelihood's curvature adjusted to its score's covariance given the residuals' memory: variance inflation {lo:.1}–{hi:.1} by direction"));
+    settings.likelihood.memory_adjustment = Some(adjustment);
+    let adjusted = settings.posterior(campaign, base);
+    let x = map.x[..adjusted.layout.fitted.len()].to_vec();
+    let map = map::refine(&adjusted, &x).ok_or_else(|| Error::Compute("the MAP search of the adjusted likelihood failed".into()))?;
+    Ok((adjusted, map))
+}
+
 /// Lag-1 autocorrelation of the MAP residuals above which independent noise
 /// makes intervals too narrow by more than √3 (AR(1) variance inflation).
 pub const MEMORY_WARNING: f64 = 0.5;
@@ -143,8 +173,8 @@ pub const MEMORY_WARNING: f64 = 0.5;
 /// whitens them, are still correlated in time: the model reads them as
 /// more independent evidence than they are.
 fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
-    // the tempered likelihood has counted the memory in
-    if posterior.likelihood.memory == Memory::Tempered {
+    // the tempered or adjusted likelihood has counted the memory in
+    if posterior.likelihood.memory != Memory::Independent {
         return Vec::new();
     }
     let Some(rhos) = map::whitened_autocorrelation(posterior, map) else {

@@ -47,6 +47,81 @@ pub struct LikelihoodSettings {
     /// when the calibration starts; the run's log-likelihood counts 1/k.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub memory_times: BTreeMap<String, f64>,
+    /// With `memory = "adjusted"`: the curvature adjustment measured at the
+    /// MAP of the independent likelihood, filled in when the calibration
+    /// starts.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory_adjustment: Option<MemoryAdjustment>,
+}
+
+/// How a calibration's likelihood allowed for its residuals' memory.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Allowance {
+    /// Each run's log-likelihood divided by its memory time k (samples).
+    Tempered { lo: f64, hi: f64 },
+    /// The curvature adjusted, each principal direction's variance
+    /// inflated by lo–hi.
+    Adjusted { lo: f64, hi: f64 },
+}
+
+impl Allowance {
+    /// The summary's words: ", likelihood tempered by …".
+    pub fn note(&self) -> String {
+        match *self {
+            Allowance::Tempered { lo, hi } => format!(", likelihood tempered by the residuals' memory (k {lo:.1}–{hi:.1} samples)"),
+            Allowance::Adjusted { lo, hi } => format!(", likelihood adjusted for the residuals' memory (variance ×{lo:.1}–{hi:.1} by direction)"),
+        }
+    }
+}
+
+/// The curvature adjustment of the likelihood for the memory of its
+/// residuals (docs/calibration.md, "The adjusted likelihood"): the
+/// likelihood is evaluated at ln θ* = c + C (ln θ − c) instead of ln θ, with
+/// c the MAP of the independent likelihood and C chosen so that the
+/// likelihood's curvature there becomes H V⁻¹ H (H its curvature, V the
+/// covariance of its score given the residuals' memory; Chandler & Bate
+/// 2007, Ribatet, Cooley & Davison 2012). θ is the B-P parameter set of
+/// one current, in ln SI units.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MemoryAdjustment {
+    /// The runs it was measured on (a calibration of some of them, such as
+    /// a held-out posterior, keeps it; one of other runs measures anew).
+    pub runs: Vec<String>,
+    /// c: ln θ at the MAP, SI units, in the order of the parameter names.
+    pub log_theta_centre: Vec<f64>,
+    /// C, row by row.
+    pub matrix: Vec<Vec<f64>>,
+    /// The variance inflation of each principal direction (the eigenvalues
+    /// of H^(−½) V H^(−½), at least 1), largest first: by how much fewer
+    /// than independent the residuals count along it.
+    pub inflation: Vec<f64>,
+}
+
+impl MemoryAdjustment {
+    /// ln θ* from ln θ.
+    pub fn apply(&self, log_theta: &[f64]) -> Vec<f64> {
+        let c = &self.log_theta_centre;
+        self.matrix
+            .iter()
+            .zip(c)
+            .map(|(row, ci)| ci + row.iter().zip(log_theta.iter().zip(c)).map(|(a, (v, cj))| a * (v - cj)).sum::<f64>())
+            .collect()
+    }
+
+    fn check(&self) -> Result<(), String> {
+        let d = self.log_theta_centre.len();
+        if d == 0 || self.matrix.len() != d || self.matrix.iter().any(|r| r.len() != d) {
+            return Err(format!("memory_adjustment: the matrix must be {d} × {d}, as many rows and columns as log_theta_centre has values"));
+        }
+        if self.log_theta_centre.iter().chain(self.matrix.iter().flatten()).chain(&self.inflation).any(|v| !v.is_finite()) {
+            return Err("memory_adjustment: every value must be finite".into());
+        }
+        if self.inflation.iter().any(|v| *v < 1.0) {
+            return Err("memory_adjustment: a variance inflation is at least 1".into());
+        }
+        Ok(())
+    }
 }
 
 /// How the memory left in a run's residuals enters its likelihood.
@@ -60,6 +135,11 @@ pub enum Memory {
     /// time of its whitened residuals at the MAP: a run of n correlated
     /// samples counts as about n/k independent ones.
     Tempered,
+    /// The likelihood's curvature adjusted at the MAP to the covariance of
+    /// its score given the residuals' memory, direction by direction (the
+    /// sandwich H⁻¹VH⁻¹): each parameter widened by the memory of the part
+    /// of the record that informs it.
+    Adjusted,
 }
 
 impl Default for LikelihoodSettings {
@@ -73,6 +153,7 @@ impl Default for LikelihoodSettings {
             discrepancy: DiscrepancySettings::default(),
             memory: Memory::Independent,
             memory_times: BTreeMap::new(),
+            memory_adjustment: None,
         }
     }
 }
@@ -84,6 +165,9 @@ impl LikelihoodSettings {
         }
         if let Some((id, k)) = self.memory_times.iter().find(|(_, k)| !(**k >= 1.0 && k.is_finite())) {
             return Err(format!("memory_times: run {id} has {k}; an integrated autocorrelation time is at least 1"));
+        }
+        if let Some(a) = &self.memory_adjustment {
+            a.check()?;
         }
         Ok(())
     }
@@ -103,6 +187,23 @@ impl LikelihoodSettings {
     pub fn memory_range(&self) -> Option<(f64, f64)> {
         (self.memory == Memory::Tempered && !self.memory_times.is_empty())
             .then(|| self.memory_times.values().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &k| (a.min(k), b.max(k))))
+    }
+
+    /// The curvature adjustment in force: with `memory = "adjusted"` and
+    /// the adjustment measured.
+    pub fn adjustment(&self) -> Option<&MemoryAdjustment> {
+        self.memory_adjustment.as_ref().filter(|_| self.memory == Memory::Adjusted)
+    }
+
+    /// How the memory of the residuals has been allowed for, once measured.
+    pub fn allowance(&self) -> Option<Allowance> {
+        if let Some((lo, hi)) = self.memory_range() {
+            return Some(Allowance::Tempered { lo, hi });
+        }
+        self.adjustment().map(|a| Allowance::Adjusted {
+            lo: a.inflation.last().copied().unwrap_or(1.0),
+            hi: a.inflation.first().copied().unwrap_or(1.0),
+        })
     }
 
     /// The noise model, with its scales bounded by `sigma_bounds` (Pa).

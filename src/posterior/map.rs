@@ -47,6 +47,13 @@ impl MapEstimate {
         MapEstimate { cov: self.cov.clone(), jacobian: self.jacobian.clone(), ..moved }
     }
 
+    /// The Jacobian of the whitened residuals at the MAP: each run's
+    /// residuals in order, then the priors' pseudo-residuals; a column per
+    /// fitted coordinate.
+    pub fn jacobian(&self) -> &DMatrix<f64> {
+        &self.jacobian
+    }
+
     /// Posterior sd of each θ coordinate from the Laplace approximation.
     pub fn sd(&self) -> Vec<f64> {
         (0..self.cov.nrows()).map(|i| self.cov[(i, i)].max(0.0).sqrt()).collect()
@@ -97,7 +104,9 @@ fn residuals_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<Vec<f64>>
         .map(|&(r, g)| {
             let run = &post.runs[r];
             let group = &xs[g..(g + LANES).min(xs.len())];
-            let points: Vec<&[f64]> = group.iter().map(|x| x.as_slice()).collect();
+            // the likelihood's points (the adjusted likelihood's ln θ*)
+            let moved: Vec<std::borrow::Cow<[f64]>> = group.iter().map(|x| post.likelihood_point(x)).collect();
+            let points: Vec<&[f64]> = moved.iter().map(|x| x.as_ref()).collect();
             let terms: Vec<(f64, f64)> = group.iter().map(|x| post.layout.terms(x, r)).collect();
             run_residuals(post, run, &points, &terms)
         })
@@ -331,7 +340,8 @@ fn project(post: &Posterior, log_theta: &[f64]) -> Vec<f64> {
 /// Each run's noise fitted to its residuals at the fitted point `x`.
 fn profiles(post: &Posterior, x: &[f64]) -> Option<Vec<Profile>> {
     let res = residuals_many(post, &[x.to_vec()]).pop()??;
-    Some(res.iter().zip(&post.runs).map(|(r, run)| post.noise.profile(run, r, post.lane_params(&[x], run).g_bound(run)[0])).collect())
+    let at = post.likelihood_point(x);
+    Some(res.iter().zip(&post.runs).map(|(r, run)| post.noise.profile(run, r, post.lane_params(&[&at], run).g_bound(run)[0])).collect())
 }
 
 /// θ extended by the noise coordinates that maximise the likelihood of the
@@ -367,7 +377,7 @@ pub fn memory_times(post: &Posterior, map: &MapEstimate) -> Option<Vec<f64>> {
 }
 
 /// Each run's residuals at the MAP, whitened by its noise model.
-fn whitened_residuals(post: &Posterior, map: &MapEstimate) -> Option<Vec<Vec<f64>>> {
+pub(super) fn whitened_residuals(post: &Posterior, map: &MapEstimate) -> Option<Vec<Vec<f64>>> {
     let res = residuals_many(post, std::slice::from_ref(&map.x)).pop()??;
     Some(
         res.iter()
@@ -491,7 +501,8 @@ pub fn laplace(post: &Posterior, map: &MapEstimate) -> Elliptical {
 /// The Euler steps of one log-density at `x` (all runs): what the
 /// integrator costs there.
 pub fn euler_steps(post: &Posterior, x: &[f64]) -> u64 {
-    post.runs.iter().map(|r| post.lane_params(&[x], r).euler_steps(&post.integrator, r)).sum()
+    let at = post.likelihood_point(x);
+    post.runs.iter().map(|r| post.lane_params(&[&at], r).euler_steps(&post.integrator, r)).sum()
 }
 
 /// Spread of the initial walkers over the approximation's: its own. The

@@ -9,6 +9,7 @@
 //!   whose residuals the noise model ([`crate::noise`]) scores;
 //! * [`prior`]: priors of θ;
 //! * [`map`]: the start of sampling: MAP, Laplace approximation, step rule;
+//! * [`memory`]: the likelihood adjusted for the memory of its residuals;
 //! * [`mode`]: the mode and curvature of the log-density itself, from the
 //!   MAP's Laplace approximation by Newton's method;
 //! * [`sample`]: a posterior sample in SI units and its draws.
@@ -19,12 +20,14 @@
 pub mod layout;
 pub mod likelihood;
 pub mod map;
+pub mod memory;
 pub mod mode;
 pub mod parameters;
 pub mod prior;
 pub mod sample;
 pub mod terms;
 
+use std::borrow::Cow;
 use std::sync::Arc;
 
 use crate::data::{Campaign, RunData};
@@ -33,7 +36,7 @@ use crate::noise::{NoiseModel, NoiseValues, MAX_PARAMETERS};
 use crate::sampler::LogDensity;
 use layout::Hardening;
 pub use layout::{unit_of, Coordinates, Layout};
-pub use likelihood::{run_log_likelihood, LaneParams, LikelihoodSettings, Memory};
+pub use likelihood::{run_log_likelihood, Allowance, LaneParams, LikelihoodSettings, Memory, MemoryAdjustment};
 pub use parameters::{ModelKind, ParameterModel, CURVE_NAMES, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, Draws, PosteriorSample, SummaryRow};
@@ -95,6 +98,22 @@ impl Posterior {
     /// The weight of run `j`'s log-likelihood ([`LikelihoodSettings::weight`]).
     pub fn weight(&self, j: usize) -> f64 {
         self.likelihood.weight(&self.runs[j].id)
+    }
+
+    /// Where the likelihood is evaluated for the point `x`: `x` itself, or
+    /// with the adjusted likelihood ([`Memory::Adjusted`]) the point whose
+    /// ln θ is the adjustment's ln θ* (the model terms and the noise as in
+    /// `x`). The prior is always evaluated at `x`.
+    pub fn likelihood_point<'a>(&self, x: &'a [f64]) -> Cow<'a, [f64]> {
+        match self.likelihood.adjustment() {
+            Some(a) => {
+                let moved = self.layout.theta_coordinates(&a.apply(&self.layout.log_theta(x)));
+                let mut y = x.to_vec();
+                y[self.layout.theta.clone()].copy_from_slice(&moved[..self.layout.theta.len()]);
+                Cow::Owned(y)
+            }
+            None => Cow::Borrowed(x),
+        }
     }
 
     /// The B-P parameters at a coil current, from the sampler's coordinates `x`.
@@ -161,7 +180,8 @@ impl Posterior {
         // (their results are dropped; an extreme point would only make the
         // other lanes wait for its sub-steps)
         let first_alive = (0..count).find(|&lane| out[lane] > f64::NEG_INFINITY).unwrap_or(0);
-        let alive: Vec<&[f64]> = (0..count).map(|lane| point(if out[lane] > f64::NEG_INFINITY { lane } else { first_alive })).collect();
+        let moved: Vec<Cow<[f64]>> = (0..count).map(|lane| self.likelihood_point(point(if out[lane] > f64::NEG_INFINITY { lane } else { first_alive }))).collect();
+        let alive: Vec<&[f64]> = moved.iter().map(|p| p.as_ref()).collect();
         let mut params = LaneParams::Fixed([Params::reference_1a(); LANES]);
         for (i, r) in self.runs.iter().enumerate() {
             // a current law gives each run its own parameters; one set is

@@ -11,7 +11,7 @@ use crate::predict::adequacy::{self, AdequacyRow};
 use crate::data::Geometry;
 use crate::error::Result;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
-use crate::posterior::LikelihoodSettings;
+use crate::posterior::{Allowance, LikelihoodSettings};
 use crate::predict::RunBands;
 
 /// Lag-1 autocorrelation above which the report says the noise model
@@ -30,14 +30,14 @@ const TREND_SHARE: f64 = 0.2;
 /// The section: plain-words findings, the table and one figure per run
 /// (`rows` the adequacy of `bands`, in their order).
 /// `likelihood` is the calibration's: whether its intervals already allow
-/// for the residuals' memory (the tempered likelihood).
+/// for the residuals' memory (the tempered or adjusted likelihood).
 pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[AdequacyRow], geometry: &Geometry, likelihood: &LikelihoodSettings) -> Result<()> {
     page.section("adequacy", "Model adequacy");
     page.para(
         "Where the calibrated law misses the records, in force (F = τA). The residual is the measured force minus the posterior-median model; \
          reversals are the samples slower than a fifth of the peak speed, where the law times yield.",
     );
-    for finding in findings(rows, likelihood.memory_range()) {
+    for finding in findings(rows, likelihood.allowance()) {
         page.para(&finding);
     }
     let table: Vec<Vec<String>> = rows
@@ -96,14 +96,14 @@ fn spread(lo: f64, hi: f64, digits: usize) -> String {
     }
 }
 
-/// What the numbers say, as sentences a reader can act on; `tempered` the
-/// range of the memory times by which a tempered likelihood divided its
-/// runs' log-likelihoods.
-pub fn findings(rows: &[AdequacyRow], tempered: Option<(f64, f64)>) -> Vec<String> {
+/// What the numbers say, as sentences a reader can act on; `allowance`
+/// how the likelihood allowed for the residuals' memory (tempered or
+/// adjusted), if it did.
+pub fn findings(rows: &[AdequacyRow], allowance: Option<Allowance>) -> Vec<String> {
     if rows.is_empty() {
         return Vec::new();
     }
-    [size(rows), memory(rows, tempered), reversals(rows), missing_force(rows), excitation(rows)].into_iter().flatten().collect()
+    [size(rows), memory(rows, allowance), reversals(rows), missing_force(rows), excitation(rows)].into_iter().flatten().collect()
 }
 
 /// The misfit's size and the band's coverage.
@@ -121,18 +121,25 @@ fn size(rows: &[AdequacyRow]) -> Option<String> {
 
 /// Whether the residuals remember their past, and what that does to the
 /// intervals.
-fn memory(rows: &[AdequacyRow], tempered: Option<(f64, f64)>) -> Option<String> {
+fn memory(rows: &[AdequacyRow], allowance: Option<Allowance>) -> Option<String> {
     let worst = rows.iter().max_by(|a, b| a.lag1_autocorrelation.total_cmp(&b.lag1_autocorrelation))?;
     if rows.iter().all(|a| a.innovation_lag1.is_finite()) {
         return Some(left_memory(rows, worst));
     }
-    if let Some((lo, hi)) = tempered {
-        return Some(format!(
+    match allowance {
+        Some(Allowance::Tempered { lo, hi }) => return Some(format!(
             "Memory: the residuals are correlated in time (lag-1 autocorrelation up to {:.2} on {}), and the likelihood was tempered for it: each run's log-likelihood divided by the integrated autocorrelation time of its residuals at the MAP ({} samples), which widens the intervals by its square root. That allows for the memory, not for a bias a missing force puts into θ.",
             worst.lag1_autocorrelation,
             esc(&worst.run),
             spread(lo, hi, 2)
-        ));
+        )),
+        Some(Allowance::Adjusted { lo, hi }) => return Some(format!(
+            "Memory: the residuals are correlated in time (lag-1 autocorrelation up to {:.2} on {}), and the likelihood was adjusted for it: its curvature at the MAP set to the covariance of its score given the residuals' memory (the sandwich H⁻¹VH⁻¹), which inflates the posterior variance by {} along its principal directions, each parameter by the memory of the part of the records that informs it. That allows for the memory, not for a bias a missing force puts into θ.",
+            worst.lag1_autocorrelation,
+            esc(&worst.run),
+            spread(lo, hi, 2)
+        )),
+        None => {}
     }
     if worst.lag1_autocorrelation <= CORRELATED {
         return Some(format!(

@@ -185,7 +185,7 @@ fn campaign_section(page: &mut Page, r: &CalibrationReport) {
         &[
             vec!["manifest".into(), esc(&rec.manifest)],
             vec!["geometry".into(), format!("A = {} m², h = {} m", geometry.area_m2, geometry.gap_m)],
-            vec!["noise model".into(), esc(&format!("{:?}{}", rec.noise, crate::report::text::tempered_note(&cal.settings.likelihood)))],
+            vec!["noise model".into(), esc(&format!("{:?}{}", rec.noise, crate::report::text::memory_note(&cal.settings.likelihood)))],
             vec!["samples in the likelihood".into(), esc(&format!("{:?}", rec.part))],
             vec![
                 "integrator".into(),

@@ -92,9 +92,10 @@ pub fn identification(results: &[CurrentIdentification]) -> String {
     out
 }
 
-/// ", likelihood tempered by the residuals' memory (k a–b)" where it is.
-pub fn tempered_note(lik: &crate::posterior::LikelihoodSettings) -> String {
-    lik.memory_range().map_or_else(String::new, |(lo, hi)| format!(", likelihood tempered by the residuals' memory (k {lo:.1}–{hi:.1} samples)"))
+/// ", likelihood tempered (or adjusted) for the residuals' memory (…)"
+/// where it is.
+pub fn memory_note(lik: &crate::posterior::LikelihoodSettings) -> String {
+    lik.allowance().map_or_else(String::new, |a| a.note())
 }
 
 /// The posterior summary table and the diagnostics' verdict.
@@ -115,7 +116,7 @@ pub fn calibration(cal: &Calibration) -> String {
         rec.burn_in,
         cal.tau_max(),
         s.likelihood.noise,
-        tempered_note(&s.likelihood),
+        memory_note(&s.likelihood),
         s.integrator.substeps
     );
     row!(

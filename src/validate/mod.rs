@@ -29,7 +29,8 @@ use rayon::prelude::*;
 use crate::data::{RecordPart, RunData};
 use crate::posterior::map;
 use crate::posterior::mode;
-use crate::posterior::{Draw, Draws, Posterior};
+use crate::model::Params;
+use crate::posterior::{Draw, Draws, MemoryAdjustment, Posterior};
 use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictOptions, PredictSettings, RunBands, RunPrediction};
 use crate::sampler::elliptical::t_factor;
 use crate::sampler::{Elliptical, LogDensity, Moments, Observer, RunControl, Sampler};
@@ -253,7 +254,14 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
     // the run's own force offset (and the spring) in each full-posterior draw
     let own: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw(s, c, left_out.id(), current)).collect();
     let paths = model_paths(&target.data, &own, &target.predict.integrator, &|| {});
-    let reweighted = psis::smooth(&target.log_weights(&paths, &own));
+    // the adjusted likelihood weighs each draw's θ* (the bands keep θ)
+    let reweighted = match lik.adjustment() {
+        Some(a) => {
+            let moved: Vec<Draw> = own.iter().map(|d| Draw { params: adjusted_params(a, &d.params), ..*d }).collect();
+            psis::smooth(&target.log_weights(&model_paths(&target.data, &moved, &target.predict.integrator, &|| {}), &moved))
+        }
+        None => psis::smooth(&target.log_weights(&paths, &own)),
+    };
     let mut row = LooRow { coverage: CoverageRow::default(), pareto_k: reweighted.k_hat, pareto_k_laplace: f64::NAN, by: HeldOutBy::Reweighting, max_rhat: f64::NAN };
     let prediction = if reweighted.k_hat <= psis::K_THRESHOLD {
         let draws: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw_without(s, c, left_out.id(), current)).collect();
@@ -280,6 +288,13 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
     };
     row.coverage = prediction.coverage.clone();
     Ok(Weighed::Done(Box::new(HeldOut { prediction, row })))
+}
+
+/// The parameters at which the adjusted likelihood evaluates a draw's
+/// `params` (one parameter set per current).
+fn adjusted_params(a: &MemoryAdjustment, params: &Params) -> Params {
+    let moved = a.apply(&params.to_array().map(f64::ln));
+    Params::from_array(std::array::from_fn(|i| moved[i].exp()))
 }
 
 /// Importance sampling from the held-out posterior's Laplace approximation

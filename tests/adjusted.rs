@@ -1,0 +1,190 @@
+//! The adjusted likelihood (`[likelihood] memory = "adjusted"`): the
+//! likelihood evaluated at ln θ* = c + C (ln θ − c), its curvature at the
+//! independent posterior's mode set to H V⁻¹ H, V the covariance of its
+//! score given the residuals' memory.
+
+use mrbp::calibrate::{start, CalibrationSettings};
+use mrbp::data::Campaign;
+use mrbp::model::{Integrator, Params, LANES};
+use mrbp::posterior::{run_log_likelihood, LaneParams, Memory, MemoryAdjustment};
+use mrbp::sampler::LogDensity;
+use mrbp::synth::{write_campaign, ExtraForce, SynthSettings};
+
+/// One crank revolution per crank speed at 2 kHz, 1 A, with a smooth
+/// random force of `smooth_n` (N, 20 ms time scale) the law does not have;
+/// the displacement exact where there is none (the smoothed strain's noise
+/// is correlated over the smoothing window).
+fn campaign(seed: u64, smooth_n: f64) -> (tempfile::TempDir, Campaign) {
+    let dir = tempfile::tempdir().unwrap();
+    let settings = SynthSettings {
+        currents_a: vec![1.0],
+        cycles: 1.0,
+        rate_hz: 2000.0,
+        seed,
+        noise_displacement_m: if smooth_n == 0.0 { 0.0 } else { SynthSettings::default().noise_displacement_m },
+        extra_force: ExtraForce { smooth_sd_n: vec![smooth_n], smooth_time_s: vec![0.02], ..ExtraForce::default() },
+        ..SynthSettings::default()
+    };
+    write_campaign(&settings, dir.path()).unwrap();
+    let c = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
+    (dir, c)
+}
+
+fn adjusted() -> CalibrationSettings {
+    let mut s = CalibrationSettings::default();
+    s.likelihood.memory = Memory::Adjusted;
+    s
+}
+
+/// The adjusted log-density is the prior at θ plus each run's
+/// log-likelihood at θ*: the parameters c + C (ln θ − c) computed here from
+/// the stored centre and matrix, the law integrated with them directly
+/// (not through the sampler's coordinates).
+#[test]
+fn the_likelihood_is_evaluated_at_the_moved_parameters() {
+    let (_dir, campaign) = campaign(3, 0.0);
+    let map = start(&campaign, &CalibrationSettings::default(), &mut |_| {}).unwrap().map;
+    let mut settings = adjusted();
+    let independent = settings.posterior(&campaign, Integrator::default());
+    let centre: Vec<f64> = independent.layout.log_theta(&map.x).iter().map(|v| v + 0.01).collect();
+    // a matrix far from the identity, with every entry set
+    let matrix: Vec<Vec<f64>> = (0..7).map(|i| (0..7).map(|j| if i == j { 0.4 + 0.05 * i as f64 } else { 0.01 * (i as f64 - j as f64) }).collect()).collect();
+    let adjustment = MemoryAdjustment { runs: campaign.runs.iter().map(|r| r.id().to_string()).collect(), log_theta_centre: centre.clone(), matrix: matrix.clone(), inflation: vec![1.0; 7] };
+    settings.likelihood.memory_adjustment = Some(adjustment);
+    let post = settings.posterior(&campaign, Integrator::default());
+    // a point a little away from the MAP
+    let mut x = map.x.clone();
+    for (i, v) in x.iter_mut().take(7).enumerate() {
+        *v += 0.002 * (i as f64 - 3.0);
+    }
+    let log_theta = post.layout.log_theta(&x);
+    let moved: Vec<f64> = (0..7).map(|i| centre[i] + (0..7).map(|j| matrix[i][j] * (log_theta[j] - centre[j])).sum::<f64>()).collect();
+    let params = Params::from_array(std::array::from_fn(|i| moved[i].exp()));
+    let own: f64 = post
+        .runs
+        .iter()
+        .enumerate()
+        .map(|(j, run)| {
+            let l = &post.layout;
+            let coordinates = std::array::from_fn(|_| l.noise_values(&x, j));
+            let terms = std::array::from_fn(|_| l.terms(&x, j));
+            run_log_likelihood(post.noise.as_ref(), &post.integrator, run, &LaneParams::Fixed([params; LANES]), &coordinates, terms)[0].unwrap()
+        })
+        .sum();
+    let want = post.log_prior(&x) + own;
+    let got = post.log_density(&x);
+    assert!((got - want).abs() < 1e-8 * want.abs(), "adjusted log-density {got}, prior plus the runs at θ* {want}");
+    // the premise: θ* is not θ, and the likelihood there differs
+    assert!((independent.log_density(&x) - got).abs() > 1.0);
+}
+
+/// Where the residuals are white (the law and sensor noise, the strain
+/// exact) no direction is inflated by more than sampling noise: Sokal's
+/// window stops after about 5 lags, whose correlations on 1200–4800 white
+/// samples each scatter by 0.015–0.03, so an inflation above 1.3 is ten of
+/// their sds (measured: 1.01 at most, six directions at the floor 1). With
+/// a smooth 80 N force of 20 ms the law lacks, every direction is
+/// inflated (the residuals' memory times are tens of samples; measured
+/// 6.4–45), by less than the number of samples, and the "too narrow"
+/// warning is not given.
+#[test]
+fn only_residuals_with_memory_are_adjusted() {
+    let (_w, white) = campaign(11, 0.0);
+    let s = start(&white, &adjusted(), &mut |_| {}).unwrap();
+    let a = s.settings.likelihood.memory_adjustment.clone().expect("measured");
+    assert!(a.inflation.iter().all(|v| (1.0..1.3).contains(v)), "white residuals: inflation {:?}", a.inflation);
+    assert_eq!(a.runs.len(), white.runs.len());
+
+    let (_s, smooth) = campaign(11, 80.0);
+    let s = start(&smooth, &adjusted(), &mut |_| {}).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let a = s.settings.likelihood.memory_adjustment.clone().expect("measured");
+    let samples: usize = s.posterior.runs.iter().map(|r| r.tau.len()).sum();
+    assert!(a.inflation[0] > 10.0 && a.inflation.iter().all(|v| (2.0..samples as f64).contains(v)), "smooth force: inflation {:?}", a.inflation);
+}
+
+/// What the adjustment is for: the posterior sd of ln θ should be the
+/// scatter of the estimate over records of the same stand, with a new path
+/// of the smooth force each time. Over 30 such campaigns (the same
+/// truth, the force and sensor noise drawn afresh), the sd of the
+/// independent posterior's mode (ln θ) against the root mean square of the
+/// adjusted posterior's sds (its Laplace approximation at the mode, by
+/// Newton's method on the log-density). Measured: adjusted / scatter 1.36
+/// (G), 1.10, 0.94, 1.01 (R0, R1, D1), 1.03 (n); the independent
+/// posterior's 0.13–0.53. The bounds 0.65–1.6: a scatter from 30
+/// replicates has a relative se of 13 %, so 0.65 is 2.7 se below a ratio
+/// of 1. m1 and m2 are not held to it: on one revolution their estimates
+/// are heavy-tailed in ln θ (a few replicates far out set the scatter;
+/// adjusted / scatter 0.54 and 0.74, independent 0.10 and 0.25).
+#[test]
+fn the_adjusted_sds_are_the_scatter_of_the_estimate() {
+    use mrbp::posterior::{map, mode, Posterior};
+    use mrbp::sampler::Elliptical;
+    use rand_distr::{Distribution, StandardNormal};
+    // the sd of each ln θ under a Gaussian approximation, from its draws
+    let sds = |e: &Elliptical, p: &Posterior, seed: u64| -> Vec<f64> {
+        let mut rng = mrbp::rng::stream(seed, &[9]);
+        let draws: Vec<Vec<f64>> = (0..4000)
+            .map(|_| {
+                let z: Vec<f64> = (0..e.dim()).map(|_| StandardNormal.sample(&mut rng)).collect();
+                p.layout.log_theta(&e.point(&z, 1.0))
+            })
+            .collect();
+        (0..7).map(|i| sd(&draws.iter().map(|d| d[i]).collect::<Vec<f64>>())).collect()
+    };
+    let (mut centres, mut adjusted_sds, mut independent_sds) = (Vec::new(), Vec::new(), Vec::new());
+    for seed in 101..=130u64 {
+        let (_d, c) = campaign(seed, 80.0);
+        let s = start(&c, &adjusted(), &mut |_| {}).unwrap();
+        centres.push(s.settings.likelihood.memory_adjustment.clone().expect("measured").log_theta_centre);
+        adjusted_sds.push(sds(&mode::laplace_from(&s.posterior, &s.map), &s.posterior, seed));
+        let independent = CalibrationSettings::default().posterior(&c, s.posterior.integrator);
+        let at = map::refine(&independent, &s.map.x[..independent.layout.fitted.len()]).unwrap();
+        independent_sds.push(sds(&mode::laplace_from(&independent, &at), &independent, seed));
+    }
+    let rms = |v: &[Vec<f64>], i: usize| (v.iter().map(|s| s[i] * s[i]).sum::<f64>() / v.len() as f64).sqrt();
+    for (i, name) in ["G", "R0", "R1", "D1", "m1", "m2", "n"].iter().enumerate() {
+        let scatter = sd(&centres.iter().map(|c| c[i]).collect::<Vec<f64>>());
+        let (adjusted, independent) = (rms(&adjusted_sds, i) / scatter, rms(&independent_sds, i) / scatter);
+        // the premise: independent noise is too sure of every parameter
+        assert!(independent < 0.6, "{name}: independent sd / scatter {independent:.2}");
+        if !["m1", "m2"].contains(name) {
+            assert!((0.65..1.6).contains(&adjusted), "{name}: adjusted sd / scatter {adjusted:.2} (independent {independent:.2})");
+        }
+    }
+}
+
+/// The sample sd.
+fn sd(x: &[f64]) -> f64 {
+    let m = x.iter().sum::<f64>() / x.len() as f64;
+    (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (x.len() as f64 - 1.0)).sqrt()
+}
+
+/// A stored adjustment that does not fit is refused with a message that
+/// names it: a matrix of another size than its centre, an inflation below
+/// 1, or a centre of another size than the model's parameter set.
+#[test]
+fn a_malformed_adjustment_is_refused() {
+    let good = MemoryAdjustment { runs: vec!["a".into()], log_theta_centre: vec![0.0; 7], matrix: vec![vec![0.0; 7]; 7], inflation: vec![1.0; 7] };
+    let with = |a: MemoryAdjustment| {
+        let mut s = adjusted();
+        s.likelihood.memory_adjustment = Some(a);
+        s.check()
+    };
+    assert!(with(good.clone()).is_ok());
+    let cases = [
+        MemoryAdjustment { matrix: vec![vec![0.0; 6]; 7], ..good.clone() },
+        MemoryAdjustment { inflation: vec![0.5; 7], ..good.clone() },
+        MemoryAdjustment { log_theta_centre: vec![0.0; 3], matrix: vec![vec![0.0; 3]; 3], ..good.clone() },
+        MemoryAdjustment { log_theta_centre: vec![f64::NAN; 7], ..good.clone() },
+    ];
+    for bad in cases {
+        let err = with(bad.clone()).expect_err("refused");
+        assert!(err.contains("memory_adjustment"), "{err}");
+    }
+    // an adjustment is only read with memory = "adjusted"
+    let mut tempered = CalibrationSettings::default();
+    tempered.likelihood.memory = Memory::Tempered;
+    tempered.likelihood.memory_adjustment = Some(MemoryAdjustment { log_theta_centre: vec![0.0; 3], matrix: vec![vec![0.0; 3]; 3], ..good });
+    assert!(tempered.check().is_ok());
+}
