@@ -504,4 +504,31 @@ mod tests {
         let picks = systematic_resample(&[0.5, 0.0, 0.25, 0.25], 8);
         assert_eq!(picks, vec![0, 0, 0, 0, 2, 2, 3, 3]);
     }
+
+    /// Leave-one-out weighs a draw by the held-out run's likelihood at the
+    /// parameters the adjusted posterior evaluates it at: from a draw's SI
+    /// parameters, the same θ* as the posterior's own likelihood point
+    /// (through its sampling coordinates), to rounding.
+    #[test]
+    fn held_out_weights_take_the_posteriors_adjusted_parameters() {
+        let campaign = Campaign::load(std::path::Path::new(crate::pipeline::bundled::BUNDLED)).unwrap().at_current(1.0);
+        let mut settings = CalibrationSettings::default();
+        settings.likelihood.memory = crate::posterior::Memory::Adjusted;
+        let centre = [12.2, 11.7, 12.0, 10.3, -12.4, -8.5, 0.18];
+        let matrix: Vec<Vec<f64>> = (0..7).map(|i| (0..7).map(|j| if i == j { 0.3 } else { 0.02 * (i as f64 - j as f64) }).collect()).collect();
+        let ids = campaign.runs.iter().map(|r| r.id().to_string()).collect();
+        settings.likelihood.memory_adjustment = Some(MemoryAdjustment { runs: ids, log_theta_centre: centre.to_vec(), matrix, inflation: vec![1.0; 7] });
+        let post = settings.posterior(&campaign, crate::model::Integrator::default());
+        let a = settings.likelihood.adjustment().unwrap();
+        let mut x = post.layout.theta_coordinates(&[12.25, 11.8, 11.9, 10.1, -12.9, -8.0, 0.2]);
+        x.resize(post.dim(), 0.0);
+        let want = post.params_at_current(&post.likelihood_point(&x), 1.0).to_array();
+        let got = adjusted_params(a, &post.params_at_current(&x, 1.0)).to_array();
+        for (g, w) in got.iter().zip(want) {
+            assert!((g / w - 1.0).abs() < 1e-10, "{got:?} against {want:?}");
+        }
+        // the premise: θ* is not θ
+        let plain = post.params_at_current(&x, 1.0).to_array();
+        assert!(plain.iter().zip(want).all(|(p, w)| (p / w - 1.0).abs() > 1e-3));
+    }
 }
