@@ -198,9 +198,9 @@ fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
                 format!(
                     "{}: the MAP residuals have a lag-1 autocorrelation of {rho:.2}, but the noise model takes them as independent; \
                      parameter intervals are too narrow by about {factor:.1}× (see the report's model adequacy section); \
-                     `--memory tempered` widens them by the measured memory at no cost per step, `--noise discrepancy` models this memory as a force the law lacks, \
+                     `--memory tempered` widens them by the measured memory at no cost per step (`--memory adjusted`: parameter by parameter), `--noise discrepancy` models this memory as a force the law lacks, \
                      and `--per-run` gives intervals that hold for a new test of this damper \
-                     (docs/calibration.md, \"The tempered likelihood\", \"Model discrepancy\", \"The between-run layer\")",
+                     (docs/calibration.md, \"The tempered likelihood\", \"The adjusted likelihood\", \"Model discrepancy\", \"The between-run layer\")",
                     run.id
                 )
             }
