@@ -47,9 +47,8 @@ pub struct LikelihoodSettings {
     /// when the calibration starts; the run's log-likelihood counts 1/k.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub memory_times: BTreeMap<String, f64>,
-    /// With `memory = "adjusted"`: the curvature adjustment measured at the
-    /// MAP of the independent likelihood, filled in when the calibration
-    /// starts.
+    /// With `memory = "adjusted"`: the curvature adjustment measured with
+    /// the independent likelihood, filled in when the calibration starts.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub memory_adjustment: Option<MemoryAdjustment>,
 }
@@ -77,7 +76,7 @@ impl Allowance {
 /// The curvature adjustment of the likelihood for the memory of its
 /// residuals (docs/calibration.md, "The adjusted likelihood"): the
 /// likelihood is evaluated at ln θ* = c + C (ln θ − c) instead of ln θ, with
-/// c the MAP of the independent likelihood and C chosen so that the
+/// c the mode of the independent posterior and C chosen so that the
 /// likelihood's curvature there becomes H V⁻¹ H (H its curvature, V the
 /// covariance of its score given the residuals' memory; Chandler & Bate
 /// 2007, Ribatet, Cooley & Davison 2012). θ is the B-P parameter set of
@@ -88,7 +87,8 @@ pub struct MemoryAdjustment {
     /// The runs it was measured on (a calibration of some of them, such as
     /// a held-out posterior, keeps it; one of other runs measures anew).
     pub runs: Vec<String>,
-    /// c: ln θ at the MAP, SI units, in the order of the parameter names.
+    /// c: ln θ at the independent posterior's mode, SI units, in the order
+    /// of the parameter names.
     pub log_theta_centre: Vec<f64>,
     /// C, row by row.
     pub matrix: Vec<Vec<f64>>,
