@@ -1,7 +1,7 @@
 //! The adjusted likelihood (`[likelihood] memory = "adjusted"`): the
-//! likelihood evaluated at ln θ* = c + C (ln θ − c), its curvature at the
-//! independent posterior's mode set to H V⁻¹ H, V the covariance of its
-//! score given the residuals' memory.
+//! likelihood evaluated at x* = c + C (x − c) in the sampler's θ
+//! coordinates, its curvature at the independent posterior's mode set to
+//! H V⁻¹ H, V the covariance of its score given the residuals' memory.
 
 use mrbp::calibrate::{start, CalibrationSettings};
 use mrbp::data::Campaign;
@@ -37,19 +37,26 @@ fn adjusted() -> CalibrationSettings {
 }
 
 /// The adjusted log-density is the prior at θ plus each run's
-/// log-likelihood at θ*: the parameters c + C (ln θ − c) computed here from
-/// the stored centre and matrix, the law integrated with them directly
-/// (not through the sampler's coordinates).
+/// log-likelihood at θ*: the coordinates c + C (x − c) computed here from
+/// the stored centre and matrix, the law integrated with their parameters
+/// directly.
 #[test]
 fn the_likelihood_is_evaluated_at_the_moved_parameters() {
     let (_dir, campaign) = campaign(3, 0.0);
     let map = start(&campaign, &CalibrationSettings::default(), &mut |_| {}).unwrap().map;
     let mut settings = adjusted();
     let independent = settings.posterior(&campaign, Integrator::default());
-    let centre: Vec<f64> = independent.layout.log_theta(&map.x).iter().map(|v| v + 0.01).collect();
+    let centre: Vec<f64> = map.x[..7].iter().map(|v| v + 0.01).collect();
     // a matrix far from the identity, with every entry set
     let matrix: Vec<Vec<f64>> = (0..7).map(|i| (0..7).map(|j| if i == j { 0.4 + 0.05 * i as f64 } else { 0.01 * (i as f64 - j as f64) }).collect()).collect();
-    let adjustment = MemoryAdjustment { runs: campaign.runs.iter().map(|r| r.id().to_string()).collect(), log_theta_centre: centre.clone(), matrix: matrix.clone(), inflation: vec![1.0; 7] };
+    let adjustment = MemoryAdjustment {
+        runs: campaign.runs.iter().map(|r| r.id().to_string()).collect(),
+        coordinates: independent.layout.theta_names().to_vec(),
+        reference_work_pa: independent.layout.reference_work(),
+        centre: centre.clone(),
+        matrix: matrix.clone(),
+        inflation: vec![1.0; 7],
+    };
     settings.likelihood.memory_adjustment = Some(adjustment);
     let post = settings.posterior(&campaign, Integrator::default());
     // a point a little away from the MAP
@@ -57,9 +64,9 @@ fn the_likelihood_is_evaluated_at_the_moved_parameters() {
     for (i, v) in x.iter_mut().take(7).enumerate() {
         *v += 0.002 * (i as f64 - 3.0);
     }
-    let log_theta = post.layout.log_theta(&x);
-    let moved: Vec<f64> = (0..7).map(|i| centre[i] + (0..7).map(|j| matrix[i][j] * (log_theta[j] - centre[j])).sum::<f64>()).collect();
-    let params = Params::from_array(std::array::from_fn(|i| moved[i].exp()));
+    let moved: Vec<f64> = (0..7).map(|i| centre[i] + (0..7).map(|j| matrix[i][j] * (x[j] - centre[j])).sum::<f64>()).collect();
+    let log_theta = post.layout.log_theta(&moved);
+    let params = Params::from_array(std::array::from_fn(|i| log_theta[i].exp()));
     let own: f64 = post
         .runs
         .iter()
@@ -136,7 +143,8 @@ fn the_adjusted_sds_are_the_scatter_of_the_estimate() {
     for seed in 101..=130u64 {
         let (_d, c) = campaign(seed, 80.0);
         let s = start(&c, &adjusted(), &mut |_| {}).unwrap();
-        centres.push(s.settings.likelihood.memory_adjustment.clone().expect("measured").log_theta_centre);
+        let a = s.settings.likelihood.memory_adjustment.clone().expect("measured");
+        centres.push(s.posterior.layout.log_theta(&a.centre));
         adjusted_sds.push(sds(&mode::laplace_from(&s.posterior, &s.map), &s.posterior, seed));
         let independent = CalibrationSettings::default().posterior(&c, s.posterior.integrator);
         let at = map::refine(&independent, &s.map.x[..independent.layout.fitted.len()]).unwrap();
@@ -165,7 +173,8 @@ fn sd(x: &[f64]) -> f64 {
 /// 1, or a centre of another size than the model's parameter set.
 #[test]
 fn a_malformed_adjustment_is_refused() {
-    let good = MemoryAdjustment { runs: vec!["a".into()], log_theta_centre: vec![0.0; 7], matrix: vec![vec![0.0; 7]; 7], inflation: vec![1.0; 7] };
+    let names: Vec<String> = ["ln G", "a", "b", "c", "d", "e", "f"].iter().map(|s| s.to_string()).collect();
+    let good = MemoryAdjustment { runs: vec!["a".into()], coordinates: names, reference_work_pa: Some(1e6), centre: vec![0.0; 7], matrix: vec![vec![0.0; 7]; 7], inflation: vec![1.0; 7] };
     let with = |a: MemoryAdjustment| {
         let mut s = adjusted();
         s.likelihood.memory_adjustment = Some(a);
@@ -175,8 +184,10 @@ fn a_malformed_adjustment_is_refused() {
     let cases = [
         MemoryAdjustment { matrix: vec![vec![0.0; 6]; 7], ..good.clone() },
         MemoryAdjustment { inflation: vec![0.5; 7], ..good.clone() },
-        MemoryAdjustment { log_theta_centre: vec![0.0; 3], matrix: vec![vec![0.0; 3]; 3], ..good.clone() },
-        MemoryAdjustment { log_theta_centre: vec![f64::NAN; 7], ..good.clone() },
+        MemoryAdjustment { centre: vec![0.0; 3], matrix: vec![vec![0.0; 3]; 3], coordinates: good.coordinates[..3].to_vec(), ..good.clone() },
+        MemoryAdjustment { centre: vec![f64::NAN; 7], ..good.clone() },
+        MemoryAdjustment { coordinates: good.coordinates[..6].to_vec(), ..good.clone() },
+        MemoryAdjustment { reference_work_pa: Some(-1.0), ..good.clone() },
     ];
     for bad in cases {
         let err = with(bad.clone()).expect_err("refused");
@@ -185,6 +196,6 @@ fn a_malformed_adjustment_is_refused() {
     // an adjustment is only read with memory = "adjusted"
     let mut tempered = CalibrationSettings::default();
     tempered.likelihood.memory = Memory::Tempered;
-    tempered.likelihood.memory_adjustment = Some(MemoryAdjustment { log_theta_centre: vec![0.0; 3], matrix: vec![vec![0.0; 3]; 3], ..good });
+    tempered.likelihood.memory_adjustment = Some(MemoryAdjustment { centre: vec![0.0; 3], matrix: vec![vec![0.0; 3]; 3], coordinates: good.coordinates[..3].to_vec(), ..good });
     assert!(tempered.check().is_ok());
 }

@@ -306,10 +306,10 @@ impl CalibrationSettings {
         self.likelihood.check()?;
         if let Some(a) = self.likelihood.adjustment() {
             let d = self.parameter_model().names().len();
-            if self.parameter_model() != ParameterModel::PerCurrent || a.log_theta_centre.len() != d {
+            if self.parameter_model() != ParameterModel::PerCurrent || a.centre.len() != d {
                 return Err(format!(
                     "memory_adjustment: {} parameters, but the adjusted likelihood takes the {} of one parameter set per current (not the current law)",
-                    a.log_theta_centre.len(),
+                    a.centre.len(),
                     PARAM_NAMES.len()
                 ));
             }

@@ -48,6 +48,15 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     let search_scheme = if integ.scheme == SchemeChoice::Auto { Scheme::LinearlyImplicit } else { integ.scheme.scheme() };
     let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
     let posterior = settings.posterior(campaign, base);
+    if let Some(a) = posterior.likelihood.adjustment() {
+        if a.coordinates != posterior.layout.theta_names() {
+            return Err(Error::Usage(format!(
+                "memory_adjustment was measured in the coordinates {:?}, this calibration's are {:?}: remove [likelihood.memory_adjustment] to measure it anew",
+                a.coordinates,
+                posterior.layout.theta_names()
+            )));
+        }
+    }
     // the sampler's settings are checked before minutes of MAP search
     if settings.sampler.walkers != 0 {
         let s = &settings.sampler;

@@ -75,21 +75,28 @@ impl Allowance {
 
 /// The curvature adjustment of the likelihood for the memory of its
 /// residuals (docs/calibration.md, "The adjusted likelihood"): the
-/// likelihood is evaluated at ln θ* = c + C (ln θ − c) instead of ln θ, with
-/// c the mode of the independent posterior and C chosen so that the
-/// likelihood's curvature there becomes H V⁻¹ H (H its curvature, V the
-/// covariance of its score given the residuals' memory; Chandler & Bate
-/// 2007, Ribatet, Cooley & Davison 2012). θ is the B-P parameter set of
-/// one current, in ln SI units.
+/// likelihood is evaluated at x* = c + C (x − c) instead of x, x the
+/// sampler's θ coordinates (ln G, ln (R0 + D1), …, in which the likelihood
+/// is close to Gaussian), c the mode of the independent posterior and C
+/// chosen so that the likelihood's curvature there becomes H V⁻¹ H (H its
+/// curvature, V the covariance of its score given the residuals' memory;
+/// Chandler & Bate 2007, Ribatet, Cooley & Davison 2012). θ is the B-P
+/// parameter set of one current.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MemoryAdjustment {
     /// The runs it was measured on (a calibration of some of them, such as
     /// a held-out posterior, keeps it; one of other runs measures anew).
     pub runs: Vec<String>,
-    /// c: ln θ at the independent posterior's mode, SI units, in the order
-    /// of the parameter names.
-    pub log_theta_centre: Vec<f64>,
+    /// The θ coordinates x, by name (the calibration's own; a calibration
+    /// in other coordinates refuses the adjustment).
+    pub coordinates: Vec<String>,
+    /// The reference plastic work W* (Pa) of the hardening coordinates it
+    /// was measured in, which a calibration of some of the runs keeps.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_work_pa: Option<f64>,
+    /// c: x at the independent posterior's mode.
+    pub centre: Vec<f64>,
     /// C, row by row.
     pub matrix: Vec<Vec<f64>>,
     /// The variance inflation of each principal direction (the eigenvalues
@@ -99,22 +106,25 @@ pub struct MemoryAdjustment {
 }
 
 impl MemoryAdjustment {
-    /// ln θ* from ln θ.
-    pub fn apply(&self, log_theta: &[f64]) -> Vec<f64> {
-        let c = &self.log_theta_centre;
+    /// x* from the θ coordinates x.
+    pub fn apply(&self, x: &[f64]) -> Vec<f64> {
+        let c = &self.centre;
         self.matrix
             .iter()
             .zip(c)
-            .map(|(row, ci)| ci + row.iter().zip(log_theta.iter().zip(c)).map(|(a, (v, cj))| a * (v - cj)).sum::<f64>())
+            .map(|(row, ci)| ci + row.iter().zip(x.iter().zip(c)).map(|(a, (v, cj))| a * (v - cj)).sum::<f64>())
             .collect()
     }
 
     fn check(&self) -> Result<(), String> {
-        let d = self.log_theta_centre.len();
-        if d == 0 || self.matrix.len() != d || self.matrix.iter().any(|r| r.len() != d) {
-            return Err(format!("memory_adjustment: the matrix must be {d} × {d}, as many rows and columns as log_theta_centre has values"));
+        let d = self.centre.len();
+        if d == 0 || self.matrix.len() != d || self.matrix.iter().any(|r| r.len() != d) || self.coordinates.len() != d {
+            return Err(format!("memory_adjustment: the matrix must be {d} × {d} and name {d} coordinates, as many as centre has values"));
         }
-        if self.log_theta_centre.iter().chain(self.matrix.iter().flatten()).chain(&self.inflation).any(|v| !v.is_finite()) {
+        if self.reference_work_pa.is_some_and(|w| !(w > 0.0 && w.is_finite())) {
+            return Err("memory_adjustment: reference_work_pa must be positive".into());
+        }
+        if self.centre.iter().chain(self.matrix.iter().flatten()).chain(&self.inflation).any(|v| !v.is_finite()) {
             return Err("memory_adjustment: every value must be finite".into());
         }
         if self.inflation.iter().any(|v| *v < 1.0) {

@@ -3,13 +3,14 @@
 //! adjusted likelihood").
 //!
 //! At the MAP of the independent likelihood's surrogate, with J the
-//! Jacobian of the whitened residuals (in ln θ, the model terms beside),
+//! Jacobian of the whitened residuals (in the sampler's θ coordinates x, in
+//! which the likelihood is close to Gaussian; the model terms beside),
 //! the likelihood's curvature is H = JᵀJ while its score −Jᵀe has
 //! covariance V = Σ_runs J_rᵀ R_r J_r, R_r the correlation matrix of run
 //! r's whitened residuals (Toeplitz, from their autocorrelation about zero
 //! out to Geyer's initial positive sequence). With memory, V exceeds H and
 //! the sandwich H⁻¹VH⁻¹ is θ's covariance; the likelihood evaluated at
-//! ln θ* = c + C (ln θ − c), c the independent posterior's mode, has
+//! x* = c + C (x − c), c the independent posterior's mode, has
 //! curvature CᵀHC, which C = H^(−½) D^(−½) H^(½), D = H^(−½) V H^(−½),
 //! makes H V⁻¹ H (Chandler & Bate 2007; Ribatet, Cooley & Davison 2012).
 //! D's eigenvalues are the variance inflation of each direction: the
@@ -47,18 +48,7 @@ pub fn adjustment(post: &Posterior, map: &MapEstimate, centre: &[f64]) -> Option
     if jac.nrows() < rows || jac.ncols() != nf {
         return None;
     }
-    // columns in ln θ: J_lnθ = J_x (∂ln θ/∂x)⁻¹, the terms as they are
-    let at = l.log_theta(&map.x);
-    let h = 1e-7;
-    let a = DMatrix::from_fn(nt, nt, |i, j| {
-        let mut y = map.x.clone();
-        y[j] += h;
-        (l.log_theta(&y)[i] - at[i]) / h
-    });
-    let a_inv = a.try_inverse()?;
-    let mut j = jac.rows(0, rows).into_owned();
-    let theta_cols = j.columns(0, nt) * &a_inv;
-    j.columns_mut(0, nt).copy_from(&theta_cols);
+    let j = jac.rows(0, rows).into_owned();
     // H = JᵀJ (the terms' priors keep their block determined)
     let mut hess = j.transpose() * &j;
     for k in l.spring.clone() {
@@ -115,7 +105,9 @@ pub fn adjustment(post: &Posterior, map: &MapEstimate, centre: &[f64]) -> Option
     sorted.sort_by(|a, b| b.total_cmp(a));
     Some(MemoryAdjustment {
         runs: post.runs.iter().map(|r| r.id.clone()).collect(),
-        log_theta_centre: l.log_theta(centre),
+        coordinates: l.theta_names().to_vec(),
+        reference_work_pa: l.reference_work(),
+        centre: centre[..nt].to_vec(),
         matrix: (0..nt).map(|i| c.row(i).iter().copied().collect()).collect(),
         inflation: sorted,
     })

@@ -55,6 +55,10 @@ pub struct Posterior {
     pub integrator: Integrator,
     pub terms: ModelTerms,
     pub layout: Layout,
+    /// With the adjusted likelihood: the coordinates its matrix acts in
+    /// (this posterior's own; a copy searched in other coordinates, by the
+    /// MAP search, carries them over).
+    adjusted_in: Option<Arc<Layout>>,
 }
 
 impl Posterior {
@@ -77,9 +81,12 @@ impl Posterior {
         let noise = likelihood.noise_model(sigma_bounds);
         let mut layout = Layout::new(&model, &ids, noise.as_ref(), coordinates, terms);
         if coordinates == Coordinates::Hardening {
-            layout.harden(&model, Hardening::reference_work(&runs));
+            // the adjusted likelihood's coordinates are those it was measured in
+            let stored = likelihood.adjustment().and_then(|a| a.reference_work_pa);
+            layout.harden(&model, stored.or_else(|| Hardening::reference_work(&runs)));
         }
         Posterior {
+            adjusted_in: likelihood.adjustment().map(|_| Arc::new(layout.clone())),
             layout,
             noise,
             terms: terms.clone(),
@@ -102,18 +109,23 @@ impl Posterior {
 
     /// Where the likelihood is evaluated for the point `x`: `x` itself, or
     /// with the adjusted likelihood ([`Memory::Adjusted`]) the point whose
-    /// ln θ is the adjustment's ln θ* (the model terms and the noise as in
-    /// `x`). The prior is always evaluated at `x`.
+    /// θ coordinates are the adjustment's x* (the model terms and the noise
+    /// as in `x`). The prior is always evaluated at `x`.
     pub fn likelihood_point<'a>(&self, x: &'a [f64]) -> Cow<'a, [f64]> {
-        match self.likelihood.adjustment() {
-            Some(a) => {
-                let moved = self.layout.theta_coordinates(&a.apply(&self.layout.log_theta(x)));
-                let mut y = x.to_vec();
-                y[self.layout.theta.clone()].copy_from_slice(&moved[..self.layout.theta.len()]);
-                Cow::Owned(y)
-            }
-            None => Cow::Borrowed(x),
-        }
+        let (Some(a), Some(own)) = (self.likelihood.adjustment(), &self.adjusted_in) else {
+            return Cow::Borrowed(x);
+        };
+        let theta = self.layout.theta.clone();
+        let moved = if self.layout == **own {
+            a.apply(&x[theta.clone()])
+        } else {
+            // through ln θ from the coordinates searched in
+            let log_theta = own.log_theta(&a.apply(&own.theta_coordinates(&self.layout.log_theta(x))));
+            self.layout.theta_coordinates(&log_theta)
+        };
+        let mut y = x.to_vec();
+        y[theta].copy_from_slice(&moved[..self.layout.theta.len()]);
+        Cow::Owned(y)
     }
 
     /// The B-P parameters at a coil current, from the sampler's coordinates `x`.
