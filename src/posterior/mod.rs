@@ -128,6 +128,24 @@ impl Posterior {
         Cow::Owned(y)
     }
 
+    /// This posterior with the independent likelihood, in the same
+    /// coordinates.
+    pub fn without_adjustment(&self) -> Posterior {
+        let mut p = self.clone();
+        p.likelihood.memory = Memory::Independent;
+        p.adjusted_in = None;
+        p
+    }
+
+    /// This posterior with its adjustment centred on the point `x`.
+    pub fn recentred(&self, x: &[f64]) -> Posterior {
+        let mut p = self.clone();
+        if let Some(a) = p.likelihood.memory_adjustment.as_mut() {
+            a.centre = x[self.layout.theta.clone()].to_vec();
+        }
+        p
+    }
+
     /// The B-P parameters at a coil current, from the sampler's coordinates `x`.
     pub fn params_at_current(&self, x: &[f64], current_a: f64) -> Params {
         self.model.params(&self.theta(x), current_a)

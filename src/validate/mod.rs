@@ -265,7 +265,10 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         None => psis::smooth(&target.log_weights(&paths, &own)),
     };
     let mut row = LooRow { coverage: CoverageRow::default(), pareto_k: reweighted.k_hat, pareto_k_laplace: f64::NAN, by: HeldOutBy::Reweighting, max_rhat: f64::NAN };
-    let prediction = if reweighted.k_hat <= psis::K_THRESHOLD {
+    // an adjusted held-out posterior is centred on its own likelihood's peak
+    // (below), which the full posterior's draws do not weigh
+    let adjusted = lik.adjustment().is_some();
+    let prediction = if reweighted.k_hat <= psis::K_THRESHOLD && !adjusted {
         let draws: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw_without(s, c, left_out.id(), current)).collect();
         target.weighted_bands(&draws, &paths, &reweighted.weights, loo.draws)?
     } else {
@@ -275,6 +278,10 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         let kept = full.campaign.filtered(|r| r.id() != left_out.id());
         let posterior = settings.posterior(&kept, target.predict.integrator);
         let start = weighted_mean_theta(full, &posterior, &positions, &reweighted.weights);
+        let posterior = match adjusted {
+            true => recentred(&posterior, &start).ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the mode of the independent likelihood was not found", left_out.id())))?,
+            false => posterior,
+        };
         let map = map::basin(&posterior, &start)
             .ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the MAP search failed", left_out.id())))?;
         let laplace = mode::laplace_from(&posterior, &map);
@@ -290,6 +297,18 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
     };
     row.coverage = prediction.coverage.clone();
     Ok(Weighed::Done(Box::new(HeldOut { prediction, row })))
+}
+
+/// The adjusted posterior `post` of the runs kept, its adjustment centred
+/// on the mode of their independent posterior (searched from `start`):
+/// the adjusted likelihood's peak lies C⁻¹ times as far from the centre as
+/// the likelihood's own, so a held-out posterior centred on the full
+/// calibration's mode would be pushed away by the run left out's pull.
+fn recentred(post: &Posterior, start: &[f64]) -> Option<Posterior> {
+    let plain = post.without_adjustment();
+    let map = map::basin(&plain, start)?;
+    let mode = mode::newton(&plain, &map::laplace(&plain, &map))?;
+    Some(post.recentred(&mode.x))
 }
 
 /// The parameters at which the adjusted likelihood of `post` evaluates a
