@@ -29,7 +29,6 @@ use rayon::prelude::*;
 use crate::data::{RecordPart, RunData};
 use crate::posterior::map;
 use crate::posterior::mode;
-use crate::model::Params;
 use crate::posterior::{Draw, Draws, Posterior};
 use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictOptions, PredictSettings, RunBands, RunPrediction};
 use crate::sampler::elliptical::t_factor;
@@ -254,19 +253,11 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
     // the run's own force offset (and the spring) in each full-posterior draw
     let own: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw(s, c, left_out.id(), current)).collect();
     let paths = model_paths(&target.data, &own, &target.predict.integrator, &|| {});
-    // the adjusted likelihood weighs each draw's θ* (the bands keep θ), in
-    // the coordinates of the full posterior
-    let reweighted = match lik.adjustment() {
-        Some(_) => {
-            let coordinates = settings.posterior(full.campaign, target.predict.integrator);
-            let moved: Vec<Draw> = own.iter().map(|d| Draw { params: adjusted_params(&coordinates, &d.params), ..*d }).collect();
-            psis::smooth(&target.log_weights(&model_paths(&target.data, &moved, &target.predict.integrator, &|| {}), &moved))
-        }
-        None => psis::smooth(&target.log_weights(&paths, &own)),
-    };
+    let reweighted = psis::smooth(&target.log_weights(&paths, &own));
     let mut row = LooRow { coverage: CoverageRow::default(), pareto_k: reweighted.k_hat, pareto_k_laplace: f64::NAN, by: HeldOutBy::Reweighting, max_rhat: f64::NAN };
     // an adjusted held-out posterior is centred on its own likelihood's peak
-    // (below), which the full posterior's draws do not weigh
+    // (below), which the full posterior's draws do not weigh: there these
+    // weights only start the search for its mode
     let adjusted = lik.adjustment().is_some();
     let prediction = if reweighted.k_hat <= psis::K_THRESHOLD && !adjusted {
         let draws: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw_without(s, c, left_out.id(), current)).collect();
@@ -309,17 +300,6 @@ fn recentred(post: &Posterior, start: &[f64]) -> Option<Posterior> {
     let map = map::basin(&plain, start)?;
     let mode = mode::newton(&plain, &map::laplace(&plain, &map))?;
     Some(post.recentred(&mode.x))
-}
-
-/// The parameters at which the adjusted likelihood of `post` evaluates a
-/// draw's `params` (one parameter set per current): x* of their θ
-/// coordinates.
-fn adjusted_params(post: &Posterior, params: &Params) -> Params {
-    let l = &post.layout;
-    let x = l.theta_coordinates(&params.to_array().map(f64::ln));
-    let moved = post.likelihood_point(&x);
-    let log_theta = l.log_theta(&moved);
-    Params::from_array(std::array::from_fn(|i| log_theta[i].exp()))
 }
 
 /// Importance sampling from the held-out posterior's Laplace approximation
@@ -528,40 +508,5 @@ mod tests {
     fn systematic_resampling_follows_the_weights() {
         let picks = systematic_resample(&[0.5, 0.0, 0.25, 0.25], 8);
         assert_eq!(picks, vec![0, 0, 0, 0, 2, 2, 3, 3]);
-    }
-
-    /// Leave-one-out weighs a draw by the held-out run's likelihood at the
-    /// parameters the adjusted posterior evaluates it at: from a draw's SI
-    /// parameters, the θ* of x* = c + C (x − c) in the posterior's θ
-    /// coordinates, computed here from the matrix, to rounding.
-    #[test]
-    fn held_out_weights_take_the_posteriors_adjusted_parameters() {
-        let campaign = Campaign::load(std::path::Path::new(crate::pipeline::bundled::BUNDLED)).unwrap().at_current(1.0);
-        let mut settings = CalibrationSettings::default();
-        settings.likelihood.memory = crate::posterior::Memory::Adjusted;
-        let plain = settings.posterior(&campaign, crate::model::Integrator::default());
-        let centre = plain.layout.theta_coordinates(&[12.2, 11.7, 12.0, 10.3, -12.4, -8.5, 0.18]);
-        let matrix: Vec<Vec<f64>> = (0..7).map(|i| (0..7).map(|j| if i == j { 0.3 } else { 0.02 * (i as f64 - j as f64) }).collect()).collect();
-        let ids = campaign.runs.iter().map(|r| r.id().to_string()).collect();
-        let adjustment = crate::posterior::MemoryAdjustment {
-            runs: ids,
-            coordinates: plain.layout.theta_names().to_vec(),
-            reference_work_pa: plain.layout.reference_work(),
-            centre: centre.clone(),
-            matrix: matrix.clone(),
-            inflation: vec![1.0; 7],
-        };
-        settings.likelihood.memory_adjustment = Some(adjustment);
-        let post = settings.posterior(&campaign, crate::model::Integrator::default());
-        let x = post.layout.theta_coordinates(&[12.25, 11.8, 11.9, 10.1, -12.9, -8.0, 0.2]);
-        let moved: Vec<f64> = (0..7).map(|i| centre[i] + (0..7).map(|j| matrix[i][j] * (x[j] - centre[j])).sum::<f64>()).collect();
-        let want: Vec<f64> = post.layout.log_theta(&moved).into_iter().map(f64::exp).collect();
-        let got = adjusted_params(&post, &Params::from_array(std::array::from_fn(|i| post.layout.log_theta(&x)[i].exp()))).to_array();
-        for (g, w) in got.iter().zip(&want) {
-            assert!((g / w - 1.0).abs() < 1e-10, "{got:?} against {want:?}");
-        }
-        // the premise: θ* is not θ
-        let theta = post.layout.log_theta(&x);
-        assert!(theta.iter().zip(&want).all(|(t, w)| (t.exp() / w - 1.0).abs() > 1e-3));
     }
 }
