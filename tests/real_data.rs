@@ -83,8 +83,8 @@ fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
     let printed = run(&["sample", m.to_str().unwrap(), "--current", "1.0", "--config", &c, "--out", &d]);
     assert!(printed.contains("lag-1 autocorrelation"), "{printed}");
     assert!(!printed.contains("far from its Laplace approximation"), "{printed}");
-    // and says in one line what models it
-    assert!(printed.contains("`--noise discrepancy` models this memory"), "{printed}");
+    // and says once, in one line, what takes it into the intervals
+    assert_eq!(printed.matches("`--noise discrepancy` models the memory").count(), 1, "once in the summary, not once a run: {printed}");
     run(&["report", &d]);
 
     let record = std::fs::read_to_string(dir.join("calibration.toml")).unwrap();

@@ -27,7 +27,7 @@ use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
 pub use record::{command_line, CalibrationRecord, StepRow};
 pub use sampling::Sampled;
-pub use start::{start, Start, MEMORY_WARNING};
+pub use start::{start, Start, MEMORY_REMEDY, MEMORY_WARNING};
 pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
 
 /// A calibration: its settings, what it did, its posterior sample and

@@ -180,7 +180,8 @@ pub const MEMORY_WARNING: f64 = 0.5;
 
 /// A warning per run whose MAP residuals, whitened as the noise model
 /// whitens them, are still correlated in time: the model reads them as
-/// more independent evidence than they are.
+/// more independent evidence than they are. Under independent noise one
+/// more line after them says once what to do about it.
 fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
     // the tempered or adjusted likelihood has counted the memory in
     if posterior.likelihood.memory != Memory::Independent {
@@ -190,7 +191,7 @@ fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
         return Vec::new();
     };
     let models_memory = posterior.noise.models_memory();
-    posterior
+    let mut warnings: Vec<String> = posterior
         .runs
         .iter()
         .zip(rhos)
@@ -206,14 +207,22 @@ fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
             } else {
                 format!(
                     "{}: the MAP residuals have a lag-1 autocorrelation of {rho:.2}, but the noise model takes them as independent; \
-                     parameter intervals are too narrow by about {factor:.1}× (see the report's model adequacy section); \
-                     `--memory tempered` widens them by the measured memory at no cost per step (`--memory adjusted`: parameter by parameter), `--noise discrepancy` models this memory as a force the law lacks, \
-                     and `--per-run` gives intervals that hold for a new test of this damper \
-                     (docs/calibration.md, \"The tempered likelihood\", \"The adjusted likelihood\", \"Model discrepancy\", \"The between-run layer\")",
+                     parameter intervals are too narrow by about {factor:.1}×",
                     run.id
                 )
             }
         })
-        .collect()
+        .collect();
+    if !warnings.is_empty() && !models_memory {
+        warnings.push(MEMORY_REMEDY.to_string());
+    }
+    warnings
 }
+
+/// What to do about residuals with memory under independent noise: said
+/// once after the runs' warnings.
+pub const MEMORY_REMEDY: &str = "about the runs' residual memory (the report's model adequacy section): `--memory tempered` widens the intervals by the measured memory \
+     at no cost per step (`--memory adjusted`: parameter by parameter), `--noise discrepancy` models the memory as a force the law lacks, \
+     and `--per-run` gives intervals that hold for a new test of this damper \
+     (docs/calibration.md, \"The tempered likelihood\", \"The adjusted likelihood\", \"Model discrepancy\", \"The between-run layer\")";
 
