@@ -116,6 +116,12 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
     ok(&o);
     let printed = String::from_utf8_lossy(&o.stdout);
     assert!(printed.contains("each run as a new test of the between-run layer"), "{printed}");
+    // each run alone in one line (its parameters are in the consistency
+    // table), the joint calibration's summary table once
+    for (id, ..) in runs {
+        assert_eq!(printed.matches(&format!("{id} alone: ")).count(), 1, "{printed}");
+    }
+    assert_eq!(printed.matches("posterior at 1 A:").count(), 1, "{printed}");
     let folder = out.join("I1.0A");
     let table = read_parquet(&folder.join("loo_new_test.parquet")).unwrap();
     assert_eq!(column_names(&table), ["run", "current_a", "samples", "inside_p95", "inside_q95", "rmse_q50_pa", "draws", "failed_draws", "calibrated", "lppd", "left_out", "max_r_hat"]);

@@ -18,7 +18,8 @@ pub fn render(e: Event) -> (bool, String) {
         Event::Checked(campaign) => out(text::campaign(campaign)),
         Event::Identified(results) => out(text::identification(results)),
         Event::Calibrating { what, dir } => out(format!("\ncalibrating {what} into {}\n", dir.display())),
-        Event::Calibrated(cal) => out(text::calibration(cal)),
+        Event::Calibrated { cal, alone: false } => out(text::calibration(cal)),
+        Event::Calibrated { cal, alone: true } => out(text::calibration_alone(cal)),
         Event::Predicted { record, dir } => {
             out(format!("{}wrote bands.parquet, coverage.parquet and prediction.toml to {}\n", text::prediction(record), dir.display()))
         }

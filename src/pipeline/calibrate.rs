@@ -88,7 +88,7 @@ impl Pipeline<'_> {
                 used.currents(),
                 if held.is_empty() { String::new() } else { format!(" (holding out {held:?} A)") }
             );
-            return Ok(vec![self.calibrate_into(&used, out, request, &what)?]);
+            return Ok(vec![self.calibrate_into(&used, out, request, &what, false)?]);
         }
         if !request.hold_out_current.is_empty() {
             return Err(Error::Usage("--hold-out-current needs --model current-law or current-curves".into()));
@@ -123,7 +123,7 @@ impl Pipeline<'_> {
     pub fn calibrate_current(&mut self, campaign: &Campaign, c: f64, dir: &Path, request: &SampleRequest) -> Result<CurrentCalibrations> {
         let runs = campaign.at_current(c);
         let what = format!("{} run(s) at {c} A", runs.runs.len());
-        let joint = self.calibrate_into(&runs, dir, request, &what)?;
+        let joint = self.calibrate_into(&runs, dir, request, &what, false)?;
         let alone = if request.per_run { self.runs_alone(&runs, &joint, request)? } else { Vec::new() };
         Ok(CurrentCalibrations { joint, runs, alone })
     }
@@ -136,7 +136,7 @@ impl Pipeline<'_> {
             let id = run.id().to_string();
             let one = campaign.filtered(|r| r.id() == id);
             let dir = joint.dir.join(folders::RUNS).join(&id);
-            alone.push((id.clone(), self.calibrate_into(&one, &dir, request, &format!("run {id} alone"))?));
+            alone.push((id.clone(), self.calibrate_into(&one, &dir, request, &format!("run {id} alone"), true)?));
         }
         for (id, cal) in &alone {
             let rhat = cal.max_rhat();
@@ -222,7 +222,7 @@ impl Pipeline<'_> {
     /// chains, summary, settings and record; the files derived from an
     /// earlier calibration there are removed. `what` names the calibration
     /// in messages.
-    pub fn calibrate_into(&mut self, campaign: &Campaign, dir: &Path, request: &SampleRequest, what: &str) -> Result<Calibration> {
+    pub fn calibrate_into(&mut self, campaign: &Campaign, dir: &Path, request: &SampleRequest, what: &str, alone: bool) -> Result<Calibration> {
         let settings = &request.settings;
         let checkpoint = dir.join(store::folder::CHECKPOINT);
         self.prepare(dir, "--out", &[campaign], &folders::CALIBRATION, request.force || request.resume)?;
@@ -250,7 +250,7 @@ impl Pipeline<'_> {
         let cal = self.write_calibration(campaign, dir, made.calibration, &made.start.identification)?;
         // the chains are complete in chains.parquet: the checkpoint has done its job
         let _ = std::fs::remove_file(&checkpoint);
-        self.emit(Event::Calibrated(&cal));
+        self.emit(Event::Calibrated { cal: &cal, alone });
         Ok(cal)
     }
 

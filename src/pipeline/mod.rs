@@ -41,7 +41,10 @@ pub enum Event<'a> {
     Identified(&'a [CurrentIdentification]),
     /// A calibration (of `what`: runs and currents) is about to start.
     Calibrating { what: &'a str, dir: &'a Path },
-    Calibrated(&'a Calibration),
+    /// A calibration is done; `alone`: one run of a `--per-run` study
+    /// calibrated by itself (its summary is in its folder; a listener may
+    /// say less of it).
+    Calibrated { cal: &'a Calibration, alone: bool },
     Predicted { record: &'a PredictionRecord, dir: &'a Path },
     LeftOneOut { rows: &'a [LooRow], seconds: f64 },
     /// The runs of a calibration, each calibrated alone, against the joint one.

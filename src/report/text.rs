@@ -147,6 +147,31 @@ pub fn calibration(cal: &Calibration) -> String {
     out
 }
 
+/// A run of a `--per-run` study calibrated alone, in one line (its
+/// parameters are in the consistency table that follows, its summary and
+/// report in its folder), with its warnings' count.
+pub fn calibration_alone(cal: &Calibration) -> String {
+    let rec = &cal.record;
+    let runs = rec.runs.join(", ");
+    let memory = rec.model_warnings.iter().filter(|w| w.as_str() != crate::calibrate::MEMORY_REMEDY).count();
+    let mut said = Vec::new();
+    if !rec.warnings.is_empty() {
+        said.push(format!("{} sampler warning(s)", rec.warnings.len()));
+    }
+    if memory > 0 {
+        said.push("residual memory".to_string());
+    }
+    let warnings = if said.is_empty() { String::new() } else { format!("; {} (calibration.toml, report.html)", said.join(", ")) };
+    format!(
+        "{runs} alone: {} walkers × {} steps, largest R̂ {:.4}, smallest ESS {:.0}, {:.1} s{warnings}\n",
+        cal.sample.chains.chains(),
+        rec.steps,
+        cal.max_rhat(),
+        cal.min_ess(),
+        cal.seconds()
+    )
+}
+
 /// The coverage of every predicted run.
 pub fn prediction(record: &PredictionRecord) -> String {
     let mut out = String::new();
