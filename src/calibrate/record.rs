@@ -95,6 +95,12 @@ pub fn command_line() -> String {
 }
 
 impl CalibrationRecord {
+    /// How many runs the residual-memory warning names (its remedy line
+    /// aside).
+    pub fn runs_with_memory(&self) -> usize {
+        self.model_warnings.iter().filter(|w| w.as_str() != super::MEMORY_REMEDY).count()
+    }
+
     /// The record of a calibration of `campaign` that started at `start`,
     /// took `walkers_start` seconds more to place its walkers (the Laplace
     /// approximation at the mode and the initial positions, over which

@@ -163,9 +163,9 @@ fn adjust(campaign: &Campaign, settings: &mut CalibrationSettings, base: Integra
         return Err(Error::Usage("`--memory adjusted` takes one parameter set per current (not the current law); `--memory tempered` takes any".into()));
     }
     // centred on the mode of the independent posterior, not the surrogate's optimum
-    let centre = mode::newton(&posterior, &map::laplace(&posterior, &map)).map_or_else(|| map.x.clone(), |m| m.x);
+    let centre = mode::from_map(&posterior, &map).map_or_else(|| map.x.clone(), |m| m.x);
     let adjustment = memory::adjustment(&posterior, &map, &centre).ok_or_else(|| Error::Compute("the memory adjustment could not be measured at the MAP".into()))?;
-    let (lo, hi) = (adjustment.inflation.last().copied().unwrap_or(1.0), adjustment.inflation.first().copied().unwrap_or(1.0));
+    let (lo, hi) = adjustment.inflation_range();
     log(&format!("  memory: the likelihood's curvature adjusted to its score's covariance given the residuals' memory: variance inflation {lo:.1}–{hi:.1} by direction"));
     settings.likelihood.memory_adjustment = Some(adjustment);
     let adjusted = settings.posterior(campaign, base);

@@ -183,15 +183,15 @@ impl Layout {
         }
     }
 
-    /// Walks the drag stress after plastic work `work` (Pa) in place of
-    /// ln R1 ([`Coordinates::Hardening`]), for the per-current parameters;
-    /// other models, or no work, keep the saturation-share coordinates.
     /// The reference plastic work W* of the hardening coordinates, where
     /// the layout has them.
     pub fn reference_work(&self) -> Option<f64> {
         self.hardening.as_ref().map(|h| h.work)
     }
 
+    /// Walks the drag stress after plastic work `work` (Pa) in place of
+    /// ln R1 ([`Coordinates::Hardening`]), for the per-current parameters;
+    /// other models, or no work, keep the saturation-share coordinates.
     pub fn harden(&mut self, model: &ParameterModel, work: Option<f64>) {
         if let (ParameterModel::PerCurrent, Some(work)) = (model, work) {
             let at = |n: &str| model.index(n);

@@ -116,6 +116,11 @@ impl MemoryAdjustment {
             .collect()
     }
 
+    /// The smallest and largest variance inflation.
+    pub fn inflation_range(&self) -> (f64, f64) {
+        (self.inflation.last().copied().unwrap_or(1.0), self.inflation.first().copied().unwrap_or(1.0))
+    }
+
     fn check(&self) -> Result<(), String> {
         let d = self.centre.len();
         if d == 0 || self.matrix.len() != d || self.matrix.iter().any(|r| r.len() != d) || self.coordinates.len() != d {
@@ -210,9 +215,9 @@ impl LikelihoodSettings {
         if let Some((lo, hi)) = self.memory_range() {
             return Some(Allowance::Tempered { lo, hi });
         }
-        self.adjustment().map(|a| Allowance::Adjusted {
-            lo: a.inflation.last().copied().unwrap_or(1.0),
-            hi: a.inflation.first().copied().unwrap_or(1.0),
+        self.adjustment().map(|a| {
+            let (lo, hi) = a.inflation_range();
+            Allowance::Adjusted { lo, hi }
         })
     }
 

@@ -250,7 +250,7 @@ pub fn basin(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
 
 fn refine_fitting(post: &Posterior, start: &[f64], fits: usize) -> Option<MapEstimate> {
     let nt = post.layout.fitted.len();
-    let searched = post.layout.searched().map(|layout| Posterior { layout, ..post.clone() });
+    let searched = post.layout.searched().map(|layout| post.in_layout(layout));
     let search = searched.as_ref().unwrap_or(post);
     let mut x: Vec<f64> = start[..nt].to_vec();
     carry(&mut x, &post.layout, &search.layout);

@@ -55,9 +55,9 @@ pub struct Posterior {
     pub integrator: Integrator,
     pub terms: ModelTerms,
     pub layout: Layout,
-    /// With the adjusted likelihood: the coordinates its matrix acts in
-    /// (this posterior's own; a copy searched in other coordinates, by the
-    /// MAP search, carries them over).
+    /// With the adjusted likelihood, where this posterior walks other
+    /// coordinates than those its matrix acts in (a copy the MAP search
+    /// made, [`Self::in_layout`]): those.
     adjusted_in: Option<Arc<Layout>>,
 }
 
@@ -86,7 +86,7 @@ impl Posterior {
             layout.harden(&model, stored.or_else(|| Hardening::reference_work(&runs)));
         }
         Posterior {
-            adjusted_in: likelihood.adjustment().map(|_| Arc::new(layout.clone())),
+            adjusted_in: None,
             layout,
             noise,
             terms: terms.clone(),
@@ -112,20 +112,28 @@ impl Posterior {
     /// θ coordinates are the adjustment's x* (the model terms and the noise
     /// as in `x`). The prior is always evaluated at `x`.
     pub fn likelihood_point<'a>(&self, x: &'a [f64]) -> Cow<'a, [f64]> {
-        let (Some(a), Some(own)) = (self.likelihood.adjustment(), &self.adjusted_in) else {
+        let Some(a) = self.likelihood.adjustment() else {
             return Cow::Borrowed(x);
         };
         let theta = self.layout.theta.clone();
-        let moved = if self.layout == **own {
-            a.apply(&x[theta.clone()])
-        } else {
+        let moved = match &self.adjusted_in {
+            None => a.apply(&x[theta.clone()]),
             // through ln θ from the coordinates searched in
-            let log_theta = own.log_theta(&a.apply(&own.theta_coordinates(&self.layout.log_theta(x))));
-            self.layout.theta_coordinates(&log_theta)
+            Some(own) => {
+                let log_theta = own.log_theta(&a.apply(&own.theta_coordinates(&self.layout.log_theta(x))));
+                self.layout.theta_coordinates(&log_theta)
+            }
         };
         let mut y = x.to_vec();
         y[theta].copy_from_slice(&moved[..self.layout.theta.len()]);
         Cow::Owned(y)
+    }
+
+    /// This posterior walked in the coordinates `layout` (the MAP search's):
+    /// an adjusted likelihood still acts in those it was measured in.
+    pub fn in_layout(&self, layout: Layout) -> Posterior {
+        let adjusted_in = self.adjusted_in.clone().or_else(|| self.likelihood.adjustment().map(|_| Arc::new(self.layout.clone())));
+        Posterior { layout, adjusted_in, ..self.clone() }
     }
 
     /// This posterior with the independent likelihood, in the same

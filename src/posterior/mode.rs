@@ -68,8 +68,13 @@ pub struct Mode {
 /// The Laplace approximation of `post` at its mode, reached by [`newton`]
 /// from the MAP's; the MAP's own where the differences cannot be taken.
 pub fn laplace_from(post: &Posterior, map: &MapEstimate) -> Elliptical {
-    let surrogate = map::laplace(post, map);
-    newton(post, &surrogate).map_or(surrogate, |m| m.laplace)
+    from_map(post, map).map_or_else(|| map::laplace(post, map), |m| m.laplace)
+}
+
+/// The mode of `post` reached by [`newton`] from the MAP's Laplace
+/// approximation; `None` where the differences cannot be taken.
+pub fn from_map(post: &Posterior, map: &MapEstimate) -> Option<Mode> {
+    newton(post, &map::laplace(post, map))
 }
 
 /// The log-density in the coordinates z of `start` (x = mean + L z).

@@ -497,7 +497,7 @@ fn verdicts(cal: &Calibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, S
         (
             "residuals as independent as the noise model assumes (MAP lag-1 autocorrelation ≤ 0.5)".to_string(),
             Mark::of(cal.record.model_warnings.is_empty()),
-            format!("{} run(s) with memory: see Model adequacy", cal.record.model_warnings.iter().filter(|w| w.as_str() != crate::calibrate::MEMORY_REMEDY).count()),
+            format!("{} run(s) with memory: see Model adequacy", cal.record.runs_with_memory()),
         ),
     ];
     if let Some(last) = cal.record.step_study.last() {

@@ -153,12 +153,11 @@ pub fn calibration(cal: &Calibration) -> String {
 pub fn calibration_alone(cal: &Calibration) -> String {
     let rec = &cal.record;
     let runs = rec.runs.join(", ");
-    let memory = rec.model_warnings.iter().filter(|w| w.as_str() != crate::calibrate::MEMORY_REMEDY).count();
     let mut said = Vec::new();
     if !rec.warnings.is_empty() {
         said.push(format!("{} sampler warning(s)", rec.warnings.len()));
     }
-    if memory > 0 {
+    if rec.runs_with_memory() > 0 {
         said.push("residual memory".to_string());
     }
     let warnings = if said.is_empty() { String::new() } else { format!("; {} (calibration.toml, report.html)", said.join(", ")) };

@@ -322,7 +322,7 @@ const HOPELESS_K: f64 = 1.5;
 fn recentred(post: &Posterior, start: &[f64]) -> Option<Posterior> {
     let plain = post.without_adjustment();
     let map = map::basin(&plain, start)?;
-    let mode = mode::newton(&plain, &map::laplace(&plain, &map))?;
+    let mode = mode::from_map(&plain, &map)?;
     Some(post.recentred(&mode.x))
 }
 
