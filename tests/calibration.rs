@@ -298,3 +298,72 @@ fn map_search_crosses_the_walls_of_a_truncated_prior() {
         assert!((la[i] - lb[i]).abs() < 0.2 * sd[i], "ln θ[{i}]: {} in the box, {} without (sd {})", la[i], lb[i], sd[i]);
     }
 }
+
+/// The sampler updates each run's discrepancy parameters on their own from
+/// the residuals a full evaluation left behind (its memo): a block's terms
+/// must change exactly as the whole log-density does. Checked on two runs
+/// with errors in variables (the memo carries the stiffness too) and both
+/// model terms, at the MAP and at points with every run's noise moved,
+/// against the log-density itself to 1e-9 of its size.
+#[test]
+fn discrepancy_block_terms_change_as_the_log_density_does() {
+    use mrbp::calibrate::start;
+    use mrbp::noise::NoiseKind;
+    use mrbp::sampler::LogDensity;
+    let dir = tempfile::tempdir().unwrap();
+    let synth = "name = \"rd1005-3-virtual\"\ncurrents_a = [1.0]\nrpms = [100.0, 200.0]\ncycles = 1.0\nrate_hz = 500.0\n\
+        noise_force_n = 12.0\nnoise_displacement_m = 0.000002\nseed = 33\n\
+        [geometry]\narea_m2 = 0.05\ngap_m = 0.001\n[crank]\nradius_m = 0.00675\nrod_m = 0.15\n[law]\nsaturation_a = 1.0\n\
+        [law.at_1a]\nG = 172496.0\nR0 = 102006.0\nR1 = 217448.0\nD1 = 32219.0\nm1 = 0.000004\nm2 = 0.0002\nn = 1.5\n\
+        [extra_force]\nsmooth_sd_n = [30.0]\nsmooth_time_s = [0.02]\nkernel = \"matern32\"\nviscous_n_s_per_m = 0.0\n";
+    std::fs::write(dir.path().join("synth.toml"), synth).unwrap();
+    write_campaign(&SynthSettings::read(&dir.path().join("synth.toml")).unwrap(), dir.path()).unwrap();
+    let campaign = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
+    let mut s = CalibrationSettings::default();
+    s.likelihood.noise = NoiseKind::Discrepancy;
+    s.terms.force_offset = true;
+    s.terms.gas_spring = true;
+    let a = start(&campaign, &s, &mut |_| {}).unwrap();
+    let post = &a.posterior;
+    let (d, blocks) = (post.dim(), post.blocks());
+    assert_eq!(blocks.len(), 2, "one block per run");
+    assert_eq!(blocks[0].len(), 3, "sigma, discrepancy_sd, discrepancy_time");
+    // eight points: the MAP with its noise moved by different amounts
+    let points: Vec<f64> = (0..8)
+        .flat_map(|p| {
+            let mut x = a.map.x.clone();
+            for i in post.layout.noise.clone() {
+                x[i] += 0.05 * (p as f64 - 3.5) * if i % 2 == 0 { 1.0 } else { -0.7 };
+            }
+            x
+        })
+        .collect();
+    let mut lp = vec![0.0; 8];
+    let mut memos = vec![Vec::new(); 8];
+    post.log_density_batch_memo(&points, &mut lp, &mut memos);
+    for (p, x) in points.chunks(d).enumerate() {
+        assert!((lp[p] - post.log_density(x)).abs() < 1e-9 * lp[p].abs(), "memo evaluation {} vs {}", lp[p], post.log_density(x));
+    }
+    let views: Vec<&[f64]> = memos.iter().map(|m| m.as_slice()).collect();
+    for (b, block) in blocks.iter().enumerate() {
+        // the memo's own terms are the block's at the point
+        let mut at = vec![0.0; 8];
+        post.block_log_density_batch(b, &points, &views, &mut at);
+        for p in 0..8 {
+            assert!((at[p] - memos[p][b]).abs() < 1e-9 * at[p].abs(), "block {b}: {} vs memo {}", at[p], memos[p][b]);
+        }
+        let mut moved = points.clone();
+        for (p, x) in moved.chunks_mut(d).enumerate() {
+            for (k, &i) in block.iter().enumerate() {
+                x[i] += 0.1 + 0.03 * (p + k) as f64;
+            }
+        }
+        let mut new = vec![0.0; 8];
+        post.block_log_density_batch(b, &moved, &views, &mut new);
+        for p in 0..8 {
+            let full = post.log_density(&moved[p * d..(p + 1) * d]) - lp[p];
+            assert!(full.abs() > 1e-3, "the move changes the density");
+            assert!((new[p] - at[p] - full).abs() < 1e-9 * lp[p].abs(), "block {b}, point {p}: {} vs {}", new[p] - at[p], full);
+        }
+    }
+}

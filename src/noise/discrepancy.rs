@@ -391,6 +391,10 @@ impl NoiseModel for Discrepancy {
         true
     }
 
+    fn updated_alone(&self) -> bool {
+        true
+    }
+
     fn scorer<'a>(&'a self, run: &'a RunData, coordinates: &[NoiseValues; LANES]) -> Box<dyn RunScorer + 'a> {
         let values = coordinates.map(|c| [c[0].exp(), c[1].exp(), c[2].exp(), 0.0]);
         let processes = values.map(|v| self.process(run, &v));

@@ -232,6 +232,14 @@ pub trait NoiseModel: Send + Sync + std::fmt::Debug {
         false
     }
 
+    /// Whether the sampler updates each run's noise parameters on their
+    /// own as well, given the run's residuals: worth it where the
+    /// parameters are several a run and scoring a run is cheap beside
+    /// integrating the law (the discrepancy model's Kalman filter).
+    fn updated_alone(&self) -> bool {
+        false
+    }
+
     /// Whether the model takes residuals correlated in time (the
     /// residual-memory warning then looks at what it leaves).
     fn models_memory(&self) -> bool {

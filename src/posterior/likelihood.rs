@@ -297,6 +297,22 @@ pub fn run_log_likelihood(
     coordinates: &[NoiseValues; LANES],
     terms: [(f64, f64); LANES],
 ) -> [Option<f64>; LANES] {
+    run_log_likelihood_memo(noise, integrator, run, params, coordinates, terms, &mut [])
+}
+
+/// [`run_log_likelihood`], also appending to `memos[lane]` (for the first
+/// `memos.len()` lanes) what the noise model scores at each sample k = 1…:
+/// the residual, and the stiffness after it where the model takes it
+/// ([`run_score`] reads them back).
+pub fn run_log_likelihood_memo(
+    noise: &dyn NoiseModel,
+    integrator: &Integrator,
+    run: &RunData,
+    params: &LaneParams,
+    coordinates: &[NoiseValues; LANES],
+    terms: [(f64, f64); LANES],
+    memos: &mut [Vec<f64>],
+) -> [Option<f64>; LANES] {
     let with_terms = terms.iter().any(|t| *t != (0.0, 0.0));
     let stiff = noise.uses_stiffness(run);
     let g = if stiff { params.g_bound(run) } else { [0.0; LANES] };
@@ -319,7 +335,44 @@ pub fn run_log_likelihood(
             }
         }
         scorer.push(k, &residual, &stiffness);
+        for (lane, memo) in memos.iter_mut().enumerate() {
+            memo.push(residual[lane]);
+            if stiff {
+                memo.push(stiffness[lane]);
+            }
+        }
     });
     let ll = scorer.finish();
     std::array::from_fn(|lane| outcome[lane].is_ok().then_some(ll[lane]))
+}
+
+/// The noise model's log-likelihood of `run` for up to [`LANES`] memos of
+/// [`run_log_likelihood_memo`] (each this run's part) with these noise
+/// coordinates: the same numbers, without integrating the law.
+pub fn run_score(noise: &dyn NoiseModel, run: &RunData, coordinates: &[NoiseValues; LANES], memos: &[&[f64]]) -> [f64; LANES] {
+    let stride = if noise.uses_stiffness(run) { 2 } else { 1 };
+    // a memo cut short (an integration that failed) is never a walker's
+    let short: [bool; LANES] = std::array::from_fn(|lane| memos[lane.min(memos.len() - 1)].len() < memo_len(noise, run));
+    if short.iter().any(|s| *s) {
+        return [f64::NEG_INFINITY; LANES];
+    }
+    let mut scorer = noise.scorer(run, coordinates);
+    let (mut residual, mut stiffness) = ([0.0; LANES], [0.0; LANES]);
+    for k in 1..run.tau.len() {
+        let at = (k - 1) * stride;
+        for lane in 0..LANES {
+            let memo = memos[lane.min(memos.len() - 1)];
+            residual[lane] = memo[at];
+            if stride == 2 {
+                stiffness[lane] = memo[at + 1];
+            }
+        }
+        scorer.push(k, &residual, &stiffness);
+    }
+    scorer.finish()
+}
+
+/// The length of `run`'s part of a memo ([`run_log_likelihood_memo`]).
+pub fn memo_len(noise: &dyn NoiseModel, run: &RunData) -> usize {
+    run.tau.len().saturating_sub(1) * if noise.uses_stiffness(run) { 2 } else { 1 }
 }

@@ -36,7 +36,7 @@ use crate::noise::{NoiseModel, NoiseValues, MAX_PARAMETERS};
 use crate::sampler::LogDensity;
 use layout::Hardening;
 pub use layout::{unit_of, Coordinates, Layout};
-pub use likelihood::{run_log_likelihood, Allowance, LaneParams, LikelihoodSettings, Memory, MemoryAdjustment};
+pub use likelihood::{run_log_likelihood, run_log_likelihood_memo, run_score, Allowance, LaneParams, LikelihoodSettings, Memory, MemoryAdjustment};
 pub use parameters::{ModelKind, ParameterModel, CURVE_NAMES, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, Draws, PosteriorSample, SummaryRow};
@@ -203,8 +203,10 @@ impl Posterior {
         lp
     }
 
-    /// Log-densities of up to [`LANES`] points integrated together.
-    fn log_density_lanes(&self, xs: &[f64], out: &mut [f64]) {
+    /// Log-densities of up to [`LANES`] points integrated together; with
+    /// `memos` (one per point, or none), each point's residuals for the
+    /// sampler's block updates of the noise ([`LogDensity::blocks`]).
+    fn log_density_lanes(&self, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
         let (d, l) = (self.dim(), &self.layout);
         let count = out.len();
         let point = |lane: usize| &xs[lane * d..(lane + 1) * d];
@@ -218,6 +220,11 @@ impl Posterior {
         // (their results are dropped; an extreme point would only make the
         // other lanes wait for its sub-steps)
         let first_alive = (0..count).find(|&lane| out[lane] > f64::NEG_INFINITY).unwrap_or(0);
+        // each memo: run j's noise terms (filled below), then the runs' residuals
+        for m in memos.iter_mut() {
+            m.clear();
+            m.resize(self.runs.len(), f64::NEG_INFINITY);
+        }
         let moved: Vec<Cow<[f64]>> = (0..count).map(|lane| self.likelihood_point(point(if out[lane] > f64::NEG_INFINITY { lane } else { first_alive }))).collect();
         let alive: Vec<&[f64]> = moved.iter().map(|p| p.as_ref()).collect();
         let mut params = LaneParams::Fixed([Params::reference_1a(); LANES]);
@@ -230,8 +237,13 @@ impl Posterior {
             let coordinates: [NoiseValues; LANES] =
                 std::array::from_fn(|lane| if lane < count { l.noise_values(point(lane), i) } else { [0.0; MAX_PARAMETERS] });
             let terms = std::array::from_fn(|lane| if lane < count { l.terms(point(lane), i) } else { (0.0, 0.0) });
-            let ll = run_log_likelihood(self.noise.as_ref(), &self.integrator, r, &params, &coordinates, terms);
+            let ll = run_log_likelihood_memo(self.noise.as_ref(), &self.integrator, r, &params, &coordinates, terms, memos);
             let weight = self.weight(i);
+            for (lane, m) in memos.iter_mut().enumerate() {
+                if let Some(v) = ll[lane] {
+                    m[i] = self.noise.log_prior(r, &coordinates[lane]) + weight * v;
+                }
+            }
             for (o, ll) in out.iter_mut().zip(ll) {
                 if *o > f64::NEG_INFINITY {
                     *o = ll.map_or(f64::NEG_INFINITY, |v| *o + weight * v);
@@ -253,7 +265,7 @@ impl LogDensity for Posterior {
 
     fn log_density(&self, x: &[f64]) -> f64 {
         let mut out = [0.0];
-        self.log_density_lanes(x, &mut out);
+        self.log_density_lanes(x, &mut out, &mut []);
         out[0]
     }
 
@@ -262,7 +274,52 @@ impl LogDensity for Posterior {
     fn log_density_batch(&self, xs: &[f64], out: &mut [f64]) {
         let d = self.dim();
         for (x, o) in xs.chunks(d * LANES).zip(out.chunks_mut(LANES)) {
-            self.log_density_lanes(x, o);
+            self.log_density_lanes(x, o, &mut []);
+        }
+    }
+
+    /// Each run's noise parameters, where the noise model asks for it
+    /// ([`NoiseModel::updated_alone`]): given the run's residuals, their
+    /// conditional is one pass of the noise model's scorer.
+    fn blocks(&self) -> Vec<Vec<usize>> {
+        let (l, nr) = (&self.layout, self.runs.len());
+        if !self.noise.updated_alone() || l.noise.is_empty() {
+            return Vec::new();
+        }
+        (0..nr).map(|j| (0..self.noise.parameters().len()).map(|p| l.noise.start + p * nr + j).collect()).collect()
+    }
+
+    fn log_density_batch_memo(&self, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
+        let d = self.dim();
+        for ((x, o), m) in xs.chunks(d * LANES).zip(out.chunks_mut(LANES)).zip(memos.chunks_mut(LANES)) {
+            self.log_density_lanes(x, o, m);
+        }
+    }
+
+    /// Run `b`'s noise prior and its weighted log-likelihood, scored from
+    /// the memos' residuals (a memo holds these terms of every run first,
+    /// then each run's residuals in turn).
+    fn block_log_density_batch(&self, b: usize, xs: &[f64], memos: &[&[f64]], out: &mut [f64]) {
+        let (d, l, run) = (self.dim(), &self.layout, &self.runs[b]);
+        let start: usize = self.runs.len() + self.runs[..b].iter().map(|r| likelihood::memo_len(self.noise.as_ref(), r)).sum::<usize>();
+        let end = start + likelihood::memo_len(self.noise.as_ref(), run);
+        let weight = self.weight(b);
+        for ((x, o), m) in xs.chunks(d * LANES).zip(out.chunks_mut(LANES)).zip(memos.chunks(LANES)) {
+            let count = o.len();
+            let point = |lane: usize| &x[lane * d..(lane + 1) * d];
+            for (lane, o) in o.iter_mut().enumerate() {
+                *o = self.noise.log_prior(run, &l.noise_values(point(lane), b));
+            }
+            let Some(alive) = (0..count).find(|&lane| o[lane] > f64::NEG_INFINITY) else {
+                continue;
+            };
+            let coordinates: [NoiseValues; LANES] =
+                std::array::from_fn(|lane| l.noise_values(point(if lane < count && o[lane] > f64::NEG_INFINITY { lane } else { alive }), b));
+            let parts: Vec<&[f64]> = m.iter().map(|memo| memo.get(start..end).unwrap_or(&[])).collect();
+            let ll = likelihood::run_score(self.noise.as_ref(), run, &coordinates, &parts);
+            for (o, ll) in o.iter_mut().zip(ll) {
+                *o = if *o > f64::NEG_INFINITY && ll.is_finite() { *o + weight * ll } else { f64::NEG_INFINITY };
+            }
         }
     }
 }

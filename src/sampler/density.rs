@@ -19,6 +19,34 @@ pub trait LogDensity: Sync {
             *o = self.log_density(x);
         }
     }
+
+    /// Blocks of coordinates whose conditional density, the other
+    /// coordinates held, is cheap once a full evaluation has left its memo
+    /// (the noise parameters of a run, given that run's residuals): the
+    /// sampler then also updates each block on its own between steps
+    /// ([`crate::sampler::ensemble`]). None by default.
+    fn blocks(&self) -> Vec<Vec<usize>> {
+        Vec::new()
+    }
+
+    /// [`LogDensity::log_density_batch`], also writing into `memos[i]`
+    /// (cleared first) what [`LogDensity::block_log_density_batch`] needs
+    /// of point i, after the values of block 0, 1, … 's terms there (as
+    /// [`LogDensity::block_log_density_batch`] gives them; the sampler
+    /// keeps them up to date). Only called where [`LogDensity::blocks`]
+    /// has some.
+    fn log_density_batch_memo(&self, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
+        self.log_density_batch(xs, out);
+        memos.iter_mut().for_each(Vec::clear);
+    }
+
+    /// The terms of the log-density of each point of `xs` that depend on
+    /// block `b`'s coordinates, every other coordinate being those of the
+    /// point `memos[i]` was made at (the memo whole, block terms first):
+    /// ln p(x) up to a constant in the block. −∞ outside the support.
+    fn block_log_density_batch(&self, _b: usize, _xs: &[f64], _memos: &[&[f64]], out: &mut [f64]) {
+        out.fill(f64::NEG_INFINITY);
+    }
 }
 
 /// Points evaluated together in one [`LogDensity::log_density_batch`] call

@@ -75,6 +75,24 @@ impl RunControl {
 /// Index of the stream that seeds an ensemble's mixture fits.
 const FIT_STREAM: u64 = u64::MAX - 2;
 
+/// Index of the stream of a walker's block updates at a step.
+const BLOCK_STREAM: u64 = u64::MAX - 4;
+
+/// Sweeps over the target's blocks ([`LogDensity::blocks`]) after every
+/// step: each block of each walker is proposed this many times. A block's
+/// conditional costs a small share of a full evaluation (the discrepancy
+/// model's Kalman filter over one run, about 1/35 of integrating the
+/// measured damper's four runs at 1 A and scoring them).
+const BLOCK_SWEEPS: usize = 2;
+
+/// The stretch move's scale within a block.
+const BLOCK_STRETCH: f64 = 2.0;
+
+/// The most memory the walkers' memos may take (bytes); beyond it the
+/// blocks are not updated on their own (the ensemble moves still move
+/// them with the rest).
+const MEMO_BUDGET_BYTES: usize = 3 << 30;
+
 /// The sampler: settings, the state, and the history of every step.
 pub struct Sampler<'t, T: LogDensity> {
     target: &'t T,
@@ -88,6 +106,12 @@ pub struct Sampler<'t, T: LogDensity> {
     reference: Option<Elliptical>,
     /// Whether observers were told that this run started.
     announced: bool,
+    /// The target's blocks ([`LogDensity::blocks`]); empty where it has
+    /// none or their memos would not fit in [`MEMO_BUDGET_BYTES`].
+    blocks: Vec<Vec<usize>>,
+    /// Each walker's memo at its current position (empty until made: a
+    /// resumed run remakes them at its first step).
+    memos: Vec<Vec<f64>>,
 }
 
 impl<'t, T: LogDensity> Sampler<'t, T> {
@@ -109,7 +133,13 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             positions.extend_from_slice(x);
         }
         let mut log_prob = vec![0.0; nc];
-        evaluate(target, &positions, &mut log_prob);
+        let mut blocks = target.blocks();
+        let mut memos = vec![Vec::new(); if blocks.is_empty() { 0 } else { nc }];
+        evaluate_memo(target, &positions, &mut log_prob, &mut memos);
+        if memos.iter().map(|m| m.len()).sum::<usize>() * std::mem::size_of::<f64>() * 3 / 2 > MEMO_BUDGET_BYTES {
+            blocks.clear();
+            memos.clear();
+        }
         if let Some(c) = log_prob.iter().position(|lp| *lp == f64::NEG_INFINITY) {
             return Err(Error::Compute(format!(
                 "walker {c} (ensemble {}, walker {}) starts where the log-density is −∞: {:?}",
@@ -132,6 +162,8 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             reference: None,
             settings,
             announced: false,
+            blocks,
+            memos,
         })
     }
 
@@ -140,7 +172,8 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let (settings, chains) = checkpoint::load(path, target.dim())?;
         settings.check(target.dim())?;
         let history = (0, vec![Learned::default(); settings.ensembles]);
-        Ok(Sampler { target, settings, chains, history, reference: None, announced: false })
+        let blocks = target.blocks();
+        Ok(Sampler { target, settings, chains, history, reference: None, announced: false, blocks, memos: Vec::new() })
     }
 
     /// The sampler with a fixed reference distribution for
@@ -249,13 +282,19 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let seed = self.settings.seed;
         let moves: Vec<Move> = (0..ne).map(|e| self.pick_move(e as u64, step)).collect();
         self.fit_history(step as usize);
-        let history = &self.history.1;
-        let reference = self.reference.as_ref();
         let mut pos = self.chains.last_positions().to_vec();
         let mut lp = self.chains.last_log_prob().to_vec();
+        if !self.blocks.is_empty() && self.memos.len() != nc {
+            // a resumed run: the memos at the stored positions (their
+            // log-densities are those stored)
+            self.memos = vec![Vec::new(); nc];
+            evaluate_memo(self.target, &pos, &mut vec![0.0; nc], &mut self.memos);
+        }
         for redraw in stranded::due(&self.chains, step as usize) {
             self.redraw(&redraw, &mut pos, &mut lp);
         }
+        let history = &self.history.1;
+        let reference = self.reference.as_ref();
         let mut acc = vec![false; nc];
         let half = nw / 2;
         for h in 0..2 {
@@ -270,7 +309,8 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                     moves[e].fit(&snapshot[other_start * d..(other_start + half) * d], d, &history[e], reference)
                 })
                 .collect();
-            let results: Vec<(Vec<f64>, Vec<f64>, Vec<bool>)> = movers
+            let with_memos = !self.blocks.is_empty();
+            let results: Vec<(Vec<f64>, Vec<f64>, Vec<bool>, Vec<Vec<f64>>)> = movers
                 .par_chunks(BATCH)
                 .map(|chunk| {
                     let mut proposals = vec![0.0; chunk.len() * d];
@@ -285,7 +325,8 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                         log_u[k] = rng.random::<f64>().ln();
                     }
                     let mut new_lp = vec![0.0; chunk.len()];
-                    evaluate(target, &proposals, &mut new_lp);
+                    let mut memos = vec![Vec::new(); if with_memos { chunk.len() } else { 0 }];
+                    evaluate_memo(target, &proposals, &mut new_lp, &mut memos);
                     let accept = chunk
                         .iter()
                         .enumerate()
@@ -294,19 +335,23 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                             new_lp[k] > f64::NEG_INFINITY && log_u[k] < ratio
                         })
                         .collect();
-                    (proposals, new_lp, accept)
+                    (proposals, new_lp, accept, memos)
                 })
                 .collect();
-            for (chunk, (proposals, new_lp, accept)) in movers.chunks(BATCH).zip(results) {
+            for (chunk, (proposals, new_lp, accept, mut memos)) in movers.chunks(BATCH).zip(results) {
                 for (k, &c) in chunk.iter().enumerate() {
                     if accept[k] {
                         pos[c * d..(c + 1) * d].copy_from_slice(&proposals[k * d..(k + 1) * d]);
                         lp[c] = new_lp[k];
                         acc[c] = true;
+                        if with_memos {
+                            self.memos[c] = std::mem::take(&mut memos[k]);
+                        }
                     }
                 }
             }
         }
+        self.update_blocks(step, &mut pos, &mut lp);
         let n_acc = acc.iter().filter(|a| **a).count();
         self.chains.positions.extend_from_slice(&pos);
         self.chains.log_prob.extend_from_slice(&lp);
@@ -317,22 +362,105 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     /// Draws the walkers of a stranded ensemble afresh ([`stranded`]); a
     /// draw where the log-density is −∞ takes the position of the same
     /// walker of the ensemble drawn from.
-    fn redraw(&self, redraw: &stranded::Redraw, pos: &mut [f64], lp: &mut [f64]) {
+    fn redraw(&mut self, redraw: &stranded::Redraw, pos: &mut [f64], lp: &mut [f64]) {
         let (d, nw) = (self.chains.dim, self.settings.walkers);
         let fresh = stranded::positions(&self.chains, redraw, self.settings.seed);
         if fresh.is_empty() {
             return;
         }
         let mut fresh_lp = vec![0.0; nw];
-        evaluate(self.target, &fresh, &mut fresh_lp);
+        let mut fresh_memos = vec![Vec::new(); if self.blocks.is_empty() { 0 } else { nw }];
+        evaluate_memo(self.target, &fresh, &mut fresh_lp, &mut fresh_memos);
         for w in 0..nw {
             let (c, source) = (redraw.ensemble * nw + w, redraw.from * nw + w);
             if fresh_lp[w] > f64::NEG_INFINITY {
                 pos[c * d..(c + 1) * d].copy_from_slice(&fresh[w * d..(w + 1) * d]);
                 lp[c] = fresh_lp[w];
+                if let Some(m) = fresh_memos.get_mut(w) {
+                    self.memos[c] = std::mem::take(m);
+                }
             } else {
                 pos.copy_within(source * d..(source + 1) * d, c * d);
                 lp[c] = lp[source];
+                if !self.blocks.is_empty() {
+                    self.memos[c] = self.memos[source].clone();
+                }
+            }
+        }
+    }
+
+    /// Each walker's blocks ([`LogDensity::blocks`]) updated on their own,
+    /// the rest of its position held: [`BLOCK_SWEEPS`] sweeps of a stretch
+    /// move within each block against the complementary half of its
+    /// ensemble (the red-blue update again, which keeps it exact), each
+    /// proposal weighed by the block's conditional density from the
+    /// walker's memo. A composition of moves that each leave the target
+    /// invariant; the draws of walker w of ensemble e at this step come
+    /// from its own stream.
+    fn update_blocks(&mut self, step: u64, pos: &mut [f64], lp: &mut [f64]) {
+        if self.blocks.is_empty() {
+            return;
+        }
+        let (d, nw, ne, seed) = (self.chains.dim, self.settings.walkers, self.settings.ensembles, self.settings.seed);
+        let half = nw / 2;
+        let (target, blocks) = (self.target, &self.blocks);
+        for h in 0..2 {
+            let movers: Vec<usize> = (0..ne).flat_map(|e| (0..half).map(move |w| e * nw + h * half + w)).collect();
+            let snapshot = &*pos;
+            let lp_now = &*lp;
+            let memos = &self.memos;
+            let results: Vec<(Vec<f64>, Vec<f64>, Vec<Vec<f64>>)> = movers
+                .par_chunks(BATCH)
+                .map(|chunk| {
+                    let n = chunk.len();
+                    let mut x: Vec<f64> = chunk.iter().flat_map(|&c| snapshot[c * d..(c + 1) * d].iter().copied()).collect();
+                    let mut l: Vec<f64> = chunk.iter().map(|&c| lp_now[c]).collect();
+                    let chunk_memos: Vec<&[f64]> = chunk.iter().map(|&c| memos[c].as_slice()).collect();
+                    let mut rngs: Vec<_> =
+                        chunk.iter().map(|&c| crate::rng::stream(seed, &[(c / nw) as u64, step, (c % nw) as u64, BLOCK_STREAM])).collect();
+                    // each block's terms at the walker, as its memo holds them
+                    let mut current: Vec<Vec<f64>> = (0..blocks.len()).map(|b| chunk_memos.iter().map(|m| m[b]).collect()).collect();
+                    let (mut y, mut proposed) = (x.clone(), vec![0.0; n]);
+                    let (mut factor, mut log_u) = (vec![0.0; n], vec![0.0; n]);
+                    for _ in 0..BLOCK_SWEEPS {
+                        for (b, block) in blocks.iter().enumerate() {
+                            y.copy_from_slice(&x);
+                            for (k, &c) in chunk.iter().enumerate() {
+                                let rng = &mut rngs[k];
+                                let u: f64 = rng.random();
+                                let z = ((BLOCK_STRETCH - 1.0) * u + 1.0).powi(2) / BLOCK_STRETCH;
+                                let j = (c / nw) * nw + (1 - h) * half + rng.random_range(0..half);
+                                for &i in block {
+                                    let xj = snapshot[j * d + i];
+                                    y[k * d + i] = xj + z * (x[k * d + i] - xj);
+                                }
+                                factor[k] = (block.len() as f64 - 1.0) * z.ln();
+                                log_u[k] = rng.random::<f64>().ln();
+                            }
+                            target.block_log_density_batch(b, &y, &chunk_memos, &mut proposed);
+                            for k in 0..n {
+                                let gain = proposed[k] - current[b][k];
+                                if proposed[k].is_finite() && log_u[k] < factor[k] + gain {
+                                    for &i in block {
+                                        x[k * d + i] = y[k * d + i];
+                                    }
+                                    l[k] += gain;
+                                    current[b][k] = proposed[k];
+                                }
+                            }
+                        }
+                    }
+                    (x, l, current)
+                })
+                .collect();
+            for (chunk, (x, l, current)) in movers.chunks(BATCH).zip(results) {
+                for (k, &c) in chunk.iter().enumerate() {
+                    pos[c * d..(c + 1) * d].copy_from_slice(&x[k * d..(k + 1) * d]);
+                    lp[c] = l[k];
+                    for (b, v) in current.iter().enumerate() {
+                        self.memos[c][b] = v[k];
+                    }
+                }
             }
         }
     }
@@ -387,12 +515,19 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     }
 }
 
-/// Log-densities of consecutive points, in parallel batches; NaN becomes −∞.
-fn evaluate<T: LogDensity>(target: &T, xs: &[f64], out: &mut [f64]) {
+/// Log-densities of consecutive points, in parallel batches; NaN becomes
+/// −∞. With `memos` (one per point; empty: none made), each point's memo
+/// for the block updates too.
+fn evaluate_memo<T: LogDensity>(target: &T, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
     let d = target.dim();
-    xs.par_chunks(BATCH * d)
-        .zip(out.par_chunks_mut(BATCH))
-        .for_each(|(x, o)| target.log_density_batch(x, o));
+    if memos.is_empty() {
+        xs.par_chunks(BATCH * d).zip(out.par_chunks_mut(BATCH)).for_each(|(x, o)| target.log_density_batch(x, o));
+    } else {
+        xs.par_chunks(BATCH * d)
+            .zip(out.par_chunks_mut(BATCH))
+            .zip(memos.par_chunks_mut(BATCH))
+            .for_each(|((x, o), m)| target.log_density_batch_memo(x, o, m));
+    }
     for v in out.iter_mut() {
         if v.is_nan() {
             *v = f64::NEG_INFINITY;
