@@ -107,6 +107,14 @@ impl Elliptical {
         self.mean.len()
     }
 
+    /// The marginal distribution of the coordinates `indices` (in that
+    /// order); `None` if its scale matrix is not positive definite.
+    pub fn marginal(&self, indices: &[usize]) -> Option<Elliptical> {
+        let cov = self.covariance();
+        let mean = DVector::from_iterator(indices.len(), indices.iter().map(|&i| self.mean[i]));
+        Elliptical::new(Moments { mean, cov: DMatrix::from_fn(indices.len(), indices.len(), |a, b| cov[(indices[a], indices[b])]) })
+    }
+
     /// The lower Cholesky factor L.
     pub fn factor(&self) -> &DMatrix<f64> {
         &self.l

@@ -83,7 +83,7 @@ const BLOCK_STREAM: u64 = u64::MAX - 4;
 /// conditional costs a small share of a full evaluation (the discrepancy
 /// model's Kalman filter over one run, about 1/35 of integrating the
 /// measured damper's four runs at 1 A and scoring them).
-const BLOCK_SWEEPS: usize = 2;
+const BLOCK_SWEEPS: usize = 4;
 
 /// The stretch move's scale within a block.
 const BLOCK_STRETCH: f64 = 2.0;
@@ -112,6 +112,33 @@ pub struct Sampler<'t, T: LogDensity> {
     /// Each walker's memo at its current position (empty until made: a
     /// resumed run remakes them at its first step).
     memos: Vec<Vec<f64>>,
+    /// The coordinates the ensemble moves propose: those in no block (all
+    /// of them where there are none). The blocks' coordinates are moved
+    /// by the block updates alone, so that a block pressed against its
+    /// prior's bound (a time scale at its longest) does not make every
+    /// joint proposal fall outside it.
+    free: Vec<usize>,
+}
+
+/// `blocks`, or none where `walkers` memos of `memo_len` numbers (and
+/// half as many again for the proposals in flight) would take more than
+/// [`MEMO_BUDGET_BYTES`].
+fn within_budget(blocks: Vec<Vec<usize>>, memo_len: usize, walkers: usize) -> Vec<Vec<usize>> {
+    if memo_len * walkers * std::mem::size_of::<f64>() * 3 / 2 > MEMO_BUDGET_BYTES {
+        Vec::new()
+    } else {
+        blocks
+    }
+}
+
+/// The coordinates in none of `blocks`, of `d`.
+fn free_coordinates(d: usize, blocks: &[Vec<usize>]) -> Vec<usize> {
+    (0..d).filter(|i| !blocks.iter().any(|b| b.contains(i))).collect()
+}
+
+/// The coordinates `free` of each of `points` (`d` coordinates each).
+fn project(points: &[f64], d: usize, free: &[usize]) -> Vec<f64> {
+    points.chunks_exact(d.max(1)).flat_map(|p| free.iter().map(move |&i| p[i])).collect()
 }
 
 impl<'t, T: LogDensity> Sampler<'t, T> {
@@ -133,11 +160,11 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             positions.extend_from_slice(x);
         }
         let mut log_prob = vec![0.0; nc];
-        let mut blocks = target.blocks();
+        let blocks = target.blocks();
         let mut memos = vec![Vec::new(); if blocks.is_empty() { 0 } else { nc }];
         evaluate_memo(target, &positions, &mut log_prob, &mut memos);
-        if memos.iter().map(|m| m.len()).sum::<usize>() * std::mem::size_of::<f64>() * 3 / 2 > MEMO_BUDGET_BYTES {
-            blocks.clear();
+        let blocks = within_budget(blocks, memos.first().map_or(0, Vec::len), nc);
+        if blocks.is_empty() {
             memos.clear();
         }
         if let Some(c) = log_prob.iter().position(|lp| *lp == f64::NEG_INFINITY) {
@@ -162,6 +189,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             reference: None,
             settings,
             announced: false,
+            free: free_coordinates(d, &blocks),
             blocks,
             memos,
         })
@@ -172,8 +200,15 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let (settings, chains) = checkpoint::load(path, target.dim())?;
         settings.check(target.dim())?;
         let history = (0, vec![Learned::default(); settings.ensembles]);
-        let blocks = target.blocks();
-        Ok(Sampler { target, settings, chains, history, reference: None, announced: false, blocks, memos: Vec::new() })
+        let mut blocks = target.blocks();
+        if !blocks.is_empty() {
+            // the budget as the run that saved it measured it
+            let (d, mut memo) = (target.dim(), vec![Vec::new()]);
+            evaluate_memo(target, &chains.last_positions()[..d], &mut [0.0], &mut memo);
+            blocks = within_budget(blocks, memo[0].len(), chains.chains());
+        }
+        let free = free_coordinates(target.dim(), &blocks);
+        Ok(Sampler { target, settings, chains, history, reference: None, announced: false, blocks, memos: Vec::new(), free })
     }
 
     /// The sampler with a fixed reference distribution for
@@ -294,19 +329,23 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             self.redraw(&redraw, &mut pos, &mut lp);
         }
         let history = &self.history.1;
-        let reference = self.reference.as_ref();
+        // the moves work in the free coordinates ([`Sampler::free`])
+        let (free, df) = (&self.free, self.free.len());
+        let marginal = if df < d { self.reference.as_ref().and_then(|r| r.marginal(free)) } else { None };
+        let reference = if df < d { marginal.as_ref() } else { self.reference.as_ref() };
         let mut acc = vec![false; nc];
         let half = nw / 2;
         for h in 0..2 {
             // chain index of every walker that moves now
             let movers: Vec<usize> = (0..ne).flat_map(|e| (0..half).map(move |w| e * nw + h * half + w)).collect();
             let snapshot = &pos;
+            let free_snapshot = project(snapshot, d, free);
             let target = self.target;
             // each ensemble's move fitted once to its other half
             let fits: Vec<Fit> = (0..ne)
                 .map(|e| {
                     let other_start = e * nw + (1 - h) * half;
-                    moves[e].fit(&snapshot[other_start * d..(other_start + half) * d], d, &history[e], reference)
+                    moves[e].fit(&free_snapshot[other_start * df..(other_start + half) * df], df, &history[e], reference)
                 })
                 .collect();
             let with_memos = !self.blocks.is_empty();
@@ -316,12 +355,18 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                     let mut proposals = vec![0.0; chunk.len() * d];
                     let mut factors = vec![0.0; chunk.len()];
                     let mut log_u = vec![0.0; chunk.len()];
+                    let mut y = vec![0.0; df];
                     for (k, &c) in chunk.iter().enumerate() {
                         let (e, w) = (c / nw, c % nw);
                         let other_start = e * nw + (1 - h) * half;
-                        let others = &snapshot[other_start * d..(other_start + half) * d];
+                        let others = &free_snapshot[other_start * df..(other_start + half) * df];
                         let mut rng = crate::rng::stream(seed, &[e as u64, step, w as u64]);
-                        factors[k] = moves[e].propose(&fits[e], &snapshot[c * d..(c + 1) * d], others, &mut rng, &mut proposals[k * d..(k + 1) * d]);
+                        factors[k] = moves[e].propose(&fits[e], &free_snapshot[c * df..(c + 1) * df], others, &mut rng, &mut y);
+                        let proposal = &mut proposals[k * d..(k + 1) * d];
+                        proposal.copy_from_slice(&snapshot[c * d..(c + 1) * d]);
+                        for (v, &i) in y.iter().zip(free) {
+                            proposal[i] = *v;
+                        }
                         log_u[k] = rng.random::<f64>().ln();
                     }
                     let mut new_lp = vec![0.0; chunk.len()];
@@ -486,13 +531,14 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         if at == 0 || at == self.history.0 || !self.adaptive() {
             return;
         }
-        let (d, nw, seed) = (self.chains.dim, self.settings.walkers, self.settings.seed);
-        let (chains, moves) = (&self.chains, &self.settings.moves);
+        let (nw, seed) = (self.settings.walkers, self.settings.seed);
+        let (chains, moves, free) = (&self.chains, &self.settings.moves, &self.free);
         self.history.1 = (0..self.settings.ensembles)
             .into_par_iter()
             .map(|e| {
-                let walkers: Vec<Vec<f64>> = (e * nw..(e + 1) * nw).map(|c| (at / 2..at).flat_map(|s| chains.point(s, c).iter().copied()).collect()).collect();
-                Learned::fit(moves, &walkers, d, &mut crate::rng::stream(seed, &[e as u64, at as u64, FIT_STREAM]))
+                let walkers: Vec<Vec<f64>> =
+                    (e * nw..(e + 1) * nw).map(|c| (at / 2..at).flat_map(|s| free.iter().map(move |&i| chains.at(s, c, i))).collect()).collect();
+                Learned::fit(moves, &walkers, free.len(), &mut crate::rng::stream(seed, &[e as u64, at as u64, FIT_STREAM]))
             })
             .collect();
         self.history.0 = at;
