@@ -120,6 +120,23 @@ pub struct Sampler<'t, T: LogDensity> {
     free: Vec<usize>,
 }
 
+/// A batch of walkers' proposals: positions, log-densities, whether each
+/// is accepted, and the memos made with them (none without blocks).
+struct Proposed {
+    positions: Vec<f64>,
+    log_prob: Vec<f64>,
+    accept: Vec<bool>,
+    memos: Vec<Vec<f64>>,
+}
+
+/// A batch of walkers after their block updates: positions, log-densities
+/// and each block's terms (`[block][walker]`).
+struct Moved {
+    positions: Vec<f64>,
+    log_prob: Vec<f64>,
+    block_terms: Vec<Vec<f64>>,
+}
+
 /// `blocks`, or none where `walkers` memos of `memo_len` numbers (and
 /// half as many again for the proposals in flight) would take more than
 /// [`MEMO_BUDGET_BYTES`].
@@ -349,7 +366,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 })
                 .collect();
             let with_memos = !self.blocks.is_empty();
-            let results: Vec<(Vec<f64>, Vec<f64>, Vec<bool>, Vec<Vec<f64>>)> = movers
+            let results: Vec<Proposed> = movers
                 .par_chunks(BATCH)
                 .map(|chunk| {
                     let mut proposals = vec![0.0; chunk.len() * d];
@@ -380,10 +397,10 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                             new_lp[k] > f64::NEG_INFINITY && log_u[k] < ratio
                         })
                         .collect();
-                    (proposals, new_lp, accept, memos)
+                    Proposed { positions: proposals, log_prob: new_lp, accept, memos }
                 })
                 .collect();
-            for (chunk, (proposals, new_lp, accept, mut memos)) in movers.chunks(BATCH).zip(results) {
+            for (chunk, Proposed { positions: proposals, log_prob: new_lp, accept, mut memos }) in movers.chunks(BATCH).zip(results) {
                 for (k, &c) in chunk.iter().enumerate() {
                     if accept[k] {
                         pos[c * d..(c + 1) * d].copy_from_slice(&proposals[k * d..(k + 1) * d]);
@@ -454,7 +471,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             let snapshot = &*pos;
             let lp_now = &*lp;
             let memos = &self.memos;
-            let results: Vec<(Vec<f64>, Vec<f64>, Vec<Vec<f64>>)> = movers
+            let results: Vec<Moved> = movers
                 .par_chunks(BATCH)
                 .map(|chunk| {
                     let n = chunk.len();
@@ -495,10 +512,10 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                             }
                         }
                     }
-                    (x, l, current)
+                    Moved { positions: x, log_prob: l, block_terms: current }
                 })
                 .collect();
-            for (chunk, (x, l, current)) in movers.chunks(BATCH).zip(results) {
+            for (chunk, Moved { positions: x, log_prob: l, block_terms: current }) in movers.chunks(BATCH).zip(results) {
                 for (k, &c) in chunk.iter().enumerate() {
                     pos[c * d..(c + 1) * d].copy_from_slice(&x[k * d..(k + 1) * d]);
                     lp[c] = l[k];
