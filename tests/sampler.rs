@@ -83,20 +83,27 @@ fn check_gaussian_with(moves: Vec<(Move, f64)>, steps: usize, reference: Option<
         ..RunControl::fixed(steps)
     };
     s.run(&control, &mut []).unwrap();
+    check_zero_mean_moments(&s, &cov, &format!("{moves:?}"));
+}
+
+/// The sampler's converged chains have mean 0 and covariance `cov`, each
+/// within [`Z`] Monte Carlo standard errors (`label` names the case).
+fn check_zero_mean_moments<T: LogDensity>(s: &Sampler<T>, cov: &DMatrix<f64>, label: &str) {
+    let d = cov.nrows();
     let diag = s.diagnostics();
-    assert!(diag.converged(400.0), "{moves:?}: {:?}", diag.warnings);
+    assert!(diag.converged(400.0), "{label}: {:?}", diag.warnings);
     let b = diag.burn_in;
     let traces: Vec<Vec<f64>> = (0..d).map(|i| pooled(&s.chains.traces(i, b))).collect();
     let n = traces[0].len() as f64;
     let ess_min = diag.coordinates.iter().map(|c| c.ess_bulk).fold(f64::INFINITY, f64::min);
     for i in 0..d {
         let c = &diag.coordinates[i];
-        assert!(c.mean.abs() < Z * c.mcse_mean, "{moves:?} mean {i}: {} ± {}", c.mean, c.mcse_mean);
+        assert!(c.mean.abs() < Z * c.mcse_mean, "{label} mean {i}: {} ± {}", c.mean, c.mcse_mean);
         for j in 0..=i {
             let sij = traces[i].iter().zip(&traces[j]).map(|(a, b)| a * b).sum::<f64>() / n;
             // sd of a sample covariance of a Gaussian: √((Σii Σjj + Σij²)/ESS)
             let se = ((cov[(i, i)] * cov[(j, j)] + cov[(i, j)].powi(2)) / ess_min).sqrt();
-            assert!((sij - cov[(i, j)]).abs() < Z * se, "{moves:?} cov {i},{j}: {sij} vs {}", cov[(i, j)]);
+            assert!((sij - cov[(i, j)]).abs() < Z * se, "{label} cov {i},{j}: {sij} vs {}", cov[(i, j)]);
         }
     }
 }
@@ -735,20 +742,7 @@ fn block_updates_keep_a_correlated_gaussian() {
     let mut s = Sampler::new(&target, settings, &init).unwrap();
     let control = RunControl { until_converged: true, check_every: 1000, ..RunControl::fixed(20000) };
     s.run(&control, &mut []).unwrap();
-    let diag = s.diagnostics();
-    assert!(diag.converged(400.0), "{:?}", diag.warnings);
-    let traces: Vec<Vec<f64>> = (0..d).map(|i| pooled(&s.chains.traces(i, diag.burn_in))).collect();
-    let n = traces[0].len() as f64;
-    let ess_min = diag.coordinates.iter().map(|c| c.ess_bulk).fold(f64::INFINITY, f64::min);
-    for i in 0..d {
-        let c = &diag.coordinates[i];
-        assert!(c.mean.abs() < Z * c.mcse_mean, "mean {i}: {} ± {}", c.mean, c.mcse_mean);
-        for j in 0..=i {
-            let sij = traces[i].iter().zip(&traces[j]).map(|(a, b)| a * b).sum::<f64>() / n;
-            let se = ((cov[(i, i)] * cov[(j, j)] + cov[(i, j)].powi(2)) / ess_min).sqrt();
-            assert!((sij - cov[(i, j)]).abs() < Z * se, "cov {i},{j}: {sij} vs {}", cov[(i, j)]);
-        }
-    }
+    check_zero_mean_moments(&s, &cov, "blocks");
     // the stored log-densities are the target's at the stored positions
     let last = s.chains.steps() - 1;
     for c in 0..s.chains.chains() {

@@ -188,7 +188,12 @@ pub const FAR_TAU_MULTIPLE: f64 = 100.0;
 pub(super) fn laplace_misfit(chains: &Chains, laplace: &Elliptical) -> f64 {
     let d = chains.dim;
     let walkers = chains.chains();
-    let w: Vec<f64> = (0..walkers).map(|c| chains.log_prob[c] - laplace.log_kernel(None, &chains.positions[c * d..(c + 1) * d], map::START_SPREAD)).filter(|v| v.is_finite()).collect();
+    spread((0..walkers).map(|c| chains.log_prob[c] - laplace.log_kernel(None, &chains.positions[c * d..(c + 1) * d], map::START_SPREAD)))
+}
+
+/// The sd of the finite values of ln p/q (0 with fewer than two).
+fn spread(log_ratio: impl Iterator<Item = f64>) -> f64 {
+    let w: Vec<f64> = log_ratio.filter(|v| v.is_finite()).collect();
     if w.len() < 2 {
         return 0.0;
     }
@@ -211,7 +216,7 @@ fn misfit(posterior: &Posterior, chains: &Chains, laplace: &Elliptical) -> f64 {
         return laplace_misfit(chains, laplace);
     }
     let d = chains.dim;
-    let free: Vec<usize> = (0..d).filter(|i| !blocks.iter().any(|b| b.contains(i))).collect();
+    let free = crate::sampler::density::free_coordinates(d, &blocks);
     let Some(q) = laplace.marginal(&free) else { return laplace_misfit(chains, laplace) };
     let mut points = chains.positions[..chains.chains() * d].to_vec();
     for x in points.chunks_exact_mut(d) {
@@ -220,16 +225,7 @@ fn misfit(posterior: &Posterior, chains: &Chains, laplace: &Elliptical) -> f64 {
         }
     }
     let lp = crate::sampler::density::log_densities(posterior, &points);
-    let w: Vec<f64> = points
-        .chunks_exact(d)
-        .zip(lp)
-        .map(|(x, lp)| lp - q.log_kernel(None, &free.iter().map(|&i| x[i]).collect::<Vec<f64>>(), map::START_SPREAD))
-        .filter(|v| v.is_finite())
-        .collect();
-    if w.len() < 2 {
-        return 0.0;
-    }
-    crate::sampler::diagnostics::variance(&w).sqrt()
+    spread(points.chunks_exact(d).zip(lp).map(|(x, lp)| lp - q.log_kernel(None, &free.iter().map(|&i| x[i]).collect::<Vec<f64>>(), map::START_SPREAD)))
 }
 
 /// The warning for a posterior far from its Laplace approximation.

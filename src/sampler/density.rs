@@ -49,6 +49,12 @@ pub trait LogDensity: Sync {
     }
 }
 
+/// The coordinates of `d` in none of `blocks` ([`LogDensity::blocks`]):
+/// those the ensemble moves propose.
+pub fn free_coordinates(d: usize, blocks: &[Vec<usize>]) -> Vec<usize> {
+    (0..d).filter(|i| !blocks.iter().any(|b| b.contains(i))).collect()
+}
+
 /// Points evaluated together in one [`LogDensity::log_density_batch`] call
 /// by [`log_densities`]: fixed, so that no result depends on the threads.
 const BATCH: usize = 8;

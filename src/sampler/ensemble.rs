@@ -15,7 +15,7 @@ use super::moves::{Fit, Learned, Move};
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
 use super::stranded;
-use super::density::LogDensity;
+use super::density::{free_coordinates, LogDensity};
 use crate::error::{Error, Result};
 
 /// Walkers proposed and evaluated together in one batch. Fixed, so that the
@@ -146,11 +146,6 @@ fn within_budget(blocks: Vec<Vec<usize>>, memo_len: usize, walkers: usize) -> Ve
     } else {
         blocks
     }
-}
-
-/// The coordinates in none of `blocks`, of `d`.
-fn free_coordinates(d: usize, blocks: &[Vec<usize>]) -> Vec<usize> {
-    (0..d).filter(|i| !blocks.iter().any(|b| b.contains(i))).collect()
 }
 
 /// The coordinates `free` of each of `points` (`d` coordinates each).
