@@ -326,6 +326,12 @@ fn discrepancy_block_terms_change_as_the_log_density_does() {
     let a = start(&campaign, &s, &mut |_| {}).unwrap();
     let post = &a.posterior;
     let (d, blocks) = (post.dim(), post.blocks());
+    // the walkers are sized for what the ensemble moves explore: θ and the
+    // terms (the coordinates not named for a run's noise), 6 each and at
+    // least 64 — not every coordinate (6 × 16 = 96)
+    let explored = post.layout.names.iter().filter(|n| !n.starts_with("sigma_") && !n.starts_with("discrepancy_")).count();
+    assert_eq!((explored, d), (10, 16));
+    assert_eq!(a.settings.sampler.walkers, (6 * explored).max(64));
     assert_eq!(blocks.len(), 2, "one block per run");
     assert_eq!(blocks[0].len(), 3, "sigma, discrepancy_sd, discrepancy_time");
     // eight points: the MAP with its noise moved by different amounts

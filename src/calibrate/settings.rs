@@ -115,6 +115,23 @@ impl SamplingSettings {
         (6 * dim).max(64).div_ceil(2) * 2
     }
 
+    /// [`SamplingSettings::walkers_for`] the coordinates the ensemble moves
+    /// propose on `posterior` with `ensembles` ensembles: where each run's
+    /// noise is moved on its own (the discrepancy model), θ and the model
+    /// terms only, else every coordinate. The ensemble's width follows the
+    /// dimension it explores; the blocks move against their own ensemble's
+    /// complementary half.
+    pub fn walkers_for_posterior(posterior: &crate::posterior::Posterior, ensembles: usize) -> usize {
+        // no walkers' memos always fit: the dimension without the blocks
+        // (and at least the sampler's 2 × dimension)
+        let dim = posterior.layout.dim();
+        let fewer = Self::walkers_for(posterior.proposed_dimension(0)).max(2 * dim);
+        match posterior.proposed_dimension(fewer * ensembles.max(1)) < dim {
+            true => fewer,
+            false => Self::walkers_for(dim),
+        }
+    }
+
     /// The sampler with `walkers` per ensemble and a seed of its own.
     pub fn sampler(&self, walkers: usize, seed: u64) -> SamplerSettings {
         SamplerSettings { walkers, ensembles: self.ensembles, moves: self.moves.clone(), seed }

@@ -119,7 +119,7 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
     settings.integrator.substeps = posterior.integrator.substeps;
     if settings.sampler.walkers == 0 {
-        settings.sampler.walkers = SamplingSettings::walkers_for(posterior.layout.dim());
+        settings.sampler.walkers = SamplingSettings::walkers_for_posterior(&posterior, settings.sampler.ensembles);
     }
     let warnings = memory_warnings(&posterior, &map);
     for w in &warnings {

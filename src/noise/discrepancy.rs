@@ -27,7 +27,7 @@ use std::sync::Arc;
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
-use super::model::{log_uniform, DiscrepancySettings, Explained, Kernel, normal_ln_pdf, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Transform, Whiten};
+use super::model::{log_uniform, log_variance_term, DiscrepancySettings, Explained, Kernel, normal_ln_pdf, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Transform, Whiten};
 use crate::data::RunData;
 use crate::model::LANES;
 
@@ -461,7 +461,7 @@ impl NoiseModel for Discrepancy {
         let values = [sigma, sd, fit.ell, 0.0];
         Profile {
             scale: (sigma * sigma + sd * sd).sqrt(),
-            whitening: Arc::new(Whitening { run: run.clone(), process: self.process(run, &values), sigma, strain_var, stiffness }),
+            whitening: Arc::new(Whitening { run: run.clone(), process: self.process(run, &values), sigma, strain_var }),
             coordinates: [sigma.ln(), sd.ln(), fit.ell.ln(), 0.0],
         }
     }
@@ -597,12 +597,29 @@ struct Whitening {
     process: Process,
     sigma: f64,
     strain_var: f64,
-    stiffness: Option<Vec<f64>>,
+}
+
+impl Whitening {
+    /// The filter over `residuals` (the stiffness, with errors in
+    /// variables, along the model stress they imply), visiting each
+    /// innovation and its variance.
+    fn filter(&self, residuals: &[f64], g: f64, visit: impl FnMut(usize, f64, f64)) {
+        let stiffness = (self.strain_var > 0.0).then(|| stiffness_of_residuals(&self.run, residuals, g));
+        filter_run(&self.run, &self.process, self.sigma, self.strain_var, stiffness.as_deref(), residuals, visit);
+    }
 }
 
 impl Whiten for Whitening {
-    fn whiten(&self, residuals: &[f64], out: &mut Vec<f64>) {
-        filter_run(&self.run, &self.process, self.sigma, self.strain_var, self.stiffness.as_deref(), residuals, |_, v, s| out.push(v / s.sqrt()));
+    fn whiten(&self, residuals: &[f64], g: f64, out: &mut Vec<f64>) {
+        self.filter(residuals, g, |_, v, s| out.push(v / s.sqrt()));
+    }
+
+    /// The innovations' variances are at least the white noise's σ².
+    fn log_variance_terms(&self, residuals: &[f64], g: f64, out: &mut Vec<f64>) {
+        if self.strain_var > 0.0 {
+            let floor = self.sigma * self.sigma;
+            self.filter(residuals, g, |_, _, s| out.push(log_variance_term(s, floor)));
+        }
     }
 }
 
@@ -733,6 +750,38 @@ mod tests {
         }
     }
 
+    /// What the MAP search's least squares weigh is the likelihood: with
+    /// errors in variables the whitened residuals and the log-variance terms
+    /// of [`Whiten`], the stiffness taken along the residuals, give
+    /// Σ w² + Σ (u² − 1) + n ln 2πσ² = −2 ln N(r; 0, Σ), the dense
+    /// covariance's density by Cholesky, at two model paths whose
+    /// stiffness differs (the second scaled by 1.3), to 1e-8 relative; so
+    /// the surrogate's optimum moves with the stiffness as the likelihood's
+    /// does.
+    #[test]
+    fn the_search_weighs_the_likelihood_with_errors_in_variables() {
+        let strain_var = 1e-8;
+        for kernel_kind in [Kernel::Matern32, Kernel::Matern12] {
+            let (run, path) = run(strain_var);
+            let scaled: Vec<f64> = path.iter().map(|v| 1.3 * v).collect();
+            for p in [&path, &scaled] {
+                let d = Dense::of(kernel_kind, &run, p, strain_var);
+                let n = run.compared();
+                let chol = d.cov.clone().cholesky().unwrap();
+                let log_det: f64 = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
+                let direct = -(n as f64) * HALF_LN_2PI - 0.5 * log_det - 0.5 * d.r.dot(&chol.solve(&d.r));
+                let w = Whitening { run: run.clone(), process: Process::new(kernel_kind, SD, ELL, run.step_s), sigma: SIGMA, strain_var };
+                let (mut white, mut terms) = (Vec::new(), Vec::new());
+                w.whiten(d.r.as_slice(), G, &mut white);
+                w.log_variance_terms(d.r.as_slice(), G, &mut terms);
+                assert_eq!((white.len(), terms.len()), (n, n));
+                let sum: f64 = white.iter().map(|v| v * v).sum::<f64>() + terms.iter().map(|u| u * u - 1.0).sum::<f64>();
+                let searched = -0.5 * (sum + n as f64 * (2.0 * SIGMA.ln() + 2.0 * HALF_LN_2PI));
+                assert!((searched - direct).abs() < 1e-8 * direct.abs(), "{kernel_kind:?}: searched {searched} vs {direct}");
+            }
+        }
+    }
+
     /// The smoother is the dense Gaussian process's conditional: E[δ | r] =
     /// K Σ⁻¹ r and var = diag(K − K Σ⁻¹ K) with Σ the residuals' covariance
     /// (Cholesky), with and without errors in variables, both kernels, to
@@ -842,7 +891,7 @@ mod tests {
         assert!((l / ell).ln().abs() < 1.5f64.ln(), "ℓ {l}");
         // the whitened residuals are close to independent standard normals
         let mut w = Vec::new();
-        p.whitening.whiten(&r, &mut w);
+        p.whitening.whiten(&r, 1e6, &mut w);
         let var = w.iter().map(|v| v * v).sum::<f64>() / w.len() as f64;
         let lag1 = w.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / w.len() as f64;
         assert!((var - 1.0).abs() < 0.1 && lag1.abs() < 0.1, "variance {var}, lag-1 {lag1}");

@@ -17,7 +17,7 @@ use std::sync::Arc;
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
-use super::model::{log_uniform, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform};
+use super::model::{log_uniform, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform, Whiten, log_variance_term};
 use crate::data::RunData;
 use crate::model::{tangent_stiffness, LANES};
 
@@ -119,16 +119,16 @@ impl NoiseModel for Gaussian {
         let (lo, hi) = self.sigma_bounds;
         let ms = rms(residuals).max(1e-9).powi(2);
         let var = self.strain_var(run);
-        let (sigma, scales) = if var <= 0.0 {
-            (ms.sqrt(), vec![ms.sqrt(); residuals.len()])
+        let (sigma, whitening): (f64, Arc<dyn Whiten>) = if var <= 0.0 {
+            (ms.sqrt(), Arc::new(Scales(vec![ms.sqrt(); residuals.len()])))
         } else {
             let a = strain_noise_of_residuals(run, residuals, g, var);
             let sigma2 = eiv_sigma2(residuals, &a, ms);
-            (sigma2.sqrt(), a.iter().map(|a| (sigma2 + a).sqrt()).collect())
+            (sigma2.sqrt(), Arc::new(StrainNoise { run: run.clone(), sigma2, var }))
         };
         // the most likely σ inside the prior's bounds
         let chosen = if self.errors_in_variables { sigma } else { rms(residuals).max(1e-9) };
-        Profile { scale: sigma, whitening: Arc::new(Scales(scales)), coordinates: [chosen.clamp(lo, hi).ln(), 0.0, 0.0, 0.0] }
+        Profile { scale: sigma, whitening, coordinates: [chosen.clamp(lo, hi).ln(), 0.0, 0.0, 0.0] }
     }
 
     /// Under the log-uniform prior on σ the σ-marginal, up to a constant:
@@ -137,6 +137,27 @@ impl NoiseModel for Gaussian {
         let n = residuals.len() as f64;
         let sum_sq: f64 = residuals.iter().map(|v| v * v).sum();
         -0.5 * n * (sum_sq / n).ln()
+    }
+}
+
+/// Residuals of variance σ² + S_k² s_γ², the stiffness S_k along the
+/// model stress they imply (errors in variables).
+#[derive(Debug)]
+struct StrainNoise {
+    run: RunData,
+    sigma2: f64,
+    var: f64,
+}
+
+impl Whiten for StrainNoise {
+    fn whiten(&self, residuals: &[f64], g: f64, out: &mut Vec<f64>) {
+        let a = strain_noise_of_residuals(&self.run, residuals, g, self.var);
+        out.extend(residuals.iter().zip(a).map(|(v, a)| v / (self.sigma2 + a).sqrt()));
+    }
+
+    fn log_variance_terms(&self, residuals: &[f64], g: f64, out: &mut Vec<f64>) {
+        let a = strain_noise_of_residuals(&self.run, residuals, g, self.var);
+        out.extend(a.into_iter().map(|a| log_variance_term(self.sigma2 + a, self.sigma2)));
     }
 }
 
@@ -352,6 +373,31 @@ mod tests {
         let n = run.compared() as f64;
         let sum = pointwise_sum(&m, &run, &path, [sigma, 0.0, 0.0, 0.0], 5e6);
         assert!((sum - (direct - n * HALF_LN_2PI)).abs() < 1e-9 * direct.abs());
+    }
+
+    /// What the MAP search's least squares weigh with errors in variables:
+    /// the whitened residuals and log-variance terms give
+    /// Σ w² + Σ (u² − 1) + n ln 2πσ² = −2 Σ ln N(r_k; 0, σ² + S_k² s_γ²), by hand with the
+    /// stiffness along the path (the surrogate leaves the branch offsets
+    /// aside), at two paths whose stiffness differs, to 1e-9 relative.
+    #[test]
+    fn the_search_weighs_the_likelihood_of_its_variances() {
+        let var = 1e-8;
+        let (run, path) = run(var);
+        let (sigma2, g) = (250.0f64.powi(2), 5e6);
+        let w = StrainNoise { run: run.clone(), sigma2, var };
+        for p in [path.clone(), path.iter().map(|v| 1.3 * v).collect::<Vec<f64>>()] {
+            let stiffness = super::super::stiffness_path(&run, &p, g);
+            let r: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - p[k]).collect();
+            let direct: f64 = r.iter().enumerate().map(|(i, r)| normal_ln_pdf(*r, (sigma2 + stiffness[i + 1].powi(2) * var).sqrt())).sum();
+            let (mut white, mut terms) = (Vec::new(), Vec::new());
+            w.whiten(&r, g, &mut white);
+            w.log_variance_terms(&r, g, &mut terms);
+            let n = r.len() as f64;
+            let sum: f64 = white.iter().map(|v| v * v).sum::<f64>() + terms.iter().map(|u| u * u - 1.0).sum::<f64>();
+            let searched = -0.5 * (sum + n * (sigma2.ln() + 2.0 * HALF_LN_2PI));
+            assert!((searched - direct).abs() < 1e-9 * direct.abs(), "searched {searched} vs {direct}");
+        }
     }
 
     /// Errors in variables: the scorer and the pointwise terms both equal

@@ -4,8 +4,9 @@
 //!
 //! Everything here works on θ in the sampler's coordinates (the noise is
 //! profiled), on the whitened residuals of a Gaussian surrogate: the
-//! residuals of every run divided by its σ, and one pseudo-residual per
-//! log-normal prior. Residuals of several points are integrated together,
+//! residuals of every run divided by its σ (its noise model's whitening),
+//! where the variances follow the model a log-variance pseudo-residual per
+//! sample, and one pseudo-residual per log-normal prior. Residuals of several points are integrated together,
 //! four per SIMD batch and runs in parallel, so a Jacobian costs about two
 //! integrations of the records rather than one per coordinate.
 
@@ -48,8 +49,8 @@ impl MapEstimate {
     }
 
     /// The Jacobian of the whitened residuals at the MAP: each run's
-    /// residuals in order, then the priors' pseudo-residuals; a column per
-    /// fitted coordinate.
+    /// residuals in order, then the runs' log-variance terms (if any), then
+    /// the priors' pseudo-residuals; a column per fitted coordinate.
     pub fn jacobian(&self) -> &DMatrix<f64> {
         &self.jacobian
     }
@@ -144,8 +145,13 @@ enum Support {
 
 /// Whitened residuals at the fitted point `x` (θ and the model terms) from
 /// its run residuals: each run's as its noise model whitens them (divided
-/// by σ, say), then (ln θ − centre)/scale for every log-normal prior and
-/// value/sd for every term's. With [`Support::Truncated`], points outside
+/// by σ, say), then each run's log-variance terms where its variances
+/// follow the model (errors in variables: without them the search's
+/// optimum is not the likelihood's, and with the discrepancy model on the
+/// measured damper it stopped 60 nats below the mode, docs/performance.md),
+/// then (ln θ − centre)/scale for every log-normal prior and value/sd for
+/// every term's: their squares sum to −2 ln p up to a constant, at the
+/// noise the search holds. With [`Support::Truncated`], points outside
 /// the prior support are infeasible.
 fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<Vec<Vec<f64>>>, support: Support) -> Option<Vec<f64>> {
     let log_theta = post.layout.log_theta(x);
@@ -158,14 +164,24 @@ fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<
     }
     let res = residuals?;
     let mut out: Vec<f64> = Vec::with_capacity(res.iter().map(Vec::len).sum::<usize>() + log_theta.len());
-    // a tempered run's residuals count by the square root of its weight
-    for (j, (r, w)) in res.iter().zip(whitening).enumerate() {
-        let from = out.len();
-        w.whiten(r, &mut out);
-        let weight = post.weight(j);
-        if weight != 1.0 {
-            let scale = weight.sqrt();
-            out[from..].iter_mut().for_each(|v| *v *= scale);
+    let at = post.likelihood_point(x);
+    let g: Vec<f64> = post.runs.iter().map(|run| post.lane_params(&[&at], run).g_bound(run)[0]).collect();
+    // every run's whitened residuals, then every run's log-variance terms
+    // (the rows of the whitened residuals first and together, as
+    // [`super::memory`] reads them); a tempered run's count by the square
+    // root of its weight
+    for terms in [false, true] {
+        for (j, (r, w)) in res.iter().zip(whitening).enumerate() {
+            let from = out.len();
+            match terms {
+                false => w.whiten(r, g[j], &mut out),
+                true => w.log_variance_terms(r, g[j], &mut out),
+            }
+            let weight = post.weight(j);
+            if weight != 1.0 {
+                let scale = weight.sqrt();
+                out[from..].iter_mut().for_each(|v| *v *= scale);
+            }
         }
     }
     for (prior, v) in post.priors.iter().zip(&log_theta) {
@@ -379,12 +395,14 @@ pub fn memory_times(post: &Posterior, map: &MapEstimate) -> Option<Vec<f64>> {
 /// Each run's residuals at the MAP, whitened by its noise model.
 pub(super) fn whitened_residuals(post: &Posterior, map: &MapEstimate) -> Option<Vec<Vec<f64>>> {
     let res = residuals_many(post, std::slice::from_ref(&map.x)).pop()??;
+    let at = post.likelihood_point(&map.x);
     Some(
         res.iter()
             .zip(&map.whitening)
-            .map(|(r, w)| {
+            .zip(&post.runs)
+            .map(|((r, w), run)| {
                 let mut white = Vec::with_capacity(r.len());
-                w.whiten(r, &mut white);
+                w.whiten(r, post.lane_params(&[&at], run).g_bound(run)[0], &mut white);
                 white
             })
             .collect(),

@@ -102,6 +102,19 @@ impl Posterior {
         Posterior { integrator, ..self.clone() }
     }
 
+    /// How many coordinates the ensemble moves propose with `walkers`
+    /// walkers in all: those in no block where the walkers' memos fit the
+    /// sampler's budget ([`crate::sampler::ensemble::memos_fit`]; the
+    /// discrepancy model's noise is then moved on its own), otherwise all.
+    pub fn proposed_dimension(&self, walkers: usize) -> usize {
+        let blocks = self.blocks();
+        let memo = self.runs.len() + self.runs.iter().map(|r| likelihood::memo_len(self.noise.as_ref(), r)).sum::<usize>();
+        match !blocks.is_empty() && crate::sampler::ensemble::memos_fit(memo, walkers) {
+            true => crate::sampler::density::free_coordinates(self.dim(), &blocks).len(),
+            false => self.dim(),
+        }
+    }
+
     /// The weight of run `j`'s log-likelihood ([`LikelihoodSettings::weight`]).
     pub fn weight(&self, j: usize) -> f64 {
         self.likelihood.weight(&self.runs[j].id)

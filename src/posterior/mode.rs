@@ -93,52 +93,81 @@ impl<T: LogDensity> Whitened<'_, T> {
         log_densities(self.target, &points)
     }
 
-    /// Gradient by central differences: 2d points.
-    fn gradient(&self, z: &DVector<f64>) -> Option<DVector<f64>> {
-        let d = z.len();
+    /// Gradient by central differences: 2 points per axis not held. An
+    /// axis whose points leave the support (a mode on a prior's bound) is
+    /// held from then on, its component 0.
+    fn gradient(&self, z: &DVector<f64>, held: &mut [bool]) -> DVector<f64> {
         let h = GRADIENT_STEP;
-        let zs: Vec<DVector<f64>> = (0..d).flat_map(|i| [-h, h].map(|s| offset(z, &[(i, s)]))).collect();
+        let axes: Vec<usize> = (0..z.len()).filter(|&i| !held[i]).collect();
+        let zs: Vec<DVector<f64>> = axes.iter().flat_map(|&i| [-h, h].map(|s| offset(z, &[(i, s)]))).collect();
         let f = self.at(&zs);
-        if f.iter().any(|v| !v.is_finite()) {
-            return None;
+        let mut g = DVector::zeros(z.len());
+        for (k, &i) in axes.iter().enumerate() {
+            match (f[2 * k], f[2 * k + 1]) {
+                (a, b) if a.is_finite() && b.is_finite() => g[i] = (b - a) / (2.0 * h),
+                _ => held[i] = true,
+            }
         }
-        Some(DVector::from_fn(d, |i, _| (f[2 * i + 1] - f[2 * i]) / (2.0 * h)))
+        g
     }
 
-    /// Hessian by central differences: 2d² points, each mixed derivative
-    /// from its four points (±h, ±h). The rule at half the points (each
-    /// pair's two diagonal points z ± h(eᵢ + eⱼ) less the axis points, the
-    /// same order of error) was tried and dropped: it carries the axis
-    /// points' rounding into every off-diagonal entry (about three times
-    /// the four-point rule's noise), and on the measured 1 A records with
-    /// the model terms it put one principal curvature at 0.075 where the
-    /// log-density one sd either side says 0.84 — a Laplace approximation
-    /// 3.4× too wide in R0, R1, D1, walkers started far out, and a run of
-    /// 800 steps instead of about 50 (docs/performance.md, "The Hessian at
-    /// half the points").
-    fn hessian(&self, z: &DVector<f64>, f0: f64) -> Option<DMatrix<f64>> {
-        let d = z.len();
+    /// Hessian by central differences over the axes not held: 2 points per
+    /// axis, each mixed derivative from its four points (±h, ±h). The rule
+    /// at half the points (each pair's two diagonal points z ± h(eᵢ + eⱼ)
+    /// less the axis points, the same order of error) was tried and
+    /// dropped: it carries the axis points' rounding into every
+    /// off-diagonal entry (about three times the four-point rule's noise),
+    /// and on the measured 1 A records with the model terms it put one
+    /// principal curvature at 0.075 where the log-density one sd either side
+    /// says 0.84 — a Laplace approximation 3.4× too wide in R0, R1, D1,
+    /// walkers started far out, and a run of 800 steps instead of about 50
+    /// (docs/performance.md, "The Hessian at half the points").
+    ///
+    /// An axis whose points leave the support is held from then on (of a
+    /// pair, the later axis): its row and column are those of the start's
+    /// own spread, curvature 1 and no correlation. The discrepancy model
+    /// puts a run's white noise σ at the record's resolution, its prior's
+    /// lower bound, on the measured damper; without the hold the search gave
+    /// up there and the walkers started about the surrogate's optimum, 35
+    /// nats below the mode (docs/performance.md).
+    fn hessian(&self, z: &DVector<f64>, f0: f64, held: &mut [bool]) -> DMatrix<f64> {
         let h = HESSIAN_STEP;
-        let mut zs: Vec<DVector<f64>> = (0..d).flat_map(|i| [-h, h].map(|s| offset(z, &[(i, s)]))).collect();
-        let pairs: Vec<(usize, usize)> = (0..d).flat_map(|i| (0..i).map(move |j| (i, j))).collect();
+        let axes: Vec<usize> = (0..z.len()).filter(|&i| !held[i]).collect();
+        let mut zs: Vec<DVector<f64>> = axes.iter().flat_map(|&i| [-h, h].map(|s| offset(z, &[(i, s)]))).collect();
+        let pairs: Vec<(usize, usize)> = axes.iter().enumerate().flat_map(|(k, &i)| axes[..k].iter().map(move |&j| (i, j))).collect();
         for &(i, j) in &pairs {
             for (si, sj) in [(h, h), (h, -h), (-h, h), (-h, -h)] {
                 zs.push(offset(z, &[(i, si), (j, sj)]));
             }
         }
         let f = self.at(&zs);
-        if f.iter().any(|v| !v.is_finite()) {
-            return None;
+        let na = axes.len();
+        for (k, &i) in axes.iter().enumerate() {
+            if !(f[2 * k].is_finite() && f[2 * k + 1].is_finite()) {
+                held[i] = true;
+            }
+        }
+        for (k, &(i, j)) in pairs.iter().enumerate() {
+            if !held[i] && !held[j] && f[2 * na + 4 * k..2 * na + 4 * k + 4].iter().any(|v| !v.is_finite()) {
+                held[i] = true;
+            }
         }
         let h2 = h * h;
-        let mut hess = DMatrix::from_fn(d, d, |i, j| if i == j { (f[2 * i + 1] - 2.0 * f0 + f[2 * i]) / h2 } else { 0.0 });
-        for (k, &(i, j)) in pairs.iter().enumerate() {
-            let q = &f[2 * d + 4 * k..2 * d + 4 * k + 4];
-            let v = (q[0] - q[1] - q[2] + q[3]) / (4.0 * h2);
-            hess[(i, j)] = v;
-            hess[(j, i)] = v;
+        let mut hess = DMatrix::from_diagonal_element(z.len(), z.len(), -1.0);
+        for (k, &i) in axes.iter().enumerate() {
+            if !held[i] {
+                hess[(i, i)] = (f[2 * k + 1] - 2.0 * f0 + f[2 * k]) / h2;
+            }
         }
-        Some(hess)
+        for (k, &(i, j)) in pairs.iter().enumerate() {
+            if !held[i] && !held[j] {
+                let q = &f[2 * na + 4 * k..2 * na + 4 * k + 4];
+                let v = (q[0] - q[1] - q[2] + q[3]) / (4.0 * h2);
+                hess[(i, j)] = v;
+                hess[(j, i)] = v;
+            }
+        }
+        hess
     }
 }
 
@@ -177,9 +206,11 @@ fn covariance(hess: &DMatrix<f64>) -> DMatrix<f64> {
 
 /// The mode of `target` and the Laplace approximation there, from `start`
 /// (the surrogate's Laplace approximation: its mean is where the search
-/// begins, its factor whitens the coordinates). `None` where the
-/// log-density is not finite at every point the differences need (a mode
-/// on the prior's bound, say): the caller keeps the surrogate.
+/// begins, its factor whitens the coordinates). A whitened axis along
+/// which the differences leave the support (a mode on a prior's bound) is
+/// held where the start put it, with the start's spread; the others reach
+/// their mode given it. `None` where the log-density is not finite at the
+/// start: the caller keeps the surrogate.
 pub fn newton(target: &impl LogDensity, start: &Elliptical) -> Option<Mode> {
     let w = Whitened { target, start };
     let d = start.dim();
@@ -188,25 +219,28 @@ pub fn newton(target: &impl LogDensity, start: &Elliptical) -> Option<Mode> {
     if !f.is_finite() {
         return None;
     }
+    // the axes whose differences leave the support, held where the start
+    // put them (a step is not taken along them)
+    let mut held = vec![false; d];
     // the Hessian where the search begins serves the steps until one falls
     // short of its model; the gradient is measured afresh after each, and
     // the search ends where a Hessian measured there expects no gain
-    let mut cov = covariance(&w.hessian(&z, f)?);
+    let mut cov = covariance(&w.hessian(&z, f, &mut held));
     let mut fresh = true;
     let mut measured = 1;
-    let mut g = w.gradient(&z)?;
+    let mut g = w.gradient(&z, &mut held);
     let mut converged = false;
     for _ in 0..MAX_STEPS {
-        let step = &cov * &g;
+        let step = hold(&cov * &hold(g.clone(), &held), &held);
         let gain = g.dot(&step);
         let moved = if gain < GAIN_TOL { None } else { line_search(&w, &z, f, &step, gain) };
         match moved {
             Some((alpha, trial, ft)) => {
                 (z, f, fresh) = (trial, ft, false);
                 if alpha < 1.0 && measured < MAX_HESSIANS {
-                    (cov, fresh, measured) = (covariance(&w.hessian(&z, f)?), true, measured + 1);
+                    (cov, fresh, measured) = (covariance(&w.hessian(&z, f, &mut held)), true, measured + 1);
                 }
-                g = w.gradient(&z)?;
+                g = w.gradient(&z, &mut held);
             }
             // no gain left, or none found, by the curvature measured here
             None if fresh => {
@@ -214,17 +248,23 @@ pub fn newton(target: &impl LogDensity, start: &Elliptical) -> Option<Mode> {
                 break;
             }
             // … or by one measured elsewhere: measure it here and go on
-            None => (cov, fresh, measured) = (covariance(&w.hessian(&z, f)?), true, measured + 1),
+            None => (cov, fresh, measured) = (covariance(&w.hessian(&z, f, &mut held)), true, measured + 1),
         }
     }
     if !fresh {
-        cov = covariance(&w.hessian(&z, f)?);
+        cov = covariance(&w.hessian(&z, f, &mut held));
     }
     let l = start.factor();
     let cov_x = l * cov * l.transpose();
     let factor = cov_x.cholesky()?.l();
     let x = w.x(&z);
     Some(Mode { laplace: Elliptical::from_factor(DVector::from_column_slice(&x), factor), x, log_density: f, converged })
+}
+
+/// `v` with its held entries set to 0.
+fn hold(mut v: DVector<f64>, held: &[bool]) -> DVector<f64> {
+    v.iter_mut().zip(held).filter(|(_, h)| **h).for_each(|(x, _)| *x = 0.0);
+    v
 }
 
 #[cfg(test)]
@@ -309,6 +349,37 @@ mod tests {
     }
 
     #[test]
+    fn a_coordinate_on_its_bound_is_held_and_the_rest_reach_their_conditional_mode() {
+        // the correlated Gaussian of `gaussian()` cut at x₂ ≥ 0.45 (its
+        // mean 0.5 lies inside, but the start sits at 0.46, within one
+        // difference step of the cut): x₂ is held at 0.46 and (x₀, x₁)
+        // reach the Gaussian's conditional mean given x₂, m₀₁ +
+        // Σ₀₁,₂ Σ₂₂⁻¹ (x₂ − m₂) (exact for a quadratic: 1e-6); x₂ keeps
+        // the start's variance and no correlation
+        struct Cut(Target);
+        impl LogDensity for Cut {
+            fn dim(&self) -> usize {
+                3
+            }
+            fn log_density(&self, x: &[f64]) -> f64 {
+                if x[2] < 0.45 { f64::NEG_INFINITY } else { self.0.log_density(x) }
+            }
+        }
+        let (target, cov) = gaussian();
+        let mean = target.mean.clone();
+        let start = Elliptical::from_factor(DVector::from_column_slice(&[2.0, -1.0, 0.46]), DMatrix::from_diagonal(&DVector::from_column_slice(&[1.0, 0.5, 0.25])));
+        let mode = newton(&Cut(target), &start).unwrap();
+        let dx2 = 0.46 - mean[2];
+        for i in 0..2 {
+            let expected = mean[i] + cov[(i, 2)] / cov[(2, 2)] * dx2;
+            assert!((mode.x[i] - expected).abs() < 1e-6, "mode {:?}, expected {expected} at {i}", mode.x);
+        }
+        assert_eq!(mode.x[2], 0.46);
+        let got = mode.laplace.covariance();
+        assert!((got[(2, 2)] - 0.0625).abs() < 1e-12 && got[(0, 2)].abs() < 1e-12 && got[(1, 2)].abs() < 1e-12, "covariance {got}");
+    }
+
+    #[test]
     fn a_flat_direction_keeps_a_bounded_spread() {
         // no information on the third coordinate: its sd is held at
         // 1/√MIN_CURVATURE start sds, not infinite
@@ -355,7 +426,7 @@ mod tests {
         let w = Whitened { target: &Quartic, start: &start };
         let z = DVector::from_column_slice(&[0.3, -0.2, 0.1]);
         let f0 = Quartic.log_density(z.as_slice());
-        let got = w.hessian(&z, f0).unwrap();
+        let got = w.hessian(&z, f0, &mut [false; 3]);
         let (x0, x1) = (z[0], z[1]);
         let mut exact = DMatrix::from_fn(3, 3, |i, j| -P[i][j]);
         exact[(0, 0)] += 6.0 * B * x0 + 2.0 * C * x1 * x1;

@@ -141,11 +141,19 @@ struct Moved {
 /// half as many again for the proposals in flight) would take more than
 /// [`MEMO_BUDGET_BYTES`].
 fn within_budget(blocks: Vec<Vec<usize>>, memo_len: usize, walkers: usize) -> Vec<Vec<usize>> {
-    if memo_len * walkers * std::mem::size_of::<f64>() * 3 / 2 > MEMO_BUDGET_BYTES {
-        Vec::new()
-    } else {
+    if memos_fit(memo_len, walkers) {
         blocks
+    } else {
+        Vec::new()
     }
+}
+
+/// Whether `walkers` memos of `memo_len` numbers (and half as many again
+/// for the proposals in flight) fit in [`MEMO_BUDGET_BYTES`]: whether a
+/// target's blocks ([`LogDensity::blocks`]) are updated on their own, and
+/// the ensemble moves propose only the other coordinates.
+pub fn memos_fit(memo_len: usize, walkers: usize) -> bool {
+    memo_len * walkers * std::mem::size_of::<f64>() * 3 / 2 <= MEMO_BUDGET_BYTES
 }
 
 /// The coordinates `free` of each of `points` (`d` coordinates each).
