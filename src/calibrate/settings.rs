@@ -177,7 +177,7 @@ pub struct Overrides {
     /// How the B-P parameters relate to the runs (default: per-current)
     #[arg(long, value_enum)]
     pub model: Option<ModelKind>,
-    /// Walkers per ensemble (default: the smallest even number ≥ max(64, 6 × dimension))
+    /// Walkers per ensemble (default: the smallest even number ≥ max(64, 6 × the dimension the ensemble moves explore: with `--noise discrepancy` each run's noise, moved on its own, is not counted))
     #[arg(long)]
     pub walkers: Option<usize>,
     /// Independent ensembles (default 4)
