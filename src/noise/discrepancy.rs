@@ -599,27 +599,20 @@ struct Whitening {
     strain_var: f64,
 }
 
-impl Whitening {
-    /// The filter over `residuals` (the stiffness, with errors in
-    /// variables, along the model stress they imply), visiting each
-    /// innovation and its variance.
-    fn filter(&self, residuals: &[f64], g: f64, visit: impl FnMut(usize, f64, f64)) {
-        let stiffness = (self.strain_var > 0.0).then(|| stiffness_of_residuals(&self.run, residuals, g));
-        filter_run(&self.run, &self.process, self.sigma, self.strain_var, stiffness.as_deref(), residuals, visit);
-    }
-}
-
 impl Whiten for Whitening {
-    fn whiten(&self, residuals: &[f64], g: f64, out: &mut Vec<f64>) {
-        self.filter(residuals, g, |_, v, s| out.push(v / s.sqrt()));
-    }
-
-    /// The innovations' variances are at least the white noise's σ².
-    fn log_variance_terms(&self, residuals: &[f64], g: f64, out: &mut Vec<f64>) {
-        if self.strain_var > 0.0 {
-            let floor = self.sigma * self.sigma;
-            self.filter(residuals, g, |_, _, s| out.push(log_variance_term(s, floor)));
-        }
+    /// The filter's standardised innovations, the stiffness (with errors in
+    /// variables) along the model stress the residuals imply; the
+    /// innovations' variances, at least the white noise's σ², follow the
+    /// model only through that stiffness.
+    fn whiten(&self, residuals: &[f64], g: f64, white: &mut Vec<f64>, terms: &mut Vec<f64>) {
+        let stiffness = (self.strain_var > 0.0).then(|| stiffness_of_residuals(&self.run, residuals, g));
+        let floor = self.sigma * self.sigma;
+        filter_run(&self.run, &self.process, self.sigma, self.strain_var, stiffness.as_deref(), residuals, |_, v, s| {
+            white.push(v / s.sqrt());
+            if stiffness.is_some() {
+                terms.push(log_variance_term(s, floor));
+            }
+        });
     }
 }
 
@@ -772,8 +765,7 @@ mod tests {
                 let direct = -(n as f64) * HALF_LN_2PI - 0.5 * log_det - 0.5 * d.r.dot(&chol.solve(&d.r));
                 let w = Whitening { run: run.clone(), process: Process::new(kernel_kind, SD, ELL, run.step_s), sigma: SIGMA, strain_var };
                 let (mut white, mut terms) = (Vec::new(), Vec::new());
-                w.whiten(d.r.as_slice(), G, &mut white);
-                w.log_variance_terms(d.r.as_slice(), G, &mut terms);
+                w.whiten(d.r.as_slice(), G, &mut white, &mut terms);
                 assert_eq!((white.len(), terms.len()), (n, n));
                 let sum: f64 = white.iter().map(|v| v * v).sum::<f64>() + terms.iter().map(|u| u * u - 1.0).sum::<f64>();
                 let searched = -0.5 * (sum + n as f64 * (2.0 * SIGMA.ln() + 2.0 * HALF_LN_2PI));
@@ -891,7 +883,7 @@ mod tests {
         assert!((l / ell).ln().abs() < 1.5f64.ln(), "ℓ {l}");
         // the whitened residuals are close to independent standard normals
         let mut w = Vec::new();
-        p.whitening.whiten(&r, 1e6, &mut w);
+        p.whitening.whiten(&r, 1e6, &mut w, &mut Vec::new());
         let var = w.iter().map(|v| v * v).sum::<f64>() / w.len() as f64;
         let lag1 = w.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / w.len() as f64;
         assert!((var - 1.0).abs() < 0.1 && lag1.abs() < 0.1, "variance {var}, lag-1 {lag1}");

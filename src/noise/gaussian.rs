@@ -150,14 +150,10 @@ struct StrainNoise {
 }
 
 impl Whiten for StrainNoise {
-    fn whiten(&self, residuals: &[f64], g: f64, out: &mut Vec<f64>) {
+    fn whiten(&self, residuals: &[f64], g: f64, white: &mut Vec<f64>, terms: &mut Vec<f64>) {
         let a = strain_noise_of_residuals(&self.run, residuals, g, self.var);
-        out.extend(residuals.iter().zip(a).map(|(v, a)| v / (self.sigma2 + a).sqrt()));
-    }
-
-    fn log_variance_terms(&self, residuals: &[f64], g: f64, out: &mut Vec<f64>) {
-        let a = strain_noise_of_residuals(&self.run, residuals, g, self.var);
-        out.extend(a.into_iter().map(|a| log_variance_term(self.sigma2 + a, self.sigma2)));
+        white.extend(residuals.iter().zip(&a).map(|(v, a)| v / (self.sigma2 + a).sqrt()));
+        terms.extend(a.iter().map(|a| log_variance_term(self.sigma2 + a, self.sigma2)));
     }
 }
 
@@ -391,8 +387,7 @@ mod tests {
             let r: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - p[k]).collect();
             let direct: f64 = r.iter().enumerate().map(|(i, r)| normal_ln_pdf(*r, (sigma2 + stiffness[i + 1].powi(2) * var).sqrt())).sum();
             let (mut white, mut terms) = (Vec::new(), Vec::new());
-            w.whiten(&r, g, &mut white);
-            w.log_variance_terms(&r, g, &mut terms);
+            w.whiten(&r, g, &mut white, &mut terms);
             let n = r.len() as f64;
             let sum: f64 = white.iter().map(|v| v * v).sum::<f64>() + terms.iter().map(|u| u * u - 1.0).sum::<f64>();
             let searched = -0.5 * (sum + n * (sigma2.ln() + 2.0 * HALF_LN_2PI));

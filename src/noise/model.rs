@@ -160,20 +160,17 @@ pub trait NoiseSimulator {
 /// Turns one run's residuals (k = 1…) into independent standard ones at
 /// fixed noise parameters: what the MAP search's least squares weigh.
 pub trait Whiten: Send + Sync + std::fmt::Debug {
-    /// Appends the whitened residuals of `residuals` to `out`; `g` is the
+    /// Appends the whitened residuals of `residuals` to `white`; `g` is the
     /// law's shear modulus where they were made (with errors in variables
     /// the stiffness through which the strain's noise reaches them is
-    /// recomputed along them, so that it follows the model).
-    fn whiten(&self, residuals: &[f64], g: f64, out: &mut Vec<f64>);
-
-    /// Appends, where the residuals' variances v_k follow the model (errors
-    /// in variables), one pseudo-residual per sample, √(ln(v_k/v₀) + 1) with
-    /// v₀ ≤ every v_k (the white noise's variance): with the whitened
+    /// recomputed along them, so that it follows the model). Where the
+    /// residuals' variances v_k follow the model (errors in variables), also
+    /// appends to `terms` one pseudo-residual per sample, √(ln(v_k/v₀) + 1)
+    /// with v₀ ≤ every v_k (the white noise's variance): with the whitened
     /// residuals their squares sum to −2 ln L up to a constant, so that
     /// least squares over both find the likelihood's maximum at these noise
-    /// parameters, not that of variances held where the search began. None
-    /// by default (variances that do not depend on the model).
-    fn log_variance_terms(&self, _residuals: &[f64], _g: f64, _out: &mut Vec<f64>) {}
+    /// parameters, not that of variances held where the search began.
+    fn whiten(&self, residuals: &[f64], g: f64, white: &mut Vec<f64>, terms: &mut Vec<f64>);
 }
 
 /// Whitening by a scale per sample.
@@ -181,13 +178,13 @@ pub trait Whiten: Send + Sync + std::fmt::Debug {
 pub struct Scales(pub Vec<f64>);
 
 impl Whiten for Scales {
-    fn whiten(&self, residuals: &[f64], _g: f64, out: &mut Vec<f64>) {
-        out.extend(residuals.iter().zip(&self.0).map(|(v, s)| v / s));
+    fn whiten(&self, residuals: &[f64], _g: f64, white: &mut Vec<f64>, _terms: &mut Vec<f64>) {
+        white.extend(residuals.iter().zip(&self.0).map(|(v, s)| v / s));
     }
 }
 
 /// The pseudo-residual √(ln(v/v₀) + 1) of a variance v ≥ v₀
-/// ([`Whiten::log_variance_terms`]).
+/// ([`Whiten::whiten`]'s terms).
 pub fn log_variance_term(v: f64, v0: f64) -> f64 {
     ((v / v0).ln().max(0.0) + 1.0).sqrt()
 }

@@ -147,8 +147,9 @@ enum Support {
 /// its run residuals: each run's as its noise model whitens them (divided
 /// by σ, say), then each run's log-variance terms where its variances
 /// follow the model (errors in variables: without them the search's
-/// optimum is not the likelihood's, and with the discrepancy model on the
-/// measured damper it stopped 60 nats below the mode, docs/performance.md),
+/// optimum is not the likelihood's: with the discrepancy model on the
+/// measured 0.5 A records it stopped 105 nats below where it now does,
+/// docs/performance.md),
 /// then (ln θ − centre)/scale for every log-normal prior and value/sd for
 /// every term's: their squares sum to −2 ln p up to a constant, at the
 /// noise the search holds. With [`Support::Truncated`], points outside
@@ -164,26 +165,21 @@ fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<
     }
     let res = residuals?;
     let mut out: Vec<f64> = Vec::with_capacity(res.iter().map(Vec::len).sum::<usize>() + log_theta.len());
-    let at = post.likelihood_point(x);
-    let g: Vec<f64> = post.runs.iter().map(|run| post.lane_params(&[&at], run).g_bound(run)[0]).collect();
     // every run's whitened residuals, then every run's log-variance terms
     // (the rows of the whitened residuals first and together, as
     // [`super::memory`] reads them); a tempered run's count by the square
     // root of its weight
-    for terms in [false, true] {
-        for (j, (r, w)) in res.iter().zip(whitening).enumerate() {
-            let from = out.len();
-            match terms {
-                false => w.whiten(r, g[j], &mut out),
-                true => w.log_variance_terms(r, g[j], &mut out),
-            }
-            let weight = post.weight(j);
-            if weight != 1.0 {
-                let scale = weight.sqrt();
-                out[from..].iter_mut().for_each(|v| *v *= scale);
-            }
+    let mut terms = Vec::new();
+    for (j, ((r, w), g)) in res.iter().zip(whitening).zip(moduli(post, x)).enumerate() {
+        let (from, terms_from) = (out.len(), terms.len());
+        w.whiten(r, g, &mut out, &mut terms);
+        let weight = post.weight(j);
+        if weight != 1.0 {
+            let scale = weight.sqrt();
+            out[from..].iter_mut().chain(&mut terms[terms_from..]).for_each(|v| *v *= scale);
         }
     }
+    out.append(&mut terms);
     for (prior, v) in post.priors.iter().zip(&log_theta) {
         if let Some((c, s)) = prior.centre() {
             out.push((v - c) / s);
@@ -356,8 +352,15 @@ fn project(post: &Posterior, log_theta: &[f64]) -> Vec<f64> {
 /// Each run's noise fitted to its residuals at the fitted point `x`.
 fn profiles(post: &Posterior, x: &[f64]) -> Option<Vec<Profile>> {
     let res = residuals_many(post, &[x.to_vec()]).pop()??;
+    Some(res.iter().zip(&post.runs).zip(moduli(post, x)).map(|((r, run), g)| post.noise.profile(run, r, g)).collect())
+}
+
+/// Each run's shear modulus at the fitted point `x` (`g_bound`: where the
+/// law's stiffness starts and what caps it), for the noise models whose
+/// variances follow that stiffness (errors in variables).
+fn moduli(post: &Posterior, x: &[f64]) -> Vec<f64> {
     let at = post.likelihood_point(x);
-    Some(res.iter().zip(&post.runs).map(|(r, run)| post.noise.profile(run, r, post.lane_params(&[&at], run).g_bound(run)[0])).collect())
+    post.runs.iter().map(|run| post.lane_params(&[&at], run).g_bound(run)[0]).collect()
 }
 
 /// θ extended by the noise coordinates that maximise the likelihood of the
@@ -395,14 +398,13 @@ pub fn memory_times(post: &Posterior, map: &MapEstimate) -> Option<Vec<f64>> {
 /// Each run's residuals at the MAP, whitened by its noise model.
 pub(super) fn whitened_residuals(post: &Posterior, map: &MapEstimate) -> Option<Vec<Vec<f64>>> {
     let res = residuals_many(post, std::slice::from_ref(&map.x)).pop()??;
-    let at = post.likelihood_point(&map.x);
     Some(
         res.iter()
             .zip(&map.whitening)
-            .zip(&post.runs)
-            .map(|((r, w), run)| {
+            .zip(moduli(post, &map.x))
+            .map(|((r, w), g)| {
                 let mut white = Vec::with_capacity(r.len());
-                w.whiten(r, post.lane_params(&[&at], run).g_bound(run)[0], &mut white);
+                w.whiten(r, g, &mut white, &mut Vec::new());
                 white
             })
             .collect(),
