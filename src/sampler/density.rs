@@ -56,15 +56,51 @@ pub fn free_coordinates(d: usize, blocks: &[Vec<usize>]) -> Vec<usize> {
 }
 
 /// Points evaluated together in one [`LogDensity::log_density_batch`] call
-/// by [`log_densities`]: fixed, so that no result depends on the threads.
-const BATCH: usize = 8;
+/// by [`log_densities`] (and the sampler): fixed, so that no result depends
+/// on the threads.
+pub(crate) const BATCH: usize = 8;
 
 /// The log-densities at `points` (each `target.dim()` coordinates, one
-/// after another), batches of [`BATCH`] evaluated in parallel.
+/// after another), batches of [`BATCH`] evaluated in parallel; NaN becomes
+/// −∞.
 pub fn log_densities(target: &impl LogDensity, points: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; points.len() / target.dim().max(1)];
+    log_densities_memo(target, points, &mut out, &mut []);
+    out
+}
+
+/// Log-densities of consecutive points, in parallel batches of [`BATCH`];
+/// NaN becomes −∞. With `memos` (one per point; empty: none made), each
+/// point's memo for [`LogDensity::block_log_density_batch`] too.
+pub fn log_densities_memo<T: LogDensity>(target: &T, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
+    use rayon::prelude::*;
+    let d = target.dim();
+    if memos.is_empty() {
+        xs.par_chunks(BATCH * d).zip(out.par_chunks_mut(BATCH)).for_each(|(x, o)| target.log_density_batch(x, o));
+    } else {
+        xs.par_chunks(BATCH * d)
+            .zip(out.par_chunks_mut(BATCH))
+            .zip(memos.par_chunks_mut(BATCH))
+            .for_each(|((x, o), m)| target.log_density_batch_memo(x, o, m));
+    }
+    for v in out.iter_mut() {
+        if v.is_nan() {
+            *v = f64::NEG_INFINITY;
+        }
+    }
+}
+
+/// Block `b`'s terms ([`LogDensity::block_log_density_batch`]) at the
+/// points `xs`, each with the memo of the point it differs from in block
+/// `b` alone, in parallel batches of [`BATCH`]; NaN becomes −∞.
+pub fn block_log_densities<T: LogDensity>(target: &T, b: usize, xs: &[f64], memos: &[&[f64]]) -> Vec<f64> {
     use rayon::prelude::*;
     let d = target.dim().max(1);
-    let mut out = vec![0.0; points.len() / d];
-    points.par_chunks(BATCH * d).zip(out.par_chunks_mut(BATCH)).for_each(|(x, o)| target.log_density_batch(x, o));
+    let mut out = vec![0.0; xs.len() / d];
+    xs.par_chunks(BATCH * d)
+        .zip(out.par_chunks_mut(BATCH))
+        .zip(memos.par_chunks(BATCH))
+        .for_each(|((x, o), m)| target.block_log_density_batch(b, x, m, o));
+    out.iter_mut().filter(|v| v.is_nan()).for_each(|v| *v = f64::NEG_INFINITY);
     out
 }

@@ -15,12 +15,8 @@ use super::moves::{Fit, Learned, Move};
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
 use super::stranded;
-use super::density::{free_coordinates, LogDensity};
+use super::density::{free_coordinates, log_densities_memo as evaluate_memo, LogDensity, BATCH};
 use crate::error::{Error, Result};
-
-/// Walkers proposed and evaluated together in one batch. Fixed, so that the
-/// batching never depends on the number of threads.
-const BATCH: usize = 8;
 
 /// Index of the stream that picks the move of an ensemble's step.
 const MOVE_STREAM: u64 = u64::MAX;
@@ -578,26 +574,6 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             u -= w;
         }
         moves[moves.len() - 1].0
-    }
-}
-
-/// Log-densities of consecutive points, in parallel batches; NaN becomes
-/// −∞. With `memos` (one per point; empty: none made), each point's memo
-/// for the block updates too.
-fn evaluate_memo<T: LogDensity>(target: &T, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
-    let d = target.dim();
-    if memos.is_empty() {
-        xs.par_chunks(BATCH * d).zip(out.par_chunks_mut(BATCH)).for_each(|(x, o)| target.log_density_batch(x, o));
-    } else {
-        xs.par_chunks(BATCH * d)
-            .zip(out.par_chunks_mut(BATCH))
-            .zip(memos.par_chunks_mut(BATCH))
-            .for_each(|((x, o), m)| target.log_density_batch_memo(x, o, m));
-    }
-    for v in out.iter_mut() {
-        if v.is_nan() {
-            *v = f64::NEG_INFINITY;
-        }
     }
 }
 
