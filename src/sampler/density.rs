@@ -74,7 +74,7 @@ pub fn log_densities(target: &impl LogDensity, points: &[f64]) -> Vec<f64> {
 /// point's memo for [`LogDensity::block_log_density_batch`] too.
 pub fn log_densities_memo<T: LogDensity>(target: &T, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
     use rayon::prelude::*;
-    let d = target.dim();
+    let d = target.dim().max(1);
     if memos.is_empty() {
         xs.par_chunks(BATCH * d).zip(out.par_chunks_mut(BATCH)).for_each(|(x, o)| target.log_density_batch(x, o));
     } else {
@@ -83,11 +83,7 @@ pub fn log_densities_memo<T: LogDensity>(target: &T, xs: &[f64], out: &mut [f64]
             .zip(memos.par_chunks_mut(BATCH))
             .for_each(|((x, o), m)| target.log_density_batch_memo(x, o, m));
     }
-    for v in out.iter_mut() {
-        if v.is_nan() {
-            *v = f64::NEG_INFINITY;
-        }
-    }
+    nan_to_neg_infinity(out);
 }
 
 /// Block `b`'s terms ([`LogDensity::block_log_density_batch`]) at the
@@ -101,6 +97,11 @@ pub fn block_log_densities<T: LogDensity>(target: &T, b: usize, xs: &[f64], memo
         .zip(out.par_chunks_mut(BATCH))
         .zip(memos.par_chunks(BATCH))
         .for_each(|((x, o), m)| target.block_log_density_batch(b, x, m, o));
-    out.iter_mut().filter(|v| v.is_nan()).for_each(|v| *v = f64::NEG_INFINITY);
+    nan_to_neg_infinity(&mut out);
     out
+}
+
+/// A NaN log-density is read as −∞ (outside the support).
+fn nan_to_neg_infinity(values: &mut [f64]) {
+    values.iter_mut().filter(|v| v.is_nan()).for_each(|v| *v = f64::NEG_INFINITY);
 }

@@ -15,7 +15,7 @@ use super::moves::{Fit, Learned, Move};
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
 use super::stranded;
-use super::density::{free_coordinates, log_densities_memo as evaluate_memo, LogDensity, BATCH};
+use super::density::{free_coordinates, log_densities_memo, LogDensity, BATCH};
 use crate::error::{Error, Result};
 
 /// Index of the stream that picks the move of an ensemble's step.
@@ -178,7 +178,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let mut log_prob = vec![0.0; nc];
         let blocks = target.blocks();
         let mut memos = vec![Vec::new(); if blocks.is_empty() { 0 } else { nc }];
-        evaluate_memo(target, &positions, &mut log_prob, &mut memos);
+        log_densities_memo(target, &positions, &mut log_prob, &mut memos);
         let blocks = within_budget(blocks, memos.first().map_or(0, Vec::len), nc);
         if blocks.is_empty() {
             memos.clear();
@@ -220,7 +220,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         if !blocks.is_empty() {
             // the budget as the run that saved it measured it
             let (d, mut memo) = (target.dim(), vec![Vec::new()]);
-            evaluate_memo(target, &chains.last_positions()[..d], &mut [0.0], &mut memo);
+            log_densities_memo(target, &chains.last_positions()[..d], &mut [0.0], &mut memo);
             blocks = within_budget(blocks, memo[0].len(), chains.chains());
         }
         let free = free_coordinates(target.dim(), &blocks);
@@ -339,7 +339,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             // a resumed run: the memos at the stored positions (their
             // log-densities are those stored)
             self.memos = vec![Vec::new(); nc];
-            evaluate_memo(self.target, &pos, &mut vec![0.0; nc], &mut self.memos);
+            log_densities_memo(self.target, &pos, &mut vec![0.0; nc], &mut self.memos);
         }
         for redraw in stranded::due(&self.chains, step as usize) {
             self.redraw(&redraw, &mut pos, &mut lp);
@@ -387,7 +387,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                     }
                     let mut new_lp = vec![0.0; chunk.len()];
                     let mut memos = vec![Vec::new(); if with_memos { chunk.len() } else { 0 }];
-                    evaluate_memo(target, &proposals, &mut new_lp, &mut memos);
+                    log_densities_memo(target, &proposals, &mut new_lp, &mut memos);
                     let accept = chunk
                         .iter()
                         .enumerate()
@@ -431,7 +431,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         }
         let mut fresh_lp = vec![0.0; nw];
         let mut fresh_memos = vec![Vec::new(); if self.blocks.is_empty() { 0 } else { nw }];
-        evaluate_memo(self.target, &fresh, &mut fresh_lp, &mut fresh_memos);
+        log_densities_memo(self.target, &fresh, &mut fresh_lp, &mut fresh_memos);
         for w in 0..nw {
             let (c, source) = (redraw.ensemble * nw + w, redraw.from * nw + w);
             if fresh_lp[w] > f64::NEG_INFINITY {
