@@ -27,7 +27,7 @@ use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
 pub use record::{command_line, CalibrationRecord, StepRow};
 pub use sampling::Sampled;
-pub use start::{start, Start, MEMORY_REMEDY, MEMORY_WARNING};
+pub use start::{confounding_warning, start, Start, CONFOUNDING_RATIO, MEMORY_REMEDY, MEMORY_WARNING};
 pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
 
 /// A calibration: its settings, what it did, its posterior sample and
@@ -199,7 +199,11 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
     if let Some(map) = map {
         start.map = map;
     }
-    let record = CalibrationRecord::of(campaign, &start, walkers_start, spread, &sampled);
+    let mut record = CalibrationRecord::of(campaign, &start, walkers_start, spread, &sampled);
+    if let Some(alone) = &start.law_alone_rms {
+        let median: Vec<f64> = sampled.diagnostics.coordinates.iter().map(|c| c.q50).collect();
+        record.confounding = start::confounding(posterior, &posterior.layout.from_si(&median), alone);
+    }
     let calibration = Calibration {
         dir: PathBuf::new(),
         settings: start.settings.clone(),

@@ -71,6 +71,11 @@ pub struct CalibrationRecord {
     /// What the start found about the model's fit (residuals with memory).
     #[serde(default)]
     pub model_warnings: Vec<String>,
+    /// Where the noise model's own force (a discrepancy, AR(1)) took over
+    /// force the law alone carries: its law-path RMS against the law
+    /// alone's, per run (empty: no such run, or a noise without a force).
+    #[serde(default)]
+    pub confounding: Vec<String>,
     /// The campaign's geometry (A, h): what turns the bands into forces.
     #[serde(default)]
     pub geometry: Option<Geometry>,
@@ -146,6 +151,7 @@ impl CalibrationRecord {
             ess_bulk_per_second: names.iter().zip(&sampled.diagnostics.coordinates).map(|(n, d)| (n.clone(), d.ess_bulk / (seconds_start + sampled.seconds))).collect(),
             warnings: sampled.diagnostics.warnings.clone(),
             model_warnings: start.warnings.clone(),
+            confounding: Vec::new(),
             geometry: Some(campaign.geometry),
             calibration_id: new_calibration_id(),
         }

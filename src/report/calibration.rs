@@ -13,6 +13,7 @@ use crate::data::{current_tag, Campaign};
 use crate::error::{Error, Result};
 use crate::model::PARAM_NAMES;
 use crate::posterior::map::step_shift_limit;
+use crate::calibrate::CONFOUNDING_RATIO;
 use crate::posterior::ParameterModel;
 use crate::calibrate::Calibration;
 use crate::predict::{CoverageRow, Prediction};
@@ -78,7 +79,7 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
     page.section("diagnostics", "Diagnostics");
     let rows: Vec<Vec<String>> = checks.iter().map(|(what, mark, detail)| vec![esc(what), mark.html().into(), esc(detail)]).collect();
     page.table(&["check", "", "measured"], &rows);
-    for w in r.cal.record.warnings.iter().chain(&r.cal.record.model_warnings) {
+    for w in r.cal.record.warnings.iter().chain(&r.cal.record.model_warnings).chain(&r.cal.record.confounding) {
         page.note(w);
     }
     coverage_section(&mut page, r);
@@ -500,6 +501,13 @@ fn verdicts(cal: &Calibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, S
             format!("{} run(s) with memory: see Model adequacy", cal.record.runs_with_memory()),
         ),
     ];
+    if cal.settings.likelihood.noise.model(&Default::default()).models_memory() {
+        v.push((
+            format!("the noise's own force does not take over the law's (law-path RMS at the MAP ≤ {CONFOUNDING_RATIO}× the law alone's)"),
+            Mark::of(cal.record.confounding.is_empty()),
+            if cal.record.confounding.is_empty() { "every run".to_string() } else { "see the warning below".to_string() },
+        ));
+    }
     if let Some(last) = cal.record.step_study.last() {
         let limit = step_shift_limit(cal.settings.integrator.extrapolate);
         v.push((

@@ -95,7 +95,7 @@ fn calibrations_section(page: &mut Page, entries: &[Entry]) {
         .map(|e| {
             let (rhat, ess) = (e.cal.max_rhat(), e.cal.min_ess());
             // every warning of the calibration counts, not only R̂ and ESS
-            let warnings: Vec<&String> = e.cal.record.warnings.iter().chain(&e.cal.record.model_warnings).collect();
+            let warnings: Vec<&String> = e.cal.record.warnings.iter().chain(&e.cal.record.model_warnings).chain(&e.cal.record.confounding).collect();
             let pass = rhat < 1.01 && ess >= e.cal.settings.sampler.min_ess && e.cal.record.warnings.is_empty();
             let verdict = if warnings.is_empty() {
                 Mark::of(pass).html().to_string()

@@ -140,7 +140,7 @@ pub fn calibration(cal: &Calibration) -> String {
             crate::sampler::diagnostics::MIN_TAU_MULTIPLE
         );
     }
-    for w in rec.warnings.iter().chain(&rec.model_warnings) {
+    for w in rec.warnings.iter().chain(&rec.model_warnings).chain(&rec.confounding) {
         row!(out, "warning: {w}");
     }
     row!(out, "wall time: {seconds:.1} s (identification, MAP, step rule and walkers' start {:.1} s, sampling {:.1} s)", rec.seconds_start, rec.seconds_sampling);

@@ -61,7 +61,7 @@ pub fn run_task(pipeline: &mut Pipeline, dir: &Path, id: &str) -> Result<(TaskOu
                 steps: cal.sample.chains.steps().saturating_sub(1),
                 max_r_hat: cal.max_rhat(),
                 min_ess: cal.min_ess(),
-                warnings: cal.record.warnings.iter().chain(&cal.record.model_warnings).cloned().collect(),
+                warnings: cal.record.warnings.iter().chain(&cal.record.model_warnings).chain(&cal.record.confounding).cloned().collect(),
             };
             crate::store::write_parquet(&folder.join("result.parquet"), result_table(&spec, &cal, &outcome))?;
             outcome
