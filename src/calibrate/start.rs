@@ -226,12 +226,13 @@ fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
 }
 
 /// How many times the law alone's residual RMS a run's residual RMS at the
-/// MAP of a noise model with a force of its own may be before the check
-/// says the two are confounded. On virtual records whose foreign force the
-/// discrepancy model recovers honestly (a viscous force and a smooth random
-/// one, docs/calibration.md) the ratio is 0.8–1.5; on the measured damper,
-/// where held-out runs are predicted worse with the discrepancy than
-/// without it, 1.3–3.1 at 1 A and 4.2–12 at 0.25 A (docs/real-data.md).
+/// posterior median of a noise model with a force of its own may be before
+/// the check says the two are confounded. On virtual records whose foreign
+/// force the discrepancy model recovers honestly (a viscous force and a
+/// smooth random one, docs/calibration.md) the ratio is 0.8–1.5; on the
+/// measured damper, where held-out runs are predicted worse with the
+/// discrepancy than without it, 1.3–3.1 at 1 A, 3.3–7.0 on three runs at
+/// 0.5 A and 3.7–12 at 0.25 A (docs/real-data.md).
 pub const CONFOUNDING_RATIO: f64 = 2.0;
 
 /// Each run's residual RMS at the MAP of the same posterior with
