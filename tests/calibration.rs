@@ -329,8 +329,8 @@ fn discrepancy_block_terms_change_as_the_log_density_does() {
     // alone does (the confounding check's ratio stays below 2)
     let alone = a.law_alone_rms.clone().expect("the law alone is fitted for a noise model with a force of its own");
     let rms = mrbp::posterior::map::residual_rms(&a.posterior, &a.map.x).unwrap();
-    let ids: Vec<&str> = a.posterior.runs.iter().map(|r| r.id.as_str()).collect();
-    assert_eq!(mrbp::calibrate::confounding_warning(&ids, &rms, &alone), None, "{rms:?} against {alone:?}");
+    let runs: Vec<(&str, usize)> = a.posterior.runs.iter().map(|r| (r.id.as_str(), r.tau.len())).collect();
+    assert_eq!(mrbp::calibrate::confounding_warning(&runs, &rms, &alone), None, "{rms:?} against {alone:?}");
     let post = &a.posterior;
     let (d, blocks) = (post.dim(), post.blocks());
     // the walkers are sized for what the ensemble moves explore: θ and the

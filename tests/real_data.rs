@@ -206,7 +206,8 @@ fn the_tempered_likelihood_widens_the_measured_intervals() {
 /// alone carries, the calibration says so. At 0.25 A the law fitted alone
 /// (independent noise) leaves an RMS of 0.4–0.75 kPa a run; under the
 /// discrepancy model its path at the posterior median misses by 3–5 kPa
-/// (measured 2026-11-27: 3.7–11× on the four runs; the check's ratio is 2),
+/// (measured 2026-11-27: 3.7–11× run by run, all runs together about 7×;
+/// the check's ratio is 2),
 /// and its held-out runs are predicted worse than the independent
 /// model's (docs/real-data.md). 20 steps: the law's path has moved from
 /// the start long before. On virtual records whose force is of the model's
@@ -221,9 +222,11 @@ fn a_discrepancy_that_takes_over_the_laws_force_is_named() {
     s.sampler.steps = 20;
     let record = calibrate(&campaign, &s).unwrap().calibration.record;
     assert_eq!(record.confounding.len(), 1, "{:?}", record.confounding);
-    for run in ["I0.25_10mm_2Hz", "I0.25_25mm_0.5Hz", "I0.25_5mm_3Hz"] {
-        assert!(record.confounding[0].contains(run), "{run} not named: {}", record.confounding[0]);
-    }
+    let w = &record.confounding[0];
+    // all runs together, then each run's RMS against the law alone's
+    let ratio: f64 = w.split(" Pa (").nth(1).and_then(|t| t.split('×').next()).and_then(|t| t.parse().ok()).unwrap_or_else(|| panic!("{w}"));
+    assert!(ratio > 3.0, "pooled ratio {ratio} (measured with the converged posterior: about 7): {w}");
+    assert!(w.contains("I0.25_10mm_2Hz") && w.contains("I0.25_5mm_3Hz"), "{w}");
     // the independent model has no force of its own to compare
     assert!(start(&campaign, &CalibrationSettings::default(), &mut |_| {}).unwrap().law_alone_rms.is_none());
 }

@@ -225,14 +225,16 @@ fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
     warnings
 }
 
-/// How many times the law alone's residual RMS a run's residual RMS at the
-/// posterior median of a noise model with a force of its own may be before
-/// the check says the two are confounded. On virtual records whose foreign
-/// force the discrepancy model recovers honestly (a viscous force and a
-/// smooth random one, docs/calibration.md) the ratio is 0.8–1.5; on the
-/// measured damper, where held-out runs are predicted worse with the
-/// discrepancy than without it, 1.3–3.1 at 1 A, 3.3–7.0 on three runs at
-/// 0.5 A and 3.7–12 at 0.25 A (docs/real-data.md).
+/// How many times the law alone's residual RMS the RMS of the law's path at
+/// the posterior median of a noise model with a force of its own may be,
+/// over all runs together, before the check says the two are confounded.
+/// On virtual records whose foreign force the discrepancy model recovers
+/// honestly (a viscous force and a smooth random one, docs/calibration.md)
+/// single runs reach 2–4× where the foreign force is largest (the fastest
+/// crank speed, its shortest record), but all runs together stay below 2;
+/// on the measured damper, where held-out runs are predicted worse with
+/// the discrepancy than without it, all runs together are 2.2× at 1 A and
+/// 4–8× at 0.5 and 0.25 A (docs/calibration.md, "Model discrepancy").
 pub const CONFOUNDING_RATIO: f64 = 2.0;
 
 /// Each run's residual RMS at the MAP of the same posterior with
@@ -253,39 +255,40 @@ fn law_alone_rms(campaign: &Campaign, settings: &CalibrationSettings, base: Inte
     map::residual_rms(&plain, &found.x)
 }
 
-/// The runs whose law path at `x` (the posterior's median) misses the
-/// record by more than [`CONFOUNDING_RATIO`] times the law alone's RMS
-/// (`alone`), in one warning ([`confounding_warning`]).
+/// [`confounding_warning`] of the law's path at `x` (the posterior's
+/// median) against the law alone's RMS (`alone`).
 pub(super) fn confounding(posterior: &Posterior, x: &[f64], alone: &[f64]) -> Vec<String> {
     let Some(rms) = map::residual_rms(posterior, x) else { return Vec::new() };
-    let ids: Vec<&str> = posterior.runs.iter().map(|r| r.id.as_str()).collect();
-    confounding_warning(&ids, &rms, alone).into_iter().collect()
+    let runs: Vec<(&str, usize)> = posterior.runs.iter().map(|r| (r.id.as_str(), r.tau.len())).collect();
+    confounding_warning(&runs, &rms, alone).into_iter().collect()
 }
 
 /// Where a noise model's own force (the discrepancy, the AR(1) process)
-/// leaves the law's path `rms` from a run's record, more than
-/// [`CONFOUNDING_RATIO`] times what the law fitted alone leaves (`alone`),
-/// that force carries force the law's parameters could carry: which of
-/// them does is then set by the noise's prior rather than the records, and
-/// θ describes the law's share only (Brynjarsdóttir & O'Hagan 2014). One
-/// warning naming those runs, with what to check; `None` where there are
-/// none.
-pub fn confounding_warning(ids: &[&str], rms: &[f64], alone: &[f64]) -> Option<String> {
-    let named: Vec<String> = ids
-        .iter()
-        .zip(rms.iter().zip(alone))
-        .filter(|(_, (r, a))| **r > CONFOUNDING_RATIO * **a)
-        .map(|(id, (r, a))| format!("{id} {r:.0} Pa against {a:.0} Pa ({:.1}×)", r / a))
-        .collect();
-    (!named.is_empty()).then(|| {
-        format!(
-            "the noise model's own force has taken over force the law can carry (RMS of the law's path at the posterior median against the record, \
-             against the law fitted alone with independent noise): {}; θ and that force are confounded, so the parameters describe \
-             the law's share of the force only, and a new test is predicted from that share \
-             (compare with the independent model by `--leave-one-out`; docs/calibration.md, \"Model discrepancy\")",
-            named.join(", ")
-        )
-    })
+/// leaves the law's path `rms` from the records (`runs`: id and samples),
+/// all runs together, more than [`CONFOUNDING_RATIO`] times what the law
+/// fitted alone leaves (`alone`), that force carries force the law's
+/// parameters could carry: which of them does is then set by the noise's
+/// prior rather than the records, and θ describes the law's share only
+/// (Brynjarsdóttir & O'Hagan 2014). One warning with both RMS values, all
+/// runs together and run by run, and what to check; `None` below the ratio.
+pub fn confounding_warning(runs: &[(&str, usize)], rms: &[f64], alone: &[f64]) -> Option<String> {
+    let pooled = |v: &[f64]| {
+        let n: usize = runs.iter().map(|r| r.1).sum();
+        (runs.iter().zip(v).map(|(r, x)| r.1 as f64 * x * x).sum::<f64>() / n.max(1) as f64).sqrt()
+    };
+    let (all, all_alone) = (pooled(rms), pooled(alone));
+    if all <= CONFOUNDING_RATIO * all_alone {
+        return None;
+    }
+    let by_run: Vec<String> = runs.iter().zip(rms.iter().zip(alone)).map(|((id, _), (r, a))| format!("{id} {r:.0} Pa against {a:.0} Pa ({:.1}×)", r / a)).collect();
+    Some(format!(
+        "the noise model's own force has taken over force the law can carry: the law's path at the posterior median misses the records by \
+         {all:.0} Pa RMS where the law fitted alone with independent noise comes within {all_alone:.0} Pa ({:.1}×; by run: {}); \
+         θ and that force are confounded, so the parameters describe the law's share of the force only, and a new test is predicted \
+         from that share (compare with the independent model by `--leave-one-out`; docs/calibration.md, \"Model discrepancy\")",
+        all / all_alone,
+        by_run.join(", ")
+    ))
 }
 
 /// What to do about residuals with memory under independent noise: said
@@ -299,15 +302,19 @@ pub const MEMORY_REMEDY: &str = "about the runs' residual memory (the report's m
 mod tests {
     use super::*;
 
-    /// A run is named where its law-path RMS exceeds the law alone's by
-    /// more than the ratio, and only then; no run, no warning.
+    /// The runs' RMS are pooled by their samples: one run far off in a
+    /// few samples does not make the warning, the records together do;
+    /// below the ratio, no warning.
     #[test]
-    fn runs_whose_law_path_misses_far_more_than_the_law_alone_are_named() {
-        let ids = ["a", "b", "c"];
-        let w = confounding_warning(&ids, &[4697.0, 1000.0, 2100.0], &[422.0, 800.0, 1000.0]).unwrap();
-        assert!(w.contains("a 4697 Pa against 422 Pa (11.1×)"), "{w}");
-        assert!(w.contains("c 2100 Pa against 1000 Pa (2.1×)"), "{w}");
-        assert!(!w.contains("b 1000"), "{w}");
-        assert_eq!(confounding_warning(&ids, &[1500.0, 1000.0, 1900.0], &[1000.0, 800.0, 1000.0]), None);
+    fn the_law_path_is_judged_over_all_runs_together() {
+        // pooled: √((1000·4697² + 1000·1000²)/2000) = 3395.6 against
+        // √((1000·422² + 1000·800²)/2000) = 639.6, 5.3×
+        let runs = [("a", 1000), ("b", 1000)];
+        let w = confounding_warning(&runs, &[4697.0, 1000.0], &[422.0, 800.0]).unwrap();
+        assert!(w.contains("by 3396 Pa RMS where the law fitted alone with independent noise comes within 640 Pa (5.3×"), "{w}");
+        assert!(w.contains("a 4697 Pa against 422 Pa (11.1×), b 1000 Pa against 800 Pa (1.2×)"), "{w}");
+        // one short run 3× off among long ones that fit: √((300·9 + 2·900·1.2²)/2100) = 1.59× the law alone's 1
+        let short = [("fast", 300), ("slow", 900), ("mid", 900)];
+        assert_eq!(confounding_warning(&short, &[3.0, 1.2, 1.2], &[1.0, 1.0, 1.0]), None);
     }
 }

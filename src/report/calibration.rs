@@ -503,7 +503,7 @@ fn verdicts(cal: &Calibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, S
     ];
     if cal.settings.likelihood.noise.model(&Default::default()).models_memory() {
         v.push((
-            format!("the noise's own force does not take over the law's (law-path RMS at the posterior median ≤ {CONFOUNDING_RATIO}× the law alone's)"),
+            format!("the noise's own force does not take over the law's (law-path RMS at the posterior median, all runs together, ≤ {CONFOUNDING_RATIO}× the law alone's)"),
             Mark::of(cal.record.confounding.is_empty()),
             if cal.record.confounding.is_empty() { "every run".to_string() } else { "see the warning below".to_string() },
         ));
