@@ -328,8 +328,9 @@ fn discrepancy_block_terms_change_as_the_log_density_does() {
     // the law's path at the MAP misses the records about as the law fitted
     // alone does (the confounding check's ratio stays below 2)
     let alone = a.law_alone_rms.clone().expect("the law alone is fitted for a noise model with a force of its own");
-    let rms = mrbp::posterior::map::residual_rms(&a.posterior, &a.map.x).unwrap();
-    let runs: Vec<(&str, usize)> = a.posterior.runs.iter().map(|r| (r.id.as_str(), r.tau.len())).collect();
+    let at = mrbp::posterior::map::residual_rms(&a.posterior, &a.map.x).unwrap();
+    let runs: Vec<(&str, usize)> = a.posterior.runs.iter().zip(&at).map(|(r, (_, n))| (r.id.as_str(), *n)).collect();
+    let rms: Vec<f64> = at.iter().map(|(rms, _)| *rms).collect();
     assert_eq!(mrbp::calibrate::confounding_warning(&runs, &rms, &alone), None, "{rms:?} against {alone:?}");
     let post = &a.posterior;
     let (d, blocks) = (post.dim(), post.blocks());

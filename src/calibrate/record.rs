@@ -73,7 +73,8 @@ pub struct CalibrationRecord {
     pub model_warnings: Vec<String>,
     /// Where the noise model's own force (a discrepancy, AR(1)) took over
     /// force the law alone carries: its law-path RMS against the law
-    /// alone's, per run (empty: no such run, or a noise without a force).
+    /// alone's, all runs together and run by run (empty: within the ratio,
+    /// or a noise without a force).
     #[serde(default)]
     pub confounding: Vec<String>,
     /// The campaign's geometry (A, h): what turns the bands into forces.

@@ -252,19 +252,20 @@ fn law_alone_rms(campaign: &Campaign, settings: &CalibrationSettings, base: Inte
     let fitted = plain.layout.fitted.len();
     let starts: Vec<Vec<f64>> = starts.iter().map(|s| s[..fitted.min(s.len())].to_vec()).collect();
     let found = map::best_map(&plain, &starts)?;
-    map::residual_rms(&plain, &found.x)
+    Some(map::residual_rms(&plain, &found.x)?.into_iter().map(|(rms, _)| rms).collect())
 }
 
 /// [`confounding_warning`] of the law's path at `x` (the posterior's
 /// median) against the law alone's RMS (`alone`).
 pub(super) fn confounding(posterior: &Posterior, x: &[f64], alone: &[f64]) -> Vec<String> {
-    let Some(rms) = map::residual_rms(posterior, x) else { return Vec::new() };
-    let runs: Vec<(&str, usize)> = posterior.runs.iter().map(|r| (r.id.as_str(), r.tau.len())).collect();
+    let Some(at) = map::residual_rms(posterior, x) else { return Vec::new() };
+    let runs: Vec<(&str, usize)> = posterior.runs.iter().zip(&at).map(|(r, (_, n))| (r.id.as_str(), *n)).collect();
+    let rms: Vec<f64> = at.iter().map(|(rms, _)| *rms).collect();
     confounding_warning(&runs, &rms, alone).into_iter().collect()
 }
 
 /// Where a noise model's own force (the discrepancy, the AR(1) process)
-/// leaves the law's path `rms` from the records (`runs`: id and samples),
+/// leaves the law's path `rms` from the records (`runs`: id and residuals),
 /// all runs together, more than [`CONFOUNDING_RATIO`] times what the law
 /// fitted alone leaves (`alone`), that force carries force the law's
 /// parameters could carry: which of them does is then set by the noise's

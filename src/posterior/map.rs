@@ -128,10 +128,11 @@ fn residuals_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<Vec<f64>>
 }
 
 /// Each run's root-mean-square residual (the law's path against the record,
-/// model terms included) at `x` (`None` where an integration fails).
-pub fn residual_rms(post: &Posterior, x: &[f64]) -> Option<Vec<f64>> {
+/// model terms included) at `x` and how many residuals it is over (`None`
+/// where an integration fails).
+pub fn residual_rms(post: &Posterior, x: &[f64]) -> Option<Vec<(f64, usize)>> {
     let res = residuals_many(post, &[x.to_vec()]).pop()??;
-    Some(res.iter().map(|r| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt()).collect())
+    Some(res.iter().map(|r| (crate::noise::rms(r), r.len())).collect())
 }
 
 /// The noise model's whitening of each run's residuals.

@@ -505,7 +505,7 @@ fn verdicts(cal: &Calibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, S
         v.push((
             format!("the noise's own force does not take over the law's (law-path RMS at the posterior median, all runs together, ≤ {CONFOUNDING_RATIO}× the law alone's)"),
             Mark::of(cal.record.confounding.is_empty()),
-            if cal.record.confounding.is_empty() { "every run".to_string() } else { "see the warning below".to_string() },
+            if cal.record.confounding.is_empty() { "within it".to_string() } else { "see the warning below".to_string() },
         ));
     }
     if let Some(last) = cal.record.step_study.last() {
