@@ -52,3 +52,12 @@ sbc-discrepancy:
 layer-coverage:
     cargo build --release
     python3 scripts/layer_coverage.py target/release/mrbp target/studies/layer-coverage 40 2
+
+# how much of a held-out record a band for a new test holds: 12 virtual
+# dampers tested at three currents, four tests each from a known
+# population; the layer's bands (each run and each current left out)
+# beside the exact band of the population (docs/calibration.md; about
+# 45 min on 2 cores; needs polars and numpy)
+current-coverage:
+    cargo build --release
+    python3 scripts/current_coverage.py target/release/mrbp target/studies/current-coverage 12 2 200

@@ -12,39 +12,13 @@ shared parameters' truth?
 """
 import concurrent.futures as cf, math, os, random, subprocess, sys
 import polars as pl
+from virtual_tests import synth as write_record
 
 MRBP, OUT, N = sys.argv[1], sys.argv[2], int(sys.argv[3])
 JOBS = int(sys.argv[4]) if len(sys.argv) > 4 else 2
 TRUTH = {"G": 2e5, "R0": 1.2e5, "R1": 1.6e5, "D1": 3e4, "m1": 4e-6, "m2": 2e-4, "n": 1.2}
 SPREAD = {"G": 0.3, "n": 0.1}
 RPMS = [100.0, 200.0, 300.0, 400.0]
-
-def synth(folder, rpm, law, seed):
-    os.makedirs(folder, exist_ok=True)
-    at = "\n".join(f"{k} = {v!r}" for k, v in law.items())
-    cfg = f"""name = "t"
-currents_a = [1.0]
-rpms = [{rpm}]
-cycles = 1.0
-rate_hz = 2000.0
-noise_force_n = 15.0
-noise_displacement_m = 0.000002
-seed = {seed}
-[geometry]
-area_m2 = 0.05
-gap_m = 0.001
-[crank]
-radius_m = 0.00675
-rod_m = 0.15
-[law]
-saturation_a = 1.0
-[law.at_1a]
-{at}
-"""
-    with open(os.path.join(folder, "synth.in.toml"), "w") as f:
-        f.write(cfg)
-    subprocess.run([MRBP, "synth", "--out", folder, "--config", os.path.join(folder, "synth.in.toml")], check=True, capture_output=True)
-    return next(os.path.join(folder, n) for n in os.listdir(folder) if n.endswith(".csv"))
 
 def replicate(r):
     rng = random.Random(1000 + r)
@@ -57,7 +31,7 @@ def replicate(r):
     base = os.path.join(OUT, f"r{r:03d}")
     manifest = 'name = "population"\n[geometry]\narea_m2 = 0.05\ngap_m = 0.001\n'
     for i, rpm in enumerate(RPMS):
-        csv = synth(os.path.join(base, f"t{i}"), rpm, tests[i], 7000 + 10 * r + i)
+        csv = write_record(MRBP, os.path.join(base, f"t{i}"), 1.0, rpm, tests[i], 7000 + 10 * r + i)
         manifest += f'[[run]]\nid = "t{i}"\nfile = "{csv}"\ncurrent_a = 1.0\n'
     with open(os.path.join(base, "campaign.toml"), "w") as f:
         f.write(manifest)

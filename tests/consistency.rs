@@ -136,8 +136,14 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
         assert!(!c.calibrated && c.lppd.is_finite() && c.draws > 0, "{c:?}");
         assert!(r.max_rhat < 1.01, "the layer without {}: R̂ {}", c.run, r.max_rhat);
     }
+    // the share pooled over the runs, each weighed by its samples, printed
+    // and in the report
+    let (inside, samples) = rows.iter().fold((0.0, 0), |(i, n), r| (i + r.coverage.inside_p95 * r.coverage.samples as f64, n + r.coverage.samples));
+    let pooled = format!("{:.1} % of the samples of the 3 runs held out alone", 100.0 * inside / samples as f64);
+    assert!(printed.contains(&format!("pooled: {pooled}")), "{printed}");
     let html = std::fs::read_to_string(folder.join("report.html")).unwrap();
     assert!(html.contains("new test: inside 95 %"), "the report shows the table");
+    assert!(html.contains(&format!("Pooled: {pooled}.")), "the report shows the pooled share");
     // a new test of the damper along an excitation of one's own: its model
     // band carries the between-test spread the posterior's does not
     let input = dir.path().join("g15").join(std::fs::read_dir(dir.path().join("g15")).unwrap().flatten().map(|e| e.file_name()).find(|n| n.to_string_lossy().ends_with(".csv")).unwrap());

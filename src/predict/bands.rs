@@ -317,6 +317,18 @@ impl CoverageRow {
             lppd: coverage.lppd,
         }
     }
+
+    /// The share of all the rows' samples inside their 95 % predictive
+    /// band, each row weighed by its count of samples; `None` without
+    /// samples. For bands of new tests this is the number to judge: a right
+    /// band holds about 95 % of the samples pooled over many tests, while
+    /// one test is inside nearly everywhere or, if its parameters lie in
+    /// the population's tails, outside over much of its record
+    /// (docs/calibration.md, "Does a new test fall in its band?").
+    pub fn pooled_inside_p95<'a>(rows: impl IntoIterator<Item = &'a CoverageRow>) -> Option<f64> {
+        let (inside, samples) = rows.into_iter().fold((0.0, 0usize), |(i, n), r| (i + r.inside_p95 * r.samples as f64, n + r.samples));
+        (samples > 0).then(|| inside / samples as f64)
+    }
 }
 
 #[cfg(test)]
@@ -324,6 +336,16 @@ mod tests {
     use super::*;
     use crate::model::{Params, Scheme};
     use crate::noise::{NoiseKind, NoiseOptions};
+
+    #[test]
+    fn pooled_share_weighs_each_run_by_its_samples() {
+        let row = |samples, inside_p95| CoverageRow { samples, inside_p95, ..CoverageRow::default() };
+        // 1000 samples all inside and 250 a fifth inside: (1000 + 50) / 1250
+        let rows = [row(1000, 1.0), row(250, 0.2)];
+        assert!((CoverageRow::pooled_inside_p95(&rows).unwrap() - 0.84).abs() < 1e-12);
+        assert_eq!(CoverageRow::pooled_inside_p95(&[]), None);
+        assert_eq!(CoverageRow::pooled_inside_p95(&[row(0, 1.0)]), None);
+    }
 
     fn ramp_run() -> RunData {
         let time: Vec<f64> = (0..400).map(|k| k as f64 * 5e-4).collect();

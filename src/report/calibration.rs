@@ -359,7 +359,7 @@ fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
 /// beside its prediction by the joint calibration of the other runs; then
 /// each run predicted from the other currents alone.
 fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut>) {
-    page.para("Each run predicted as a new test of this damper: the between-run layer fitted to every other run calibrated alone, at every current, draws the run's parameters and noise, which the integrator carries along its record. Beside it, where the leave-one-out study was run, the same run predicted by the joint calibration of the other runs at its current. A predictive band that holds about 95 % of every held-out run is honest about what a test the calibration never saw will do; the log predictive density per sample scores sharpness and honesty together (higher is better).");
+    page.para("Each run predicted as a new test of this damper: the between-run layer fitted to every other run calibrated alone, at every current, draws the run's parameters and noise, which the integrator carries along its record. Beside it, where the leave-one-out study was run, the same run predicted by the joint calibration of the other runs at its current. Pooled over many tests, a right band for a new test holds about 95 % of the samples; one test is inside nearly everywhere or, if its parameters lie in the population's tails, outside over much of its record, since tests differ by more than the noise. So a run near 100 % is a typical test, a run far below is unlike the others, and the pooled share under the tables judges the band (docs/calibration.md); the log predictive density per sample scores sharpness and honesty together (higher is better).");
     let per_sample = |c: &CoverageRow| c.lppd / c.samples.max(1) as f64;
     let joint = |run: &str| loo.and_then(|l| l.rows.iter().find(|r| r.coverage.run == run)).map(|r| &r.coverage);
     let table: Vec<Vec<String>> = rows
@@ -395,6 +395,10 @@ fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut
     if !by_current.is_empty() {
         page.para("A current the layer never saw: every run at this current left out, the layer fitted to the runs at the other currents, its centre here read off its curve in the current (docs/calibration.md), and each run predicted as a new test there.");
         page.table(&["held out with its current", "inside 95 % (%)", "inside model band (%)", "RMS to median (Pa)", "lppd per sample", ""], &by_current);
+    }
+    let pooled = super::text::new_test_pooled(rows);
+    if !pooled.is_empty() {
+        page.para(&format!("Pooled: {}.", pooled.join("; ")));
     }
 }
 

@@ -1,0 +1,34 @@
+"""Virtual tests for the coverage studies of the between-run layer
+(layer_coverage.py, current_coverage.py): one record of a given B-P law,
+written by `mrbp synth` on the bundled stand's geometry (one revolution at
+2 kHz, 15 N force noise, 2 µm displacement noise)."""
+import os, subprocess
+
+def synth(mrbp, folder, current, rpm, law, seed):
+    """One virtual record of `law` (the B-P parameters at 1 A, stresses
+    saturating as tanh(I)) at `current` and `rpm`; returns its path."""
+    os.makedirs(folder, exist_ok=True)
+    at = "\n".join(f"{k} = {v!r}" for k, v in law.items())
+    cfg = f"""name = "t"
+currents_a = [{current}]
+rpms = [{rpm}]
+cycles = 1.0
+rate_hz = 2000.0
+noise_force_n = 15.0
+noise_displacement_m = 0.000002
+seed = {seed}
+[geometry]
+area_m2 = 0.05
+gap_m = 0.001
+[crank]
+radius_m = 0.00675
+rod_m = 0.15
+[law]
+saturation_a = 1.0
+[law.at_1a]
+{at}
+"""
+    with open(os.path.join(folder, "synth.in.toml"), "w") as f:
+        f.write(cfg)
+    subprocess.run([mrbp, "synth", "--out", folder, "--config", os.path.join(folder, "synth.in.toml")], check=True, capture_output=True)
+    return next(os.path.join(folder, n) for n in os.listdir(folder) if n.endswith(".csv"))
