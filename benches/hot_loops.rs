@@ -32,19 +32,14 @@ fn euler() {
     let p = Params::reference_1a();
     for (rate, rpm) in [(5000.0, 100.0), (10000.0, 400.0)] {
         let (t, g) = crank_history(6000, rate, rpm);
-        for (scheme, extrapolate) in [(Scheme::Explicit, false), (Scheme::LinearlyImplicit, false), (Scheme::Explicit, true)] {
+        for (scheme, extrapolate) in
+            [(Scheme::Explicit, false), (Scheme::LinearlyImplicit, false), (Scheme::Explicit, true)]
+        {
             for substeps in [1, 4] {
-                let integ = Integrator {
-                    scheme,
-                    substeps,
-                    extrapolate,
-                    ..Integrator::default()
-                };
+                let integ = Integrator { scheme, substeps, extrapolate, ..Integrator::default() };
                 let secs = best_of(20, || {
                     let mut acc = 0.0;
-                    integ
-                        .run_with(&p, &t, &g, Default::default(), |_, s| acc += s.tau)
-                        .unwrap();
+                    integ.run_with(&p, &t, &g, Default::default(), |_, s| acc += s.tau).unwrap();
                     black_box(acc);
                 });
                 let per = secs / (t.len() - 1) as f64;
@@ -73,7 +68,8 @@ impl LogDensity for Cheap {
 
 fn sampler_overhead() {
     println!("## Sampler overhead (cheap 10-D target, all threads)\n");
-    let init: Vec<Vec<f64>> = (0..128).map(|c| (0..10).map(|i| ((c * 10 + i) as f64).sin()).collect()).collect();
+    let init: Vec<Vec<f64>> =
+        (0..128).map(|c| (0..10).map(|i| ((c * 10 + i) as f64).sin()).collect()).collect();
     let steps = 2000;
     let secs = best_of(3, || {
         let mut s = Sampler::new(&Cheap, SamplerSettings::default(), &init).unwrap();
@@ -85,16 +81,31 @@ fn sampler_overhead() {
     println!("|---|---|---|");
     println!("| stretch | {} | {:.0} |", steps * 128, per * 1e9);
     let mixtures = [
-        ("DE 0.8 + snooker 0.2", vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)]),
-        ("independence 0.9 + DE 0.1", vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)]),
-        ("anchored 0.9 + DE 0.1 (the default)", vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)]),
+        (
+            "DE 0.8 + snooker 0.2",
+            vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)],
+        ),
+        (
+            "independence 0.9 + DE 0.1",
+            vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)],
+        ),
+        (
+            "anchored 0.9 + DE 0.1 (the default)",
+            vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)],
+        ),
     ];
     // the anchored move's reference: the target itself, N(0, I)
-    let reference = Elliptical::new(Moments { mean: nalgebra::DVector::zeros(10), cov: nalgebra::DMatrix::identity(10, 10) }).unwrap();
+    let reference = Elliptical::new(Moments {
+        mean: nalgebra::DVector::zeros(10),
+        cov: nalgebra::DMatrix::identity(10, 10),
+    })
+    .unwrap();
     for (name, moves) in mixtures {
         let settings = SamplerSettings { moves, ..SamplerSettings::default() };
         let secs = best_of(3, || {
-            let mut s = Sampler::new(&Cheap, settings.clone(), &init).unwrap().with_reference(reference.clone());
+            let mut s = Sampler::new(&Cheap, settings.clone(), &init)
+                .unwrap()
+                .with_reference(reference.clone());
             s.run(&RunControl::fixed(steps), &mut []).unwrap();
             black_box(s.chains.positions.len());
         });
@@ -105,7 +116,10 @@ fn sampler_overhead() {
         s.run(&RunControl::fixed(steps), &mut []).unwrap();
         black_box(s.diagnostics());
     });
-    println!("\nDiagnostics of 128 chains × {steps} steps × 10 coordinates (with sampling): {:.2} s\n", secs);
+    println!(
+        "\nDiagnostics of 128 chains × {steps} steps × 10 coordinates (with sampling): {:.2} s\n",
+        secs
+    );
 }
 
 /// Max |τ − τ_ref| of the integrators against a reference 256 times finer,
@@ -119,7 +133,16 @@ fn convergence() {
     stiff.n = 3.0;
     for (name, p) in [("1 A reference", Params::reference_1a()), ("stiff: 10 G, n = 3", stiff)] {
         let solve = |scheme, substeps, extrapolate| {
-            Integrator { scheme, substeps, extrapolate, max_substeps: 100_000, ..Integrator::default() }.run(&p, &t, &g).unwrap().tau
+            Integrator {
+                scheme,
+                substeps,
+                extrapolate,
+                max_substeps: 100_000,
+                ..Integrator::default()
+            }
+            .run(&p, &t, &g)
+            .unwrap()
+            .tau
         };
         let run = |scheme, substeps| solve(scheme, substeps, false);
         let reference = solve(Scheme::Explicit, 256, true);
@@ -145,8 +168,12 @@ fn convergence() {
         println!("|---|---|---|---|---|");
         for m in [1, 2, 4, 8] {
             let err = |scheme| {
-                let d: Vec<f64> = solve(scheme, m, true).iter().zip(&reference).map(|(a, b)| a - b).collect();
-                (d.iter().fold(0.0f64, |x, v| x.max(v.abs())), (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt())
+                let d: Vec<f64> =
+                    solve(scheme, m, true).iter().zip(&reference).map(|(a, b)| a - b).collect();
+                (
+                    d.iter().fold(0.0f64, |x, v| x.max(v.abs())),
+                    (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt(),
+                )
             };
             let (e, li) = (err(Scheme::Explicit), err(Scheme::LinearlyImplicit));
             println!("| {m} | {:.2} | {:.3} | {:.2} | {:.3} |", e.0, e.1, li.0, li.1);
@@ -162,7 +189,8 @@ fn likelihood() {
     use rayon::prelude::*;
     println!("## Log-density of the bundled 1 A runs (3 runs, 10 500 sample intervals)\n");
     let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let campaign = mrbp::data::Campaign::load(&repo.join("data/campaign.toml")).unwrap().at_current(1.0);
+    let campaign =
+        mrbp::data::Campaign::load(&repo.join("data/campaign.toml")).unwrap().at_current(1.0);
     let settings = CalibrationSettings::default();
     let intervals: usize = campaign.runs.iter().map(|r| r.shear.len() - 1).sum();
     println!("| integrator | threads | walkers per batch | log-densities/s | M walker-steps/s |");
@@ -180,18 +208,25 @@ fn likelihood() {
                 post.layout.from_si(&si)
             })
             .collect();
-        assert!(post.log_density(&points[..d]).is_finite(), "the benchmark's points lie in the support");
+        assert!(
+            post.log_density(&points[..d]).is_finite(),
+            "the benchmark's points lie in the support"
+        );
         for (threads, batch) in [(1, 1), (1, 8), (2, 8)] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             let secs = best_of(3, || {
                 pool.install(|| {
                     let mut out = vec![0.0; 96];
-                    points.par_chunks(d * batch).zip(out.par_chunks_mut(batch)).for_each(|(x, o)| post.log_density_batch(x, o));
+                    points
+                        .par_chunks(d * batch)
+                        .zip(out.par_chunks_mut(batch))
+                        .for_each(|(x, o)| post.log_density_batch(x, o));
                     black_box(out);
                 })
             });
             let evals = 96.0 / secs;
-            let steps_per_eval = intervals as f64 * substeps as f64 * if extrapolate { 3.0 } else { 1.0 };
+            let steps_per_eval =
+                intervals as f64 * substeps as f64 * if extrapolate { 3.0 } else { 1.0 };
             println!(
                 "| Euler{} × {substeps} | {threads} | {batch} | {evals:.0} | {:.1} |",
                 if extrapolate { " + Richardson" } else { "" },
@@ -214,24 +249,42 @@ fn likelihood_at_start() {
     println!("| records | samples | integrator | Euler steps per log-density (nominal, counted) | threads | log-densities/s | M walker-steps/s (counted) |");
     println!("|---|---|---|---|---|---|---|");
     let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    for (name, manifest) in [("bundled virtual", "data/campaign.toml"), ("measured (utfsm-mts)", "data/utfsm-mts/campaign.toml")] {
+    for (name, manifest) in [
+        ("bundled virtual", "data/campaign.toml"),
+        ("measured (utfsm-mts)", "data/utfsm-mts/campaign.toml"),
+    ] {
         let campaign = mrbp::data::Campaign::load(&repo.join(manifest)).unwrap().at_current(1.0);
-        let start = mrbp::calibrate::start::start(&campaign, &CalibrationSettings::default(), &mut |_| {}).unwrap();
+        let start =
+            mrbp::calibrate::start::start(&campaign, &CalibrationSettings::default(), &mut |_| {})
+                .unwrap();
         let post = &start.posterior;
         let d = post.dim();
         let nt = start.map.cov.nrows();
-        let sd: Vec<f64> = (0..d).map(|i| if i < nt { start.map.cov[(i, i)].sqrt() } else { 0.0 }).collect();
-        let points: Vec<f64> = (0..96).flat_map(|w| (0..d).map(|i| start.map.x[i] + 0.5 * sd[i] * ((w * (i + 1)) as f64).sin()).collect::<Vec<f64>>()).collect();
-        let counted: u64 = points.chunks(d).map(|x| mrbp::posterior::map::euler_steps(post, x)).sum::<u64>() / 96;
+        let sd: Vec<f64> =
+            (0..d).map(|i| if i < nt { start.map.cov[(i, i)].sqrt() } else { 0.0 }).collect();
+        let points: Vec<f64> = (0..96)
+            .flat_map(|w| {
+                (0..d)
+                    .map(|i| start.map.x[i] + 0.5 * sd[i] * ((w * (i + 1)) as f64).sin())
+                    .collect::<Vec<f64>>()
+            })
+            .collect();
+        let counted: u64 =
+            points.chunks(d).map(|x| mrbp::posterior::map::euler_steps(post, x)).sum::<u64>() / 96;
         let samples: usize = campaign.runs.iter().map(|r| r.shear.len()).sum();
         let integ = &post.integrator;
-        let nominal = (samples - campaign.runs.len()) as u64 * integ.substeps as u64 * if integ.extrapolate { 3 } else { 1 };
+        let nominal = (samples - campaign.runs.len()) as u64
+            * integ.substeps as u64
+            * if integ.extrapolate { 3 } else { 1 };
         for threads in [1, 2] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             let secs = best_of(3, || {
                 pool.install(|| {
                     let mut out = vec![0.0; 96];
-                    points.par_chunks(d * mrbp::model::LANES).zip(out.par_chunks_mut(mrbp::model::LANES)).for_each(|(x, o)| post.log_density_batch(x, o));
+                    points
+                        .par_chunks(d * mrbp::model::LANES)
+                        .zip(out.par_chunks_mut(mrbp::model::LANES))
+                        .for_each(|(x, o)| post.log_density_batch(x, o));
                     black_box(out);
                 })
             });
@@ -255,12 +308,20 @@ fn calibration() {
     use mrbp::calibrate::{calibrate, CalibrationSettings};
     use mrbp::data::Campaign;
     use mrbp::synth::{write_campaign, SynthSettings};
-    println!("## One current calibrated to R̂ < 1.01 and ESS ≥ 400 (default settings, all threads)\n");
+    println!(
+        "## One current calibrated to R̂ < 1.01 and ESS ≥ 400 (default settings, all threads)\n"
+    );
     println!("| campaign | runs | samples | wall (s) | of which start (s) | steps × walkers | acceptance | min bulk ESS | min tail ESS | max R̂ | ESS/s (min over θ) | M walker-steps/s |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let fresh = tempfile::tempdir().unwrap();
-    let synth = SynthSettings { currents_a: vec![1.0], rate_hz: 2000.0, noise_force_n: 20.0, seed: 99, ..SynthSettings::default() };
+    let synth = SynthSettings {
+        currents_a: vec![1.0],
+        rate_hz: 2000.0,
+        noise_force_n: 20.0,
+        seed: 99,
+        ..SynthSettings::default()
+    };
     write_campaign(&synth, fresh.path()).unwrap();
     let campaigns = [
         ("bundled virtual", repo.join("data/campaign.toml")),

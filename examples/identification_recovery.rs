@@ -47,7 +47,12 @@ fn main() -> mrbp::Result<()> {
     println!("\nNoisy records, 10 noise realisations: median |error| (largest |error|)\n");
     println!("| rate (kHz) | force noise (N) | displacement noise (µm) | {} | realisations with warnings |", PARAM_NAMES.join(" | "));
     println!("|---|---|---|{}---|", "---|".repeat(7));
-    for (rate, noise_f, noise_x) in [(10_000.0, 15.0, 2.0e-6), (5_000.0, 15.0, 2.0e-6), (5_000.0, 5.0, 0.5e-6), (5_000.0, 50.0, 5.0e-6)] {
+    for (rate, noise_f, noise_x) in [
+        (10_000.0, 15.0, 2.0e-6),
+        (5_000.0, 15.0, 2.0e-6),
+        (5_000.0, 5.0, 0.5e-6),
+        (5_000.0, 50.0, 5.0e-6),
+    ] {
         let mut all: Vec<Vec<f64>> = vec![vec![]; 7];
         let mut warned = 0;
         for seed in 1..=10 {
@@ -65,7 +70,13 @@ fn main() -> mrbp::Result<()> {
                 format!("{:.0} % ({:.0} %)", 100.0 * med, 100.0 * v[9])
             })
             .collect();
-        println!("| {} | {} | {} | {} | {warned}/10 |", rate / 1000.0, noise_f, noise_x * 1e6, cells.join(" | "));
+        println!(
+            "| {} | {} | {} | {} | {warned}/10 |",
+            rate / 1000.0,
+            noise_f,
+            noise_x * 1e6,
+            cells.join(" | ")
+        );
     }
     Ok(())
 }

@@ -17,7 +17,9 @@ impl LogDensity for CholeskyGaussian {
         self.0.nrows()
     }
     fn log_density(&self, x: &[f64]) -> f64 {
-        self.0.solve_lower_triangular(&DVector::from_column_slice(x)).map_or(f64::NEG_INFINITY, |z| -0.5 * z.norm_squared())
+        self.0
+            .solve_lower_triangular(&DVector::from_column_slice(x))
+            .map_or(f64::NEG_INFINITY, |z| -0.5 * z.norm_squared())
     }
 }
 
@@ -31,7 +33,8 @@ fn main() {
         let cov = &q * DMatrix::from_diagonal(&lambda) * q.transpose();
         let factor = cov.clone().cholesky().expect("positive definite").l();
         let target = CholeskyGaussian(factor.clone());
-        let exact = Elliptical::new(Moments { mean: DVector::zeros(d), cov: cov.clone() }).expect("positive definite");
+        let exact = Elliptical::new(Moments { mean: DVector::zeros(d), cov: cov.clone() })
+            .expect("positive definite");
         let scale = DVector::from_fn(d, |i, _| 2f64.powi(i as i32 % 3 - 1).sqrt());
         let poor = Elliptical::new(Moments {
             mean: &factor * DVector::from_element(d, 1.0 / (d as f64).sqrt()),
@@ -43,7 +46,9 @@ fn main() {
             let (u, v): (f64, f64) = (rng.random(), rng.random());
             (-2.0 * u.max(1e-300).ln()).sqrt() * (std::f64::consts::TAU * v).cos()
         };
-        let start: Vec<Vec<f64>> = (0..4 * walkers).map(|_| (&factor * DVector::from_fn(d, |_, _| normal(&mut rng))).as_slice().to_vec()).collect();
+        let start: Vec<Vec<f64>> = (0..4 * walkers)
+            .map(|_| (&factor * DVector::from_fn(d, |_, _| normal(&mut rng))).as_slice().to_vec())
+            .collect();
         let cases = [
             ("independence", Move::independence(), None),
             ("history", Move::history(), None),
@@ -51,7 +56,12 @@ fn main() {
             ("anchored", Move::anchored(), Some(("poor", poor))),
         ];
         for (name, first, reference) in cases {
-            let settings = SamplerSettings { walkers, ensembles: 4, moves: vec![(first, 0.9), (Move::differential_evolution(), 0.1)], seed: 3 };
+            let settings = SamplerSettings {
+                walkers,
+                ensembles: 4,
+                moves: vec![(first, 0.9), (Move::differential_evolution(), 0.1)],
+                seed: 3,
+            };
             let mut sampler = Sampler::new(&target, settings, &start).expect("a valid start");
             let label = reference.as_ref().map_or("-", |r| r.0);
             if let Some((_, r)) = reference {
@@ -59,7 +69,8 @@ fn main() {
             }
             sampler.run(&RunControl::fixed(100), &mut []).expect("runs");
             // steps 65-100: after the history move's fit at step 64
-            let accepted = sampler.chains.accepted.iter().skip(65 * 4 * walkers).filter(|a| **a).count();
+            let accepted =
+                sampler.chains.accepted.iter().skip(65 * 4 * walkers).filter(|a| **a).count();
             println!(
                 "{d} | {name} | {label} | {:.3} | {:.1}",
                 accepted as f64 / (36 * 4 * walkers) as f64,

@@ -22,9 +22,11 @@ fn main() {
         eprintln!("usage: log_density_at DIR names|si|x|to-si < points");
         std::process::exit(2);
     };
-    let cal = mrbp::store::folder::read(std::path::Path::new(dir)).unwrap_or_else(|e| fail(&e.to_string()));
+    let cal = mrbp::store::folder::read(std::path::Path::new(dir))
+        .unwrap_or_else(|e| fail(&e.to_string()));
     let campaign = cal.campaign().unwrap_or_else(|e| fail(&e.to_string()));
-    let posterior = cal.settings.posterior(&cal.used_runs(&campaign), cal.predict_settings(1, 1).integrator);
+    let posterior =
+        cal.settings.posterior(&cal.used_runs(&campaign), cal.predict_settings(1, 1).integrator);
     let layout = &posterior.layout;
     let line = |v: &[f64]| v.iter().map(|x| format!("{x:.17e}")).collect::<Vec<_>>().join(",");
     if mode == "names" {
@@ -34,15 +36,29 @@ fn main() {
     let points: Vec<Vec<f64>> = std::io::stdin()
         .lock()
         .lines()
-        .map(|l| l.unwrap_or_else(|e| fail(&e.to_string())).split(',').map(|v| v.trim().parse::<f64>().unwrap_or_else(|_| fail(&format!("not a number: {v}")))).collect())
+        .map(|l| {
+            l.unwrap_or_else(|e| fail(&e.to_string()))
+                .split(',')
+                .map(|v| {
+                    v.trim().parse::<f64>().unwrap_or_else(|_| fail(&format!("not a number: {v}")))
+                })
+                .collect()
+        })
         .collect();
     if let Some(p) = points.iter().find(|p| p.len() != layout.names.len()) {
-        fail(&format!("a point of {} values; the posterior has {} coordinates", p.len(), layout.names.len()));
+        fail(&format!(
+            "a point of {} values; the posterior has {} coordinates",
+            p.len(),
+            layout.names.len()
+        ));
     }
     match mode.as_str() {
         "to-si" => points.iter().for_each(|p| println!("{}", line(&layout.to_si(p)))),
         "si" | "x" => {
-            let xs: Vec<Vec<f64>> = points.iter().map(|p| if mode == "si" { layout.from_si(p) } else { p.clone() }).collect();
+            let xs: Vec<Vec<f64>> = points
+                .iter()
+                .map(|p| if mode == "si" { layout.from_si(p) } else { p.clone() })
+                .collect();
             let flat: Vec<f64> = xs.iter().flatten().copied().collect();
             for (x, lp) in xs.iter().zip(mrbp::sampler::density::log_densities(&posterior, &flat)) {
                 println!("{},{lp:.17e}", line(x));

@@ -25,7 +25,8 @@ static WRITES: AtomicUsize = AtomicUsize::new(0);
 /// A write or removal has ended: abort here if fault injection says so.
 fn written() {
     static AFTER: OnceLock<Option<usize>> = OnceLock::new();
-    let after = AFTER.get_or_init(|| std::env::var(ABORT_AFTER_WRITE).ok().and_then(|v| v.trim().parse().ok()));
+    let after = AFTER
+        .get_or_init(|| std::env::var(ABORT_AFTER_WRITE).ok().and_then(|v| v.trim().parse().ok()));
     let n = WRITES.fetch_add(1, Ordering::SeqCst) + 1;
     if *after == Some(n) {
         eprintln!("mrbp: {ABORT_AFTER_WRITE}={n}: aborting");
@@ -59,7 +60,12 @@ pub fn remove(path: &Path) -> Result<()> {
 pub fn replace_dir(built: &Path, path: &Path) -> Result<()> {
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if path.exists() {
-        let aside = tempfile::Builder::new().prefix(TEMPORARY).suffix(".old.tmp").tempdir_in(parent).map_err(|e| Error::output(parent, e))?.keep();
+        let aside = tempfile::Builder::new()
+            .prefix(TEMPORARY)
+            .suffix(".old.tmp")
+            .tempdir_in(parent)
+            .map_err(|e| Error::output(parent, e))?
+            .keep();
         std::fs::rename(path, &aside).map_err(|e| Error::output(path, e))?;
         written();
         std::fs::rename(built, path).map_err(|e| Error::output(path, e))?;
@@ -91,10 +97,7 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 /// Creates `path` atomically from what `fill` writes into it.
-pub fn write_with(
-    path: &Path,
-    fill: impl FnOnce(&mut std::fs::File) -> Result<()>,
-) -> Result<()> {
+pub fn write_with(path: &Path, fill: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -108,13 +111,9 @@ pub fn write_with(
         use std::os::unix::fs::PermissionsExt;
         builder.permissions(std::fs::Permissions::from_mode(0o644));
     }
-    let mut tmp = builder
-        .tempfile_in(dir)
-        .map_err(|e| Error::output(dir, e))?;
+    let mut tmp = builder.tempfile_in(dir).map_err(|e| Error::output(dir, e))?;
     fill(tmp.as_file_mut())?;
-    tmp.as_file_mut()
-        .sync_all()
-        .map_err(|e| Error::output(path, e))?;
+    tmp.as_file_mut().sync_all().map_err(|e| Error::output(path, e))?;
     tmp.persist(path).map_err(|e| Error::output(path, e.error))?;
     written();
     Ok(())

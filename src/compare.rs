@@ -96,13 +96,23 @@ impl Comparison {
         for (i, a) in entries.iter().enumerate() {
             for b in &entries[i + 1..] {
                 for name in a.sample.layout.theta_names() {
-                    if let (Some(da), Some(db)) = (a.sample.values(name, &a.positions), b.sample.values(name, &b.positions)) {
-                        differences.push(DifferenceRow { a: a.label.clone(), b: b.label.clone(), parameter: name.clone(), difference: difference(&da, &db) });
+                    if let (Some(da), Some(db)) =
+                        (a.sample.values(name, &a.positions), b.sample.values(name, &b.positions))
+                    {
+                        differences.push(DifferenceRow {
+                            a: a.label.clone(),
+                            b: b.label.clone(),
+                            parameter: name.clone(),
+                            difference: difference(&da, &db),
+                        });
                     }
                 }
             }
         }
-        let mut currents: Vec<f64> = entries.iter().flat_map(|e| e.law_currents.iter().copied().chain([e.current_a])).collect();
+        let mut currents: Vec<f64> = entries
+            .iter()
+            .flat_map(|e| e.law_currents.iter().copied().chain([e.current_a]))
+            .collect();
         currents.sort_by(f64::total_cmp);
         currents.dedup();
         for law in entries.iter().filter(|e| !e.law_currents.is_empty()) {
@@ -132,13 +142,23 @@ pub fn layer_differences(entries: &[Entry]) -> Vec<DifferenceRow> {
 
 /// [`layer_differences`] of one pair; `None` unless both come from one
 /// fit (their draws pair).
-pub fn centre_differences(label_a: &str, a: &LayerCentre, label_b: &str, b: &LayerCentre) -> Option<Vec<DifferenceRow>> {
+pub fn centre_differences(
+    label_a: &str,
+    a: &LayerCentre,
+    label_b: &str,
+    b: &LayerCentre,
+) -> Option<Vec<DifferenceRow>> {
     if a.fit != b.fit || a.draw != b.draw {
         return None;
     }
     let mut rows = Vec::new();
     for (k, parameter) in PARAM_NAMES.iter().enumerate() {
-        let (x, y): (Vec<f64>, Vec<f64>) = a.centre[k].iter().zip(&b.centre[k]).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)).unzip();
+        let (x, y): (Vec<f64>, Vec<f64>) = a.centre[k]
+            .iter()
+            .zip(&b.centre[k])
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .map(|(x, y)| (*x, *y))
+            .unzip();
         if x.len() >= 2 {
             rows.push(DifferenceRow {
                 a: format!("{label_a}{TYPICAL_TEST}"),
@@ -153,15 +173,29 @@ pub fn centre_differences(label_a: &str, a: &LayerCentre, label_b: &str, b: &Lay
 
 /// How a law's B-P parameters differ between each pair of `currents_a`:
 /// a at the higher current, b at the lower, from the same draws.
-pub fn law_differences(label: &str, sample: &PosteriorSample, positions: &[(usize, usize)], currents_a: &[f64]) -> Vec<DifferenceRow> {
-    let at: Vec<Vec<[f64; 7]>> = currents_a.iter().map(|&i| positions.iter().map(|&(s, c)| sample.params_at(s, c, i).to_array()).collect()).collect();
+pub fn law_differences(
+    label: &str,
+    sample: &PosteriorSample,
+    positions: &[(usize, usize)],
+    currents_a: &[f64],
+) -> Vec<DifferenceRow> {
+    let at: Vec<Vec<[f64; 7]>> = currents_a
+        .iter()
+        .map(|&i| positions.iter().map(|&(s, c)| sample.params_at(s, c, i).to_array()).collect())
+        .collect();
     let name = |i: f64| format!("{label} at {i:?} A");
     let mut rows = Vec::new();
     for (lo, low) in currents_a.iter().zip(&at) {
         for (hi, high) in currents_a.iter().zip(&at).filter(|(hi, _)| *hi > lo) {
             for (k, parameter) in PARAM_NAMES.iter().enumerate() {
-                let (a, b): (Vec<f64>, Vec<f64>) = high.iter().zip(low).map(|(h, l)| (h[k], l[k])).unzip();
-                rows.push(DifferenceRow { a: name(*hi), b: name(*lo), parameter: parameter.to_string(), difference: paired_difference(&a, &b) });
+                let (a, b): (Vec<f64>, Vec<f64>) =
+                    high.iter().zip(low).map(|(h, l)| (h[k], l[k])).unzip();
+                rows.push(DifferenceRow {
+                    a: name(*hi),
+                    b: name(*lo),
+                    parameter: parameter.to_string(),
+                    difference: paired_difference(&a, &b),
+                });
             }
         }
     }
@@ -189,7 +223,9 @@ impl CurrentKind {
     }
 
     pub fn parse(name: &str) -> Option<CurrentKind> {
-        [CurrentKind::Calibrated, CurrentKind::Between, CurrentKind::Outside].into_iter().find(|k| k.name() == name)
+        [CurrentKind::Calibrated, CurrentKind::Between, CurrentKind::Outside]
+            .into_iter()
+            .find(|k| k.name() == name)
     }
 }
 
@@ -222,12 +258,20 @@ pub fn current_grid(calibrated_a: &[f64]) -> Vec<f64> {
     }
     let raw = top / GRID_STEPS;
     let decade = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 2.5, 5.0, 10.0].iter().map(|m| m * decade).find(|s| *s >= raw * (1.0 - 1e-9)).unwrap_or(10.0 * decade);
+    let step = [1.0, 2.0, 2.5, 5.0, 10.0]
+        .iter()
+        .map(|m| m * decade)
+        .find(|s| *s >= raw * (1.0 - 1e-9))
+        .unwrap_or(10.0 * decade);
     let count = (top / step - 1e-9).ceil() as usize;
     let near = |v: f64| calibrated_a.iter().any(|c| (v - c).abs() <= 1e-9 * top);
     // k·step rounded to the step's decimals, so that 0.1·3 reads 0.3
     let round = |v: f64| (v / decade * 1e3).round() * decade / 1e3;
-    let mut grid: Vec<f64> = (0..=count).map(|k| round(k as f64 * step)).filter(|v| !near(*v)).chain(calibrated_a.iter().copied()).collect();
+    let mut grid: Vec<f64> = (0..=count)
+        .map(|k| round(k as f64 * step))
+        .filter(|v| !near(*v))
+        .chain(calibrated_a.iter().copied())
+        .collect();
     grid.sort_by(f64::total_cmp);
     grid.dedup();
     grid
@@ -236,8 +280,14 @@ pub fn current_grid(calibrated_a: &[f64]) -> Vec<f64> {
 /// Each B-P parameter of a law against the coil current: its posterior
 /// (over the draws at `positions`) on [`current_grid`] of the currents
 /// `calibrated_a` it saw.
-pub fn against_current(sample: &PosteriorSample, positions: &[(usize, usize)], calibrated_a: &[f64]) -> Vec<CurrentRow> {
-    let (lo, hi) = calibrated_a.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
+pub fn against_current(
+    sample: &PosteriorSample,
+    positions: &[(usize, usize)],
+    calibrated_a: &[f64],
+) -> Vec<CurrentRow> {
+    let (lo, hi) = calibrated_a
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
     let mut rows = Vec::new();
     for current_a in current_grid(calibrated_a) {
         let kind = if calibrated_a.contains(&current_a) {
@@ -247,12 +297,14 @@ pub fn against_current(sample: &PosteriorSample, positions: &[(usize, usize)], c
         } else {
             CurrentKind::Outside
         };
-        let draws: Vec<[f64; 7]> = positions.iter().map(|&(s, c)| sample.params_at(s, c, current_a).to_array()).collect();
+        let draws: Vec<[f64; 7]> =
+            positions.iter().map(|&(s, c)| sample.params_at(s, c, current_a).to_array()).collect();
         for (k, parameter) in PARAM_NAMES.iter().enumerate() {
             let mut v: Vec<f64> = draws.iter().map(|p| p[k]).collect();
             let n = v.len() as f64;
             let mean = v.iter().sum::<f64>() / n;
-            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
+            let sd =
+                (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
             v.sort_by(f64::total_cmp);
             rows.push(CurrentRow {
                 parameter: parameter.to_string(),
@@ -274,7 +326,18 @@ pub fn against_current(sample: &PosteriorSample, positions: &[(usize, usize)], c
 pub fn paired_difference(a: &[f64], b: &[f64]) -> Difference {
     let mut diffs: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
     let mut ratios: Vec<f64> = a.iter().zip(b).map(|(x, y)| x / y).collect();
-    let greater: f64 = diffs.iter().map(|d| if *d > 0.0 { 1.0 } else if *d == 0.0 { 0.5 } else { 0.0 }).sum();
+    let greater: f64 = diffs
+        .iter()
+        .map(|d| {
+            if *d > 0.0 {
+                1.0
+            } else if *d == 0.0 {
+                0.5
+            } else {
+                0.0
+            }
+        })
+        .sum();
     diffs.sort_by(f64::total_cmp);
     ratios.sort_by(f64::total_cmp);
     Difference {
@@ -364,16 +427,35 @@ mod tests {
         let x = normal_draws(0.0, 1.0, 1000, 3);
         let centre = |shift: f64, fit: &str| LayerCentre {
             draw: (0..1000).map(|i| i as f64).collect(),
-            centre: (0..7).map(|_| x.iter().enumerate().map(|(i, v)| if i == 7 { f64::NAN } else { 10.0 + v + shift }).collect()).collect(),
+            centre: (0..7)
+                .map(|_| {
+                    x.iter()
+                        .enumerate()
+                        .map(|(i, v)| if i == 7 { f64::NAN } else { 10.0 + v + shift })
+                        .collect()
+                })
+                .collect(),
             fit: fit.to_string(),
         };
         let (a, b) = (centre(0.0, "f"), centre(-0.1, "f"));
         let rows = centre_differences("a", &a, "b", &b).expect("one fit");
         assert_eq!(rows.len(), 7);
         assert_eq!(rows[0].a, "a (typical test)");
-        assert!(rows.iter().all(|r| r.difference.p_greater == 1.0 && (r.difference.diff_q50 - 0.1).abs() < 1e-9), "{:?}", rows[0]);
-        assert!(difference(&a.centre[0][..7], &b.centre[0][..7]).p_greater < 0.9, "the premise: the marginals overlap");
-        assert!(centre_differences("a", &a, "b", &centre(-0.1, "g")).is_none(), "two fits do not pair");
+        assert!(
+            rows.iter().all(
+                |r| r.difference.p_greater == 1.0 && (r.difference.diff_q50 - 0.1).abs() < 1e-9
+            ),
+            "{:?}",
+            rows[0]
+        );
+        assert!(
+            difference(&a.centre[0][..7], &b.centre[0][..7]).p_greater < 0.9,
+            "the premise: the marginals overlap"
+        );
+        assert!(
+            centre_differences("a", &a, "b", &centre(-0.1, "g")).is_none(),
+            "two fits do not pair"
+        );
     }
 
     /// a ~ N(1.0, 0.3²), b ~ N(0.8, 0.4²): a − b ~ N(0.2, 0.5²), so

@@ -12,12 +12,7 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 pub enum Error {
     /// Something wrong with an input file: missing, unreadable, malformed.
     #[error("{}{}{}: {message}", .file.display(), row_text(.row), column_text(.column))]
-    Input {
-        file: PathBuf,
-        row: Option<usize>,
-        column: Option<String>,
-        message: String,
-    },
+    Input { file: PathBuf, row: Option<usize>, column: Option<String>, message: String },
     /// A command line that does not make sense (an option out of range, …).
     #[error("{0}")]
     Usage(String),
@@ -40,10 +35,7 @@ fn row_text(row: &Option<usize>) -> String {
 }
 
 fn column_text(column: &Option<String>) -> String {
-    column
-        .as_ref()
-        .map(|c| format!(", column '{c}'"))
-        .unwrap_or_default()
+    column.as_ref().map(|c| format!(", column '{c}'")).unwrap_or_default()
 }
 
 impl Error {
@@ -73,10 +65,7 @@ impl Error {
     }
 
     pub fn output(path: impl AsRef<Path>, message: impl std::fmt::Display) -> Self {
-        Error::Output {
-            path: path.as_ref().to_path_buf(),
-            message: message.to_string(),
-        }
+        Error::Output { path: path.as_ref().to_path_buf(), message: message.to_string() }
     }
 
     /// Exit status of the command line: 2 for bad input or usage and for a

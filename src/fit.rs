@@ -94,11 +94,21 @@ pub fn least_squares(start: &[f64], residuals: &Residuals, jacobian: Option<&Jac
 /// recommended value is √ε ≈ 1.5e-8). For residuals that carry an
 /// integrator's rounding, tolerances near ε are never met by a real
 /// gain: the solver creeps on for hundreds of iterations.
-pub fn least_squares_to(ftol: f64, start: &[f64], residuals: &Residuals, jacobian: Option<&Jacobian>) -> Fit {
+pub fn least_squares_to(
+    ftol: f64,
+    start: &[f64],
+    residuals: &Residuals,
+    jacobian: Option<&Jacobian>,
+) -> Fit {
     solve(start, residuals, jacobian, LevenbergMarquardt::new().with_ftol(ftol))
 }
 
-fn solve(start: &[f64], residuals: &Residuals, jacobian: Option<&Jacobian>, solver: LevenbergMarquardt<f64>) -> Fit {
+fn solve(
+    start: &[f64],
+    residuals: &Residuals,
+    jacobian: Option<&Jacobian>,
+    solver: LevenbergMarquardt<f64>,
+) -> Fit {
     let problem = ClosureProblem {
         p: DVector::from_column_slice(start),
         residuals,
@@ -138,7 +148,8 @@ mod tests {
         // y = 3 exp(−0.5 x) exactly: the fit must recover (3, −0.5)
         let x: Vec<f64> = (0..20).map(|i| i as f64 * 0.3).collect();
         let y: Vec<f64> = x.iter().map(|x| 3.0 * (-0.5 * x).exp()).collect();
-        let res = |p: &[f64]| Some(x.iter().zip(&y).map(|(x, y)| p[0] * (p[1] * x).exp() - y).collect());
+        let res =
+            |p: &[f64]| Some(x.iter().zip(&y).map(|(x, y)| p[0] * (p[1] * x).exp() - y).collect());
         let jac = |p: &[f64]| {
             Some(DMatrix::from_fn(x.len(), 2, |i, j| {
                 if j == 0 {
@@ -148,9 +159,15 @@ mod tests {
                 }
             }))
         };
-        for fit in [least_squares(&[1.0, -0.1], &res, Some(&jac)), least_squares(&[1.0, -0.1], &res, None)] {
+        for fit in
+            [least_squares(&[1.0, -0.1], &res, Some(&jac)), least_squares(&[1.0, -0.1], &res, None)]
+        {
             assert!(fit.converged, "{}", fit.message);
-            assert!((fit.params[0] - 3.0).abs() < 1e-6 && (fit.params[1] + 0.5).abs() < 1e-6, "{:?}", fit.params);
+            assert!(
+                (fit.params[0] - 3.0).abs() < 1e-6 && (fit.params[1] + 0.5).abs() < 1e-6,
+                "{:?}",
+                fit.params
+            );
         }
     }
 }

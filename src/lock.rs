@@ -75,7 +75,13 @@ fn claim(dir: &Path, wait: bool) -> Result<Writing> {
         return Ok(Writing { key });
     }
     let path = dir.join(FILE);
-    let mut file = OpenOptions::new().create(true).truncate(false).read(true).write(true).open(&path).map_err(|e| Error::output(&path, e))?;
+    let mut file = OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .read(true)
+        .write(true)
+        .open(&path)
+        .map_err(|e| Error::output(&path, e))?;
     if wait {
         file.lock().map_err(|e| Error::output(&path, e))?;
     } else {
@@ -83,13 +89,16 @@ fn claim(dir: &Path, wait: bool) -> Result<Writing> {
         let tried = patiently(|| file.try_lock());
         match tried {
             Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => return Err(busy(dir, "wait until it ends, or write to another folder")),
+            Err(std::fs::TryLockError::WouldBlock) => {
+                return Err(busy(dir, "wait until it ends, or write to another folder"))
+            }
             Err(std::fs::TryLockError::Error(e)) => return Err(Error::output(&path, e)),
         }
     }
     // tell a refused writer who holds the folder
     let pid = std::process::id().to_string();
-    let told = file.set_len(0).and_then(|_| file.rewind()).and_then(|_| file.write_all(pid.as_bytes()));
+    let told =
+        file.set_len(0).and_then(|_| file.rewind()).and_then(|_| file.write_all(pid.as_bytes()));
     told.map_err(|e| Error::output(&path, e))?;
     with_held(|held| held.insert(key.clone(), (1, file)));
     Ok(Writing { key })
@@ -116,11 +125,15 @@ pub fn read(dir: &Path) -> Result<Reading> {
 
 /// Tries to lock for up to a second: a folder read or released at this
 /// very moment is not a folder being written.
-fn patiently(mut attempt: impl FnMut() -> std::result::Result<(), std::fs::TryLockError>) -> std::result::Result<(), std::fs::TryLockError> {
+fn patiently(
+    mut attempt: impl FnMut() -> std::result::Result<(), std::fs::TryLockError>,
+) -> std::result::Result<(), std::fs::TryLockError> {
     let start = std::time::Instant::now();
     loop {
         match attempt() {
-            Err(std::fs::TryLockError::WouldBlock) if start.elapsed() < std::time::Duration::from_secs(1) => {
+            Err(std::fs::TryLockError::WouldBlock)
+                if start.elapsed() < std::time::Duration::from_secs(1) =>
+            {
                 std::thread::sleep(std::time::Duration::from_millis(25))
             }
             other => return other,

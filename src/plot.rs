@@ -45,17 +45,33 @@ fn init_fonts() {
 /// How a series is drawn.
 #[derive(Clone, Debug)]
 pub enum Mark {
-    Line { width: u32 },
-    Dashed { width: u32 },
-    Points { size: u32 },
+    Line {
+        width: u32,
+    },
+    Dashed {
+        width: u32,
+    },
+    Points {
+        size: u32,
+    },
     /// Filled band between `y` (lower) and `y2` (upper), with opacity.
-    Band { opacity: f64 },
+    Band {
+        opacity: f64,
+    },
     /// Histogram bars: `x` holds bin edges (one more than `y`).
-    Bars { opacity: f64 },
+    Bars {
+        opacity: f64,
+    },
     /// A vertical line at each `x`.
-    VLines { width: u32 },
+    VLines {
+        width: u32,
+    },
     /// Filled rectangles of size `w` × `h`, lower-left corners at (`x`, `y`).
-    Cells { w: f64, h: f64, opacity: f64 },
+    Cells {
+        w: f64,
+        h: f64,
+        opacity: f64,
+    },
 }
 
 #[derive(Clone, Debug)]
@@ -69,27 +85,74 @@ pub struct Series {
 }
 
 impl Series {
-    pub fn line(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, y: Vec<f64>) -> Self {
+    pub fn line(
+        label: impl Into<Option<String>>,
+        color: RGBColor,
+        x: Vec<f64>,
+        y: Vec<f64>,
+    ) -> Self {
         Series { label: label.into(), color, mark: Mark::Line { width: 2 }, x, y, y2: vec![] }
     }
-    pub fn dashed(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, y: Vec<f64>) -> Self {
+    pub fn dashed(
+        label: impl Into<Option<String>>,
+        color: RGBColor,
+        x: Vec<f64>,
+        y: Vec<f64>,
+    ) -> Self {
         Series { label: label.into(), color, mark: Mark::Dashed { width: 2 }, x, y, y2: vec![] }
     }
-    pub fn points(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, y: Vec<f64>) -> Self {
+    pub fn points(
+        label: impl Into<Option<String>>,
+        color: RGBColor,
+        x: Vec<f64>,
+        y: Vec<f64>,
+    ) -> Self {
         Series { label: label.into(), color, mark: Mark::Points { size: 2 }, x, y, y2: vec![] }
     }
-    pub fn band(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, lo: Vec<f64>, hi: Vec<f64>) -> Self {
+    pub fn band(
+        label: impl Into<Option<String>>,
+        color: RGBColor,
+        x: Vec<f64>,
+        lo: Vec<f64>,
+        hi: Vec<f64>,
+    ) -> Self {
         Series { label: label.into(), color, mark: Mark::Band { opacity: 0.25 }, x, y: lo, y2: hi }
     }
-    pub fn bars(label: impl Into<Option<String>>, color: RGBColor, edges: Vec<f64>, heights: Vec<f64>) -> Self {
-        Series { label: label.into(), color, mark: Mark::Bars { opacity: 0.5 }, x: edges, y: heights, y2: vec![] }
+    pub fn bars(
+        label: impl Into<Option<String>>,
+        color: RGBColor,
+        edges: Vec<f64>,
+        heights: Vec<f64>,
+    ) -> Self {
+        Series {
+            label: label.into(),
+            color,
+            mark: Mark::Bars { opacity: 0.5 },
+            x: edges,
+            y: heights,
+            y2: vec![],
+        }
     }
     /// Filled `w` × `h` cells with lower-left corners at (`x`, `y`).
-    pub fn cells(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>, y: Vec<f64>, (w, h): (f64, f64), opacity: f64) -> Self {
+    pub fn cells(
+        label: impl Into<Option<String>>,
+        color: RGBColor,
+        x: Vec<f64>,
+        y: Vec<f64>,
+        (w, h): (f64, f64),
+        opacity: f64,
+    ) -> Self {
         Series { label: label.into(), color, mark: Mark::Cells { w, h, opacity }, x, y, y2: vec![] }
     }
     pub fn vlines(label: impl Into<Option<String>>, color: RGBColor, x: Vec<f64>) -> Self {
-        Series { label: label.into(), color, mark: Mark::VLines { width: 2 }, x, y: vec![], y2: vec![] }
+        Series {
+            label: label.into(),
+            color,
+            mark: Mark::VLines { width: 2 },
+            x,
+            y: vec![],
+            y2: vec![],
+        }
     }
     pub fn with_width(mut self, w: u32) -> Self {
         match &mut self.mark {
@@ -143,7 +206,11 @@ pub enum LegendAt {
 }
 
 impl Chart {
-    pub fn new(title: impl Into<String>, x_label: impl Into<String>, y_label: impl Into<String>) -> Self {
+    pub fn new(
+        title: impl Into<String>,
+        x_label: impl Into<String>,
+        y_label: impl Into<String>,
+    ) -> Self {
         Chart {
             title: title.into(),
             x_label: x_label.into(),
@@ -209,7 +276,8 @@ pub fn save(figure: &Figure, stem: &Path) -> Result<()> {
 
 /// The PNG of an SVG drawn by [`save`], its text in the embedded DejaVu.
 fn rasterise(svg: &str) -> std::result::Result<Vec<u8>, String> {
-    static FONTS: std::sync::OnceLock<std::sync::Arc<resvg::usvg::fontdb::Database>> = std::sync::OnceLock::new();
+    static FONTS: std::sync::OnceLock<std::sync::Arc<resvg::usvg::fontdb::Database>> =
+        std::sync::OnceLock::new();
     let fonts = FONTS.get_or_init(|| {
         let mut db = resvg::usvg::fontdb::Database::new();
         db.load_font_data(dejavu::sans::regular().to_vec());
@@ -220,7 +288,8 @@ fn rasterise(svg: &str) -> std::result::Result<Vec<u8>, String> {
     let options = resvg::usvg::Options { fontdb: fonts.clone(), ..Default::default() };
     let tree = resvg::usvg::Tree::from_str(svg, &options).map_err(|e| e.to_string())?;
     let size = tree.size().to_int_size();
-    let mut pixmap = resvg::tiny_skia::Pixmap::new(size.width(), size.height()).ok_or("empty figure")?;
+    let mut pixmap =
+        resvg::tiny_skia::Pixmap::new(size.width(), size.height()).ok_or("empty figure")?;
     resvg::render(&tree, resvg::tiny_skia::Transform::default(), &mut pixmap.as_mut());
     // the figures are opaque (white background): RGB, a quarter smaller than RGBA
     let rgb: Vec<u8> = pixmap.data().chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
@@ -236,7 +305,8 @@ fn rasterise(svg: &str) -> std::result::Result<Vec<u8>, String> {
     Ok(out)
 }
 
-type DrawResult<DB> = std::result::Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
+type DrawResult<DB> =
+    std::result::Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
 
 fn render<DB: DrawingBackend>(figure: &Figure, root: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
     root.fill(&WHITE)?;
@@ -335,12 +405,12 @@ fn axis_ranges(chart: &Chart) -> ((f64, f64), (f64, f64)) {
     let yr = chart
         .y_range
         .or_else(|| {
-            finite_range(
-                chart
-                    .series
-                    .iter()
-                    .flat_map(|s| s.y.iter().chain(&s.y2).copied().chain(matches!(s.mark, Mark::Bars { .. }).then_some(0.0))),
-            )
+            finite_range(chart.series.iter().flat_map(|s| {
+                s.y.iter()
+                    .chain(&s.y2)
+                    .copied()
+                    .chain(matches!(s.mark, Mark::Bars { .. }).then_some(0.0))
+            }))
             .map(|r| padded(r, 0.05))
         })
         .unwrap_or((0.0, 1.0));
@@ -354,7 +424,9 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
     let (caption, labels, descs, ticks, y_area, x_area, margin) =
         if chart.compact { (13, 11, 13, 4, 56, 40, 6) } else { (18, 13, 15, 7, 70, 44, 12) };
     // names on the y axis need room: about 7 px per character
-    let y_area = chart.y_names.as_ref().map_or(y_area, |n| y_area.max(12 + 7 * n.iter().map(|s| s.chars().count()).max().unwrap_or(0) as u32));
+    let y_area = chart.y_names.as_ref().map_or(y_area, |n| {
+        y_area.max(12 + 7 * n.iter().map(|s| s.chars().count()).max().unwrap_or(0) as u32)
+    });
     let tx = |x: f64| if chart.log_x { x.log10() } else { x };
     let (xr, yr) = axis_ranges(chart);
     let mut c = ChartBuilder::on(area)
@@ -365,7 +437,13 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
         .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)?;
     let log_x = chart.log_x;
     let (x_span, y_span) = (xr.1 - xr.0, yr.1 - yr.0);
-    let x_fmt = move |v: &f64| if log_x { tick(significant(10f64.powf(*v), 2)) } else { tick_in(*v, x_span) };
+    let x_fmt = move |v: &f64| {
+        if log_x {
+            tick(significant(10f64.powf(*v), 2))
+        } else {
+            tick_in(*v, x_span)
+        }
+    };
     let names = chart.y_names.clone();
     let y_fmt = move |v: &f64| match &names {
         // a name at each whole row, nothing between rows
@@ -417,19 +495,34 @@ fn draw_chart<DB: DrawingBackend>(chart: &Chart, area: &DrawingArea<DB, Shift>) 
     Ok(())
 }
 
-type Plane<'a, DB> = ChartContext<'a, DB, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>;
+type Plane<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
 
 /// Draws one series on the plane; returns whether it has a legend entry.
-fn draw_series<'a, DB: DrawingBackend + 'a>(c: &mut Plane<'a, DB>, s: &Series, tx: &dyn Fn(f64) -> f64, yr: (f64, f64)) -> std::result::Result<bool, DrawingAreaErrorKind<DB::ErrorType>> {
+fn draw_series<'a, DB: DrawingBackend + 'a>(
+    c: &mut Plane<'a, DB>,
+    s: &Series,
+    tx: &dyn Fn(f64) -> f64,
+    yr: (f64, f64),
+) -> std::result::Result<bool, DrawingAreaErrorKind<DB::ErrorType>> {
     let color = s.color;
     let xs: Vec<f64> = s.x.iter().map(|x| tx(*x)).collect();
     let anno = match &s.mark {
         Mark::Line { width } => c.draw_series(LineSeries::new(
-            xs.iter().zip(&s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)),
+            xs.iter()
+                .zip(&s.y)
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .map(|(x, y)| (*x, *y)),
             color.stroke_width(*width),
         ))?,
         Mark::Dashed { width } => c.draw_series(DashedLineSeries::new(
-            xs.iter().zip(&s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(x, y)| (*x, *y)),
+            xs.iter()
+                .zip(&s.y)
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .map(|(x, y)| (*x, *y)),
             8,
             5,
             color.stroke_width(*width),
@@ -449,19 +542,22 @@ fn draw_series<'a, DB: DrawingBackend + 'a>(c: &mut Plane<'a, DB>, s: &Series, t
         Mark::Bars { opacity } => c.draw_series(xs.windows(2).zip(&s.y).map(|(e, h)| {
             Rectangle::new([(e[0], 0.0), (e[1], *h)], color.mix(*opacity).filled())
         }))?,
-        Mark::VLines { width } => c.draw_series(
-            xs.iter().map(|x| PathElement::new(vec![(*x, yr.0), (*x, yr.1)], color.stroke_width(*width))),
-        )?,
-        Mark::Cells { w, h, opacity } => c.draw_series(
-            xs.iter().zip(&s.y).map(|(x, y)| Rectangle::new([(*x, *y), (*x + w, *y + h)], color.mix(*opacity).filled())),
-        )?,
+        Mark::VLines { width } => {
+            c.draw_series(xs.iter().map(|x| {
+                PathElement::new(vec![(*x, yr.0), (*x, yr.1)], color.stroke_width(*width))
+            }))?
+        }
+        Mark::Cells { w, h, opacity } => c.draw_series(xs.iter().zip(&s.y).map(|(x, y)| {
+            Rectangle::new([(*x, *y), (*x + w, *y + h)], color.mix(*opacity).filled())
+        }))?,
     };
     if let Some(label) = &s.label {
         let mark = s.mark.clone();
         anno.label(label).legend(move |(x, y)| match mark {
             Mark::Points { .. } => Circle::new((x + 10, y), 4, color.filled()).into_dyn(),
             Mark::Band { opacity } | Mark::Bars { opacity } | Mark::Cells { opacity, .. } => {
-                Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(opacity.max(0.3)).filled()).into_dyn()
+                Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(opacity.max(0.3)).filled())
+                    .into_dyn()
             }
             _ => PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3)).into_dyn(),
         });
@@ -495,7 +591,13 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let chart = Chart::new("t", "x (m)", "y (N)")
             .with(Series::line(Some("line".into()), PALETTE[0], vec![0.0, 1.0], vec![0.0, 2.0]))
-            .with(Series::band(Some("band".into()), PALETTE[1], vec![0.0, 1.0], vec![-1.0, 0.0], vec![1.0, 3.0]));
+            .with(Series::band(
+                Some("band".into()),
+                PALETTE[1],
+                vec![0.0, 1.0],
+                vec![-1.0, 0.0],
+                vec![1.0, 3.0],
+            ));
         save(&Figure::single(chart), &dir.path().join("f")).unwrap();
         let svg = std::fs::read_to_string(dir.path().join("f.svg")).unwrap();
         assert!(svg.contains("<svg") && svg.contains("x (m)"));

@@ -24,9 +24,23 @@ use crate::rng;
 /// The pointwise terms of `draw` along `run`, whose model stress (the B-P
 /// law alone, as the integrator returns it) is `path`; the replicate's
 /// noise comes from `rng`.
-pub fn pointwise(noise: &dyn NoiseModel, run: &RunData, path: &[f64], draw: &Draw, rng: &mut dyn rand::Rng) -> Pointwise {
-    let model: Vec<f64> = path.iter().enumerate().map(|(k, p)| p + run.terms_stress(k, draw.spring_n_per_m, draw.offset_n)).collect();
-    let stiffness = if noise.uses_stiffness(run) { stiffness_path(run, path, draw.params.g) } else { vec![0.0; path.len()] };
+pub fn pointwise(
+    noise: &dyn NoiseModel,
+    run: &RunData,
+    path: &[f64],
+    draw: &Draw,
+    rng: &mut dyn rand::Rng,
+) -> Pointwise {
+    let model: Vec<f64> = path
+        .iter()
+        .enumerate()
+        .map(|(k, p)| p + run.terms_stress(k, draw.spring_n_per_m, draw.offset_n))
+        .collect();
+    let stiffness = if noise.uses_stiffness(run) {
+        stiffness_path(run, path, draw.params.g)
+    } else {
+        vec![0.0; path.len()]
+    };
     noise.pointwise(run, &model, &stiffness, &draw.noise, rng)
 }
 
@@ -66,7 +80,8 @@ pub fn pointwise_draws(
     seed: u64,
 ) -> PointwiseDraws {
     let chains = sample.chains.chains();
-    let positions: Vec<(usize, usize)> = (0..chains).flat_map(|c| steps.iter().map(move |&s| (s, c))).collect();
+    let positions: Vec<(usize, usize)> =
+        (0..chains).flat_map(|c| steps.iter().map(move |&s| (s, c))).collect();
     let mut set = PointwiseDraws {
         steps: steps.to_vec(),
         chains,
@@ -79,7 +94,14 @@ pub fn pointwise_draws(
         failed: 0,
     };
     // every run's observations side by side: run j's start in each row
-    let offsets: Vec<usize> = runs.iter().scan(0, |at, r| { let o = *at; *at += r.time.len() - 1; Some(o) }).collect();
+    let offsets: Vec<usize> = runs
+        .iter()
+        .scan(0, |at, r| {
+            let o = *at;
+            *at += r.time.len() - 1;
+            Some(o)
+        })
+        .collect();
     let total: usize = runs.iter().map(|r| r.time.len() - 1).sum();
     set.log_likelihood = vec![f64::NEG_INFINITY; positions.len() * total];
     set.replicate = vec![f32::NAN; positions.len() * total];
@@ -92,7 +114,13 @@ pub fn pointwise_draws(
             .zip(&draws)
             .zip(&paths)
             .map(|((&(s, c), draw), path)| match path {
-                Some(path) => pointwise(noise, run, path, draw, &mut rng::stream(seed, &[0x9a7e, j as u64, s as u64, c as u64])),
+                Some(path) => pointwise(
+                    noise,
+                    run,
+                    path,
+                    draw,
+                    &mut rng::stream(seed, &[0x9a7e, j as u64, s as u64, c as u64]),
+                ),
                 None => Pointwise::default(),
             })
             .collect();

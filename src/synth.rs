@@ -12,9 +12,9 @@ use std::path::Path;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
+use crate::atomic;
 use crate::data::{Columns, Geometry, Manifest, Record, RunSpec};
 use crate::error::{Error, Result};
-use crate::atomic;
 use crate::model::{CurrentCurves, CurrentLaw, FieldLaw, Integrator, Params, LANES};
 use crate::noise::Kernel;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
@@ -33,10 +33,7 @@ impl Default for Crank {
     /// r = 6.75 mm gives the paper's nominal shear rates (mean |γ̇| = 4 r f / h
     /// = 45, 90, 180 1/s at 100, 200, 400 rpm with h = 1 mm).
     fn default() -> Self {
-        Crank {
-            radius_m: 6.75e-3,
-            rod_m: 0.15,
-        }
+        Crank { radius_m: 6.75e-3, rod_m: 0.15 }
     }
 }
 
@@ -184,8 +181,13 @@ impl SwitchedRun {
         if !(self.rpm > 0.0) || self.levels_a.len() < 2 {
             return bad("needs a positive rpm and two or more levels_a".into());
         }
-        if !(self.holds_s.len() == 1 || self.holds_s.len() == self.levels_a.len()) || self.holds_s.iter().any(|h| !(*h > 0.0 && h.is_finite())) {
-            return bad(format!("holds_s must be one positive time or one per level ({} levels)", self.levels_a.len()));
+        if !(self.holds_s.len() == 1 || self.holds_s.len() == self.levels_a.len())
+            || self.holds_s.iter().any(|h| !(*h > 0.0 && h.is_finite()))
+        {
+            return bad(format!(
+                "holds_s must be one positive time or one per level ({} levels)",
+                self.levels_a.len()
+            ));
         }
         for &level in &self.levels_a {
             if !(level >= 0.0 && level.is_finite()) {
@@ -203,7 +205,8 @@ impl SwitchedRun {
 
     /// The commanded current at time `t`.
     pub fn current_at(&self, t: f64) -> f64 {
-        let hold = |i: usize| if self.holds_s.len() == 1 { self.holds_s[0] } else { self.holds_s[i] };
+        let hold =
+            |i: usize| if self.holds_s.len() == 1 { self.holds_s[0] } else { self.holds_s[i] };
         let cycle: f64 = (0..self.levels_a.len()).map(hold).sum();
         let mut into = t.rem_euclid(cycle);
         for (i, level) in self.levels_a.iter().enumerate() {
@@ -277,10 +280,7 @@ impl Default for SynthSettings {
     fn default() -> Self {
         SynthSettings {
             name: "rd1005-3-virtual".into(),
-            geometry: Geometry {
-                area_m2: 0.05,
-                gap_m: 1.0e-3,
-            },
+            geometry: Geometry { area_m2: 0.05, gap_m: 1.0e-3 },
             crank: Crank::default(),
             law: StandLaw::default(),
             currents_a: vec![0.5, 1.0, 1.5],
@@ -299,14 +299,19 @@ impl Default for SynthSettings {
 impl SynthSettings {
     /// Reads a settings file (the `synth.toml` format).
     pub fn read(path: &Path) -> Result<SynthSettings> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
-        toml::from_str(&text).map_err(|e| Error::input(path, format!("invalid synth settings: {}", e.message())))
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
+        toml::from_str(&text)
+            .map_err(|e| Error::input(path, format!("invalid synth settings: {}", e.message())))
     }
 
     /// Writes the settings file `synth.toml` into `dir`.
     fn write(&self, dir: &Path) -> Result<()> {
         let text = toml::to_string(self).map_err(|e| Error::Compute(e.to_string()))?;
-        atomic::write(&dir.join("synth.toml"), format!("# Settings of `mrbp synth` that made this campaign.\n{text}").as_bytes())
+        atomic::write(
+            &dir.join("synth.toml"),
+            format!("# Settings of `mrbp synth` that made this campaign.\n{text}").as_bytes(),
+        )
     }
 }
 
@@ -369,7 +374,8 @@ impl Overrides {
         if let Some(v) = &self.smooth_force_time {
             s.extra_force.smooth_time_s = v.clone();
         }
-        s.extra_force.viscous_n_s_per_m = self.viscous_force.unwrap_or(s.extra_force.viscous_n_s_per_m);
+        s.extra_force.viscous_n_s_per_m =
+            self.viscous_force.unwrap_or(s.extra_force.viscous_n_s_per_m);
         Ok(s)
     }
 }
@@ -397,10 +403,7 @@ pub fn virtual_record(
     let duration = settings.cycles * 60.0 / rpm;
     let n = (duration * settings.rate_hz).round() as usize;
     let time: Vec<f64> = (0..=n).map(|k| k as f64 / settings.rate_hz).collect();
-    let x: Vec<f64> = time
-        .iter()
-        .map(|&t| settings.crank.displacement(rpm, t))
-        .collect();
+    let x: Vec<f64> = time.iter().map(|&t| settings.crank.displacement(rpm, t)).collect();
     let gamma: Vec<f64> = x.iter().map(|x| x / settings.geometry.gap_m).collect();
     let truth = Integrator {
         substeps: TRUTH_SUBSTEPS,
@@ -431,13 +434,30 @@ pub fn switched_record(settings: &SynthSettings, run: &SwitchedRun, stream: u64)
     let current: Vec<f64> = time.iter().map(|&t| run.current_at(t)).collect();
     let m = SWITCHED_OVERSAMPLING;
     let fine_t: Vec<f64> = (0..=n * m).map(|k| k as f64 / (settings.rate_hz * m as f64)).collect();
-    let fine_gamma: Vec<f64> = fine_t.iter().map(|&t| settings.crank.displacement(rpm, t) / settings.geometry.gap_m).collect();
+    let fine_gamma: Vec<f64> = fine_t
+        .iter()
+        .map(|&t| settings.crank.displacement(rpm, t) / settings.geometry.gap_m)
+        .collect();
     let fine_current: Vec<f64> = (0..=n * m).map(|k| current[k / m]).collect();
     let lanes = [settings.law.field_law(); LANES];
     let mut fine_tau = vec![0.0; fine_t.len()];
-    let integrator = Integrator { substeps: TRUTH_SUBSTEPS / m as u32, extrapolate: true, max_substeps: 1_000_000, ..Integrator::default() };
-    let [outcome, ..] = integrator.run_lanes_along(&lanes, &[settings.law.coil_lag_s; LANES], &fine_current, &fine_t, &fine_gamma, 0.0, |k, s| fine_tau[k] = s.tau[0]);
-    outcome.map_err(|e| Error::Compute(format!("switched virtual experiment at {rpm} rpm: {e}")))?;
+    let integrator = Integrator {
+        substeps: TRUTH_SUBSTEPS / m as u32,
+        extrapolate: true,
+        max_substeps: 1_000_000,
+        ..Integrator::default()
+    };
+    let [outcome, ..] = integrator.run_lanes_along(
+        &lanes,
+        &[settings.law.coil_lag_s; LANES],
+        &fine_current,
+        &fine_t,
+        &fine_gamma,
+        0.0,
+        |k, s| fine_tau[k] = s.tau[0],
+    );
+    outcome
+        .map_err(|e| Error::Compute(format!("switched virtual experiment at {rpm} rpm: {e}")))?;
     let tau: Vec<f64> = (0..=n).map(|k| fine_tau[k * m]).collect();
     sensed(settings, rpm, time, x, &tau, current, None, stream)
 }
@@ -447,10 +467,19 @@ pub fn switched_record(settings: &SynthSettings, run: &SwitchedRun, stream: u64)
 /// noise from the stream `(seed, stream)`, the extra force (the smooth
 /// one `smooth`) added, and the coil current `current`.
 #[allow(clippy::too_many_arguments)]
-fn sensed(settings: &SynthSettings, rpm: f64, time: Vec<f64>, x: Vec<f64>, tau: &[f64], current: Vec<f64>, smooth: Option<(f64, f64)>, stream: u64) -> Result<Record> {
-
+fn sensed(
+    settings: &SynthSettings,
+    rpm: f64,
+    time: Vec<f64>,
+    x: Vec<f64>,
+    tau: &[f64],
+    current: Vec<f64>,
+    smooth: Option<(f64, f64)>,
+    stream: u64,
+) -> Result<Record> {
     let mut rng = crate::rng::stream(settings.seed, &[stream]);
-    let noise = |sd: f64| Normal::new(0.0, sd).map_err(|e| Error::Usage(format!("noise level {sd}: {e}")));
+    let noise =
+        |sd: f64| Normal::new(0.0, sd).map_err(|e| Error::Usage(format!("noise level {sd}: {e}")));
     let force_noise = noise(settings.noise_force_n)?;
     let disp_noise = noise(settings.noise_displacement_m)?;
     let mut force = Vec::with_capacity(time.len());
@@ -463,19 +492,20 @@ fn sensed(settings: &SynthSettings, rpm: f64, time: Vec<f64>, x: Vec<f64>, tau: 
     // those of earlier versions, bit for bit
     if let Some((sd, ell)) = smooth {
         let mut rng = crate::rng::stream(settings.seed, &[stream, EXTRA_FORCE_STREAM]);
-        let path = crate::noise::discrepancy::sample_path(settings.extra_force.kernel, sd, ell, &time, &mut rng);
+        let path = crate::noise::discrepancy::sample_path(
+            settings.extra_force.kernel,
+            sd,
+            ell,
+            &time,
+            &mut rng,
+        );
         force.iter_mut().zip(path).for_each(|(f, d)| *f += d);
     }
     let c = settings.extra_force.viscous_n_s_per_m;
     if c != 0.0 {
         force.iter_mut().zip(&time).for_each(|(f, &t)| *f += c * settings.crank.velocity(rpm, t));
     }
-    Ok(Record {
-        current: Some(current),
-        time,
-        displacement,
-        force,
-    })
+    Ok(Record { current: Some(current), time, displacement, force })
 }
 
 /// Run id used in the manifest, e.g. `I1.0_100rpm`.
@@ -487,7 +517,8 @@ pub fn run_id(current_a: f64, rpm: f64) -> String {
 /// run, the settings used (`synth.toml`) and a figure of the force-
 /// displacement loops (`records.svg`, `records.png`).
 pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> {
-    if settings.rate_hz <= 0.0 || settings.cycles <= 0.0 || settings.rpms.iter().any(|r| *r <= 0.0) {
+    if settings.rate_hz <= 0.0 || settings.cycles <= 0.0 || settings.rpms.iter().any(|r| *r <= 0.0)
+    {
         return Err(Error::Usage("rate, cycles and rpm must be positive".into()));
     }
     for i in 0..settings.rpms.len() {
@@ -498,10 +529,17 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     }
     if let Some(c) = &settings.law.curves {
         if !(c.low_a >= 0.0 && c.high_a > c.low_a && c.high_a.is_finite()) {
-            return Err(Error::Usage(format!("[law.curves]: need anchor currents 0 ≤ low_a < high_a; got {} and {}", c.low_a, c.high_a)));
+            return Err(Error::Usage(format!(
+                "[law.curves]: need anchor currents 0 ≤ low_a < high_a; got {} and {}",
+                c.low_a, c.high_a
+            )));
         }
         if let Some(k) = c.bend.iter().position(|b| !(*b > 0.0 && b.is_finite())) {
-            return Err(Error::Usage(format!("[law.curves]: bend {} of {} must be positive and finite", c.bend[k], crate::model::PARAM_NAMES[k])));
+            return Err(Error::Usage(format!(
+                "[law.curves]: bend {} of {} must be positive and finite",
+                c.bend[k],
+                crate::model::PARAM_NAMES[k]
+            )));
         }
     }
     for run in &settings.switched {
@@ -517,8 +555,7 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     let mut stream = 0u64;
     for &current in &settings.currents_a {
         let p = settings.law.params_at(current);
-        p.validate()
-            .map_err(|e| Error::Usage(format!("at {current} A: {e}")))?;
+        p.validate().map_err(|e| Error::Usage(format!("at {current} A: {e}")))?;
         let mut chart = Chart::new(
             format!("virtual records at {current} A"),
             "piston displacement x (mm)",
@@ -531,18 +568,25 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
             let smooth = settings.extra_force.smooth(i, settings.rpms.len())?;
             let rec = virtual_record(settings, &p, rpm, current, smooth, stream)?;
             stream += 1;
-            chart.series.push(Series::line(
-                Some(format!("{rpm} rpm")),
-                PALETTE[i % PALETTE.len()],
-                rec.displacement.iter().map(|x| x * 1e3).collect(),
-                rec.force.iter().map(|f| f * 1e-3).collect(),
-            ).with_width(1));
+            chart.series.push(
+                Series::line(
+                    Some(format!("{rpm} rpm")),
+                    PALETTE[i % PALETTE.len()],
+                    rec.displacement.iter().map(|x| x * 1e3).collect(),
+                    rec.force.iter().map(|f| f * 1e-3).collect(),
+                )
+                .with_width(1),
+            );
             atomic::write(&dir.join(&file), crate::data::table::csv_text(&rec).as_bytes())?;
             runs.push(RunSpec {
                 id,
                 file: file.into(),
                 current_a: current,
-                shear_rate: Some((settings.crank.nominal_shear_rate(rpm, settings.geometry.gap_m) * 10.0).round() / 10.0),
+                shear_rate: Some(
+                    (settings.crank.nominal_shear_rate(rpm, settings.geometry.gap_m) * 10.0)
+                        .round()
+                        / 10.0,
+                ),
                 initial_stress_pa: None,
                 current_varies: false,
             });
@@ -550,7 +594,11 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
         panels.push(chart);
     }
     if !settings.switched.is_empty() {
-        let mut chart = Chart::new("switched-current records", "piston displacement x (mm)", "damper force F (kN)");
+        let mut chart = Chart::new(
+            "switched-current records",
+            "piston displacement x (mm)",
+            "damper force F (kN)",
+        );
         chart.legend_at = LegendAt::Middle;
         for (k, run) in settings.switched.iter().enumerate() {
             let id = run.id(k + 1);
@@ -558,7 +606,13 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
             let rec = switched_record(settings, run, stream)?;
             stream += 1;
             chart.series.push(
-                Series::line(Some(id.clone()), PALETTE[k % PALETTE.len()], rec.displacement.iter().map(|x| x * 1e3).collect(), rec.force.iter().map(|f| f * 1e-3).collect()).with_width(1),
+                Series::line(
+                    Some(id.clone()),
+                    PALETTE[k % PALETTE.len()],
+                    rec.displacement.iter().map(|x| x * 1e3).collect(),
+                    rec.force.iter().map(|f| f * 1e-3).collect(),
+                )
+                .with_width(1),
             );
             // the run's nominal current: the command's mean over the record
             let current = rec.current.as_deref().unwrap_or(&[]);
@@ -568,7 +622,11 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
                 id,
                 file: file.into(),
                 current_a: (mean * 1e3).round() / 1e3,
-                shear_rate: Some((settings.crank.nominal_shear_rate(run.rpm, settings.geometry.gap_m) * 10.0).round() / 10.0),
+                shear_rate: Some(
+                    (settings.crank.nominal_shear_rate(run.rpm, settings.geometry.gap_m) * 10.0)
+                        .round()
+                        / 10.0,
+                ),
                 initial_stress_pa: None,
                 current_varies: true,
             });
@@ -583,7 +641,11 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
         limits: Default::default(),
         runs,
     };
-    let extra = if settings.extra_force.is_none() { "" } else { " + a force the law lacks ([extra_force])" };
+    let extra = if settings.extra_force.is_none() {
+        ""
+    } else {
+        " + a force the law lacks ([extra_force])"
+    };
     let header = format!(
         "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
          # Synthetic data: B-P model{extra} + sensor noise, not measurements.\n"
@@ -617,12 +679,22 @@ mod tests {
         for t in [0.0, 0.013, 0.1, 0.2999, 0.41, 0.77] {
             let h = 1e-6;
             let numeric = (c.displacement(200.0, t + h) - c.displacement(200.0, t - h)) / (2.0 * h);
-            assert!((c.velocity(200.0, t) - numeric).abs() < 1e-7, "t {t}: {} vs {numeric}", c.velocity(200.0, t));
+            assert!(
+                (c.velocity(200.0, t) - numeric).abs() < 1e-7,
+                "t {t}: {} vs {numeric}",
+                c.velocity(200.0, t)
+            );
         }
     }
 
     fn small_stand() -> SynthSettings {
-        SynthSettings { rpms: vec![400.0], currents_a: vec![1.0], cycles: 1.0, rate_hz: 2000.0, ..SynthSettings::default() }
+        SynthSettings {
+            rpms: vec![400.0],
+            currents_a: vec![1.0],
+            cycles: 1.0,
+            rate_hz: 2000.0,
+            ..SynthSettings::default()
+        }
     }
 
     /// The extra force adds to the record and nothing else: the same seed
@@ -635,7 +707,10 @@ mod tests {
         let base = small_stand();
         let p = base.law.law().params_at(1.0);
         let plain = virtual_record(&base, &p, 400.0, 1.0, None, 0).unwrap();
-        let viscous = SynthSettings { extra_force: ExtraForce { viscous_n_s_per_m: 500.0, ..ExtraForce::default() }, ..base.clone() };
+        let viscous = SynthSettings {
+            extra_force: ExtraForce { viscous_n_s_per_m: 500.0, ..ExtraForce::default() },
+            ..base.clone()
+        };
         let rec = virtual_record(&viscous, &p, 400.0, 1.0, None, 0).unwrap();
         assert_eq!(rec.displacement, plain.displacement);
         for k in 0..rec.time.len() {
@@ -646,10 +721,12 @@ mod tests {
         let rec = virtual_record(&base, &p, 400.0, 1.0, Some((80.0, 0.005)), 0).unwrap();
         let added: Vec<f64> = rec.force.iter().zip(&plain.force).map(|(a, b)| a - b).collect();
         let mean = added.iter().sum::<f64>() / added.len() as f64;
-        let sd = (added.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / added.len() as f64).sqrt();
+        let sd =
+            (added.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / added.len() as f64).sqrt();
         assert!((sd / 80.0 - 1.0).abs() < 0.4, "sd {sd}");
         // smooth: neighbours nearly equal (ℓ is 10 samples)
-        let lag1 = added.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum::<f64>() / (sd * sd * added.len() as f64);
+        let lag1 = added.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum::<f64>()
+            / (sd * sd * added.len() as f64);
         assert!(lag1 > 0.9, "lag-1 correlation {lag1}");
     }
 

@@ -21,8 +21,16 @@ fn campaign(seed: u64, smooth_n: f64) -> (tempfile::TempDir, Campaign) {
         cycles: 1.0,
         rate_hz: 2000.0,
         seed,
-        noise_displacement_m: if smooth_n == 0.0 { 0.0 } else { SynthSettings::default().noise_displacement_m },
-        extra_force: ExtraForce { smooth_sd_n: vec![smooth_n], smooth_time_s: vec![0.02], ..ExtraForce::default() },
+        noise_displacement_m: if smooth_n == 0.0 {
+            0.0
+        } else {
+            SynthSettings::default().noise_displacement_m
+        },
+        extra_force: ExtraForce {
+            smooth_sd_n: vec![smooth_n],
+            smooth_time_s: vec![0.02],
+            ..ExtraForce::default()
+        },
         ..SynthSettings::default()
     };
     write_campaign(&settings, dir.path()).unwrap();
@@ -48,7 +56,13 @@ fn the_likelihood_is_evaluated_at_the_moved_parameters() {
     let independent = settings.posterior(&campaign, Integrator::default());
     let centre: Vec<f64> = map.x[..7].iter().map(|v| v + 0.01).collect();
     // a matrix far from the identity, with every entry set
-    let matrix: Vec<Vec<f64>> = (0..7).map(|i| (0..7).map(|j| if i == j { 0.4 + 0.05 * i as f64 } else { 0.01 * (i as f64 - j as f64) }).collect()).collect();
+    let matrix: Vec<Vec<f64>> = (0..7)
+        .map(|i| {
+            (0..7)
+                .map(|j| if i == j { 0.4 + 0.05 * i as f64 } else { 0.01 * (i as f64 - j as f64) })
+                .collect()
+        })
+        .collect();
     let adjustment = MemoryAdjustment {
         runs: campaign.runs.iter().map(|r| r.id().to_string()).collect(),
         coordinates: independent.layout.theta_names().to_vec(),
@@ -64,7 +78,9 @@ fn the_likelihood_is_evaluated_at_the_moved_parameters() {
     for (i, v) in x.iter_mut().take(7).enumerate() {
         *v += 0.002 * (i as f64 - 3.0);
     }
-    let moved: Vec<f64> = (0..7).map(|i| centre[i] + (0..7).map(|j| matrix[i][j] * (x[j] - centre[j])).sum::<f64>()).collect();
+    let moved: Vec<f64> = (0..7)
+        .map(|i| centre[i] + (0..7).map(|j| matrix[i][j] * (x[j] - centre[j])).sum::<f64>())
+        .collect();
     let log_theta = post.layout.log_theta(&moved);
     let params = Params::from_array(std::array::from_fn(|i| log_theta[i].exp()));
     let own: f64 = post
@@ -75,12 +91,23 @@ fn the_likelihood_is_evaluated_at_the_moved_parameters() {
             let l = &post.layout;
             let coordinates = std::array::from_fn(|_| l.noise_values(&x, j));
             let terms = std::array::from_fn(|_| l.terms(&x, j));
-            run_log_likelihood(post.noise.as_ref(), &post.integrator, run, &LaneParams::Fixed([params; LANES]), &coordinates, terms)[0].unwrap()
+            run_log_likelihood(
+                post.noise.as_ref(),
+                &post.integrator,
+                run,
+                &LaneParams::Fixed([params; LANES]),
+                &coordinates,
+                terms,
+            )[0]
+            .unwrap()
         })
         .sum();
     let want = post.log_prior(&x) + own;
     let got = post.log_density(&x);
-    assert!((got - want).abs() < 1e-8 * want.abs(), "adjusted log-density {got}, prior plus the runs at θ* {want}");
+    assert!(
+        (got - want).abs() < 1e-8 * want.abs(),
+        "adjusted log-density {got}, prior plus the runs at θ* {want}"
+    );
     // the premise: θ* is not θ, and the likelihood there differs
     assert!((independent.log_density(&x) - got).abs() > 1.0);
 }
@@ -99,7 +126,11 @@ fn only_residuals_with_memory_are_adjusted() {
     let (_w, white) = campaign(11, 0.0);
     let s = start(&white, &adjusted(), &mut |_| {}).unwrap();
     let a = s.settings.likelihood.memory_adjustment.clone().expect("measured");
-    assert!(a.inflation.iter().all(|v| (1.0..1.3).contains(v)), "white residuals: inflation {:?}", a.inflation);
+    assert!(
+        a.inflation.iter().all(|v| (1.0..1.3).contains(v)),
+        "white residuals: inflation {:?}",
+        a.inflation
+    );
     assert_eq!(a.runs.len(), white.runs.len());
 
     let (_s, smooth) = campaign(11, 80.0);
@@ -107,7 +138,11 @@ fn only_residuals_with_memory_are_adjusted() {
     assert!(s.warnings.is_empty(), "{:?}", s.warnings);
     let a = s.settings.likelihood.memory_adjustment.clone().expect("measured");
     let samples: usize = s.posterior.runs.iter().map(|r| r.tau.len()).sum();
-    assert!(a.inflation[0] > 10.0 && a.inflation.iter().all(|v| (2.0..samples as f64).contains(v)), "smooth force: inflation {:?}", a.inflation);
+    assert!(
+        a.inflation[0] > 10.0 && a.inflation.iter().all(|v| (2.0..samples as f64).contains(v)),
+        "smooth force: inflation {:?}",
+        a.inflation
+    );
 }
 
 /// What the adjustment is for: the posterior sd of ln θ should be the
@@ -150,14 +185,20 @@ fn the_adjusted_sds_are_the_scatter_of_the_estimate() {
         let at = map::refine(&independent, &s.map.x[..independent.layout.fitted.len()]).unwrap();
         independent_sds.push(sds(&mode::laplace_from(&independent, &at), &independent, seed));
     }
-    let rms = |v: &[Vec<f64>], i: usize| (v.iter().map(|s| s[i] * s[i]).sum::<f64>() / v.len() as f64).sqrt();
+    let rms = |v: &[Vec<f64>], i: usize| {
+        (v.iter().map(|s| s[i] * s[i]).sum::<f64>() / v.len() as f64).sqrt()
+    };
     for (i, name) in ["G", "R0", "R1", "D1", "m1", "m2", "n"].iter().enumerate() {
         let scatter = sd(&centres.iter().map(|c| c[i]).collect::<Vec<f64>>());
-        let (adjusted, independent) = (rms(&adjusted_sds, i) / scatter, rms(&independent_sds, i) / scatter);
+        let (adjusted, independent) =
+            (rms(&adjusted_sds, i) / scatter, rms(&independent_sds, i) / scatter);
         // the premise: independent noise is too sure of every parameter
         assert!(independent < 0.6, "{name}: independent sd / scatter {independent:.2}");
         if !["m1", "m2"].contains(name) {
-            assert!((0.65..1.6).contains(&adjusted), "{name}: adjusted sd / scatter {adjusted:.2} (independent {independent:.2})");
+            assert!(
+                (0.65..1.6).contains(&adjusted),
+                "{name}: adjusted sd / scatter {adjusted:.2} (independent {independent:.2})"
+            );
         }
     }
 }
@@ -173,8 +214,16 @@ fn sd(x: &[f64]) -> f64 {
 /// 1, or a centre of another size than the model's parameter set.
 #[test]
 fn a_malformed_adjustment_is_refused() {
-    let names: Vec<String> = ["ln G", "a", "b", "c", "d", "e", "f"].iter().map(|s| s.to_string()).collect();
-    let good = MemoryAdjustment { runs: vec!["a".into()], coordinates: names, reference_work_pa: Some(1e6), centre: vec![0.0; 7], matrix: vec![vec![0.0; 7]; 7], inflation: vec![1.0; 7] };
+    let names: Vec<String> =
+        ["ln G", "a", "b", "c", "d", "e", "f"].iter().map(|s| s.to_string()).collect();
+    let good = MemoryAdjustment {
+        runs: vec!["a".into()],
+        coordinates: names,
+        reference_work_pa: Some(1e6),
+        centre: vec![0.0; 7],
+        matrix: vec![vec![0.0; 7]; 7],
+        inflation: vec![1.0; 7],
+    };
     let with = |a: MemoryAdjustment| {
         let mut s = adjusted();
         s.likelihood.memory_adjustment = Some(a);
@@ -184,7 +233,12 @@ fn a_malformed_adjustment_is_refused() {
     let cases = [
         MemoryAdjustment { matrix: vec![vec![0.0; 6]; 7], ..good.clone() },
         MemoryAdjustment { inflation: vec![0.5; 7], ..good.clone() },
-        MemoryAdjustment { centre: vec![0.0; 3], matrix: vec![vec![0.0; 3]; 3], coordinates: good.coordinates[..3].to_vec(), ..good.clone() },
+        MemoryAdjustment {
+            centre: vec![0.0; 3],
+            matrix: vec![vec![0.0; 3]; 3],
+            coordinates: good.coordinates[..3].to_vec(),
+            ..good.clone()
+        },
         MemoryAdjustment { centre: vec![f64::NAN; 7], ..good.clone() },
         MemoryAdjustment { coordinates: good.coordinates[..6].to_vec(), ..good.clone() },
         MemoryAdjustment { reference_work_pa: Some(-1.0), ..good.clone() },
@@ -196,7 +250,12 @@ fn a_malformed_adjustment_is_refused() {
     // an adjustment is only read with memory = "adjusted"
     let mut tempered = CalibrationSettings::default();
     tempered.likelihood.memory = Memory::Tempered;
-    tempered.likelihood.memory_adjustment = Some(MemoryAdjustment { centre: vec![0.0; 3], matrix: vec![vec![0.0; 3]; 3], coordinates: good.coordinates[..3].to_vec(), ..good });
+    tempered.likelihood.memory_adjustment = Some(MemoryAdjustment {
+        centre: vec![0.0; 3],
+        matrix: vec![vec![0.0; 3]; 3],
+        coordinates: good.coordinates[..3].to_vec(),
+        ..good
+    });
     assert!(tempered.check().is_ok());
 }
 
@@ -222,10 +281,23 @@ fn held_out_runs_fall_inside_their_bands() {
     let held_out = |memory: &str| {
         let out = tempfile::tempdir().unwrap();
         let o = std::process::Command::new(env!("CARGO_BIN_EXE_mrbp"))
-            .args(["run", manifest.to_str().unwrap(), "--out", out.path().to_str().unwrap(), "--memory", memory, "--leave-one-out"])
+            .args([
+                "run",
+                manifest.to_str().unwrap(),
+                "--out",
+                out.path().to_str().unwrap(),
+                "--memory",
+                memory,
+                "--leave-one-out",
+            ])
             .output()
             .expect("run mrbp");
-        assert!(o.status.success(), "{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+        assert!(
+            o.status.success(),
+            "{}\n{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
         let path = out.path().join("I1.0A").join("loo.parquet");
         let loo = read_parquet(&path).unwrap();
         let inside = f64_column(&loo, "inside_p95", &path).unwrap();
@@ -238,10 +310,19 @@ fn held_out_runs_fall_inside_their_bands() {
     for ((run, share), by) in runs.iter().zip(&inside).zip(&by) {
         // the full posterior's draws do not weigh an adjusted held-out posterior
         assert_ne!(by, "reweighting", "{run}");
-        assert!(*share >= 0.80, "{run} held out: {:.1} % inside its 95 % band ({by})", 100.0 * share);
+        assert!(
+            *share >= 0.80,
+            "{run} held out: {:.1} % inside its 95 % band ({by})",
+            100.0 * share
+        );
     }
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let independent = mean(&held_out("independent").1);
     let adjusted = mean(&inside);
-    assert!(adjusted >= 0.88 && adjusted >= independent - 0.03, "held out: {:.1} % inside on average (independent {:.1} %)", 100.0 * adjusted, 100.0 * independent);
+    assert!(
+        adjusted >= 0.88 && adjusted >= independent - 0.03,
+        "held out: {:.1} % inside on average (independent {:.1} %)",
+        100.0 * adjusted,
+        100.0 * independent
+    );
 }

@@ -11,14 +11,19 @@ use std::process::Command;
 use mrbp::calibrate::CalibrationSettings;
 use mrbp::data::Campaign;
 use mrbp::model::Params;
-use mrbp::pointwise::pointwise_draws;
 use mrbp::noise::NoiseKind;
+use mrbp::pointwise::pointwise_draws;
 use mrbp::posterior::{LikelihoodSettings, PosteriorSample};
 use mrbp::sampler::{Chains, LogDensity};
 use mrbp::synth::{write_campaign, SynthSettings};
 
 fn campaign(dir: &Path) -> PathBuf {
-    let settings = SynthSettings { currents_a: vec![1.0], cycles: 1.0, rate_hz: 2000.0, ..SynthSettings::default() };
+    let settings = SynthSettings {
+        currents_a: vec![1.0],
+        cycles: 1.0,
+        rate_hz: 2000.0,
+        ..SynthSettings::default()
+    };
     write_campaign(&settings, dir).unwrap();
     dir.join("campaign.toml")
 }
@@ -38,7 +43,10 @@ fn pointwise_terms_sum_to_the_samplers_likelihood() {
         LikelihoodSettings { noise: NoiseKind::Ar1, ..LikelihoodSettings::default() },
     ];
     for likelihood in cases {
-        let settings = CalibrationSettings { likelihood: likelihood.clone(), ..CalibrationSettings::default() };
+        let settings = CalibrationSettings {
+            likelihood: likelihood.clone(),
+            ..CalibrationSettings::default()
+        };
         let integrator = settings.integrator.integrator(2);
         let posterior = settings.posterior(&campaign, integrator);
         let layout = &posterior.layout;
@@ -49,14 +57,38 @@ fn pointwise_terms_sum_to_the_samplers_likelihood() {
         }
         let x = layout.from_si(&si);
         let total = posterior.log_density(&x) - posterior.log_prior(&x);
-        let chains = Chains { dim: x.len(), ensembles: 1, walkers: 1, positions: x.clone(), log_prob: vec![total], accepted: vec![true] };
-        let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains, Vec::new());
-        let draws = pointwise_draws(&sample, &posterior.runs, &[0], &integrator, posterior.noise.as_ref(), 7);
+        let chains = Chains {
+            dim: x.len(),
+            ensembles: 1,
+            walkers: 1,
+            positions: x.clone(),
+            log_prob: vec![total],
+            accepted: vec![true],
+        };
+        let sample =
+            PosteriorSample::from_coordinates(layout, posterior.model, &chains, Vec::new());
+        let draws = pointwise_draws(
+            &sample,
+            &posterior.runs,
+            &[0],
+            &integrator,
+            posterior.noise.as_ref(),
+            7,
+        );
         let sum: f64 = draws.log_likelihood.iter().sum();
         let n = draws.observed.len() as f64;
-        let constant = if likelihood.noise == NoiseKind::StudentT { 0.0 } else { -0.5 * n * (2.0 * std::f64::consts::PI).ln() };
+        let constant = if likelihood.noise == NoiseKind::StudentT {
+            0.0
+        } else {
+            -0.5 * n * (2.0 * std::f64::consts::PI).ln()
+        };
         assert_eq!(draws.failed, 0);
-        assert!(((sum - constant) - total).abs() < 1e-7 * total.abs(), "{:?}: pointwise {} vs likelihood {total}", likelihood.noise, sum - constant);
+        assert!(
+            ((sum - constant) - total).abs() < 1e-7 * total.abs(),
+            "{:?}: pointwise {} vs likelihood {total}",
+            likelihood.noise,
+            sum - constant
+        );
     }
 }
 
@@ -70,15 +102,35 @@ fn arviz_opens_the_store_and_agrees_with_the_summary() {
     let manifest = campaign(data.path());
     let out = tempfile::tempdir().unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args(["run", manifest.to_str().unwrap(), "--out", out.path().to_str().unwrap(), "--substeps", "2", "--draws", "100"])
+        .args([
+            "run",
+            manifest.to_str().unwrap(),
+            "--out",
+            out.path().to_str().unwrap(),
+            "--substeps",
+            "2",
+            "--draws",
+            "100",
+        ])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let dir = out.path().join("I1.0A");
     let store = dir.join("inference.zarr");
-    for group in ["posterior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data"] {
-        assert!(store.join(group).join("zarr.json").is_file(), "no {group} group in {}", store.display());
+    for group in
+        ["posterior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data"]
+    {
+        assert!(
+            store.join(group).join("zarr.json").is_file(),
+            "no {group} group in {}",
+            store.display()
+        );
     }
 
-    common::python_check("arviz_check.py", &[&dir], "arviz, xarray, zarr, pandas, pyarrow, matplotlib", "MRBP_ARVIZ_CHECK");
+    common::python_check(
+        "arviz_check.py",
+        &[&dir],
+        "arviz, xarray, zarr, pandas, pyarrow, matplotlib",
+        "MRBP_ARVIZ_CHECK",
+    );
 }

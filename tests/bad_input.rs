@@ -19,7 +19,11 @@ fn record(n: usize) -> String {
     for k in 0..n {
         let t = k as f64 * 1e-3;
         let phase = 2.0 * std::f64::consts::PI * 2.0 * t * 1000.0 / n as f64;
-        s += &format!("{t},{},{}\n", 0.005 * phase.sin(), 800.0 * phase.cos().signum() * (1.0 - (-5.0 * phase.cos().abs()).exp()));
+        s += &format!(
+            "{t},{},{}\n",
+            0.005 * phase.sin(),
+            800.0 * phase.cos().signum() * (1.0 - (-5.0 * phase.cos().abs()).exp())
+        );
     }
     s
 }
@@ -54,9 +58,13 @@ fn good(root: &Path) -> PathBuf {
     csv_campaign(root, &record(400))
 }
 
-fn parquet_bytes(columns: Vec<(&str, Vec<Option<f64>>)>, text: Option<(&str, Vec<&str>)>) -> Vec<u8> {
+fn parquet_bytes(
+    columns: Vec<(&str, Vec<Option<f64>>)>,
+    text: Option<(&str, Vec<&str>)>,
+) -> Vec<u8> {
     use polars::prelude::*;
-    let mut cols: Vec<Column> = columns.into_iter().map(|(n, v)| Column::new(n.into(), v)).collect();
+    let mut cols: Vec<Column> =
+        columns.into_iter().map(|(n, v)| Column::new(n.into(), v)).collect();
     if let Some((n, v)) = text {
         cols.push(Column::new(n.into(), v));
     }
@@ -74,8 +82,10 @@ type Cells = Vec<Option<f64>>;
 
 fn sine(n: usize) -> (Cells, Cells, Cells) {
     let t: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
-    let x: Vec<f64> = t.iter().map(|t| 0.005 * (2.0 * std::f64::consts::PI * 5.0 * t).sin()).collect();
-    let f: Vec<f64> = t.iter().map(|t| 500.0 * (2.0 * std::f64::consts::PI * 5.0 * t).cos()).collect();
+    let x: Vec<f64> =
+        t.iter().map(|t| 0.005 * (2.0 * std::f64::consts::PI * 5.0 * t).sin()).collect();
+    let f: Vec<f64> =
+        t.iter().map(|t| 500.0 * (2.0 * std::f64::consts::PI * 5.0 * t).cos()).collect();
     let some = |v: Vec<f64>| v.into_iter().map(Some).collect();
     (some(t), some(x), some(f))
 }
@@ -87,7 +97,10 @@ fn calibration() -> &'static (PathBuf, PathBuf) {
     CAL.get_or_init(|| {
         let root = tempfile::tempdir().unwrap().keep();
         let data = root.join("data");
-        let o = mrbp(&root, &s(&["synth", "--out", "data", "--currents", "1.0", "--rate", "2000", "--cycles", "1"]));
+        let o = mrbp(
+            &root,
+            &s(&["synth", "--out", "data", "--currents", "1.0", "--rate", "2000", "--cycles", "1"]),
+        );
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let out = root.join("cal");
         let o = mrbp(&root, &s(&["sample", "data/campaign.toml", "--out", "cal", "--steps", "30"]));
@@ -115,47 +128,126 @@ fn p(path: &Path) -> String {
 fn cases() -> Vec<Case> {
     vec![
         // --- the manifest
-        Case { name: "missing manifest", make: |r| s(&["check", &p(&r.join("nope.toml"))]), code: 2, expect: &["nope.toml", "not found"] },
+        Case {
+            name: "missing manifest",
+            make: |r| s(&["check", &p(&r.join("nope.toml"))]),
+            code: 2,
+            expect: &["nope.toml", "not found"],
+        },
         Case {
             name: "malformed manifest",
-            make: |r| s(&["check", &p(&setup(r, "name = \"t\"\n[geometry]\narea_m2 = \"big\"\ngap_m = 0.001\n", &[]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        "name = \"t\"\n[geometry]\narea_m2 = \"big\"\ngap_m = 0.001\n",
+                        &[],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["campaign.toml", "invalid manifest"],
         },
         Case {
             name: "unknown manifest key",
-            make: |r| s(&["check", &p(&setup(r, &manifest_with("colour = \"red\"\n", &one_run("run1.csv")), &[("run1.csv", record(400).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with("colour = \"red\"\n", &one_run("run1.csv")),
+                        &[("run1.csv", record(400).into())],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["campaign.toml", "colour"],
         },
-        Case { name: "no runs", make: |r| s(&["check", &p(&setup(r, &manifest_with("", ""), &[]))]), code: 2, expect: &["no [[run]]"] },
+        Case {
+            name: "no runs",
+            make: |r| s(&["check", &p(&setup(r, &manifest_with("", ""), &[]))]),
+            code: 2,
+            expect: &["no [[run]]"],
+        },
         Case {
             name: "empty name",
-            make: |r| s(&["check", &p(&setup(r, &format!("name = \" \"\n{GEOMETRY}{}", one_run("run1.csv")), &[("run1.csv", record(400).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &format!("name = \" \"\n{GEOMETRY}{}", one_run("run1.csv")),
+                        &[("run1.csv", record(400).into())],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["name must not be empty"],
         },
         Case {
             name: "zero area",
-            make: |r| s(&["check", &p(&setup(r, &format!("name = \"t\"\n[geometry]\narea_m2 = 0.0\ngap_m = 0.001\n{}", one_run("run1.csv")), &[("run1.csv", record(400).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &format!(
+                            "name = \"t\"\n[geometry]\narea_m2 = 0.0\ngap_m = 0.001\n{}",
+                            one_run("run1.csv")
+                        ),
+                        &[("run1.csv", record(400).into())],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["area_m2", "positive"],
         },
         Case {
             name: "negative gap",
-            make: |r| s(&["check", &p(&setup(r, &format!("name = \"t\"\n[geometry]\narea_m2 = 0.05\ngap_m = -1e-3\n{}", one_run("run1.csv")), &[("run1.csv", record(400).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &format!(
+                            "name = \"t\"\n[geometry]\narea_m2 = 0.05\ngap_m = -1e-3\n{}",
+                            one_run("run1.csv")
+                        ),
+                        &[("run1.csv", record(400).into())],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["gap_m", "positive"],
         },
         Case {
             name: "zero column scale",
-            make: |r| s(&["check", &p(&setup(r, &manifest_with("[columns]\nforce_scale = 0.0\n", &one_run("run1.csv")), &[("run1.csv", record(400).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with("[columns]\nforce_scale = 0.0\n", &one_run("run1.csv")),
+                        &[("run1.csv", record(400).into())],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["columns.force_scale", "positive"],
         },
         Case {
             name: "negative limit",
-            make: |r| s(&["check", &p(&setup(r, &manifest_with("[limits]\nforce_n = -1.0\n", &one_run("run1.csv")), &[("run1.csv", record(400).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with("[limits]\nforce_n = -1.0\n", &one_run("run1.csv")),
+                        &[("run1.csv", record(400).into())],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["limits.force_n", "positive"],
         },
@@ -163,27 +255,78 @@ fn cases() -> Vec<Case> {
             name: "duplicate run id",
             make: |r| {
                 let runs = format!("{}{}", one_run("run1.csv"), one_run("run1.csv"));
-                s(&["check", &p(&setup(r, &manifest_with("", &runs), &[("run1.csv", record(400).into())]))])
+                s(&[
+                    "check",
+                    &p(&setup(r, &manifest_with("", &runs), &[("run1.csv", record(400).into())])),
+                ])
             },
             code: 2,
             expect: &["duplicate run id 'r1'"],
         },
         Case {
             name: "empty run id",
-            make: |r| s(&["check", &p(&setup(r, &manifest_with("", "[[run]]\nid = \"\"\nfile = \"run1.csv\"\ncurrent_a = 1.0\n"), &[("run1.csv", record(400).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with(
+                            "",
+                            "[[run]]\nid = \"\"\nfile = \"run1.csv\"\ncurrent_a = 1.0\n",
+                        ),
+                        &[("run1.csv", record(400).into())],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["empty id"],
         },
         Case {
             name: "negative current",
-            make: |r| s(&["check", &p(&setup(r, &manifest_with("", "[[run]]\nid = \"r1\"\nfile = \"run1.csv\"\ncurrent_a = -1.0\n"), &[("run1.csv", record(400).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with(
+                            "",
+                            "[[run]]\nid = \"r1\"\nfile = \"run1.csv\"\ncurrent_a = -1.0\n",
+                        ),
+                        &[("run1.csv", record(400).into())],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["current_a", "non-negative"],
         },
         // --- CSV records
-        Case { name: "missing data file", make: |r| s(&["check", &p(&setup(r, &manifest_with("", &one_run("run1.csv")), &[]))]), code: 2, expect: &["run1.csv", "not found"] },
-        Case { name: "unknown file type", make: |r| s(&["check", &p(&setup(r, &manifest_with("", &one_run("run1.txt")), &[("run1.txt", record(400).into())]))]), code: 2, expect: &["run1.txt", "unknown data file type"] },
-        Case { name: "missing column", make: |r| s(&["check", &p(&csv_campaign(r, "time_s,displacement_m\n0,0\n1,1\n"))]), code: 2, expect: &["run1.csv", "column 'force_n'"] },
+        Case {
+            name: "missing data file",
+            make: |r| s(&["check", &p(&setup(r, &manifest_with("", &one_run("run1.csv")), &[]))]),
+            code: 2,
+            expect: &["run1.csv", "not found"],
+        },
+        Case {
+            name: "unknown file type",
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with("", &one_run("run1.txt")),
+                        &[("run1.txt", record(400).into())],
+                    )),
+                ])
+            },
+            code: 2,
+            expect: &["run1.txt", "unknown data file type"],
+        },
+        Case {
+            name: "missing column",
+            make: |r| s(&["check", &p(&csv_campaign(r, "time_s,displacement_m\n0,0\n1,1\n"))]),
+            code: 2,
+            expect: &["run1.csv", "column 'force_n'"],
+        },
         Case {
             name: "duplicate column",
             make: |r| s(&["check", &p(&csv_campaign(r, &duplicate_force_column()))]),
@@ -192,22 +335,82 @@ fn cases() -> Vec<Case> {
         },
         Case {
             name: "text in a number",
-            make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 2, "0.001,abc,10")))]),
+            make: |r| {
+                s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 2, "0.001,abc,10")))])
+            },
             code: 2,
             expect: &["row 2", "text where a number belongs"],
         },
-        Case { name: "NaN in a number", make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 3, "0.002,0,NaN")))]), code: 2, expect: &["row 3", "column 'force_n'", "finite"] },
-        Case { name: "infinity in a number", make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 3, "0.002,inf,1")))]), code: 2, expect: &["row 3", "column 'displacement_m'", "finite"] },
-        Case { name: "time that does not increase", make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 3, "0.001,0,1")))]), code: 2, expect: &["row 3", "column 'time_s'", "does not increase"] },
-        Case { name: "empty record", make: |r| s(&["check", &p(&csv_campaign(r, "time_s,displacement_m,force_n\n"))]), code: 2, expect: &["0 data rows"] },
-        Case { name: "record of two rows", make: |r| s(&["check", &p(&csv_campaign(r, &record(2)))]), code: 2, expect: &["2 data rows", "at least 10"] },
-        Case { name: "ragged row", make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 4, "0.003,0")))]), code: 2, expect: &["run1.csv", "row 4"] },
-        Case { name: "force of 1e300", make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 7, "0.006,0,1e300")))]), code: 2, expect: &["row 7", "column 'force_n'", "plausible"] },
-        Case { name: "displacement of a kilometre", make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 5, "0.004,1000,1")))]), code: 2, expect: &["row 5", "column 'displacement_m'", "plausible"] },
-        Case { name: "time of thirty years", make: |r| s(&["check", &p(&csv_campaign(r, &format!("{}1e9,0,0\n", record(400))))]), code: 2, expect: &["row 401", "column 'time_s'", "plausible"] },
+        Case {
+            name: "NaN in a number",
+            make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 3, "0.002,0,NaN")))]),
+            code: 2,
+            expect: &["row 3", "column 'force_n'", "finite"],
+        },
+        Case {
+            name: "infinity in a number",
+            make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 3, "0.002,inf,1")))]),
+            code: 2,
+            expect: &["row 3", "column 'displacement_m'", "finite"],
+        },
+        Case {
+            name: "time that does not increase",
+            make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 3, "0.001,0,1")))]),
+            code: 2,
+            expect: &["row 3", "column 'time_s'", "does not increase"],
+        },
+        Case {
+            name: "empty record",
+            make: |r| s(&["check", &p(&csv_campaign(r, "time_s,displacement_m,force_n\n"))]),
+            code: 2,
+            expect: &["0 data rows"],
+        },
+        Case {
+            name: "record of two rows",
+            make: |r| s(&["check", &p(&csv_campaign(r, &record(2)))]),
+            code: 2,
+            expect: &["2 data rows", "at least 10"],
+        },
+        Case {
+            name: "ragged row",
+            make: |r| s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 4, "0.003,0")))]),
+            code: 2,
+            expect: &["run1.csv", "row 4"],
+        },
+        Case {
+            name: "force of 1e300",
+            make: |r| {
+                s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 7, "0.006,0,1e300")))])
+            },
+            code: 2,
+            expect: &["row 7", "column 'force_n'", "plausible"],
+        },
+        Case {
+            name: "displacement of a kilometre",
+            make: |r| {
+                s(&["check", &p(&csv_campaign(r, &nth_row(&record(400), 5, "0.004,1000,1")))])
+            },
+            code: 2,
+            expect: &["row 5", "column 'displacement_m'", "plausible"],
+        },
+        Case {
+            name: "time of thirty years",
+            make: |r| s(&["check", &p(&csv_campaign(r, &format!("{}1e9,0,0\n", record(400))))]),
+            code: 2,
+            expect: &["row 401", "column 'time_s'", "plausible"],
+        },
         Case {
             name: "a raised limit lets a big force through",
-            make: |r| s(&["check", &p(&setup(r, &manifest_with("[limits]\nforce_n = 1e7\n", &one_run("run1.csv")), &[("run1.csv", nth_row(&record(400), 7, "0.006,0,2e6").into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with("[limits]\nforce_n = 1e7\n", &one_run("run1.csv")),
+                        &[("run1.csv", nth_row(&record(400), 7, "0.006,0,2e6").into())],
+                    )),
+                ])
+            },
             code: 0,
             expect: &[],
         },
@@ -219,23 +422,67 @@ fn cases() -> Vec<Case> {
         },
         Case {
             name: "a varying current without its column",
-            make: |r| s(&["check", &p(&setup(r, &manifest_with("", &format!("{}current_varies = true\n", one_run("run1.csv"))), &[("run1.csv", record(400).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with(
+                            "",
+                            &format!("{}current_varies = true\n", one_run("run1.csv")),
+                        ),
+                        &[("run1.csv", record(400).into())],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["column 'current_a'", "missing", "current_varies = true"],
         },
         Case {
             name: "a varying current below 0 A",
-            make: |r| s(&["check", &p(&setup(r, &manifest_with("", &format!("{}current_varies = true\n", one_run("run1.csv"))), &[("run1.csv", nth_row(&with_current(&record(400), 0.5), 4, "0.003,0,0,-0.2").into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with(
+                            "",
+                            &format!("{}current_varies = true\n", one_run("run1.csv")),
+                        ),
+                        &[(
+                            "run1.csv",
+                            nth_row(&with_current(&record(400), 0.5), 4, "0.003,0,0,-0.2").into(),
+                        )],
+                    )),
+                ])
+            },
             code: 2,
             expect: &["row 4", "column 'current_a'", "-0.2 A", "0 A or more"],
         },
         Case {
             name: "a varying current is read",
-            make: |r| s(&["check", &p(&setup(r, &manifest_with("", &format!("{}current_varies = true\n", one_run("run1.csv"))), &[("run1.csv", with_current(&record(400), 2.5).into())]))]),
+            make: |r| {
+                s(&[
+                    "check",
+                    &p(&setup(
+                        r,
+                        &manifest_with(
+                            "",
+                            &format!("{}current_varies = true\n", one_run("run1.csv")),
+                        ),
+                        &[("run1.csv", with_current(&record(400), 2.5).into())],
+                    )),
+                ])
+            },
             code: 0,
             expect: &[],
         },
-        Case { name: "file current within ripple", make: |r| s(&["check", &p(&csv_campaign(r, &with_current(&record(400), 1.02)))]), code: 0, expect: &[] },
+        Case {
+            name: "file current within ripple",
+            make: |r| s(&["check", &p(&csv_campaign(r, &with_current(&record(400), 1.02)))]),
+            code: 0,
+            expect: &[],
+        },
         Case {
             name: "file outside the manifest folder is read with a note",
             make: |r| {
@@ -253,7 +500,16 @@ fn cases() -> Vec<Case> {
                 let mut f: Vec<String> = (0..400).map(|k| format!("{}", k)).collect();
                 f[4] = "abc".into();
                 let f: Vec<&str> = f.iter().map(String::as_str).collect();
-                s(&["check", &p(&parquet_campaign(r, parquet_bytes(vec![("time_s", t), ("displacement_m", x)], Some(("force_n", f)))))])
+                s(&[
+                    "check",
+                    &p(&parquet_campaign(
+                        r,
+                        parquet_bytes(
+                            vec![("time_s", t), ("displacement_m", x)],
+                            Some(("force_n", f)),
+                        ),
+                    )),
+                ])
             },
             code: 2,
             expect: &["run1.parquet", "row 5", "column 'force_n'", "text where a number belongs"],
@@ -263,7 +519,16 @@ fn cases() -> Vec<Case> {
             make: |r| {
                 let (t, mut x, f) = sine(400);
                 x[2] = None;
-                s(&["check", &p(&parquet_campaign(r, parquet_bytes(vec![("time_s", t), ("displacement_m", x), ("force_n", f)], None)))])
+                s(&[
+                    "check",
+                    &p(&parquet_campaign(
+                        r,
+                        parquet_bytes(
+                            vec![("time_s", t), ("displacement_m", x), ("force_n", f)],
+                            None,
+                        ),
+                    )),
+                ])
             },
             code: 2,
             expect: &["row 3", "column 'displacement_m'", "missing value"],
@@ -273,7 +538,16 @@ fn cases() -> Vec<Case> {
             make: |r| {
                 let (t, x, mut f) = sine(400);
                 f[1] = Some(f64::NAN);
-                s(&["check", &p(&parquet_campaign(r, parquet_bytes(vec![("time_s", t), ("displacement_m", x), ("force_n", f)], None)))])
+                s(&[
+                    "check",
+                    &p(&parquet_campaign(
+                        r,
+                        parquet_bytes(
+                            vec![("time_s", t), ("displacement_m", x), ("force_n", f)],
+                            None,
+                        ),
+                    )),
+                ])
             },
             code: 2,
             expect: &["row 2", "column 'force_n'", "finite"],
@@ -282,52 +556,170 @@ fn cases() -> Vec<Case> {
             name: "parquet missing column",
             make: |r| {
                 let (t, x, _) = sine(400);
-                s(&["check", &p(&parquet_campaign(r, parquet_bytes(vec![("time_s", t), ("displacement_m", x)], None)))])
+                s(&[
+                    "check",
+                    &p(&parquet_campaign(
+                        r,
+                        parquet_bytes(vec![("time_s", t), ("displacement_m", x)], None),
+                    )),
+                ])
             },
             code: 2,
             expect: &["column 'force_n'", "no such column"],
         },
-        Case { name: "not a parquet file", make: |r| s(&["check", &p(&parquet_campaign(r, b"PAR1 this is not parquet".to_vec()))]), code: 2, expect: &["run1.parquet", "not a readable Parquet"] },
+        Case {
+            name: "not a parquet file",
+            make: |r| s(&["check", &p(&parquet_campaign(r, b"PAR1 this is not parquet".to_vec()))]),
+            code: 2,
+            expect: &["run1.parquet", "not a readable Parquet"],
+        },
         // --- records with nothing to fit
-        Case { name: "no motion: identify refuses", make: |r| s(&["identify", &p(&csv_campaign(r, &constant_displacement())), "--out", &p(&r.join("out"))]), code: 2, expect: &["no loading branch", "identification"] },
-        Case { name: "no motion: check notes it", make: |r| s(&["check", &p(&csv_campaign(r, &constant_displacement()))]), code: 0, expect: &["no loading branch"] },
-        Case { name: "no force: sample refuses", make: |r| s(&["sample", &p(&csv_campaign(r, &zero_force())), "--out", &p(&r.join("out"))]), code: 2, expect: &["no force signal", "calibration"] },
+        Case {
+            name: "no motion: identify refuses",
+            make: |r| {
+                s(&[
+                    "identify",
+                    &p(&csv_campaign(r, &constant_displacement())),
+                    "--out",
+                    &p(&r.join("out")),
+                ])
+            },
+            code: 2,
+            expect: &["no loading branch", "identification"],
+        },
+        Case {
+            name: "no motion: check notes it",
+            make: |r| s(&["check", &p(&csv_campaign(r, &constant_displacement()))]),
+            code: 0,
+            expect: &["no loading branch"],
+        },
+        Case {
+            name: "no force: sample refuses",
+            make: |r| {
+                s(&["sample", &p(&csv_campaign(r, &zero_force())), "--out", &p(&r.join("out"))])
+            },
+            code: 2,
+            expect: &["no force signal", "calibration"],
+        },
         // --- options, refused before any work
-        Case { name: "--walkers 1", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--walkers", "1"]), code: 2, expect: &["--walkers"] },
-        Case { name: "--walkers odd", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--walkers", "33"]), code: 2, expect: &["--walkers", "even"] },
-        Case { name: "--ensembles 0", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--ensembles", "0"]), code: 2, expect: &["--ensembles"] },
-        Case { name: "--steps 0", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--steps", "0"]), code: 2, expect: &["--steps"] },
-        Case { name: "--substeps 0", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--substeps", "0"]), code: 2, expect: &["--substeps"] },
-        Case { name: "--threads 0", make: |r| s(&["--threads", "0", "check", &p(&good(r))]), code: 2, expect: &["--threads"] },
-        Case { name: "--current not in the campaign", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--current", "3"]), code: 2, expect: &["no run at 3 A"] },
+        Case {
+            name: "--walkers 1",
+            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--walkers", "1"]),
+            code: 2,
+            expect: &["--walkers"],
+        },
+        Case {
+            name: "--walkers odd",
+            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--walkers", "33"]),
+            code: 2,
+            expect: &["--walkers", "even"],
+        },
+        Case {
+            name: "--ensembles 0",
+            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--ensembles", "0"]),
+            code: 2,
+            expect: &["--ensembles"],
+        },
+        Case {
+            name: "--steps 0",
+            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--steps", "0"]),
+            code: 2,
+            expect: &["--steps"],
+        },
+        Case {
+            name: "--substeps 0",
+            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--substeps", "0"]),
+            code: 2,
+            expect: &["--substeps"],
+        },
+        Case {
+            name: "--threads 0",
+            make: |r| s(&["--threads", "0", "check", &p(&good(r))]),
+            code: 2,
+            expect: &["--threads"],
+        },
+        Case {
+            name: "--current not in the campaign",
+            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--current", "3"]),
+            code: 2,
+            expect: &["no run at 3 A"],
+        },
         Case {
             name: "--hold-out-current without a current law",
-            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--hold-out-current", "1"]),
+            make: |r| {
+                s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--hold-out-current", "1"])
+            },
             code: 2,
             expect: &["--model current-law"],
         },
         Case {
             name: "current curves from one current",
-            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--model", "current-curves"]),
+            make: |r| {
+                s(&[
+                    "sample",
+                    &p(&good(r)),
+                    "--out",
+                    &p(&r.join("out")),
+                    "--model",
+                    "current-curves",
+                ])
+            },
             code: 2,
             expect: &["two or more currents"],
         },
         Case {
             name: "--config curves' anchors reversed",
             make: |r| {
-                std::fs::write(r.join("c.toml"), "model = \"current-curves\"\nanchor_currents_a = [1.0, 0.5]\n").unwrap();
-                s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--config", &p(&r.join("c.toml"))])
+                std::fs::write(
+                    r.join("c.toml"),
+                    "model = \"current-curves\"\nanchor_currents_a = [1.0, 0.5]\n",
+                )
+                .unwrap();
+                s(&[
+                    "sample",
+                    &p(&good(r)),
+                    "--out",
+                    &p(&r.join("out")),
+                    "--config",
+                    &p(&r.join("c.toml")),
+                ])
             },
             code: 2,
             expect: &["c.toml", "anchor_currents_a", "low < high"],
         },
-        Case { name: "--noise unknown", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--noise", "pink"]), code: 2, expect: &["pink"] },
-        Case { name: "--config missing", make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--config", &p(&r.join("none.toml"))]), code: 2, expect: &["none.toml"] },
+        Case {
+            name: "--noise unknown",
+            make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--noise", "pink"]),
+            code: 2,
+            expect: &["pink"],
+        },
+        Case {
+            name: "--config missing",
+            make: |r| {
+                s(&[
+                    "sample",
+                    &p(&good(r)),
+                    "--out",
+                    &p(&r.join("out")),
+                    "--config",
+                    &p(&r.join("none.toml")),
+                ])
+            },
+            code: 2,
+            expect: &["none.toml"],
+        },
         Case {
             name: "--config unknown key",
             make: |r| {
                 std::fs::write(r.join("c.toml"), "[sampler]\nwalkerz = 3\n").unwrap();
-                s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--config", &p(&r.join("c.toml"))])
+                s(&[
+                    "sample",
+                    &p(&good(r)),
+                    "--out",
+                    &p(&r.join("out")),
+                    "--config",
+                    &p(&r.join("c.toml")),
+                ])
             },
             code: 2,
             expect: &["c.toml", "walkerz"],
@@ -351,8 +743,18 @@ fn cases() -> Vec<Case> {
             code: 2,
             expect: &["--out", "cannot create"],
         },
-        Case { name: "--out in an unwritable place", make: |r| s(&["identify", &p(&good(r)), "--out", "/proc/mrbp-results"]), code: 2, expect: &["--out", "/proc/mrbp-results"] },
-        Case { name: "--out is the campaign's folder", make: |r| s(&["identify", &p(&good(r)), "--out", &p(&r.join("campaign"))]), code: 2, expect: &["--out", "folder of the campaign"] },
+        Case {
+            name: "--out in an unwritable place",
+            make: |r| s(&["identify", &p(&good(r)), "--out", "/proc/mrbp-results"]),
+            code: 2,
+            expect: &["--out", "/proc/mrbp-results"],
+        },
+        Case {
+            name: "--out is the campaign's folder",
+            make: |r| s(&["identify", &p(&good(r)), "--out", &p(&r.join("campaign"))]),
+            code: 2,
+            expect: &["--out", "folder of the campaign"],
+        },
         Case {
             name: "identify over an earlier identification",
             make: |r| {
@@ -384,20 +786,60 @@ fn cases() -> Vec<Case> {
             expect: &["sampler.checkpoint", "not a sampler checkpoint"],
         },
         // --- later stages
-        Case { name: "predict a folder that is no calibration", make: |r| s(&["predict", &p(r)]), code: 2, expect: &["not a calibration folder"] },
-        Case { name: "report a missing folder", make: |r| s(&["report", &p(&r.join("nowhere"))]), code: 2, expect: &["nowhere"] },
-        Case { name: "predict --draws 0", make: |_| s(&["predict", &p(&calibration().1), "--draws", "0", "--out", "bands"]), code: 2, expect: &["--draws"] },
+        Case {
+            name: "predict a folder that is no calibration",
+            make: |r| s(&["predict", &p(r)]),
+            code: 2,
+            expect: &["not a calibration folder"],
+        },
+        Case {
+            name: "report a missing folder",
+            make: |r| s(&["report", &p(&r.join("nowhere"))]),
+            code: 2,
+            expect: &["nowhere"],
+        },
+        Case {
+            name: "predict --draws 0",
+            make: |_| s(&["predict", &p(&calibration().1), "--draws", "0", "--out", "bands"]),
+            code: 2,
+            expect: &["--draws"],
+        },
         Case {
             name: "predict another current with a per-current calibration",
             make: |r| {
-                let o = mrbp(r, &s(&["synth", "--out", "half", "--currents", "0.5", "--rate", "2000", "--cycles", "1"]));
+                let o = mrbp(
+                    r,
+                    &s(&[
+                        "synth",
+                        "--out",
+                        "half",
+                        "--currents",
+                        "0.5",
+                        "--rate",
+                        "2000",
+                        "--cycles",
+                        "1",
+                    ]),
+                );
                 assert!(o.status.success());
-                s(&["predict", &p(&calibration().1), "--campaign", &p(&r.join("half/campaign.toml")), "--out", &p(&r.join("pred"))])
+                s(&[
+                    "predict",
+                    &p(&calibration().1),
+                    "--campaign",
+                    &p(&r.join("half/campaign.toml")),
+                    "--out",
+                    &p(&r.join("pred")),
+                ])
             },
             code: 2,
             expect: &["no run at 1 A"],
         },
-        Case { name: "compare a folder that is no calibration", make: |r| s(&["compare", &p(r), &p(&calibration().1), "--out", &p(&r.join("cmp"))]), code: 2, expect: &["not a calibration folder"] },
+        Case {
+            name: "compare a folder that is no calibration",
+            make: |r| s(&["compare", &p(r), &p(&calibration().1), "--out", &p(&r.join("cmp"))]),
+            code: 2,
+            expect: &["not a calibration folder"],
+        },
     ]
 }
 
@@ -409,19 +851,38 @@ fn nth_row(csv: &str, row: usize, line: &str) -> String {
 }
 
 fn duplicate_force_column() -> String {
-    record(400).lines().enumerate().map(|(i, l)| if i == 0 { format!("{l},force_n\n") } else { format!("{l},1\n") }).collect()
+    record(400)
+        .lines()
+        .enumerate()
+        .map(|(i, l)| if i == 0 { format!("{l},force_n\n") } else { format!("{l},1\n") })
+        .collect()
 }
 
 fn with_current(csv: &str, current: f64) -> String {
-    csv.lines().enumerate().map(|(i, l)| if i == 0 { format!("{l},current_a\n") } else { format!("{l},{current}\n") }).collect()
+    csv.lines()
+        .enumerate()
+        .map(|(i, l)| if i == 0 { format!("{l},current_a\n") } else { format!("{l},{current}\n") })
+        .collect()
 }
 
 fn constant_displacement() -> String {
-    (0..400).fold(String::from("time_s,displacement_m,force_n\n"), |s, k| s + &format!("{},0.001,{}\n", k as f64 * 1e-3, (k as f64).sin()))
+    (0..400).fold(String::from("time_s,displacement_m,force_n\n"), |s, k| {
+        s + &format!("{},0.001,{}\n", k as f64 * 1e-3, (k as f64).sin())
+    })
 }
 
 fn zero_force() -> String {
-    record(400).lines().enumerate().map(|(i, l)| if i == 0 { format!("{l}\n") } else { format!("{},0\n", l.rsplit_once(',').unwrap().0) }).collect()
+    record(400)
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i == 0 {
+                format!("{l}\n")
+            } else {
+                format!("{},0\n", l.rsplit_once(',').unwrap().0)
+            }
+        })
+        .collect()
 }
 
 #[test]
@@ -437,19 +898,36 @@ fn every_bad_input_is_refused_clearly() {
         let all = format!("{}{}", String::from_utf8_lossy(&o.stdout), err);
         let code = o.status.code();
         if code != Some(case.code) {
-            failures.push(format!("{}: exit {code:?}, expected {} — {}", case.name, case.code, err.trim()));
+            failures.push(format!(
+                "{}: exit {code:?}, expected {} — {}",
+                case.name,
+                case.code,
+                err.trim()
+            ));
             continue;
         }
         if case.code == 2 {
             // one line on stderr (clap's usage errors excepted), naming what it should
-            let lines = err.trim_end().lines().filter(|l| l.starts_with("mrbp: error") || l.starts_with("error:")).count();
+            let lines = err
+                .trim_end()
+                .lines()
+                .filter(|l| l.starts_with("mrbp: error") || l.starts_with("error:"))
+                .count();
             if lines != 1 {
-                failures.push(format!("{}: expected one 'mrbp: error' line, got: {}", case.name, err.trim()));
+                failures.push(format!(
+                    "{}: expected one 'mrbp: error' line, got: {}",
+                    case.name,
+                    err.trim()
+                ));
             }
         }
         for fragment in case.expect {
             if !all.contains(fragment) {
-                failures.push(format!("{}: the message lacks '{fragment}': {}", case.name, all.trim()));
+                failures.push(format!(
+                    "{}: the message lacks '{fragment}': {}",
+                    case.name,
+                    all.trim()
+                ));
             }
         }
         // a refused command writes no results (the lock file of a folder it
@@ -458,7 +936,20 @@ fn every_bad_input_is_refused_clearly() {
             for dir in ["out", "pred", "cmp"] {
                 let d = root.path().join(dir);
                 let written: Vec<String> = std::fs::read_dir(&d)
-                    .map(|it| it.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| !["identification.parquet", "chains.parquet", "sampler.checkpoint", mrbp::lock::FILE].contains(&n.as_str())).collect())
+                    .map(|it| {
+                        it.filter_map(|e| e.ok())
+                            .map(|e| e.file_name().to_string_lossy().into_owned())
+                            .filter(|n| {
+                                ![
+                                    "identification.parquet",
+                                    "chains.parquet",
+                                    "sampler.checkpoint",
+                                    mrbp::lock::FILE,
+                                ]
+                                .contains(&n.as_str())
+                            })
+                            .collect()
+                    })
                     .unwrap_or_default();
                 if !written.is_empty() {
                     failures.push(format!("{}: left {written:?} in {dir}/", case.name));
@@ -466,5 +957,11 @@ fn every_bad_input_is_refused_clearly() {
             }
         }
     }
-    assert!(failures.is_empty(), "{} of {} cases failed:\n{}", failures.len(), cases.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} of {} cases failed:\n{}",
+        failures.len(),
+        cases.len(),
+        failures.join("\n")
+    );
 }

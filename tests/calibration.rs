@@ -2,10 +2,10 @@
 //! parameters: recovery, the output tables, and reproducibility.
 
 use mrbp::calibrate::calibrate;
+use mrbp::calibrate::CalibrationSettings;
 use mrbp::data::Campaign;
 use mrbp::model::Params;
 use mrbp::store::read_parquet;
-use mrbp::calibrate::CalibrationSettings;
 use mrbp::synth::{write_campaign, SynthSettings};
 
 /// One crank revolution per run at 2 kHz, 1 A: small enough for a test.
@@ -49,7 +49,13 @@ fn posterior_recovers_known_parameters() {
         let z = (p.mean - truth[i]).abs() / p.sd;
         // the issue's criterion; a correct posterior exceeds 3.5 sd with
         // probability ~5e-4 per parameter
-        assert!(z < 3.5, "{name}: mean {:.4e} sd {:.3e} truth {:.4e} ({z:.2} sd)", p.mean, p.sd, truth[i]);
+        assert!(
+            z < 3.5,
+            "{name}: mean {:.4e} sd {:.3e} truth {:.4e} ({z:.2} sd)",
+            p.mean,
+            p.sd,
+            truth[i]
+        );
         assert!(p.r_hat < 1.01, "{name}: R̂ {}", p.r_hat);
     }
 }
@@ -97,8 +103,12 @@ fn sample_command_writes_the_contract_tables() {
 
     let chains = read_parquet(&out.path().join("chains.parquet")).unwrap();
     let names: Vec<String> = chains.get_column_names().iter().map(|s| s.to_string()).collect();
-    let mut expected: Vec<String> = ["ensemble", "chain", "draw", "G", "R0", "R1", "D1", "m1", "m2", "n"].map(String::from).to_vec();
-    expected.extend(["I1.0_100rpm", "I1.0_200rpm", "I1.0_400rpm"].iter().map(|r| format!("sigma_{r}")));
+    let mut expected: Vec<String> =
+        ["ensemble", "chain", "draw", "G", "R0", "R1", "D1", "m1", "m2", "n"]
+            .map(String::from)
+            .to_vec();
+    expected
+        .extend(["I1.0_100rpm", "I1.0_200rpm", "I1.0_400rpm"].iter().map(|r| format!("sigma_{r}")));
     expected.extend(["log_prob", "accepted"].map(String::from));
     assert_eq!(names, expected);
     assert_eq!(chains.height(), 40 * 41, "2 ensembles × 20 walkers × (40 steps + start)");
@@ -107,7 +117,9 @@ fn sample_command_writes_the_contract_tables() {
 
     let summary = read_parquet(&out.path().join("summary.parquet")).unwrap();
     let names: Vec<String> = summary.get_column_names().iter().map(|s| s.to_string()).collect();
-    for c in ["parameter", "mean", "sd", "q05", "q50", "q95", "ess_bulk", "ess_tail", "r_hat", "tau_int"] {
+    for c in
+        ["parameter", "mean", "sd", "q05", "q50", "q95", "ess_bulk", "ess_tail", "r_hat", "tau_int"]
+    {
         assert!(names.contains(&c.to_string()), "summary lacks {c}: {names:?}");
     }
     assert_eq!(summary.height(), 10);
@@ -133,8 +145,12 @@ fn interrupted_sample_resumes_to_the_same_chains() {
     let mut first = s.clone();
     first.sampler.steps = 30;
     let mut saver = Checkpointer { path: path.clone(), every: 10, stop: || false };
-    sample(&campaign, start(&campaign, &first, &mut |_| {}).unwrap(), None, &mut [&mut saver]).unwrap();
-    let resumed = sample(&campaign, start(&campaign, &s, &mut |_| {}).unwrap(), Some(&path), &mut []).unwrap().chains;
+    sample(&campaign, start(&campaign, &first, &mut |_| {}).unwrap(), None, &mut [&mut saver])
+        .unwrap();
+    let resumed =
+        sample(&campaign, start(&campaign, &s, &mut |_| {}).unwrap(), Some(&path), &mut [])
+            .unwrap()
+            .chains;
     assert_eq!(resumed, whole);
 }
 
@@ -144,7 +160,14 @@ fn bad_settings_file_is_a_clear_error() {
     let cfg = dir.path().join("bad.toml");
     std::fs::write(&cfg, "[prior.G]\nkind = \"log-normal\"\nmedian = -1.0\nsd_log = 1.0\nlower = 1.0\nupper = 10.0\n").unwrap();
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args(["sample", dir.path().join("campaign.toml").to_str().unwrap(), "--out", "/nonexistent/x", "--config", cfg.to_str().unwrap()])
+        .args([
+            "sample",
+            dir.path().join("campaign.toml").to_str().unwrap(),
+            "--out",
+            "/nonexistent/x",
+            "--config",
+            cfg.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
@@ -175,7 +198,14 @@ fn default_sampler_agrees_with_a_long_differential_evolution_run() {
         let z_mean = (p.mean - q.mean).abs() / (p.mcse_mean.powi(2) + q.mcse_mean.powi(2)).sqrt();
         let se_sd = (p.sd.powi(2) / (2.0 * p.ess_bulk) + q.sd.powi(2) / (2.0 * q.ess_bulk)).sqrt();
         let z_sd = (p.sd - q.sd).abs() / se_sd;
-        assert!(z_mean < 5.0 && z_sd < 5.0, "{name}: mean {:.5e} vs {:.5e} ({z_mean:.1} MCSE), sd {:.3e} vs {:.3e} ({z_sd:.1} se)", p.mean, q.mean, p.sd, q.sd);
+        assert!(
+            z_mean < 5.0 && z_sd < 5.0,
+            "{name}: mean {:.5e} vs {:.5e} ({z_mean:.1} MCSE), sd {:.3e} vs {:.3e} ({z_sd:.1} se)",
+            p.mean,
+            q.mean,
+            p.sd,
+            q.sd
+        );
     }
 }
 
@@ -190,7 +220,11 @@ fn model_terms_recover_a_known_offset_and_gas_spring() {
     let (dir, _) = campaign_with(11, 0.0);
     let (spring, offsets) = (3000.0, [30.0, -20.0, 10.0]);
     let manifest = std::fs::read_to_string(dir.path().join("campaign.toml")).unwrap();
-    let files: Vec<String> = manifest.lines().filter_map(|l| l.trim().strip_prefix("file = ")).map(|f| f.trim_matches('"').to_string()).collect();
+    let files: Vec<String> = manifest
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("file = "))
+        .map(|f| f.trim_matches('"').to_string())
+        .collect();
     assert_eq!(files.len(), 3);
     for (file, offset) in files.iter().zip(offsets) {
         let path = dir.path().join(file);
@@ -213,16 +247,28 @@ fn model_terms_recover_a_known_offset_and_gas_spring() {
     settings.terms.gas_spring = true;
     let cal = calibrate(&campaign, &settings).unwrap();
     let names = &cal.start.posterior.layout.names;
-    let mut truth: Vec<(String, f64)> = ["G", "R0", "R1", "D1", "m1", "m2", "n"].iter().map(|n| n.to_string()).zip(Params::reference_1a().to_array()).collect();
+    let mut truth: Vec<(String, f64)> = ["G", "R0", "R1", "D1", "m1", "m2", "n"]
+        .iter()
+        .map(|n| n.to_string())
+        .zip(Params::reference_1a().to_array())
+        .collect();
     truth.push(("gas_spring_n_per_m".into(), spring));
     for (run, offset) in campaign.runs.iter().zip(offsets) {
         truth.push((format!("force_offset_n_{}", run.id()), offset));
     }
     for (name, value) in truth {
-        let i = names.iter().position(|n| *n == name).unwrap_or_else(|| panic!("no {name} in {names:?}"));
+        let i = names
+            .iter()
+            .position(|n| *n == name)
+            .unwrap_or_else(|| panic!("no {name} in {names:?}"));
         let p = &cal.diagnostics.coordinates[i];
         let z = (p.mean - value).abs() / p.sd;
-        assert!(z < 3.5, "{name}: mean {:.4e} sd {:.3e} truth {value:.4e} ({z:.2} sd)", p.mean, p.sd);
+        assert!(
+            z < 3.5,
+            "{name}: mean {:.4e} sd {:.3e} truth {value:.4e} ({z:.2} sd)",
+            p.mean,
+            p.sd
+        );
     }
 }
 
@@ -249,7 +295,10 @@ fn errors_in_variables_holds_a_g_the_exact_input_likelihood_misses() {
     let (lo, hi, z) = interval(false);
     assert!(!(lo <= g && g <= hi), "exact input: [{lo:.1}, {hi:.1}] holds G = {g} (z {z:.2})");
     let (lo, hi, z) = interval(true);
-    assert!(lo <= g && g <= hi, "errors in variables: [{lo:.1}, {hi:.1}] misses G = {g} (z {z:.2})");
+    assert!(
+        lo <= g && g <= hi,
+        "errors in variables: [{lo:.1}, {hi:.1}] misses G = {g} (z {z:.2})"
+    );
 }
 
 /// A truncated prior narrower than the road from the start: the SBC box
@@ -274,9 +323,11 @@ fn map_search_crosses_the_walls_of_a_truncated_prior() {
         m1 = 0.000004175361632627412\nm2 = 0.00020080274956810803\nn = 1.5308949205631517\n\
         [extra_force]\nsmooth_sd_n = [12.851426152844803]\nsmooth_time_s = [0.03915090130688959]\nkernel = \"matern32\"\nviscous_n_s_per_m = 0.0\n";
     std::fs::write(dir.path().join("synth.toml"), synth).unwrap();
-    write_campaign(&SynthSettings::read(&dir.path().join("synth.toml")).unwrap(), dir.path()).unwrap();
+    write_campaign(&SynthSettings::read(&dir.path().join("synth.toml")).unwrap(), dir.path())
+        .unwrap();
     let campaign = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
-    let mut boxed = CalibrationSettings::read(std::path::Path::new("studies/sbc-prior.toml")).unwrap();
+    let mut boxed =
+        CalibrationSettings::read(std::path::Path::new("studies/sbc-prior.toml")).unwrap();
     boxed.likelihood.noise = NoiseKind::Discrepancy;
     let mut open = boxed.clone();
     let physical = CalibrationSettings::default().prior;
@@ -290,12 +341,27 @@ fn map_search_crosses_the_walls_of_a_truncated_prior() {
     let b = start(&campaign, &open, &mut |_| {}).unwrap();
     let identification = a.identification.params.to_array();
     let (_, hi) = boxed.prior["R1"].bounds();
-    assert!(identification[2] > hi, "the premise: the identification's R1 {} is outside the box", identification[2]);
-    assert!((a.map.log_density - b.map.log_density).abs() < 1.0, "MAP log-density {} in the box, {} without", a.map.log_density, b.map.log_density);
+    assert!(
+        identification[2] > hi,
+        "the premise: the identification's R1 {} is outside the box",
+        identification[2]
+    );
+    assert!(
+        (a.map.log_density - b.map.log_density).abs() < 1.0,
+        "MAP log-density {} in the box, {} without",
+        a.map.log_density,
+        b.map.log_density
+    );
     let (la, lb) = (a.posterior.layout.log_theta(&a.map.x), b.posterior.layout.log_theta(&b.map.x));
     let sd = b.map.log_theta_sd(&b.posterior.layout);
     for i in 0..7 {
-        assert!((la[i] - lb[i]).abs() < 0.2 * sd[i], "ln θ[{i}]: {} in the box, {} without (sd {})", la[i], lb[i], sd[i]);
+        assert!(
+            (la[i] - lb[i]).abs() < 0.2 * sd[i],
+            "ln θ[{i}]: {} in the box, {} without (sd {})",
+            la[i],
+            lb[i],
+            sd[i]
+        );
     }
 }
 
@@ -317,7 +383,8 @@ fn discrepancy_block_terms_change_as_the_log_density_does() {
         [law.at_1a]\nG = 172496.0\nR0 = 102006.0\nR1 = 217448.0\nD1 = 32219.0\nm1 = 0.000004\nm2 = 0.0002\nn = 1.5\n\
         [extra_force]\nsmooth_sd_n = [30.0]\nsmooth_time_s = [0.02]\nkernel = \"matern32\"\nviscous_n_s_per_m = 0.0\n";
     std::fs::write(dir.path().join("synth.toml"), synth).unwrap();
-    write_campaign(&SynthSettings::read(&dir.path().join("synth.toml")).unwrap(), dir.path()).unwrap();
+    write_campaign(&SynthSettings::read(&dir.path().join("synth.toml")).unwrap(), dir.path())
+        .unwrap();
     let campaign = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
     let mut s = CalibrationSettings::default();
     s.likelihood.noise = NoiseKind::Discrepancy;
@@ -327,17 +394,30 @@ fn discrepancy_block_terms_change_as_the_log_density_does() {
     // a force of the model's own kind is the discrepancy's, not the law's:
     // the law's path at the MAP misses the records about as the law fitted
     // alone does (the confounding check's ratio stays below 2)
-    let alone = a.law_alone_rms.clone().expect("the law alone is fitted for a noise model with a force of its own");
+    let alone = a
+        .law_alone_rms
+        .clone()
+        .expect("the law alone is fitted for a noise model with a force of its own");
     let at = mrbp::posterior::map::residual_rms(&a.posterior, &a.map.x).unwrap();
-    let runs: Vec<(&str, usize)> = a.posterior.runs.iter().zip(&at).map(|(r, (_, n))| (r.id.as_str(), *n)).collect();
+    let runs: Vec<(&str, usize)> =
+        a.posterior.runs.iter().zip(&at).map(|(r, (_, n))| (r.id.as_str(), *n)).collect();
     let rms: Vec<f64> = at.iter().map(|(rms, _)| *rms).collect();
-    assert_eq!(mrbp::calibrate::confounding_warning(&runs, &rms, &alone), None, "{rms:?} against {alone:?}");
+    assert_eq!(
+        mrbp::calibrate::confounding_warning(&runs, &rms, &alone),
+        None,
+        "{rms:?} against {alone:?}"
+    );
     let post = &a.posterior;
     let (d, blocks) = (post.dim(), post.blocks());
     // the walkers are sized for what the ensemble moves explore: θ and the
     // terms (the coordinates not named for a run's noise), 6 each and at
     // least 64 — not every coordinate (6 × 16 = 96)
-    let explored = post.layout.names.iter().filter(|n| !n.starts_with("sigma_") && !n.starts_with("discrepancy_")).count();
+    let explored = post
+        .layout
+        .names
+        .iter()
+        .filter(|n| !n.starts_with("sigma_") && !n.starts_with("discrepancy_"))
+        .count();
     assert_eq!((explored, d), (10, 16));
     assert_eq!(a.settings.sampler.walkers, (6 * explored).max(64));
     assert_eq!(blocks.len(), 2, "one block per run");
@@ -356,7 +436,12 @@ fn discrepancy_block_terms_change_as_the_log_density_does() {
     let mut memos = vec![Vec::new(); 8];
     post.log_density_batch_memo(&points, &mut lp, &mut memos);
     for (p, x) in points.chunks(d).enumerate() {
-        assert!((lp[p] - post.log_density(x)).abs() < 1e-9 * lp[p].abs(), "memo evaluation {} vs {}", lp[p], post.log_density(x));
+        assert!(
+            (lp[p] - post.log_density(x)).abs() < 1e-9 * lp[p].abs(),
+            "memo evaluation {} vs {}",
+            lp[p],
+            post.log_density(x)
+        );
     }
     let views: Vec<&[f64]> = memos.iter().map(|m| m.as_slice()).collect();
     for (b, block) in blocks.iter().enumerate() {
@@ -364,7 +449,12 @@ fn discrepancy_block_terms_change_as_the_log_density_does() {
         let mut at = vec![0.0; 8];
         post.block_log_density_batch(b, &points, &views, &mut at);
         for p in 0..8 {
-            assert!((at[p] - memos[p][b]).abs() < 1e-9 * at[p].abs(), "block {b}: {} vs memo {}", at[p], memos[p][b]);
+            assert!(
+                (at[p] - memos[p][b]).abs() < 1e-9 * at[p].abs(),
+                "block {b}: {} vs memo {}",
+                at[p],
+                memos[p][b]
+            );
         }
         let mut moved = points.clone();
         for (p, x) in moved.chunks_mut(d).enumerate() {
@@ -377,7 +467,12 @@ fn discrepancy_block_terms_change_as_the_log_density_does() {
         for p in 0..8 {
             let full = post.log_density(&moved[p * d..(p + 1) * d]) - lp[p];
             assert!(full.abs() > 1e-3, "the move changes the density");
-            assert!((new[p] - at[p] - full).abs() < 1e-9 * lp[p].abs(), "block {b}, point {p}: {} vs {}", new[p] - at[p], full);
+            assert!(
+                (new[p] - at[p] - full).abs() < 1e-9 * lp[p].abs(),
+                "block {b}, point {p}: {} vs {}",
+                new[p] - at[p],
+                full
+            );
         }
     }
 }

@@ -5,10 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn mrbp(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args(args)
-        .output()
-        .expect("run mrbp")
+    Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).output().expect("run mrbp")
 }
 
 fn stderr(o: &Output) -> String {
@@ -72,7 +69,10 @@ fn parquet_records_are_read_and_checked() {
     let t: Vec<f64> = (0..12).map(|k| 0.1 * k as f64).collect();
     let x: Vec<f64> = t.iter().map(|t| 1e-3 * (2.0 * t).sin()).collect();
     let f: Vec<f64> = x.iter().map(|x| 1e5 * x).collect();
-    let good = Table::new().f64("time_s", t.clone()).f64("displacement_m", x.clone()).f64("force_n", f.clone());
+    let good = Table::new()
+        .f64("time_s", t.clone())
+        .f64("displacement_m", x.clone())
+        .f64("force_n", f.clone());
     write_parquet(&dir.path().join("run1.parquet"), good).unwrap();
     let manifest = dir.path().join("campaign.toml");
     std::fs::write(
@@ -93,7 +93,9 @@ fn parquet_records_are_read_and_checked() {
 #[test]
 fn column_names_and_units_are_configurable() {
     let dir = tempfile::tempdir().unwrap();
-    let rows: String = (0..12).map(|k| format!("{k},{},{}\n", 0.1 * (6 - (k - 6i32).abs()) as f64, 0.01 * k as f64)).collect();
+    let rows: String = (0..12)
+        .map(|k| format!("{k},{},{}\n", 0.1 * (6 - (k - 6i32).abs()) as f64, 0.01 * k as f64))
+        .collect();
     std::fs::write(dir.path().join("r.csv"), format!("t_ms,x_mm,F_kN\n{rows}")).unwrap();
     let manifest = dir.path().join("c.toml");
     std::fs::write(

@@ -12,16 +12,33 @@ fn mrbp(args: &[&str]) -> Output {
 }
 
 fn ok(o: &Output) {
-    assert!(o.status.success(), "{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 /// One revolution at 2 kHz at 1 A and `rpm`, with the law's G scaled by
 /// `g_factor`; returns the record's path.
 fn record(dir: &Path, rpm: f64, g_factor: f64, seed: u64) -> String {
-    let mut s = SynthSettings { currents_a: vec![1.0], rpms: vec![rpm], cycles: 1.0, rate_hz: 2000.0, seed, ..SynthSettings::default() };
+    let mut s = SynthSettings {
+        currents_a: vec![1.0],
+        rpms: vec![rpm],
+        cycles: 1.0,
+        rate_hz: 2000.0,
+        seed,
+        ..SynthSettings::default()
+    };
     s.law.at_1a.g *= g_factor;
     write_campaign(&s, dir).unwrap();
-    let csv = std::fs::read_dir(dir).unwrap().flatten().map(|e| e.path()).find(|p| p.extension().is_some_and(|e| e == "csv")).unwrap();
+    let csv = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "csv"))
+        .unwrap();
     csv.to_str().unwrap().to_string()
 }
 
@@ -36,7 +53,8 @@ fn record(dir: &Path, rpm: f64, g_factor: f64, seed: u64) -> String {
 fn per_run_calibrations_find_the_run_with_another_g() {
     let dir = tempfile::tempdir().unwrap();
     let runs = [("a100", 100.0, 1.0, 11), ("a400", 400.0, 1.0, 12), ("b200", 200.0, 2.0, 13)];
-    let mut manifest = String::from("name = \"mixed\"\n[geometry]\narea_m2 = 0.05\ngap_m = 0.001\n");
+    let mut manifest =
+        String::from("name = \"mixed\"\n[geometry]\narea_m2 = 0.05\ngap_m = 0.001\n");
     for (id, rpm, g, seed) in runs {
         let sub = dir.path().join(id);
         let csv = record(&sub, rpm, g, seed);
@@ -45,7 +63,15 @@ fn per_run_calibrations_find_the_run_with_another_g() {
     let path = dir.path().join("campaign.toml");
     std::fs::write(&path, manifest).unwrap();
     let out = dir.path().join("out");
-    let o = mrbp(&["sample", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "--substeps", "2", "--per-run"]);
+    let o = mrbp(&[
+        "sample",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--substeps",
+        "2",
+        "--per-run",
+    ]);
     ok(&o);
     let printed = String::from_utf8_lossy(&o.stdout);
     assert!(printed.contains("G: the runs disagree"), "{printed}");
@@ -53,7 +79,22 @@ fn per_run_calibrations_find_the_run_with_another_g() {
         assert!(out.join("runs").join(id).join("summary.parquet").exists(), "{id}");
     }
     let table = read_parquet(&out.join("consistency.parquet")).unwrap();
-    assert_eq!(column_names(&table), ["parameter", "kind", "label", "mean_log", "sd_log", "q05", "q50", "q95", "chi2_nu", "p_value", "spread_log"]);
+    assert_eq!(
+        column_names(&table),
+        [
+            "parameter",
+            "kind",
+            "label",
+            "mean_log",
+            "sd_log",
+            "q05",
+            "q50",
+            "q95",
+            "chi2_nu",
+            "p_value",
+            "spread_log"
+        ]
+    );
     // 7 parameters × (3 runs + joint + new test)
     assert_eq!(table.height(), 35);
     let joint = mrbp::store::record::read(&out.join("calibration.toml")).unwrap();
@@ -65,7 +106,12 @@ fn per_run_calibrations_find_the_run_with_another_g() {
     let layer = read_parquet(&out.join("between_runs.parquet")).unwrap();
     let columns = column_names(&layer);
     assert_eq!(columns[..8], ["draw", "G", "R0", "R1", "D1", "m1", "m2", "n"], "{columns:?}");
-    assert!(columns.contains(&"sigma".to_string()) && columns.contains(&"centre_G".to_string()) && columns.contains(&"centre_n".to_string()), "{columns:?}");
+    assert!(
+        columns.contains(&"sigma".to_string())
+            && columns.contains(&"centre_G".to_string())
+            && columns.contains(&"centre_n".to_string()),
+        "{columns:?}"
+    );
     assert_eq!(layer.height(), 4000);
     let g = parameters.iter().find(|p| p.parameter == "G").unwrap();
     assert!(g.disagrees() && g.chi2_nu > 50.0, "G: χ²/ν {}", g.chi2_nu);
@@ -77,17 +123,45 @@ fn per_run_calibrations_find_the_run_with_another_g() {
     // the report shows the section and its figure
     ok(&mrbp(&["report", out.to_str().unwrap(), "--draws", "50"]));
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
-    assert!(html.contains("id=\"consistency\"") && html.contains("one G does not describe these tests"));
+    assert!(
+        html.contains("id=\"consistency\"") && html.contains("one G does not describe these tests")
+    );
     assert!(out.join("consistency.png").exists());
     // a new calibration in the folder makes the run-wise results stale
-    ok(&mrbp(&["sample", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "--substeps", "2", "--steps", "20", "--force"]));
-    assert!(!out.join("consistency.parquet").exists() && !out.join("runs").exists() && !out.join("consistency.png").exists());
+    ok(&mrbp(&[
+        "sample",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--substeps",
+        "2",
+        "--steps",
+        "20",
+        "--force",
+    ]));
+    assert!(
+        !out.join("consistency.parquet").exists()
+            && !out.join("runs").exists()
+            && !out.join("consistency.png").exists()
+    );
     assert!(!out.join("between_runs.parquet").exists());
     // without the layer there are no new tests to simulate
-    let csv = dir.path().join("a100").join(std::fs::read_dir(dir.path().join("a100")).unwrap().flatten().map(|e| e.file_name()).find(|n| n.to_string_lossy().ends_with(".csv")).unwrap());
-    let refused = mrbp(&["simulate", out.to_str().unwrap(), "--input", csv.to_str().unwrap(), "--new-test"]);
+    let csv = dir.path().join("a100").join(
+        std::fs::read_dir(dir.path().join("a100"))
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name())
+            .find(|n| n.to_string_lossy().ends_with(".csv"))
+            .unwrap(),
+    );
+    let refused =
+        mrbp(&["simulate", out.to_str().unwrap(), "--input", csv.to_str().unwrap(), "--new-test"]);
     assert_eq!(refused.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&refused.stderr).contains("--per-run"), "{}", String::from_utf8_lossy(&refused.stderr));
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("--per-run"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
 }
 
 /// Leave-one-out with the between-run layer (`mrbp run --per-run
@@ -104,7 +178,8 @@ fn per_run_calibrations_find_the_run_with_another_g() {
 fn leave_one_out_predicts_each_run_as_a_new_test() {
     let dir = tempfile::tempdir().unwrap();
     let runs = [("g10", 100.0, 1.0, 21), ("g15", 200.0, 1.5, 22), ("g20", 400.0, 2.0, 23)];
-    let mut manifest = String::from("name = \"varied\"\n[geometry]\narea_m2 = 0.05\ngap_m = 0.001\n");
+    let mut manifest =
+        String::from("name = \"varied\"\n[geometry]\narea_m2 = 0.05\ngap_m = 0.001\n");
     for (id, rpm, g, seed) in runs {
         let csv = record(&dir.path().join(id), rpm, g, seed);
         manifest.push_str(&format!("[[run]]\nid = \"{id}\"\nfile = \"{csv}\"\ncurrent_a = 1.0\n"));
@@ -112,7 +187,18 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
     let path = dir.path().join("campaign.toml");
     std::fs::write(&path, manifest).unwrap();
     let out = dir.path().join("out");
-    let o = mrbp(&["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "--substeps", "2", "--per-run", "--leave-one-out", "--draws", "100"]);
+    let o = mrbp(&[
+        "run",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--substeps",
+        "2",
+        "--per-run",
+        "--leave-one-out",
+        "--draws",
+        "100",
+    ]);
     ok(&o);
     let printed = String::from_utf8_lossy(&o.stdout);
     assert!(printed.contains("each run as a new test of the between-run layer"), "{printed}");
@@ -124,45 +210,121 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
     assert_eq!(printed.matches("posterior at 1 A:").count(), 1, "{printed}");
     let folder = out.join("I1.0A");
     let table = read_parquet(&folder.join("loo_new_test.parquet")).unwrap();
-    assert_eq!(column_names(&table), ["run", "current_a", "samples", "inside_p95", "inside_q95", "rmse_q50_pa", "draws", "failed_draws", "calibrated", "lppd", "left_out", "max_r_hat"]);
+    assert_eq!(
+        column_names(&table),
+        [
+            "run",
+            "current_a",
+            "samples",
+            "inside_p95",
+            "inside_q95",
+            "rmse_q50_pa",
+            "draws",
+            "failed_draws",
+            "calibrated",
+            "lppd",
+            "left_out",
+            "max_r_hat"
+        ]
+    );
     let joint = mrbp::store::record::read(&folder.join("calibration.toml")).unwrap();
-    let rows = mrbp::store::between_runs::read_leave_one_out(&folder, &joint.calibration_id).unwrap().expect("written");
+    let rows = mrbp::store::between_runs::read_leave_one_out(&folder, &joint.calibration_id)
+        .unwrap()
+        .expect("written");
     // one current: each run left out alone (no other current to leave it out with)
     assert_eq!(rows.len(), 3);
     for r in &rows {
         let c = &r.coverage;
         assert_eq!(r.left_out, mrbp::validate::between_runs::LeftOut::Run);
-        assert!(c.inside_p95 >= 0.9, "{}: {:.1} % inside the new test's band", c.run, 100.0 * c.inside_p95);
+        assert!(
+            c.inside_p95 >= 0.9,
+            "{}: {:.1} % inside the new test's band",
+            c.run,
+            100.0 * c.inside_p95
+        );
         assert!(!c.calibrated && c.lppd.is_finite() && c.draws > 0, "{c:?}");
         assert!(r.max_rhat < 1.01, "the layer without {}: R̂ {}", c.run, r.max_rhat);
     }
     // the share pooled over the runs, each weighed by its samples, printed
     // and in the report
-    let (inside, samples) = rows.iter().fold((0.0, 0), |(i, n), r| (i + r.coverage.inside_p95 * r.coverage.samples as f64, n + r.coverage.samples));
-    let pooled = format!("{:.1} % of the samples of the 3 runs held out alone", 100.0 * inside / samples as f64);
+    let (inside, samples) = rows.iter().fold((0.0, 0), |(i, n), r| {
+        (i + r.coverage.inside_p95 * r.coverage.samples as f64, n + r.coverage.samples)
+    });
+    let pooled = format!(
+        "{:.1} % of the samples of the 3 runs held out alone",
+        100.0 * inside / samples as f64
+    );
     assert!(printed.contains(&format!("pooled: {pooled}")), "{printed}");
     let html = std::fs::read_to_string(folder.join("report.html")).unwrap();
     assert!(html.contains("new test: inside 95 %"), "the report shows the table");
     assert!(html.contains(&format!("Pooled: {pooled}.")), "the report shows the pooled share");
     // a new test of the damper along an excitation of one's own: its model
     // band carries the between-test spread the posterior's does not
-    let input = dir.path().join("g15").join(std::fs::read_dir(dir.path().join("g15")).unwrap().flatten().map(|e| e.file_name()).find(|n| n.to_string_lossy().ends_with(".csv")).unwrap());
+    let input = dir.path().join("g15").join(
+        std::fs::read_dir(dir.path().join("g15"))
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name())
+            .find(|n| n.to_string_lossy().ends_with(".csv"))
+            .unwrap(),
+    );
     let width = |sim: &Path| {
         let t = read_parquet(&sim.join("simulation.parquet")).unwrap();
-        let (hi, lo) = (mrbp::store::f64_column(&t, "q975", sim).unwrap(), mrbp::store::f64_column(&t, "q025", sim).unwrap());
+        let (hi, lo) = (
+            mrbp::store::f64_column(&t, "q975", sim).unwrap(),
+            mrbp::store::f64_column(&t, "q025", sim).unwrap(),
+        );
         hi.iter().zip(&lo).map(|(h, l)| h - l).sum::<f64>() / hi.len() as f64
     };
     let (new, posterior) = (folder.join("simulation-new"), folder.join("simulation-posterior"));
-    ok(&mrbp(&["simulate", folder.to_str().unwrap(), "--input", input.to_str().unwrap(), "--new-test", "--draws", "100", "--out", new.to_str().unwrap()]));
-    ok(&mrbp(&["simulate", folder.to_str().unwrap(), "--input", input.to_str().unwrap(), "--draws", "100", "--out", posterior.to_str().unwrap()]));
-    assert!(width(&new) > 3.0 * width(&posterior), "model band of a new test {} against the posterior's {}", width(&new), width(&posterior));
+    ok(&mrbp(&[
+        "simulate",
+        folder.to_str().unwrap(),
+        "--input",
+        input.to_str().unwrap(),
+        "--new-test",
+        "--draws",
+        "100",
+        "--out",
+        new.to_str().unwrap(),
+    ]));
+    ok(&mrbp(&[
+        "simulate",
+        folder.to_str().unwrap(),
+        "--input",
+        input.to_str().unwrap(),
+        "--draws",
+        "100",
+        "--out",
+        posterior.to_str().unwrap(),
+    ]));
+    assert!(
+        width(&new) > 3.0 * width(&posterior),
+        "model band of a new test {} against the posterior's {}",
+        width(&new),
+        width(&posterior)
+    );
     assert!(std::fs::read_to_string(new.join("simulation.toml")).unwrap().contains("layer_runs"));
     let status = mrbp(&["status", out.to_str().unwrap()]);
     assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stdout));
     // a run calibrated alone again makes the layer's files stale
     let alone = folder.join("runs").join("g15");
-    ok(&mrbp(&["sample", path.to_str().unwrap(), "--current", "1.0", "--out", alone.to_str().unwrap(), "--substeps", "2", "--steps", "20", "--force"]));
-    let stale = mrbp::store::between_runs::read_leave_one_out(&folder, &joint.calibration_id).unwrap_err().to_string();
+    ok(&mrbp(&[
+        "sample",
+        path.to_str().unwrap(),
+        "--current",
+        "1.0",
+        "--out",
+        alone.to_str().unwrap(),
+        "--substeps",
+        "2",
+        "--steps",
+        "20",
+        "--force",
+    ]));
+    let stale = mrbp::store::between_runs::read_leave_one_out(&folder, &joint.calibration_id)
+        .unwrap_err()
+        .to_string();
     assert!(stale.contains("stale") && stale.contains("runs/g15"), "{stale}");
 }
 
@@ -177,21 +339,52 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
 #[test]
 fn a_current_left_out_is_predicted_from_the_others() {
     let dir = tempfile::tempdir().unwrap();
-    let s = SynthSettings { currents_a: vec![0.5, 1.0, 1.5], rpms: vec![100.0, 400.0], cycles: 1.0, rate_hz: 2000.0, seed: 31, ..SynthSettings::default() };
+    let s = SynthSettings {
+        currents_a: vec![0.5, 1.0, 1.5],
+        rpms: vec![100.0, 400.0],
+        cycles: 1.0,
+        rate_hz: 2000.0,
+        seed: 31,
+        ..SynthSettings::default()
+    };
     write_campaign(&s, dir.path()).unwrap();
     let manifest = dir.path().join("campaign.toml");
     let out = dir.path().join("out");
-    let o = mrbp(&["run", manifest.to_str().unwrap(), "--out", out.to_str().unwrap(), "--substeps", "2", "--per-run", "--leave-one-out", "--draws", "100"]);
+    let o = mrbp(&[
+        "run",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--substeps",
+        "2",
+        "--per-run",
+        "--leave-one-out",
+        "--draws",
+        "100",
+    ]);
     ok(&o);
     let said = String::from_utf8_lossy(&o.stderr);
-    assert!(said.contains("between-run layer: 6 runs alone") && !said.contains("not converged"), "{said}");
+    assert!(
+        said.contains("between-run layer: 6 runs alone") && !said.contains("not converged"),
+        "{said}"
+    );
     let folder = out.join("I1.0A");
     let joint = mrbp::store::record::read(&folder.join("calibration.toml")).unwrap();
-    let rows = mrbp::store::between_runs::read_leave_one_out(&folder, &joint.calibration_id).unwrap().expect("written");
-    let by_current: Vec<_> = rows.iter().filter(|r| r.left_out == mrbp::validate::between_runs::LeftOut::Current).collect();
+    let rows = mrbp::store::between_runs::read_leave_one_out(&folder, &joint.calibration_id)
+        .unwrap()
+        .expect("written");
+    let by_current: Vec<_> = rows
+        .iter()
+        .filter(|r| r.left_out == mrbp::validate::between_runs::LeftOut::Current)
+        .collect();
     assert_eq!(by_current.len(), 2, "{rows:?}");
     for r in by_current {
-        assert!(r.coverage.inside_p95 >= 0.9, "{}: {:.1} % inside the band of a current left out", r.coverage.run, 100.0 * r.coverage.inside_p95);
+        assert!(
+            r.coverage.inside_p95 >= 0.9,
+            "{}: {:.1} % inside the band of a current left out",
+            r.coverage.run,
+            100.0 * r.coverage.inside_p95
+        );
     }
     let html = std::fs::read_to_string(folder.join("report.html")).unwrap();
     assert!(html.contains("held out with its current"), "the report shows the table");
@@ -202,26 +395,50 @@ fn a_current_left_out_is_predicted_from_the_others() {
     // outside the priors' support: within a tenth of the 90 % interval), a
     // new test is wider than the typical test, and the grid runs from 0 A
     // beyond the highest current
-    let typical = mrbp::store::between_runs::read_typical(&folder, &joint.calibration_id).unwrap().expect("written");
+    let typical = mrbp::store::between_runs::read_typical(&folder, &joint.calibration_id)
+        .unwrap()
+        .expect("written");
     let layer = read_parquet(&folder.join("between_runs.parquet")).unwrap();
     for (k, parameter) in mrbp::model::PARAM_NAMES.iter().enumerate() {
         let rows: Vec<_> = typical.iter().filter(|r| r.parameter == *parameter).collect();
-        assert!(rows.first().unwrap().current_a == 0.0 && rows.last().unwrap().current_a > 1.5, "{parameter}: {rows:?}");
-        let here = rows.iter().find(|r| (r.current_a - 1.0).abs() < 1e-9).expect("the folder's current is on the grid");
+        assert!(
+            rows.first().unwrap().current_a == 0.0 && rows.last().unwrap().current_a > 1.5,
+            "{parameter}: {rows:?}"
+        );
+        let here = rows
+            .iter()
+            .find(|r| (r.current_a - 1.0).abs() < 1e-9)
+            .expect("the folder's current is on the grid");
         assert_eq!(here.kind, mrbp::compare::CurrentKind::Calibrated);
-        let mut centre: Vec<f64> = layer.column(&format!("centre_{parameter}")).unwrap().f64().unwrap().into_no_null_iter().filter(|v| v.is_finite()).collect();
+        let mut centre: Vec<f64> = layer
+            .column(&format!("centre_{parameter}"))
+            .unwrap()
+            .f64()
+            .unwrap()
+            .into_no_null_iter()
+            .filter(|v| v.is_finite())
+            .collect();
         centre.sort_by(f64::total_cmp);
         let median = centre[centre.len() / 2];
         let width = here.centre[2] - here.centre[0];
-        assert!((here.centre[1] - median).abs() < 0.1 * width, "{parameter} (#{k}): median {} vs the draws' {median}", here.centre[1]);
+        assert!(
+            (here.centre[1] - median).abs() < 0.1 * width,
+            "{parameter} (#{k}): median {} vs the draws' {median}",
+            here.centre[1]
+        );
         for r in &rows {
             assert!(r.centre[0] <= r.centre[1] && r.centre[1] <= r.centre[2], "{r:?}");
-            assert!(r.new_test[2] - r.new_test[0] >= 0.9 * (r.centre[2] - r.centre[0]), "a new test is not narrower than the typical test: {r:?}");
+            assert!(
+                r.new_test[2] - r.new_test[0] >= 0.9 * (r.centre[2] - r.centre[0]),
+                "a new test is not narrower than the typical test: {r:?}"
+            );
         }
     }
     for other in ["I0.5A", "I1.5A"] {
         let cal = mrbp::store::record::read(&out.join(other).join("calibration.toml")).unwrap();
-        let there = mrbp::store::between_runs::read_typical(&out.join(other), &cal.calibration_id).unwrap().expect("written in every current's folder");
+        let there = mrbp::store::between_runs::read_typical(&out.join(other), &cal.calibration_id)
+            .unwrap()
+            .expect("written in every current's folder");
         assert_eq!(there, typical, "the same rows in every folder");
     }
 }

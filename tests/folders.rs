@@ -25,22 +25,53 @@ fn said(o: &Output) -> String {
 /// A small virtual campaign: one run at each of two currents.
 fn campaign(dir: &Path) -> PathBuf {
     let data = dir.join("data");
-    let o = mrbp(&["synth", "--out", data.to_str().unwrap(), "--currents", "0.5,1.0", "--rpm", "200", "--cycles", "1", "--rate", "400"]);
+    let o = mrbp(&[
+        "synth",
+        "--out",
+        data.to_str().unwrap(),
+        "--currents",
+        "0.5,1.0",
+        "--rpm",
+        "200",
+        "--cycles",
+        "1",
+        "--rate",
+        "400",
+    ]);
     assert!(o.status.success(), "{}", said(&o));
     data.join("campaign.toml")
 }
 
 /// [`job`] run to its end.
 fn run_job(manifest: &Path, out: &Path, seed: &str) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mrbp")).args(job(manifest, out, seed)).output().expect("run mrbp")
+    Command::new(env!("CARGO_BIN_EXE_mrbp"))
+        .args(job(manifest, out, seed))
+        .output()
+        .expect("run mrbp")
 }
 
 /// The whole job on `manifest` into `out`, small enough to run many times.
 fn job(manifest: &Path, out: &Path, seed: &str) -> Vec<String> {
-    ["run", manifest.to_str().unwrap(), "--out", out.to_str().unwrap(), "--seed", seed, "--steps", "30", "--walkers", "18", "--draws", "10", "--replicates", "1", "--force"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect()
+    [
+        "run",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--seed",
+        seed,
+        "--steps",
+        "30",
+        "--walkers",
+        "18",
+        "--draws",
+        "10",
+        "--replicates",
+        "1",
+        "--force",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect()
 }
 
 const CURRENTS: [&str; 2] = ["I0.5A", "I1.0A"];
@@ -54,7 +85,11 @@ fn values(path: &Path) -> Vec<(String, Vec<String>)> {
         .map(|name| {
             let cells = match mrbp::store::str_column(&df, &name, path) {
                 Ok(s) => s,
-                Err(_) => mrbp::store::f64_column(&df, &name, path).unwrap().iter().map(|v| format!("{:x}", v.to_bits())).collect(),
+                Err(_) => mrbp::store::f64_column(&df, &name, path)
+                    .unwrap()
+                    .iter()
+                    .map(|v| format!("{:x}", v.to_bits()))
+                    .collect(),
             };
             (name, cells)
         })
@@ -66,7 +101,11 @@ fn same_table(a: &Path, b: &Path) -> bool {
 }
 
 fn one_status(dir: &Path) -> FolderStatus {
-    status(dir).unwrap().into_iter().find(|s| s.dir == dir).unwrap_or_else(|| panic!("{} is no results folder", dir.display()))
+    status(dir)
+        .unwrap()
+        .into_iter()
+        .find(|s| s.dir == dir)
+        .unwrap_or_else(|| panic!("{} is no results folder", dir.display()))
 }
 
 /// Checks the folders of an interrupted job in `w`: each is complete and
@@ -80,20 +119,38 @@ fn check_interrupted(w: &Path, before: &Path, reference: &Path, when: &str) {
         assert!(s.writer.is_none(), "{when}: {current} still held by {:?}", s.writer);
         if s.complete() {
             let chains = dir.join("chains.parquet");
-            let source = [before, reference].into_iter().find(|o| same_table(&chains, &o.join(current).join("chains.parquet")));
-            let source = source.unwrap_or_else(|| panic!("{when}: {current}'s chains are neither the old nor the new ones"));
-            for file in ["summary.parquet", "bands.parquet", "coverage.parquet", "adequacy.parquet", "identification.parquet"] {
+            let source = [before, reference]
+                .into_iter()
+                .find(|o| same_table(&chains, &o.join(current).join("chains.parquet")));
+            let source = source.unwrap_or_else(|| {
+                panic!("{when}: {current}'s chains are neither the old nor the new ones")
+            });
+            for file in [
+                "summary.parquet",
+                "bands.parquet",
+                "coverage.parquet",
+                "adequacy.parquet",
+                "identification.parquet",
+            ] {
                 if dir.join(file).exists() {
-                    assert!(same_table(&dir.join(file), &source.join(current).join(file)), "{when}: {current}/{file} comes from another calibration than its chains");
+                    assert!(
+                        same_table(&dir.join(file), &source.join(current).join(file)),
+                        "{when}: {current}/{file} comes from another calibration than its chains"
+                    );
                 }
             }
-            mrbp::store::folder::read(&dir).unwrap_or_else(|e| panic!("{when}: a complete folder refused: {e}"));
+            mrbp::store::folder::read(&dir)
+                .unwrap_or_else(|e| panic!("{when}: a complete folder refused: {e}"));
         } else {
             for p in &s.problems {
-                assert!(p.contains("rebuild it with `mrbp "), "{when}: {current}: {p} does not say how to rebuild");
+                assert!(
+                    p.contains("rebuild it with `mrbp "),
+                    "{when}: {current}: {p} does not say how to rebuild"
+                );
             }
             if !dir.join("calibration.toml").exists() {
-                let e = mrbp::store::folder::read(&dir).expect_err("an incomplete calibration read as whole");
+                let e = mrbp::store::folder::read(&dir)
+                    .expect_err("an incomplete calibration read as whole");
                 assert!(e.to_string().contains("incomplete"), "{when}: {e}");
             }
         }
@@ -103,16 +160,27 @@ fn check_interrupted(w: &Path, before: &Path, reference: &Path, when: &str) {
     if s.complete() {
         let table = comparison.join("comparison.parquet");
         assert!(
-            [before, reference].iter().any(|o| same_table(&table, &o.join("comparison/comparison.parquet"))),
+            [before, reference]
+                .iter()
+                .any(|o| same_table(&table, &o.join("comparison/comparison.parquet"))),
             "{when}: a complete comparison of neither the old nor the new calibrations"
         );
         let record = mrbp::store::comparison::read_record(&comparison).unwrap();
         for c in &record.compared {
-            let now = mrbp::store::record::read(&c.folder_from(&comparison).join("calibration.toml")).unwrap();
-            assert_eq!(now.calibration_id, c.calibration_id, "{when}: a complete comparison of calibrations since redone");
+            let now =
+                mrbp::store::record::read(&c.folder_from(&comparison).join("calibration.toml"))
+                    .unwrap();
+            assert_eq!(
+                now.calibration_id, c.calibration_id,
+                "{when}: a complete comparison of calibrations since redone"
+            );
         }
     } else {
-        assert!(s.problems.iter().all(|p| p.contains("rebuild it with `mrbp ")), "{when}: {:?}", s.problems);
+        assert!(
+            s.problems.iter().all(|p| p.contains("rebuild it with `mrbp ")),
+            "{when}: {:?}",
+            s.problems
+        );
     }
 }
 
@@ -124,10 +192,19 @@ fn check_complete(w: &Path, reference: &Path, when: &str) {
     }
     for current in CURRENTS {
         for file in ["chains.parquet", "summary.parquet", "bands.parquet", "coverage.parquet"] {
-            assert!(same_table(&w.join(current).join(file), &reference.join(current).join(file)), "{when}: {current}/{file} differs from an uninterrupted run's");
+            assert!(
+                same_table(&w.join(current).join(file), &reference.join(current).join(file)),
+                "{when}: {current}/{file} differs from an uninterrupted run's"
+            );
         }
     }
-    assert!(same_table(&w.join("comparison/comparison.parquet"), &reference.join("comparison/comparison.parquet")), "{when}: comparison");
+    assert!(
+        same_table(
+            &w.join("comparison/comparison.parquet"),
+            &reference.join("comparison/comparison.parquet")
+        ),
+        "{when}: comparison"
+    );
 }
 
 fn copy_tree(from: &Path, to: &Path) {
@@ -150,10 +227,19 @@ fn currents_side_by_side_equal_currents_in_turn() {
     assert!(o.status.success(), "{}", said(&o));
     let printed = String::from_utf8_lossy(&o.stdout).to_string();
     let at = |what: &str| printed.find(what).unwrap_or_else(|| panic!("{what} not in {printed}"));
-    assert!(at("calibrating 1 run(s) at 0.5 A") < at("I0.5A/report.html") && at("I0.5A/report.html") < at("calibrating 1 run(s) at 1 A"), "{printed}");
+    assert!(
+        at("calibrating 1 run(s) at 0.5 A") < at("I0.5A/report.html")
+            && at("I0.5A/report.html") < at("calibrating 1 run(s) at 1 A"),
+        "{printed}"
+    );
 
     let in_turn = dir.path().join("in-turn");
-    let settings = mrbp::calibrate::settings::Overrides { seed: Some(3), steps: Some(30), walkers: Some(18), ..Default::default() };
+    let settings = mrbp::calibrate::settings::Overrides {
+        seed: Some(3),
+        steps: Some(30),
+        walkers: Some(18),
+        ..Default::default()
+    };
     let options = RunOptions {
         sample: SampleOptions { settings, force: true, ..Default::default() }.request().unwrap(),
         predict: PredictOptions { draws: 10, replicates: 1, ..Default::default() },
@@ -164,7 +250,10 @@ fn currents_side_by_side_equal_currents_in_turn() {
     Pipeline::new(&mut quiet, false).run(&manifest, &in_turn, &options).unwrap();
     for current in CURRENTS {
         for file in ["chains.parquet", "summary.parquet", "bands.parquet", "coverage.parquet"] {
-            assert!(same_table(&beside.join(current).join(file), &in_turn.join(current).join(file)), "{current}/{file}");
+            assert!(
+                same_table(&beside.join(current).join(file), &in_turn.join(current).join(file)),
+                "{current}/{file}"
+            );
         }
     }
 }
@@ -185,12 +274,17 @@ fn killed_at_any_write_leaves_no_mix() {
     let args = job(&manifest, &w, "1");
     // the quick form: early, middle and late writes of both currents and
     // the comparison (the job makes about 90)
-    let points: Vec<usize> = if full { (1..=10_000).collect() } else { vec![2, 11, 23, 37, 52, 66, 79, 10_000] };
+    let points: Vec<usize> =
+        if full { (1..=10_000).collect() } else { vec![2, 11, 23, 37, 52, 66, 79, 10_000] };
     let mut aborted = 0;
     for k in points {
         let _ = std::fs::remove_dir_all(&w);
         copy_tree(&before, &w);
-        let o = Command::new(env!("CARGO_BIN_EXE_mrbp")).args(&args).env(mrbp::atomic::ABORT_AFTER_WRITE, k.to_string()).output().unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_mrbp"))
+            .args(&args)
+            .env(mrbp::atomic::ABORT_AFTER_WRITE, k.to_string())
+            .output()
+            .unwrap();
         let when = format!("aborted after write {k}");
         if o.status.success() {
             check_complete(&w, &reference, "a run that wrote fewer times than asked");
@@ -204,7 +298,9 @@ fn killed_at_any_write_leaves_no_mix() {
         check_complete(&w, &reference, &format!("{when}, then run again"));
     }
     assert!(aborted >= 7, "only {aborted} aborts");
-    eprintln!("crash test: {aborted} aborted runs, each followed by a complete one, 0 mixed folders");
+    eprintln!(
+        "crash test: {aborted} aborted runs, each followed by a complete one, 0 mixed folders"
+    );
     if full {
         sigkill_moments(&args, &w, &before, &reference);
     }
@@ -221,7 +317,12 @@ fn sigkill_moments(args: &[String], w: &Path, before: &Path, reference: &Path) {
         let _ = std::fs::remove_dir_all(w);
         copy_tree(before, w);
         let at = whole.mul_f64((i as f64 + 0.5) / 24.0);
-        let mut child = Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()).spawn().unwrap();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_mrbp"))
+            .args(args)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
         std::thread::sleep(at);
         let _ = child.kill();
         let _ = child.wait();
@@ -251,12 +352,42 @@ fn a_folder_being_written_is_refused() {
     let busy = |o: &Output, what: &str| {
         assert_eq!(o.status.code(), Some(2), "{what}: {}", said(o));
         let text = said(o);
-        assert!(text.contains(&format!("{} is being written by another mrbp (process {pid})", cal.display())), "{what}: {text}");
+        assert!(
+            text.contains(&format!(
+                "{} is being written by another mrbp (process {pid})",
+                cal.display()
+            )),
+            "{what}: {text}"
+        );
     };
-    busy(&mrbp(&["sample", m, "--out", c, "--current", "1.0", "--force", "--steps", "30", "--walkers", "18"]), "sample");
+    busy(
+        &mrbp(&[
+            "sample",
+            m,
+            "--out",
+            c,
+            "--current",
+            "1.0",
+            "--force",
+            "--steps",
+            "30",
+            "--walkers",
+            "18",
+        ]),
+        "sample",
+    );
     busy(&mrbp(&["predict", c]), "predict");
     busy(&mrbp(&["report", c]), "report");
-    busy(&mrbp(&["compare", c, other.to_str().unwrap(), "--out", t.path().join("cmp").to_str().unwrap()]), "compare");
+    busy(
+        &mrbp(&[
+            "compare",
+            c,
+            other.to_str().unwrap(),
+            "--out",
+            t.path().join("cmp").to_str().unwrap(),
+        ]),
+        "compare",
+    );
     busy(&run_job(&manifest, &out, "2"), "run");
     let o = mrbp(&["status", out.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", said(&o));
@@ -277,21 +408,56 @@ fn two_writers_at_once() {
     let out = t.path().join("one");
     let (m, o_) = (manifest.to_str().unwrap(), out.to_str().unwrap());
     let mut first = Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args(["sample", m, "--out", o_, "--current", "1.0", "--steps", "3000", "--walkers", "18", "--seed", "1"])
+        .args([
+            "sample",
+            m,
+            "--out",
+            o_,
+            "--current",
+            "1.0",
+            "--steps",
+            "3000",
+            "--walkers",
+            "18",
+            "--seed",
+            "1",
+        ])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
     let clock = Instant::now();
     while mrbp::lock::writer(&out).is_none() {
-        assert!(clock.elapsed() < Duration::from_secs(60), "the first writer never took the folder");
+        assert!(
+            clock.elapsed() < Duration::from_secs(60),
+            "the first writer never took the folder"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
-    let second = mrbp(&["sample", m, "--out", o_, "--current", "1.0", "--steps", "30", "--walkers", "18", "--seed", "2", "--force"]);
+    let second = mrbp(&[
+        "sample",
+        m,
+        "--out",
+        o_,
+        "--current",
+        "1.0",
+        "--steps",
+        "30",
+        "--walkers",
+        "18",
+        "--seed",
+        "2",
+        "--force",
+    ]);
     let _ = first.kill();
     let _ = first.wait();
     assert_eq!(second.status.code(), Some(2), "{}", said(&second));
-    assert!(said(&second).contains(&format!("is being written by another mrbp (process {})", first.id())), "{}", said(&second));
+    assert!(
+        said(&second)
+            .contains(&format!("is being written by another mrbp (process {})", first.id())),
+        "{}",
+        said(&second)
+    );
 }
 
 /// A file planted from another calibration is refused by its reader with
@@ -318,7 +484,12 @@ fn stale_files_are_refused() {
     plant("bands.parquet");
     let o = mrbp(&["report", cal.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", said(&o));
-    assert!(said(&o).contains("bands.parquet: stale") && said(&o).contains("rebuild it with `mrbp predict DIR`"), "{}", said(&o));
+    assert!(
+        said(&o).contains("bands.parquet: stale")
+            && said(&o).contains("rebuild it with `mrbp predict DIR`"),
+        "{}",
+        said(&o)
+    );
     let o = mrbp(&["status", cal.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
     assert!(said(&o).contains("bands.parquet"), "{}", said(&o));
@@ -334,10 +505,29 @@ fn stale_files_are_refused() {
     assert!(one_status(&cal).complete(), "{:?}", one_status(&cal).problems);
 
     // one current calibrated again: the comparison no longer describes it
-    let o = mrbp(&["sample", manifest.to_str().unwrap(), "--out", cal.to_str().unwrap(), "--current", "1.0", "--force", "--steps", "30", "--walkers", "18", "--seed", "3"]);
+    let o = mrbp(&[
+        "sample",
+        manifest.to_str().unwrap(),
+        "--out",
+        cal.to_str().unwrap(),
+        "--current",
+        "1.0",
+        "--force",
+        "--steps",
+        "30",
+        "--walkers",
+        "18",
+        "--seed",
+        "3",
+    ]);
     assert!(o.status.success(), "{}", said(&o));
     let s = one_status(&a.join("comparison"));
-    assert!(!s.complete() && s.problems.iter().any(|p| p.contains("I1.0A") && p.contains("calibrated again")), "{:?}", s.problems);
+    assert!(
+        !s.complete()
+            && s.problems.iter().any(|p| p.contains("I1.0A") && p.contains("calibrated again")),
+        "{:?}",
+        s.problems
+    );
     // and the recalibrated folder itself is whole, its derived files gone
     let s = one_status(&cal);
     assert!(s.complete(), "{:?}", s.problems);

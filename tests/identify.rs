@@ -27,7 +27,12 @@ fn noise_free_10khz_recovers_g_r0_and_n() {
     assert!(rel(id.raw[6], truth.n) < 0.10, "n {}", id.raw[6]);
     // every run reached yield and had a converged eq. 7 fit
     for r in &id.runs {
-        assert!(r.yield_point.is_some() && r.curve.as_ref().is_some_and(|c| c.converged), "{}: {:?}", r.run, r.warnings);
+        assert!(
+            r.yield_point.is_some() && r.curve.as_ref().is_some_and(|c| c.converged),
+            "{}: {:?}",
+            r.run,
+            r.warnings
+        );
     }
 }
 
@@ -50,7 +55,12 @@ fn identify_command_writes_table_and_figures() {
     let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = tempfile::tempdir().unwrap();
     let status = std::process::Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args(["identify", repo.join("data/campaign.toml").to_str().unwrap(), "--out", out.path().to_str().unwrap()])
+        .args([
+            "identify",
+            repo.join("data/campaign.toml").to_str().unwrap(),
+            "--out",
+            out.path().to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
@@ -61,12 +71,16 @@ fn identify_command_writes_table_and_figures() {
     }
     let runs = df.column("run").unwrap().str().unwrap().clone();
     let params = df.column("parameter").unwrap().str().unwrap().clone();
-    let combined_g = (0..df.height()).filter(|&i| runs.get(i) == Some("all") && params.get(i) == Some("G")).count();
+    let combined_g = (0..df.height())
+        .filter(|&i| runs.get(i) == Some("all") && params.get(i) == Some("G"))
+        .count();
     assert_eq!(combined_g, 3, "one combined G per current");
     for k in 1..=5 {
         let n = std::fs::read_dir(out.path())
             .unwrap()
-            .filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().starts_with(&format!("fig{k}_")))
+            .filter(|e| {
+                e.as_ref().unwrap().file_name().to_string_lossy().starts_with(&format!("fig{k}_"))
+            })
             .count();
         assert_eq!(n, 6, "fig{k}: svg and png for 3 currents");
     }

@@ -22,13 +22,25 @@ fn text(o: &Output) -> String {
 fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     let root = tempfile::tempdir().unwrap();
     let dir = root.path();
-    let o = mrbp(dir, &["synth", "--out", "data", "--currents", "1.0", "--rate", "2000", "--cycles", "1"]);
+    let o = mrbp(
+        dir,
+        &["synth", "--out", "data", "--currents", "1.0", "--rate", "2000", "--cycles", "1"],
+    );
     assert!(o.status.success(), "{}", text(&o));
 
     // a run far longer than the test waits, interrupted while it samples
     let child = Command::new(env!("CARGO_BIN_EXE_mrbp"))
         .current_dir(dir)
-        .args(["sample", "data/campaign.toml", "--out", "cal", "--steps", "100000", "--substeps", "1"])
+        .args([
+            "sample",
+            "data/campaign.toml",
+            "--out",
+            "cal",
+            "--steps",
+            "100000",
+            "--substeps",
+            "1",
+        ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -49,19 +61,63 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     assert!(!dir.join("cal/chains.parquet").exists(), "no results from a half run");
 
     // options that do not match the checkpoint are refused at once
-    let o = mrbp(dir, &["sample", "data/campaign.toml", "--out", "cal", "--steps", "100000", "--substeps", "1", "--resume", "--seed", "7"]);
+    let o = mrbp(
+        dir,
+        &[
+            "sample",
+            "data/campaign.toml",
+            "--out",
+            "cal",
+            "--steps",
+            "100000",
+            "--substeps",
+            "1",
+            "--resume",
+            "--seed",
+            "7",
+        ],
+    );
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("--seed"), "{}", text(&o));
-    let o = mrbp(dir, &["sample", "data/campaign.toml", "--out", "cal", "--steps", "1", "--substeps", "1", "--resume"]);
+    let o = mrbp(
+        dir,
+        &[
+            "sample",
+            "data/campaign.toml",
+            "--out",
+            "cal",
+            "--steps",
+            "1",
+            "--substeps",
+            "1",
+            "--resume",
+        ],
+    );
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("fewer than"), "{}", text(&o));
 
     // resumed to a fixed length, the chains are those of a run never stopped
     let done = read_steps(&dir.join("cal/sampler.checkpoint"));
     let steps = (done + 5).to_string();
-    let o = mrbp(dir, &["sample", "data/campaign.toml", "--out", "cal", "--steps", &steps, "--substeps", "1", "--resume"]);
+    let o = mrbp(
+        dir,
+        &[
+            "sample",
+            "data/campaign.toml",
+            "--out",
+            "cal",
+            "--steps",
+            &steps,
+            "--substeps",
+            "1",
+            "--resume",
+        ],
+    );
     assert!(o.status.success(), "{}", text(&o));
-    let o = mrbp(dir, &["sample", "data/campaign.toml", "--out", "whole", "--steps", &steps, "--substeps", "1"]);
+    let o = mrbp(
+        dir,
+        &["sample", "data/campaign.toml", "--out", "whole", "--steps", &steps, "--substeps", "1"],
+    );
     assert!(o.status.success(), "{}", text(&o));
     let resumed = read_parquet(&dir.join("cal/chains.parquet")).unwrap();
     let whole = read_parquet(&dir.join("whole/chains.parquet")).unwrap();
@@ -72,9 +128,25 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     let o = mrbp(dir, &["predict", "whole", "--draws", "50"]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(dir.join("whole/bands.parquet").exists());
-    let o = mrbp(dir, &["sample", "data/campaign.toml", "--out", "whole", "--steps", "20", "--substeps", "1"]);
+    let o = mrbp(
+        dir,
+        &["sample", "data/campaign.toml", "--out", "whole", "--steps", "20", "--substeps", "1"],
+    );
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    let o = mrbp(dir, &["sample", "data/campaign.toml", "--out", "whole", "--steps", "20", "--substeps", "1", "--force"]);
+    let o = mrbp(
+        dir,
+        &[
+            "sample",
+            "data/campaign.toml",
+            "--out",
+            "whole",
+            "--steps",
+            "20",
+            "--substeps",
+            "1",
+            "--force",
+        ],
+    );
     assert!(o.status.success(), "{}", text(&o));
     for stale in ["bands.parquet", "coverage.parquet", "prediction.toml", "adequacy.parquet"] {
         assert!(!dir.join("whole").join(stale).exists(), "{stale} of the old chains survived");

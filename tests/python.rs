@@ -13,7 +13,10 @@ use std::process::Command;
 fn python_with(modules: &str, what: &str) -> Option<String> {
     let must = std::env::var("MRBP_PYTHON_PACKAGE_CHECK").is_ok_and(|v| v == "1");
     let python = std::env::var("MRBP_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ready = Command::new(&python).args(["-c", &format!("import {modules}")]).output().is_ok_and(|o| o.status.success());
+    let ready = Command::new(&python)
+        .args(["-c", &format!("import {modules}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
     if !ready {
         assert!(!must, "MRBP_PYTHON_PACKAGE_CHECK=1 but {python} cannot import {modules} (pip install ./python; scripts/requirements-checks.txt)");
         eprintln!("{what} skipped: {python} cannot import {modules}");
@@ -25,17 +28,23 @@ fn python_with(modules: &str, what: &str) -> Option<String> {
 /// Runs `command` to success, showing what it said.
 fn succeeds(command: &mut Command, what: &str) {
     let o = command.output().unwrap_or_else(|e| panic!("{what}: {e}"));
-    let said = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    let said =
+        format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
     assert!(o.status.success(), "{what} failed:\n{said}");
     eprintln!("{said}");
 }
 
 #[test]
 fn python_package_agrees_with_the_command_line() {
-    let Some(python) = python_with("mrbp, pytest, pandas, pyarrow", "python package tests") else { return };
+    let Some(python) = python_with("mrbp, pytest, pandas, pyarrow", "python package tests") else {
+        return;
+    };
     let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("python").join("tests");
     let mut pytest = Command::new(&python);
-    pytest.args(["-m", "pytest", "-q", "-p", "no:cacheprovider"]).arg(&tests).env("MRBP_BIN", env!("CARGO_BIN_EXE_mrbp"));
+    pytest
+        .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
+        .arg(&tests)
+        .env("MRBP_BIN", env!("CARGO_BIN_EXE_mrbp"));
     succeeds(&mut pytest, "pytest python/tests");
 }
 
@@ -45,9 +54,16 @@ fn python_package_agrees_with_the_command_line() {
 /// asserts convergence and coverage. Mandatory where the package check is.
 #[test]
 fn example_notebook_runs_end_to_end() {
-    let Some(python) = python_with("mrbp, nbclient, nbformat, ipykernel, arviz, matplotlib", "the example notebook") else { return };
+    let Some(python) = python_with(
+        "mrbp, nbclient, nbformat, ipykernel, arviz, matplotlib",
+        "the example notebook",
+    ) else {
+        return;
+    };
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut notebook = Command::new(&python);
-    notebook.arg(root.join("scripts").join("run_notebook.py")).arg(root.join("examples").join("python").join("calibrate.ipynb"));
+    notebook
+        .arg(root.join("scripts").join("run_notebook.py"))
+        .arg(root.join("examples").join("python").join("calibrate.ipynb"));
     succeeds(&mut notebook, "examples/python/calibrate.ipynb");
 }

@@ -32,23 +32,36 @@ fn identification_gives_a_usable_start_at_every_current() {
         for (v, (lo, hi)) in res.params.to_array().iter().zip(PHYSICAL_RANGE) {
             assert!(v.is_finite() && *v >= lo && *v <= hi, "{} A: {:?}", res.current_a, res.params);
         }
-        let runs: Vec<_> = campaign.runs.iter().filter(|r| r.spec.current_a == res.current_a).collect();
+        let runs: Vec<_> =
+            campaign.runs.iter().filter(|r| r.spec.current_a == res.current_a).collect();
         assert_eq!(runs.len(), res.euler_rms.len());
         for (run, rms) in runs.iter().zip(&res.euler_rms) {
-            let level = quantile(&run.shear.tau.iter().map(|t| t.abs()).collect::<Vec<f64>>(), 0.99);
-            assert!(*rms < 0.3 * level, "{}: Euler RMS {rms:.0} Pa against a level of {level:.0} Pa", run.id());
+            let level =
+                quantile(&run.shear.tau.iter().map(|t| t.abs()).collect::<Vec<f64>>(), 0.99);
+            assert!(
+                *rms < 0.3 * level,
+                "{}: Euler RMS {rms:.0} Pa against a level of {level:.0} Pa",
+                run.id()
+            );
         }
         for r in &res.runs {
             assert!(r.g.is_finite() && r.g > 0.0, "{}: G {} ({:?})", r.run, r.g, r.warnings);
         }
         // steady cycles only: the expected route is said in one line, not
         // as warnings, and names what it had to choose
-        let route = res.route.as_deref().unwrap_or_else(|| panic!("{} A: no route line", res.current_a));
-        assert!(route.contains("no record starts from rest") && route.contains("m1 = ") && route.contains("m2 = "), "{route}");
+        let route =
+            res.route.as_deref().unwrap_or_else(|| panic!("{} A: no route line", res.current_a));
+        assert!(
+            route.contains("no record starts from rest")
+                && route.contains("m1 = ")
+                && route.contains("m2 = "),
+            "{route}"
+        );
         assert!(res.warnings.is_empty(), "{} A: {:?}", res.current_a, res.warnings);
     }
     let text = mrbp::report::text::identification(&results);
-    let rows: Vec<&str> = text.lines().filter(|l| l.starts_with("I0.25_") || l.starts_with("I1.00_")).collect();
+    let rows: Vec<&str> =
+        text.lines().filter(|l| l.starts_with("I0.25_") || l.starts_with("I1.00_")).collect();
     // the id column holds the longest id: every row's G in the same column
     let g_end = |l: &str| {
         let g = l.split_whitespace().nth(1).unwrap();
@@ -79,20 +92,34 @@ fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
         assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
         String::from_utf8_lossy(&o.stdout).to_string()
     };
-    let (m, d, c) = (manifest(), dir.to_str().unwrap().to_string(), config.to_str().unwrap().to_string());
-    let printed = run(&["sample", m.to_str().unwrap(), "--current", "1.0", "--config", &c, "--out", &d]);
+    let (m, d, c) =
+        (manifest(), dir.to_str().unwrap().to_string(), config.to_str().unwrap().to_string());
+    let printed =
+        run(&["sample", m.to_str().unwrap(), "--current", "1.0", "--config", &c, "--out", &d]);
     assert!(printed.contains("lag-1 autocorrelation"), "{printed}");
     assert!(!printed.contains("far from its Laplace approximation"), "{printed}");
     // and says once, in one line, what takes it into the intervals
-    assert_eq!(printed.matches("`--noise discrepancy` models the memory").count(), 1, "once in the summary, not once a run: {printed}");
+    assert_eq!(
+        printed.matches("`--noise discrepancy` models the memory").count(),
+        1,
+        "once in the summary, not once a run: {printed}"
+    );
     run(&["report", &d]);
 
     let record = std::fs::read_to_string(dir.join("calibration.toml")).unwrap();
-    assert!(record.contains("model_warnings") && record.contains("lag-1 autocorrelation"), "{record}");
+    assert!(
+        record.contains("model_warnings") && record.contains("lag-1 autocorrelation"),
+        "{record}"
+    );
     let spread = record.parse::<toml::Table>().unwrap()["laplace_spread_nats"].as_float().unwrap();
     assert!(spread < 3.0, "ln p/q spread {spread} over the initial walkers (measured 0.92)");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    for needle in ["Model adequacy", "Memory: the residuals are correlated", "force–velocity loop", "Reversals:"] {
+    for needle in [
+        "Model adequacy",
+        "Memory: the residuals are correlated",
+        "force–velocity loop",
+        "Reversals:",
+    ] {
         assert!(html.contains(needle), "report lacks '{needle}'");
     }
     let path = dir.join("adequacy.parquet");
@@ -100,7 +127,8 @@ fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
     let runs = str_column(&df, "run", &path).unwrap();
     assert_eq!(runs.len(), 4);
     let col = |n: &str| f64_column(&df, n, &path).unwrap();
-    let (rms, peak, rho) = (col("residual_rms_n"), col("peak_force_n"), col("lag1_autocorrelation"));
+    let (rms, peak, rho) =
+        (col("residual_rms_n"), col("peak_force_n"), col("lag1_autocorrelation"));
     for i in 0..runs.len() {
         assert!(rms[i] < 0.15 * peak[i], "{}: residual {} N, peak {} N", runs[i], rms[i], peak[i]);
         assert!(rho[i] > 0.5, "{}: lag-1 {}", runs[i], rho[i]);
@@ -108,7 +136,12 @@ fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
     // the excitations the file names are the stand's: 25 mm at 0.25 Hz …
     let (amp, freq) = (col("amplitude_m"), col("frequency_hz"));
     let i = runs.iter().position(|r| r == "I1.00_25mm_0.25Hz").unwrap();
-    assert!((amp[i] - 0.025).abs() < 0.002 && (freq[i] - 0.25).abs() < 0.01, "{} m, {} Hz", amp[i], freq[i]);
+    assert!(
+        (amp[i] - 0.025).abs() < 0.002 && (freq[i] - 0.25).abs() < 0.01,
+        "{} m, {} Hz",
+        amp[i],
+        freq[i]
+    );
 }
 
 /// The force channel of the measured records is quantised: 2.942 N steps
@@ -120,7 +153,12 @@ fn the_force_quantum_of_every_measured_run_is_found() {
     let campaign = Campaign::load(&manifest()).unwrap();
     for run in &campaign.runs {
         let data = mrbp::data::RunData::from_run(run, mrbp::data::RecordPart::WholeRecord, 2.0);
-        assert!((data.stress_step_pa - 58.84).abs() < 0.01, "{}: {}", run.id(), data.stress_step_pa);
+        assert!(
+            (data.stress_step_pa - 58.84).abs() < 0.01,
+            "{}: {}",
+            run.id(),
+            data.stress_step_pa
+        );
     }
 }
 
@@ -138,7 +176,8 @@ fn the_force_quantum_of_every_measured_run_is_found() {
 fn a_local_map_is_left_for_higher_ground_and_a_ridge_is_named() {
     let out = tempfile::tempdir().unwrap();
     let data = manifest().parent().unwrap().to_path_buf();
-    std::fs::copy(data.join("I1.00_25mm_0.25Hz.csv"), out.path().join("I1.00_25mm_0.25Hz.csv")).unwrap();
+    std::fs::copy(data.join("I1.00_25mm_0.25Hz.csv"), out.path().join("I1.00_25mm_0.25Hz.csv"))
+        .unwrap();
     let one = out.path().join("campaign.toml");
     std::fs::write(
         &one,
@@ -148,18 +187,37 @@ fn a_local_map_is_left_for_higher_ground_and_a_ridge_is_named() {
     let dir = out.path().join("cal");
     let config = data.join("mrbp.toml");
     let o = Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args(["sample", one.to_str().unwrap(), "--config", config.to_str().unwrap(), "--out", dir.to_str().unwrap(), "--steps", "10"])
+        .args([
+            "sample",
+            one.to_str().unwrap(),
+            "--config",
+            config.to_str().unwrap(),
+            "--out",
+            dir.to_str().unwrap(),
+            "--steps",
+            "10",
+        ])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let record: toml::Table = std::fs::read_to_string(dir.join("calibration.toml")).unwrap().parse().unwrap();
+    let record: toml::Table =
+        std::fs::read_to_string(dir.join("calibration.toml")).unwrap().parse().unwrap();
     let map = record["map_log_density"].as_float().unwrap();
     let spread = record["laplace_spread_nats"].as_float().unwrap();
     assert!(spread > 8.0, "ln p/q spread {spread} over the initial walkers (measured 30)");
     assert!(map > -36_416.0, "MAP log-density {map}: still the local optimum (−36 553)");
-    let warnings: Vec<&str> = record["warnings"].as_array().unwrap().iter().filter_map(|w| w.as_str()).collect();
-    assert!(warnings.iter().any(|w| w.contains("climbed") && w.contains("-36553.3")), "{warnings:?}");
-    assert!(warnings.iter().any(|w| w.contains("far from its Laplace approximation") && w.contains("curved move")), "{warnings:?}");
+    let warnings: Vec<&str> =
+        record["warnings"].as_array().unwrap().iter().filter_map(|w| w.as_str()).collect();
+    assert!(
+        warnings.iter().any(|w| w.contains("climbed") && w.contains("-36553.3")),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("far from its Laplace approximation") && w.contains("curved move")),
+        "{warnings:?}"
+    );
 }
 
 /// The tempered likelihood on the 1 A records (`--memory tempered`): each
@@ -179,10 +237,20 @@ fn the_tempered_likelihood_widens_the_measured_intervals() {
         assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
         String::from_utf8_lossy(&o.stdout).to_string()
     };
-    let printed = run(&["sample", manifest().to_str().unwrap(), "--current", "1.0", "--memory", "tempered", "--out", &d]);
+    let printed = run(&[
+        "sample",
+        manifest().to_str().unwrap(),
+        "--current",
+        "1.0",
+        "--memory",
+        "tempered",
+        "--out",
+        &d,
+    ]);
     assert!(printed.contains("likelihood tempered by the residuals' memory"), "{printed}");
     assert!(!printed.contains("too narrow"), "{printed}");
-    let config: toml::Table = std::fs::read_to_string(dir.join("config.toml")).unwrap().parse().unwrap();
+    let config: toml::Table =
+        std::fs::read_to_string(dir.join("config.toml")).unwrap().parse().unwrap();
     let likelihood = config["likelihood"].as_table().unwrap();
     assert_eq!(likelihood["memory"].as_str(), Some("tempered"));
     let times = likelihood["memory_times"].as_table().unwrap();
@@ -193,12 +261,16 @@ fn the_tempered_likelihood_widens_the_measured_intervals() {
     }
     run(&["report", &d]);
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    assert!(html.contains("the likelihood was tempered for it"), "report lacks the tempered memory finding");
+    assert!(
+        html.contains("the likelihood was tempered for it"),
+        "report lacks the tempered memory finding"
+    );
     let path = dir.join("summary.parquet");
     let df = read_parquet(&path).unwrap();
     let names = str_column(&df, "parameter", &path).unwrap();
     let g = names.iter().position(|n| n == "G").unwrap();
-    let (mean, sd) = (f64_column(&df, "mean", &path).unwrap()[g], f64_column(&df, "sd", &path).unwrap()[g]);
+    let (mean, sd) =
+        (f64_column(&df, "mean", &path).unwrap()[g], f64_column(&df, "sd", &path).unwrap()[g]);
     assert!(sd > 0.02 * mean, "G {mean} ± {sd}: not widened");
 }
 
@@ -224,9 +296,20 @@ fn a_discrepancy_that_takes_over_the_laws_force_is_named() {
     assert_eq!(record.confounding.len(), 1, "{:?}", record.confounding);
     let w = &record.confounding[0];
     // all runs together, then each run's RMS against the law alone's
-    let ratio: f64 = w.split(" Pa (").nth(1).and_then(|t| t.split('×').next()).and_then(|t| t.parse().ok()).unwrap_or_else(|| panic!("{w}"));
-    assert!(ratio > 3.0, "pooled ratio {ratio} (measured with the converged posterior: about 7): {w}");
+    let ratio: f64 = w
+        .split(" Pa (")
+        .nth(1)
+        .and_then(|t| t.split('×').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("{w}"));
+    assert!(
+        ratio > 3.0,
+        "pooled ratio {ratio} (measured with the converged posterior: about 7): {w}"
+    );
     assert!(w.contains("I0.25_10mm_2Hz") && w.contains("I0.25_5mm_3Hz"), "{w}");
     // the independent model has no force of its own to compare
-    assert!(start(&campaign, &CalibrationSettings::default(), &mut |_| {}).unwrap().law_alone_rms.is_none());
+    assert!(start(&campaign, &CalibrationSettings::default(), &mut |_| {})
+        .unwrap()
+        .law_alone_rms
+        .is_none());
 }

@@ -20,12 +20,27 @@ fn text(o: &Output) -> String {
 /// bundled noise levels (15 N force, 2 µm displacement): records from known
 /// parameters.
 fn virtual_campaign(dir: &Path) -> PathBuf {
-    let settings = SynthSettings { currents_a: vec![1.0], cycles: 1.0, rate_hz: 2000.0, ..SynthSettings::default() };
+    let settings = SynthSettings {
+        currents_a: vec![1.0],
+        cycles: 1.0,
+        rate_hz: 2000.0,
+        ..SynthSettings::default()
+    };
     write_campaign(&settings, dir).unwrap();
     dir.join("campaign.toml")
 }
 
-const SECTIONS: [&str; 9] = ["campaign", "identification", "posterior", "diagnostics", "coverage", "adequacy", "validation", "figures", "reproduce"];
+const SECTIONS: [&str; 9] = [
+    "campaign",
+    "identification",
+    "posterior",
+    "diagnostics",
+    "coverage",
+    "adequacy",
+    "validation",
+    "figures",
+    "reproduce",
+];
 
 #[test]
 fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
@@ -52,18 +67,26 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     let path = dir.join("bands.parquet");
     let bands = read_parquet(&path).unwrap();
     let names = column_names(&bands);
-    for c in ["run", "time_s", "gamma", "tau_obs", "q025", "q25", "q50", "q75", "q975", "p025", "p975"] {
+    for c in
+        ["run", "time_s", "gamma", "tau_obs", "q025", "q25", "q50", "q75", "q975", "p025", "p975"]
+    {
         assert!(names.contains(&c.to_string()), "bands.parquet lacks {c}: {names:?}");
     }
     let runs = str_column(&bands, "run", &path).unwrap();
     // 1 revolution at 100/200/400 rpm and 2 kHz: 1200 + 600 + 300 samples (+1 each)
     assert!((2100..=2104).contains(&runs.len()), "{} rows", runs.len());
-    let q: Vec<Vec<f64>> = ["p025", "q025", "q25", "q50", "q75", "q975", "p975"].iter().map(|c| f64_column(&bands, c, &path).unwrap()).collect();
+    let q: Vec<Vec<f64>> = ["p025", "q025", "q25", "q50", "q75", "q975", "p975"]
+        .iter()
+        .map(|c| f64_column(&bands, c, &path).unwrap())
+        .collect();
     for k in 0..runs.len() {
         for w in q[1..6].windows(2) {
             assert!(w[0][k] <= w[1][k], "model quantiles out of order at row {k}");
         }
-        assert!(q[0][k] <= q[3][k] && q[3][k] <= q[6][k], "predictive band misses the median at row {k}");
+        assert!(
+            q[0][k] <= q[3][k] && q[3][k] <= q[6][k],
+            "predictive band misses the median at row {k}"
+        );
     }
 
     // the acceptance: 90–99 % of each run inside its 95 % predictive band
@@ -72,7 +95,11 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     let inside = f64_column(&cov, "inside_p95", &path).unwrap();
     assert_eq!(inside.len(), 3);
     for (run, share) in str_column(&cov, "run", &path).unwrap().iter().zip(&inside) {
-        assert!((0.90..=0.99).contains(share), "{run}: {:.1} % inside the 95 % band", 100.0 * share);
+        assert!(
+            (0.90..=0.99).contains(share),
+            "{run}: {:.1} % inside the 95 % band",
+            100.0 * share
+        );
     }
 
     // leave-one-out: one row per held-out run, predicted without it
@@ -89,14 +116,24 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     }
     assert!(html.matches("data:image/png;base64,").count() >= 10, "figures inline");
     assert!(!html.contains("src=\"file:") && !html.contains(".png\""), "no external images");
-    for f in ["corner.png", "traces.png", "marginals.png", "residuals.png", "bands_I1.0_100rpm.svg"] {
+    for f in ["corner.png", "traces.png", "marginals.png", "residuals.png", "bands_I1.0_100rpm.svg"]
+    {
         assert!(dir.join(f).exists(), "{f}");
     }
     browser_check(&dir.join("report.html"));
 
     // predicting again with the same seed gives the same bands, bit for bit
     let copy = tempfile::tempdir().unwrap();
-    let o = mrbp(&["predict", dir.to_str().unwrap(), "--out", copy.path().to_str().unwrap(), "--draws", "200", "--threads", "1"]);
+    let o = mrbp(&[
+        "predict",
+        dir.to_str().unwrap(),
+        "--out",
+        copy.path().to_str().unwrap(),
+        "--draws",
+        "200",
+        "--threads",
+        "1",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let again = read_parquet(&copy.path().join("bands.parquet")).unwrap();
     let first = read_parquet(&dir.join("bands.parquet")).unwrap();
@@ -108,7 +145,17 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     let o = Command::new("cp").arg("-a").arg(&dir).arg(alone.path()).output().unwrap();
     assert!(o.status.success(), "{}", text(&o));
     let again_dir = alone.path().join("I1.0A");
-    let o = mrbp(&["--threads", "1", "report", again_dir.to_str().unwrap(), "--leave-one-out", "--loo-steps", "200", "--draws", "200"]);
+    let o = mrbp(&[
+        "--threads",
+        "1",
+        "report",
+        again_dir.to_str().unwrap(),
+        "--leave-one-out",
+        "--loo-steps",
+        "200",
+        "--draws",
+        "200",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     for file in ["loo.parquet", "loo_bands.parquet"] {
         let one = read_parquet(&again_dir.join(file)).unwrap();
@@ -129,10 +176,23 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     // a later test of the same damper (a new noise realisation): every run
     // is new to the calibration, and its band holds 90–99 % of each
     let later = tempfile::tempdir().unwrap();
-    let settings = SynthSettings { currents_a: vec![1.0], cycles: 1.0, rate_hz: 2000.0, seed: 99, ..SynthSettings::default() };
+    let settings = SynthSettings {
+        currents_a: vec![1.0],
+        cycles: 1.0,
+        rate_hz: 2000.0,
+        seed: 99,
+        ..SynthSettings::default()
+    };
     write_campaign(&settings, later.path()).unwrap();
     let other = later.path().join("campaign.toml");
-    let o = mrbp(&["predict", dir.to_str().unwrap(), "--campaign", other.to_str().unwrap(), "--draws", "200"]);
+    let o = mrbp(&[
+        "predict",
+        dir.to_str().unwrap(),
+        "--campaign",
+        other.to_str().unwrap(),
+        "--draws",
+        "200",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let on = dir.join("on-rd1005-3-virtual");
     let path = on.join("coverage.parquet");
@@ -147,7 +207,12 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
 
     // a per-current calibration does not predict another current
     let half = tempfile::tempdir().unwrap();
-    let settings = SynthSettings { currents_a: vec![0.5], cycles: 1.0, rate_hz: 2000.0, ..SynthSettings::default() };
+    let settings = SynthSettings {
+        currents_a: vec![0.5],
+        cycles: 1.0,
+        rate_hz: 2000.0,
+        ..SynthSettings::default()
+    };
     write_campaign(&settings, half.path()).unwrap();
     let other = half.path().join("campaign.toml");
     let o = mrbp(&["predict", dir.to_str().unwrap(), "--campaign", other.to_str().unwrap()]);
@@ -199,7 +264,13 @@ fn leave_one_out_reweights_where_the_weights_can_be_trusted() {
     write_campaign(&settings, data.path()).unwrap();
     let manifest = data.path().join("campaign.toml");
     let out = tempfile::tempdir().unwrap();
-    let o = mrbp(&["run", manifest.to_str().unwrap(), "--out", out.path().to_str().unwrap(), "--leave-one-out"]);
+    let o = mrbp(&[
+        "run",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+        "--leave-one-out",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let path = out.path().join("I1.0A").join("loo.parquet");
     let loo = read_parquet(&path).unwrap();
@@ -212,7 +283,10 @@ fn leave_one_out_reweights_where_the_weights_can_be_trusted() {
         assert_eq!(by == "reweighting", *k <= 0.7, "{by} with k̂ {k}");
         assert!((0.90..=0.99).contains(share), "{by}: {:.1} % inside", 100.0 * share);
     }
-    assert!(by.iter().any(|b| b == "reweighting") && by.iter().any(|b| b == "laplace-importance"), "{by:?}");
+    assert!(
+        by.iter().any(|b| b == "reweighting") && by.iter().any(|b| b == "laplace-importance"),
+        "{by:?}"
+    );
 }
 
 #[test]
@@ -222,7 +296,10 @@ fn later_stages_reject_a_folder_that_is_not_a_calibration() {
         let o = mrbp(&[cmd, empty.path().to_str().unwrap()]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{cmd}: {err}");
-        assert!(err.contains("config.toml") && err.contains("not a calibration folder"), "{cmd}: {err}");
+        assert!(
+            err.contains("config.toml") && err.contains("not a calibration folder"),
+            "{cmd}: {err}"
+        );
     }
     let o = mrbp(&["predict", "/no/such/folder"]);
     assert_eq!(o.status.code(), Some(2));
@@ -237,7 +314,18 @@ fn a_report_of_very_short_chains_is_written() {
     let data = tempfile::tempdir().unwrap();
     let manifest = virtual_campaign(data.path());
     let out = tempfile::tempdir().unwrap();
-    let o = mrbp(&["run", manifest.to_str().unwrap(), "--out", out.path().to_str().unwrap(), "--substeps", "2", "--steps", "6", "--draws", "20"]);
+    let o = mrbp(&[
+        "run",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+        "--substeps",
+        "2",
+        "--steps",
+        "6",
+        "--draws",
+        "20",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(out.path().join("I1.0A/report.html").is_file());
     assert!(text(&o).contains("run longer"), "{}", text(&o));
@@ -255,14 +343,27 @@ fn a_report_of_very_short_chains_is_written() {
 #[test]
 fn the_report_draws_the_discrepancy_it_finds() {
     let data = tempfile::tempdir().unwrap();
-    let plain = SynthSettings { currents_a: vec![1.0], rpms: vec![200.0], cycles: 3.0, rate_hz: 2000.0, ..SynthSettings::default() };
+    let plain = SynthSettings {
+        currents_a: vec![1.0],
+        rpms: vec![200.0],
+        cycles: 3.0,
+        rate_hz: 2000.0,
+        ..SynthSettings::default()
+    };
     let mut extra = plain.clone();
     extra.extra_force.smooth_sd_n = vec![80.0];
     extra.extra_force.smooth_time_s = vec![0.02];
     write_campaign(&plain, &data.path().join("plain")).unwrap();
     write_campaign(&extra, &data.path().join("extra")).unwrap();
     let out = tempfile::tempdir().unwrap();
-    let o = mrbp(&["run", data.path().join("extra/campaign.toml").to_str().unwrap(), "--noise", "discrepancy", "--out", out.path().to_str().unwrap()]);
+    let o = mrbp(&[
+        "run",
+        data.path().join("extra/campaign.toml").to_str().unwrap(),
+        "--noise",
+        "discrepancy",
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let dir = out.path().join("I1.0A");
 
@@ -273,7 +374,10 @@ fn the_report_draws_the_discrepancy_it_finds() {
         let column = lines.next().unwrap().split(',').position(|c| c == "force_n").unwrap();
         lines.map(|l| l.split(',').nth(column).unwrap().parse().unwrap()).collect()
     };
-    let (with, without) = (force(&data.path().join("extra/I1.0_200rpm.csv")), force(&data.path().join("plain/I1.0_200rpm.csv")));
+    let (with, without) = (
+        force(&data.path().join("extra/I1.0_200rpm.csv")),
+        force(&data.path().join("plain/I1.0_200rpm.csv")),
+    );
     let added: Vec<f64> = with.iter().zip(&without).map(|(a, b)| a - b).collect();
 
     let path = dir.join("bands.parquet");
@@ -281,8 +385,10 @@ fn the_report_draws_the_discrepancy_it_finds() {
     for c in ["discrepancy_pa", "discrepancy_sd_pa", "innovation"] {
         assert!(column_names(&df).contains(&c.to_string()), "{c} missing");
     }
-    let found: Vec<f64> = f64_column(&df, "discrepancy_pa", &path).unwrap().iter().map(|d| d * 0.05).collect();
-    let (a, b): (Vec<f64>, Vec<f64>) = found.iter().zip(&added).skip(1).map(|(f, a)| (*f, *a)).unzip();
+    let found: Vec<f64> =
+        f64_column(&df, "discrepancy_pa", &path).unwrap().iter().map(|d| d * 0.05).collect();
+    let (a, b): (Vec<f64>, Vec<f64>) =
+        found.iter().zip(&added).skip(1).map(|(f, a)| (*f, *a)).unzip();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let (ma, mb) = (mean(&a), mean(&b));
     let cov: f64 = a.iter().zip(&b).map(|(x, y)| (x - ma) * (y - mb)).sum();
@@ -292,10 +398,17 @@ fn the_report_draws_the_discrepancy_it_finds() {
 
     let path = dir.join("adequacy.parquet");
     let df = read_parquet(&path).unwrap();
-    let (rho, left) = (f64_column(&df, "lag1_autocorrelation", &path).unwrap()[0], f64_column(&df, "innovation_lag1", &path).unwrap()[0]);
+    let (rho, left) = (
+        f64_column(&df, "lag1_autocorrelation", &path).unwrap()[0],
+        f64_column(&df, "innovation_lag1", &path).unwrap()[0],
+    );
     assert!(rho > 0.8 && left.abs() < 0.2, "residual lag-1 {rho}, innovations' {left}");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    for needle in ["the discrepancy the noise model finds in it over time", "one-step-ahead innovations, is close to independent", "lag-1 ρ (of the innovations)"] {
+    for needle in [
+        "the discrepancy the noise model finds in it over time",
+        "one-step-ahead innovations, is close to independent",
+        "lag-1 ρ (of the innovations)",
+    ] {
         assert!(html.contains(needle), "report lacks '{needle}'");
     }
 }

@@ -46,7 +46,10 @@ fn random_history(rng: &mut ChaCha8Rng) -> (Vec<f64>, Vec<f64>) {
         .map(|&t| {
             let g = match kind {
                 0 => amp * (2.0 * PI * freq * t).sin(),
-                1 => amp * (2.0 * PI * freq * t).sin() + 0.3 * amp * (2.0 * PI * 3.1 * freq * t).cos(),
+                1 => {
+                    amp * (2.0 * PI * freq * t).sin()
+                        + 0.3 * amp * (2.0 * PI * 3.1 * freq * t).cos()
+                }
                 2 => amp * (t * rate / n as f64),
                 _ => 0.0,
             };
@@ -97,7 +100,12 @@ fn the_integrator_returns_numbers_or_errors_over_the_prior_support() {
         // one lane alone agrees with the lane batch (both from rest)
         if initial == 0.0 {
             let single = integ.run(&params[0], &time, &gamma);
-            assert_eq!(single.is_ok(), outcome[0].is_ok(), "case {case}: single and lane runs disagree ({:?})", params[0]);
+            assert_eq!(
+                single.is_ok(),
+                outcome[0].is_ok(),
+                "case {case}: single and lane runs disagree ({:?})",
+                params[0]
+            );
         }
     }
     assert!(ok > 0 && ok + failed == cases(200) * LANES, "{ok} ok, {failed} errors");
@@ -116,7 +124,12 @@ fn valid_files() -> (String, String, Vec<u8>) {
     let mut buf = Vec::new();
     {
         use polars::prelude::*;
-        let mut df = DataFrame::new_infer_height(vec![Column::new("time_s".into(), t), Column::new("displacement_m".into(), x), Column::new("force_n".into(), f)]).unwrap();
+        let mut df = DataFrame::new_infer_height(vec![
+            Column::new("time_s".into(), t),
+            Column::new("displacement_m".into(), x),
+            Column::new("force_n".into(), f),
+        ])
+        .unwrap();
         ParquetWriter::new(&mut buf).finish(&mut df).unwrap();
     }
     (manifest, csv, buf)
@@ -146,7 +159,23 @@ fn mutate(rng: &mut ChaCha8Rng, bytes: &[u8]) -> Vec<u8> {
         _ => {
             // a text edit where the file is text: a token replaced by a nasty one
             if let Ok(text) = String::from_utf8(b.clone()) {
-                let nasty = ["abc", "1e300", "-1e999", "NaN", "inf", "", ",", "\"", "[[run]]", "0", "-0.0", "1e-320", "\n", "ÿ", "current_a = 2.5"];
+                let nasty = [
+                    "abc",
+                    "1e300",
+                    "-1e999",
+                    "NaN",
+                    "inf",
+                    "",
+                    ",",
+                    "\"",
+                    "[[run]]",
+                    "0",
+                    "-0.0",
+                    "1e-320",
+                    "\n",
+                    "ÿ",
+                    "current_a = 2.5",
+                ];
                 let tokens: Vec<&str> = text.split_inclusive([',', '\n', '=']).collect();
                 let k = rng.random_range(0..tokens.len());
                 let mut out = String::new();
@@ -183,7 +212,8 @@ fn the_readers_refuse_or_accept_mutated_files_without_panicking() {
     Campaign::load(&path).expect("the valid files load");
     let (mut accepted, mut refused) = (0, 0);
     for case in 0..cases(400) {
-        let (mut m, mut c, mut p) = (manifest.as_bytes().to_vec(), csv.as_bytes().to_vec(), parquet.clone());
+        let (mut m, mut c, mut p) =
+            (manifest.as_bytes().to_vec(), csv.as_bytes().to_vec(), parquet.clone());
         match case % 3 {
             0 => m = mutate(&mut rng, &m),
             1 => c = mutate(&mut rng, &c),
@@ -197,14 +227,26 @@ fn the_readers_refuse_or_accept_mutated_files_without_panicking() {
                 // what is accepted is usable: finite, increasing time, within limits
                 for run in &campaign.runs {
                     let r = &run.record;
-                    assert!(r.time.windows(2).all(|w| w[1] > w[0]), "case {case}: time not increasing");
-                    assert!(r.force.iter().chain(&r.displacement).all(|v| v.is_finite()), "case {case}: non-finite accepted");
+                    assert!(
+                        r.time.windows(2).all(|w| w[1] > w[0]),
+                        "case {case}: time not increasing"
+                    );
+                    assert!(
+                        r.force.iter().chain(&r.displacement).all(|v| v.is_finite()),
+                        "case {case}: non-finite accepted"
+                    );
                 }
             }
             Ok(Err(e)) => {
                 refused += 1;
-                assert!(e.exit_code() == 2, "case {case}: a bad file is an input error (exit 2), got {e}");
-                assert!(!e.to_string().contains('\n') || e.to_string().lines().count() <= 2, "case {case}: one line: {e}");
+                assert!(
+                    e.exit_code() == 2,
+                    "case {case}: a bad file is an input error (exit 2), got {e}"
+                );
+                assert!(
+                    !e.to_string().contains('\n') || e.to_string().lines().count() <= 2,
+                    "case {case}: one line: {e}"
+                );
             }
             Err(_) => panic!("case {case}: a reader panicked"),
         }

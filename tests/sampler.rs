@@ -3,7 +3,10 @@
 //! effective sample size; seeds are fixed.
 
 use mrbp::sampler::diagnostics::{ess_bulk, ess_tail, quantile};
-use mrbp::sampler::{Checkpointer, Diagnostics, Elliptical, LogDensity, Moments, Move, RunControl, Sampler, SamplerSettings};
+use mrbp::sampler::{
+    Checkpointer, Diagnostics, Elliptical, LogDensity, Moments, Move, RunControl, Sampler,
+    SamplerSettings,
+};
 use nalgebra::{DMatrix, DVector};
 
 /// Tolerance in Monte Carlo standard errors: a correct sampler fails a single
@@ -62,26 +65,16 @@ fn reference(mean: &[f64], cov: DMatrix<f64>) -> Elliptical {
 fn check_gaussian_with(moves: Vec<(Move, f64)>, steps: usize, reference: Option<Elliptical>) {
     let d = 10;
     let cov = correlated_covariance(d);
-    let target = Gaussian {
-        precision: cov.clone().try_inverse().unwrap(),
-    };
-    let settings = SamplerSettings {
-        walkers: 32,
-        ensembles: 4,
-        moves: moves.clone(),
-        seed: 11,
-    };
+    let target = Gaussian { precision: cov.clone().try_inverse().unwrap() };
+    let settings = SamplerSettings { walkers: 32, ensembles: 4, moves: moves.clone(), seed: 11 };
     let init = start_ball(d, 128, &vec![0.0; d], 1.0);
     let mut s = Sampler::new(&target, settings, &init).unwrap();
     if let Some(r) = reference {
         s = s.with_reference(r);
     }
     // run until converged (≥ 50 τ, R̂ < 1.01, τ stable), within a budget
-    let control = RunControl {
-        until_converged: true,
-        check_every: 1000,
-        ..RunControl::fixed(steps)
-    };
+    let control =
+        RunControl { until_converged: true, check_every: 1000, ..RunControl::fixed(steps) };
     s.run(&control, &mut []).unwrap();
     check_zero_mean_moments(&s, &cov, &format!("{moves:?}"));
 }
@@ -103,7 +96,11 @@ fn check_zero_mean_moments<T: LogDensity>(s: &Sampler<T>, cov: &DMatrix<f64>, la
             let sij = traces[i].iter().zip(&traces[j]).map(|(a, b)| a * b).sum::<f64>() / n;
             // sd of a sample covariance of a Gaussian: √((Σii Σjj + Σij²)/ESS)
             let se = ((cov[(i, i)] * cov[(j, j)] + cov[(i, j)].powi(2)) / ess_min).sqrt();
-            assert!((sij - cov[(i, j)]).abs() < Z * se, "{label} cov {i},{j}: {sij} vs {}", cov[(i, j)]);
+            assert!(
+                (sij - cov[(i, j)]).abs() < Z * se,
+                "{label} cov {i},{j}: {sij} vs {}",
+                cov[(i, j)]
+            );
         }
     }
 }
@@ -136,7 +133,11 @@ fn correlated_gaussian_10d_anchored_mixture() {
     let scale = DVector::from_fn(d, |i, _| 2f64.powi(i as i32 % 3 - 1).sqrt());
     let wrong = DMatrix::from_diagonal(&scale) * &cov * DMatrix::from_diagonal(&scale);
     let mean: Vec<f64> = (0..d).map(|i| 0.5 * cov[(i, i)].sqrt()).collect();
-    check_gaussian_with(vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 5000, Some(reference(&mean, wrong)));
+    check_gaussian_with(
+        vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)],
+        5000,
+        Some(reference(&mean, wrong)),
+    );
 }
 
 /// The history move: a Student-t mixture fitted to each ensemble's past
@@ -154,7 +155,11 @@ fn correlated_gaussian_10d_curved_mixture() {
     let d = 10;
     let cov = correlated_covariance(d);
     let mean: Vec<f64> = (0..d).map(|i| 0.5 * cov[(i, i)].sqrt()).collect();
-    check_gaussian_with(vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], 5000, Some(reference(&mean, cov * 2.0)));
+    check_gaussian_with(
+        vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)],
+        5000,
+        Some(reference(&mean, cov * 2.0)),
+    );
 }
 
 /// x1 ~ N(1, 1), x2 | x1 ~ N(x1², 0.5²): a banana whose moments are known:
@@ -193,7 +198,11 @@ fn rosenbrock_banana_with_history_mixture() {
 #[test]
 fn rosenbrock_banana_with_anchored_mixture() {
     let r = reference(&[1.0, 1.0], DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 4.0])));
-    banana_moments_with(vec![(Move::anchored(), 0.7), (Move::differential_evolution(), 0.3)], 10000, Some(r));
+    banana_moments_with(
+        vec![(Move::anchored(), 0.7), (Move::differential_evolution(), 0.3)],
+        10000,
+        Some(r),
+    );
 }
 
 /// The curved move on the banana: its tube bends along x1.
@@ -220,7 +229,12 @@ fn banana_moments_with(moves: Vec<(Move, f64)>, steps: usize, reference: Option<
     let truth_var = [1.0, 6.25];
     for i in 0..2 {
         let c = &diag.coordinates[i];
-        assert!((c.mean - truth_mean[i]).abs() < Z * c.mcse_mean, "mean {i}: {} ± {}", c.mean, c.mcse_mean);
+        assert!(
+            (c.mean - truth_mean[i]).abs() < Z * c.mcse_mean,
+            "mean {i}: {} ± {}",
+            c.mean,
+            c.mcse_mean
+        );
         // MCSE of the variance: sd of (x − μ)² over √ESS of those squares
         let traces = s.chains.traces(i, diag.burn_in);
         let sq: Vec<Vec<f64>> = traces
@@ -260,26 +274,51 @@ fn lognormal_quantiles() {
 #[test]
 fn lognormal_quantiles_with_independence_mixture() {
     let dist = statrs::distribution::LogNormal::new(0.0, 1.0).unwrap();
-    check_quantiles(&LogNormal2, &dist, vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+    check_quantiles(
+        &LogNormal2,
+        &dist,
+        vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+    );
 }
 
 #[test]
 fn lognormal_quantiles_with_anchored_mixture() {
     let dist = statrs::distribution::LogNormal::new(0.0, 1.0).unwrap();
     let r = reference(&[1.0, 1.0], DMatrix::identity(2, 2));
-    check_quantiles_with(&LogNormal2, &dist, vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000, Some(r));
+    check_quantiles_with(
+        &LogNormal2,
+        &dist,
+        vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+        Some(r),
+    );
 }
 
 #[test]
 fn lognormal_quantiles_with_curved_mixture() {
     let dist = statrs::distribution::LogNormal::new(0.0, 1.0).unwrap();
-    check_quantiles(&LogNormal2, &dist, vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+    check_quantiles(
+        &LogNormal2,
+        &dist,
+        vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+    );
 }
 
 #[test]
 fn lognormal_quantiles_with_history_mixture() {
     let dist = statrs::distribution::LogNormal::new(0.0, 1.0).unwrap();
-    check_quantiles(&LogNormal2, &dist, vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+    check_quantiles(
+        &LogNormal2,
+        &dist,
+        vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+    );
 }
 
 /// A target bounded by its prior: independent standard normals truncated
@@ -311,7 +350,11 @@ impl TruncatedNormal {
 
 impl statrs::distribution::Continuous<f64, f64> for TruncatedNormal {
     fn pdf(&self, x: f64) -> f64 {
-        if x <= 0.5 { 0.0 } else { (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt() / Self::mass() }
+        if x <= 0.5 {
+            0.0
+        } else {
+            (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt() / Self::mass()
+        }
     }
     fn ln_pdf(&self, x: f64) -> f64 {
         self.pdf(x).ln()
@@ -333,7 +376,11 @@ impl statrs::statistics::Max<f64> for TruncatedNormal {
 impl statrs::distribution::ContinuousCDF<f64, f64> for TruncatedNormal {
     fn cdf(&self, x: f64) -> f64 {
         let n = statrs::distribution::Normal::standard();
-        if x <= 0.5 { 0.0 } else { (n.cdf(x) - n.cdf(0.5)) / Self::mass() }
+        if x <= 0.5 {
+            0.0
+        } else {
+            (n.cdf(x) - n.cdf(0.5)) / Self::mass()
+        }
     }
     fn inverse_cdf(&self, p: f64) -> f64 {
         let n = statrs::distribution::Normal::standard();
@@ -343,29 +390,60 @@ impl statrs::distribution::ContinuousCDF<f64, f64> for TruncatedNormal {
 
 #[test]
 fn truncated_quantiles_with_independence_mixture() {
-    check_quantiles(&Truncated2, &TruncatedNormal, vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+    check_quantiles(
+        &Truncated2,
+        &TruncatedNormal,
+        vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+    );
 }
 
 #[test]
 fn truncated_quantiles_with_anchored_mixture() {
     let r = reference(&[0.9, 0.9], DMatrix::identity(2, 2) * 0.25);
-    check_quantiles_with(&Truncated2, &TruncatedNormal, vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000, Some(r));
+    check_quantiles_with(
+        &Truncated2,
+        &TruncatedNormal,
+        vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+        Some(r),
+    );
 }
 
 #[test]
 fn truncated_quantiles_with_curved_mixture() {
-    check_quantiles(&Truncated2, &TruncatedNormal, vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+    check_quantiles(
+        &Truncated2,
+        &TruncatedNormal,
+        vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+    );
 }
 
 #[test]
 fn truncated_quantiles_with_history_mixture() {
-    check_quantiles(&Truncated2, &TruncatedNormal, vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+    check_quantiles(
+        &Truncated2,
+        &TruncatedNormal,
+        vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+    );
 }
 
 #[test]
 fn heavy_tailed_quantiles_with_history_mixture() {
     let dist = statrs::distribution::StudentsT::new(0.0, 1.0, 3.0).unwrap();
-    check_quantiles(&StudentT2, &dist, vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+    check_quantiles(
+        &StudentT2,
+        &dist,
+        vec![(Move::history(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+    );
 }
 
 /// A heavy-tailed target: independent Student-t coordinates with ν = 3 in
@@ -386,33 +464,63 @@ impl LogDensity for StudentT2 {
 fn heavy_tailed_quantiles_with_anchored_mixture() {
     let dist = statrs::distribution::StudentsT::new(0.0, 1.0, 3.0).unwrap();
     let r = reference(&[0.0, 0.0], DMatrix::identity(2, 2));
-    check_quantiles_with(&StudentT2, &dist, vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000, Some(r));
+    check_quantiles_with(
+        &StudentT2,
+        &dist,
+        vec![(Move::anchored(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+        Some(r),
+    );
 }
 
 #[test]
 fn heavy_tailed_quantiles_with_curved_mixture() {
     let dist = statrs::distribution::StudentsT::new(0.0, 1.0, 3.0).unwrap();
-    check_quantiles(&StudentT2, &dist, vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+    check_quantiles(
+        &StudentT2,
+        &dist,
+        vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+    );
 }
 
 #[test]
 fn heavy_tailed_quantiles_with_independence_mixture() {
     let dist = statrs::distribution::StudentsT::new(0.0, 1.0, 3.0).unwrap();
-    check_quantiles(&StudentT2, &dist, vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)], 32, 3000);
+    check_quantiles(
+        &StudentT2,
+        &dist,
+        vec![(Move::independence(), 0.9), (Move::differential_evolution(), 0.1)],
+        32,
+        3000,
+    );
 }
 
 /// Runs `steps` steps of 4 ensembles of `walkers` and compares the 5, 50
 /// and 95 % quantiles of each coordinate with those of `dist`.
-fn check_quantiles<D>(target: &impl LogDensity, dist: &D, moves: Vec<(Move, f64)>, walkers: usize, steps: usize)
-where
+fn check_quantiles<D>(
+    target: &impl LogDensity,
+    dist: &D,
+    moves: Vec<(Move, f64)>,
+    walkers: usize,
+    steps: usize,
+) where
     D: statrs::distribution::Continuous<f64, f64> + statrs::distribution::ContinuousCDF<f64, f64>,
 {
     check_quantiles_with(target, dist, moves, walkers, steps, None);
 }
 
 /// [`check_quantiles`] with a fixed `reference` for the anchored move.
-fn check_quantiles_with<D>(target: &impl LogDensity, dist: &D, moves: Vec<(Move, f64)>, walkers: usize, steps: usize, reference: Option<Elliptical>)
-where
+fn check_quantiles_with<D>(
+    target: &impl LogDensity,
+    dist: &D,
+    moves: Vec<(Move, f64)>,
+    walkers: usize,
+    steps: usize,
+    reference: Option<Elliptical>,
+) where
     D: statrs::distribution::Continuous<f64, f64> + statrs::distribution::ContinuousCDF<f64, f64>,
 {
     let settings = SamplerSettings { walkers, ensembles: 4, moves: moves.clone(), seed: 8 };
@@ -455,7 +563,9 @@ fn small_run(threads: usize, steps: usize) -> Vec<f64> {
             seed: 42,
         };
         let init = start_ball(2, 24, &[1.0, 1.0], 0.1);
-        let mut s = Sampler::new(&Banana, settings, &init).unwrap().with_reference(reference(&[1.0, 1.0], DMatrix::identity(2, 2)));
+        let mut s = Sampler::new(&Banana, settings, &init)
+            .unwrap()
+            .with_reference(reference(&[1.0, 1.0], DMatrix::identity(2, 2)));
         s.run(&RunControl::fixed(steps), &mut []).unwrap();
         s.chains.positions.clone()
     })
@@ -479,7 +589,11 @@ fn resumed_run_equals_uninterrupted_run() {
         walkers: 8,
         ensembles: 2,
         // the history move refits at 64 from the checkpoint's chains, then at 128
-        moves: vec![(Move::Stretch { a: 2.0 }, 0.5), (Move::snooker(), 0.2), (Move::history(), 0.3)],
+        moves: vec![
+            (Move::Stretch { a: 2.0 }, 0.5),
+            (Move::snooker(), 0.2),
+            (Move::history(), 0.3),
+        ],
         seed: 9,
     };
     let init = start_ball(2, 16, &[1.0, 1.0], 0.1);
@@ -501,11 +615,7 @@ fn resumed_run_equals_uninterrupted_run() {
 
 #[test]
 fn refuses_to_start_at_minus_infinity_and_names_the_walker() {
-    let settings = SamplerSettings {
-        walkers: 4,
-        ensembles: 2,
-        ..SamplerSettings::default()
-    };
+    let settings = SamplerSettings { walkers: 4, ensembles: 2, ..SamplerSettings::default() };
     let mut init = start_ball(2, 8, &[1.0, 1.0], 0.1);
     init[5] = vec![-1.0, 1.0];
     let err = Sampler::new(&LogNormal2, settings, &init).err().unwrap().to_string();
@@ -515,11 +625,7 @@ fn refuses_to_start_at_minus_infinity_and_names_the_walker() {
 #[test]
 fn stuck_walker_is_detected() {
     // a walker frozen at its start: acceptance 0
-    let settings = SamplerSettings {
-        walkers: 8,
-        ensembles: 1,
-        ..SamplerSettings::default()
-    };
+    let settings = SamplerSettings { walkers: 8, ensembles: 1, ..SamplerSettings::default() };
     let init = start_ball(2, 8, &[1.0, 1.0], 0.1);
     let mut s = Sampler::new(&Banana, settings, &init).unwrap();
     s.run(&RunControl::fixed(200), &mut []).unwrap();
@@ -540,9 +646,17 @@ fn rarely_accepted_proposals_are_flagged() {
     let init = start_ball(2, 32, &[1.0, 1.0], 0.1);
     let mut s = Sampler::new(&Banana, settings, &init).unwrap();
     s.run(&RunControl::fixed(300), &mut []).unwrap();
-    let flagged = |d: &Diagnostics| d.warnings.iter().any(|w| w.contains("proposals were accepted at a median rate"));
+    let flagged = |d: &Diagnostics| {
+        d.warnings.iter().any(|w| w.contains("proposals were accepted at a median rate"))
+    };
     let diag = Diagnostics::compute(&s.chains, 50);
-    assert!(!flagged(&diag) && diag.acceptance.iter().sum::<f64>() / 32.0 > mrbp::sampler::diagnostics::LOW_ACCEPTANCE, "{:?}", diag.warnings);
+    assert!(
+        !flagged(&diag)
+            && diag.acceptance.iter().sum::<f64>() / 32.0
+                > mrbp::sampler::diagnostics::LOW_ACCEPTANCE,
+        "{:?}",
+        diag.warnings
+    );
     // keep one accepted proposal in twenty (the positions are left as they
     // are: the diagnostic reads the acceptance record only)
     let nc = s.chains.chains();
@@ -589,12 +703,30 @@ fn an_ensemble_stranded_in_a_negligible_mode_is_drawn_afresh() {
         let high = start_ball(3, chains / 2, &[20.0; 3], 1.0);
         low.into_iter().chain(high).collect()
     };
-    let settings = SamplerSettings { walkers: 32, ensembles: 4, moves: vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)], seed: 3 };
+    let settings = SamplerSettings {
+        walkers: 32,
+        ensembles: 4,
+        moves: vec![(Move::differential_evolution(), 0.8), (Move::snooker(), 0.2)],
+        seed: 3,
+    };
     let target = TwoModes { minor: 40.0 };
     let mut s = Sampler::new(&target, settings.clone(), &start(128)).unwrap();
-    s.run(&RunControl { until_converged: true, check_every: 100, min_ess: 400.0, ..RunControl::fixed(4000) }, &mut []).unwrap();
+    s.run(
+        &RunControl {
+            until_converged: true,
+            check_every: 100,
+            min_ess: 400.0,
+            ..RunControl::fixed(4000)
+        },
+        &mut [],
+    )
+    .unwrap();
     let redraws = stranded::history(&s.chains);
-    assert_eq!(redraws.iter().map(|r| (r.step, r.ensemble)).collect::<Vec<_>>(), vec![(32, 2), (32, 3)], "{redraws:?}");
+    assert_eq!(
+        redraws.iter().map(|r| (r.step, r.ensemble)).collect::<Vec<_>>(),
+        vec![(32, 2), (32, 3)],
+        "{redraws:?}"
+    );
     assert!(redraws.iter().all(|r| r.from < 2 && (r.gap - 40.0).abs() < 5.0), "{redraws:?}");
     let diag = s.diagnostics();
     assert!(diag.burn_in >= 32, "burn-in {}", diag.burn_in);
@@ -607,7 +739,10 @@ fn an_ensemble_stranded_in_a_negligible_mode_is_drawn_afresh() {
     let mut s = Sampler::new(&equal, settings, &start(128)).unwrap();
     s.run(&RunControl::fixed(300), &mut []).unwrap();
     assert!(stranded::history(&s.chains).is_empty());
-    assert!(s.diagnostics().max_rhat() > 1.5, "two modes, one per half of the ensembles: R̂ must say so");
+    assert!(
+        s.diagnostics().max_rhat() > 1.5,
+        "two modes, one per half of the ensembles: R̂ must say so"
+    );
 }
 
 /// A curved ridge with a long, thin end in six dimensions: x0 Gumbel
@@ -638,7 +773,12 @@ impl LogDensity for SkewedRidge {
 /// 3.6 se (docs/performance.md, "The far end of a real ridge").
 #[test]
 fn skewed_ridge_quantiles_with_curved_mixture() {
-    let settings = SamplerSettings { walkers: 64, ensembles: 4, moves: vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)], seed: 8 };
+    let settings = SamplerSettings {
+        walkers: 64,
+        ensembles: 4,
+        moves: vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)],
+        seed: 8,
+    };
     let init: Vec<Vec<f64>> = start_ball(6, 256, &[0.0; 6], 0.05)
         .into_iter()
         .map(|mut x| {
@@ -647,7 +787,13 @@ fn skewed_ridge_quantiles_with_curved_mixture() {
         })
         .collect();
     let mut s = Sampler::new(&SkewedRidge, settings, &init).unwrap();
-    let control = RunControl { max_steps: 5000, until_converged: true, check_every: 10, min_ess: 400.0, min_tau_multiple: mrbp::calibrate::probe::FAR_TAU_MULTIPLE };
+    let control = RunControl {
+        max_steps: 5000,
+        until_converged: true,
+        check_every: 10,
+        min_ess: 400.0,
+        min_tau_multiple: mrbp::calibrate::probe::FAR_TAU_MULTIPLE,
+    };
     s.run(&control, &mut []).unwrap();
     let diag = s.diagnostics();
     assert!(diag.converged(400.0), "{:?}", diag.warnings);
@@ -737,10 +883,16 @@ fn blocked_gaussian() -> (BlockedGaussian, DMatrix<f64>) {
 fn block_updates_keep_a_correlated_gaussian() {
     let (target, cov) = blocked_gaussian();
     let d = 6;
-    let settings = SamplerSettings { walkers: 24, ensembles: 4, moves: vec![(Move::Stretch { a: 2.0 }, 1.0)], seed: 13 };
+    let settings = SamplerSettings {
+        walkers: 24,
+        ensembles: 4,
+        moves: vec![(Move::Stretch { a: 2.0 }, 1.0)],
+        seed: 13,
+    };
     let init = start_ball(d, 96, &vec![0.0; d], 1.0);
     let mut s = Sampler::new(&target, settings, &init).unwrap();
-    let control = RunControl { until_converged: true, check_every: 1000, ..RunControl::fixed(20000) };
+    let control =
+        RunControl { until_converged: true, check_every: 1000, ..RunControl::fixed(20000) };
     s.run(&control, &mut []).unwrap();
     check_zero_mean_moments(&s, &cov, "blocks");
     // the stored log-densities are the target's at the stored positions
@@ -756,7 +908,12 @@ fn block_updates_keep_a_correlated_gaussian() {
 #[test]
 fn block_updates_are_reproducible_and_resumable() {
     let (target, _) = blocked_gaussian();
-    let settings = SamplerSettings { walkers: 12, ensembles: 2, moves: vec![(Move::Stretch { a: 2.0 }, 0.7), (Move::independence(), 0.3)], seed: 4 };
+    let settings = SamplerSettings {
+        walkers: 12,
+        ensembles: 2,
+        moves: vec![(Move::Stretch { a: 2.0 }, 0.7), (Move::independence(), 0.3)],
+        seed: 4,
+    };
     let init = start_ball(6, 24, &[0.0; 6], 1.0);
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();

@@ -27,11 +27,32 @@ fn ok(args: &[&str]) -> Output {
 /// a current law over them.
 fn calibrate(dir: &Path, currents: &str, law: bool) -> PathBuf {
     let data = dir.join("data");
-    ok(&["synth", "--out", data.to_str().unwrap(), "--currents", currents, "--rpm", "200", "--cycles", "1", "--rate", "400"]);
+    ok(&[
+        "synth",
+        "--out",
+        data.to_str().unwrap(),
+        "--currents",
+        currents,
+        "--rpm",
+        "200",
+        "--cycles",
+        "1",
+        "--rate",
+        "400",
+    ]);
     let out = dir.join("cal");
     let walkers = if law { "24" } else { "18" };
     let manifest = data.join("campaign.toml");
-    let mut args = vec!["sample", manifest.to_str().unwrap(), "--out", out.to_str().unwrap(), "--steps", "30", "--walkers", walkers];
+    let mut args = vec![
+        "sample",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--steps",
+        "30",
+        "--walkers",
+        walkers,
+    ];
     if law {
         args.extend(["--model", "current-law"]);
     }
@@ -42,7 +63,11 @@ fn calibrate(dir: &Path, currents: &str, law: bool) -> PathBuf {
 /// A sine excitation of 5 mm at 3 Hz, 0.7 s at 1 kHz, no force; with a
 /// current column when given.
 fn excitation(path: &Path, current: Option<&dyn Fn(f64) -> f64>) {
-    let mut text = String::from(if current.is_some() { "time_s,displacement_m,current_a\n" } else { "time_s,displacement_m\n" });
+    let mut text = String::from(if current.is_some() {
+        "time_s,displacement_m,current_a\n"
+    } else {
+        "time_s,displacement_m\n"
+    });
     for k in 0..=700 {
         let t = k as f64 / 1000.0;
         let x = 0.005 * (2.0 * std::f64::consts::PI * 3.0 * t).sin();
@@ -69,7 +94,14 @@ fn reference(p: &mrbp::model::Params, time: &[f64], displacement: &[f64], gap: f
         let h = dt / steps as f64;
         for _ in 0..steps {
             let z = p.r1 + (p.r0 - p.r1) * (-p.m1 * w).exp() + p.d1 * (1.0 - (-p.m2 * w).exp());
-            let flow = if tau == 0.0 { 0.0 } else { 2.0 * d0 * (-0.5 * (z / (3f64.sqrt() * tau.abs())).powf(2.0 * p.n) * (p.n + 1.0) / p.n).exp() * tau.signum() };
+            let flow = if tau == 0.0 {
+                0.0
+            } else {
+                2.0 * d0
+                    * (-0.5 * (z / (3f64.sqrt() * tau.abs())).powf(2.0 * p.n) * (p.n + 1.0) / p.n)
+                        .exp()
+                    * tau.signum()
+            };
             w += h * tau * flow;
             tau += h * p.g * (rate - flow);
         }
@@ -85,7 +117,18 @@ fn median_at_one_draw_is_the_law_solution() {
     let input = t.path().join("sine.csv");
     excitation(&input, None);
     let out = t.path().join("sim");
-    ok(&["simulate", cal_dir.to_str().unwrap(), "--input", input.to_str().unwrap(), "--out", out.to_str().unwrap(), "--draws", "1", "--replicates", "400"]);
+    ok(&[
+        "simulate",
+        cal_dir.to_str().unwrap(),
+        "--input",
+        input.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--draws",
+        "1",
+        "--replicates",
+        "400",
+    ]);
     let s = simulation::read(&out).unwrap();
     assert_eq!(s.record.current_a, 1.0);
     assert_eq!(s.record.draws, 1);
@@ -116,16 +159,26 @@ fn median_at_one_draw_is_the_law_solution() {
     use statrs::distribution::ContinuousCDF;
     let at: f64 = 0.975 * 399.0;
     let (i, frac) = (at.floor() + 1.0, at - at.floor());
-    let expected = (1.0 - frac) * normal.inverse_cdf(i / 401.0) + frac * normal.inverse_cdf((i + 1.0) / 401.0);
+    let expected =
+        (1.0 - frac) * normal.inverse_cdf(i / 401.0) + frac * normal.inverse_cdf((i + 1.0) / 401.0);
     let sigma = draw.noise[0];
-    let half: f64 = (1..s.time.len()).map(|k| 0.5 * (s.predictive[1][k] - s.predictive[0][k])).sum::<f64>() / (s.time.len() - 1) as f64;
+    let half: f64 =
+        (1..s.time.len()).map(|k| 0.5 * (s.predictive[1][k] - s.predictive[0][k])).sum::<f64>()
+            / (s.time.len() - 1) as f64;
     eprintln!("predictive half-width {:.4} σ, expected {expected:.4} σ", half / sigma);
-    assert!((half / sigma - expected).abs() < 0.03, "predictive half-width {:.3} σ, expected {expected:.3}", half / sigma);
+    assert!(
+        (half / sigma - expected).abs() < 0.03,
+        "predictive half-width {:.3} σ, expected {expected:.3}",
+        half / sigma
+    );
     // force columns are the stress times the area
     let df = mrbp::store::read_parquet(&out.join(simulation::FILE)).unwrap();
     let f50 = mrbp::store::f64_column(&df, "force_q50_n", &out).unwrap();
     let area = cal.record.geometry.unwrap().area_m2;
-    assert!(f50.iter().zip(&s.model[2]).all(|(f, tau)| (f - tau * area).abs() <= 1e-9 * f.abs().max(1.0)));
+    assert!(f50
+        .iter()
+        .zip(&s.model[2])
+        .all(|(f, tau)| (f - tau * area).abs() <= 1e-9 * f.abs().max(1.0)));
     assert!(out.join("simulation.png").exists());
     let status = mrbp::store::status::status(&out).unwrap();
     assert!(status[0].complete(), "{:?}", status[0].problems);
@@ -138,7 +191,20 @@ fn a_current_law_simulates_near_its_currents() {
     let input = t.path().join("sine.csv");
     excitation(&input, None);
     let (c, i) = (cal.to_str().unwrap(), input.to_str().unwrap());
-    let sim = |current: &str, out: &str| mrbp(&["simulate", c, "--input", i, "--current", current, "--out", t.path().join(out).to_str().unwrap(), "--draws", "40"]);
+    let sim = |current: &str, out: &str| {
+        mrbp(&[
+            "simulate",
+            c,
+            "--input",
+            i,
+            "--current",
+            current,
+            "--out",
+            t.path().join(out).to_str().unwrap(),
+            "--draws",
+            "40",
+        ])
+    };
     let o = sim("0.75", "mid");
     assert!(o.status.success(), "{}", said(&o));
     let mid = simulation::read(&t.path().join("mid")).unwrap();
@@ -155,7 +221,13 @@ fn a_current_law_simulates_near_its_currents() {
     })
     .unwrap();
     let peak = |s: &simulation::Simulation| s.model[2].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    assert!(peak(&low) < peak(&mid) && peak(&mid) < peak(&high), "{} {} {}", peak(&low), peak(&mid), peak(&high));
+    assert!(
+        peak(&low) < peak(&mid) && peak(&mid) < peak(&high),
+        "{} {} {}",
+        peak(&low),
+        peak(&mid),
+        peak(&high)
+    );
     // a little beyond: simulated, marked as extrapolated
     let o = sim("1.2", "beyond");
     assert!(o.status.success() && said(&o).contains("extrapolates"), "{}", said(&o));
@@ -178,21 +250,55 @@ fn a_current_law_simulates_near_its_currents() {
     let stepped = t.path().join("stepped.csv");
     excitation(&stepped, Some(&|t| if t < 0.35 { 0.5 } else { 1.0 }));
     let s = stepped.to_str().unwrap();
-    let o = mrbp(&["simulate", c, "--input", s, "--out", t.path().join("stepped").to_str().unwrap(), "--draws", "40"]);
+    let o = mrbp(&[
+        "simulate",
+        c,
+        "--input",
+        s,
+        "--out",
+        t.path().join("stepped").to_str().unwrap(),
+        "--draws",
+        "40",
+    ]);
     assert!(o.status.success() && said(&o).contains("follows the current at once"), "{}", said(&o));
     let followed = simulation::read(&t.path().join("stepped")).unwrap();
-    assert!(followed.record.current_varies && (followed.current[0], followed.current[700]) == (0.5, 1.0));
+    assert!(
+        followed.record.current_varies
+            && (followed.current[0], followed.current[700]) == (0.5, 1.0)
+    );
     assert_eq!(followed.model[2][..=350], low.model[2][..=350]);
     let end = |x: &simulation::Simulation| x.model[2][700];
-    assert!((end(&followed) - end(&high)).abs() < (end(&followed) - end(&low)).abs(), "{} {} {}", end(&followed), end(&low), end(&high));
+    assert!(
+        (end(&followed) - end(&high)).abs() < (end(&followed) - end(&low)).abs(),
+        "{} {} {}",
+        end(&followed),
+        end(&low),
+        end(&high)
+    );
     // one current named for a current that changes: refused
-    let o = mrbp(&["simulate", c, "--input", s, "--current", "0.5", "--out", t.path().join("named").to_str().unwrap()]);
+    let o = mrbp(&[
+        "simulate",
+        c,
+        "--input",
+        s,
+        "--current",
+        "0.5",
+        "--out",
+        t.path().join("named").to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(said(&o).contains("names one current"), "{}", said(&o));
     // the current law has no yield stress at 0 A: a current switched off is refused
     let off = t.path().join("off.csv");
     excitation(&off, Some(&|t| if t < 0.35 { 0.5 } else { 0.0 }));
-    let o = mrbp(&["simulate", c, "--input", off.to_str().unwrap(), "--out", t.path().join("off").to_str().unwrap()]);
+    let o = mrbp(&[
+        "simulate",
+        c,
+        "--input",
+        off.to_str().unwrap(),
+        "--out",
+        t.path().join("off").to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(said(&o).contains("off-state"), "{}", said(&o));
 }
@@ -204,7 +310,8 @@ fn what_cannot_be_simulated_is_refused() {
     let c = cal.to_str().unwrap();
     let refused = |input: &Path, extra: &[&str], expect: &str| {
         let out = t.path().join("refused");
-        let mut args = vec!["simulate", c, "--input", input.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        let mut args =
+            vec!["simulate", c, "--input", input.to_str().unwrap(), "--out", out.to_str().unwrap()];
         args.extend(extra);
         let o = mrbp(&args);
         assert_eq!(o.status.code(), Some(2), "{expect}: {}", said(&o));
@@ -226,7 +333,11 @@ fn what_cannot_be_simulated_is_refused() {
     let backwards = t.path().join("backwards.csv");
     let mut text = String::from("time_s,displacement_m\n");
     for k in 0..20 {
-        text.push_str(&format!("{},{}\n", if k == 7 { 0.001 } else { k as f64 * 0.01 }, 0.001 * k as f64));
+        text.push_str(&format!(
+            "{},{}\n",
+            if k == 7 { 0.001 } else { k as f64 * 0.01 },
+            0.001 * k as f64
+        ));
     }
     std::fs::write(&backwards, text).unwrap();
     refused(&backwards, &[], "row 8");
@@ -243,7 +354,8 @@ fn predict_leaves_out_runs_it_cannot_predict() {
     let data = t.path().join("data");
     // the 0.5 A record without its current column, listed at 0.75 A and 0 A
     let text = std::fs::read_to_string(data.join("I0.5_200rpm.csv")).unwrap();
-    let stripped: String = text.lines().map(|l| l.rsplit_once(',').unwrap().0.to_string() + "\n").collect();
+    let stripped: String =
+        text.lines().map(|l| l.rsplit_once(',').unwrap().0.to_string() + "\n").collect();
     std::fs::write(data.join("x.csv"), stripped).unwrap();
     let manifest = data.join("mixed.toml");
     std::fs::write(
@@ -252,7 +364,16 @@ fn predict_leaves_out_runs_it_cannot_predict() {
     )
     .unwrap();
     let out = t.path().join("pred");
-    let o = mrbp(&["predict", cal.to_str().unwrap(), "--campaign", manifest.to_str().unwrap(), "--out", out.to_str().unwrap(), "--draws", "20"]);
+    let o = mrbp(&[
+        "predict",
+        cal.to_str().unwrap(),
+        "--campaign",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--draws",
+        "20",
+    ]);
     assert_eq!(o.status.code(), Some(1), "{}", said(&o));
     assert!(said(&o).contains("1 run(s) could not be predicted (off)"), "{}", said(&o));
     let predicted = mrbp::store::prediction::read(&out).unwrap().expect("the other run's bands");

@@ -11,11 +11,28 @@ use mrbp::synth::{write_campaign, SynthSettings};
 #[test]
 fn every_file_reads_back_and_agrees_with_the_others() {
     let data = tempfile::tempdir().unwrap();
-    let settings = SynthSettings { currents_a: vec![0.5, 1.0], rpms: vec![200.0, 400.0], cycles: 1.0, rate_hz: 1000.0, ..SynthSettings::default() };
+    let settings = SynthSettings {
+        currents_a: vec![0.5, 1.0],
+        rpms: vec![200.0, 400.0],
+        cycles: 1.0,
+        rate_hz: 1000.0,
+        ..SynthSettings::default()
+    };
     write_campaign(&settings, data.path()).unwrap();
     let out = tempfile::tempdir().unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args(["run", data.path().join("campaign.toml").to_str().unwrap(), "--out", out.path().to_str().unwrap(), "--substeps", "2", "--steps", "40", "--draws", "50"])
+        .args([
+            "run",
+            data.path().join("campaign.toml").to_str().unwrap(),
+            "--out",
+            out.path().to_str().unwrap(),
+            "--substeps",
+            "2",
+            "--steps",
+            "40",
+            "--draws",
+            "50",
+        ])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -33,11 +50,20 @@ fn every_file_reads_back_and_agrees_with_the_others() {
         for (a, c) in prediction.adequacy.iter().zip(&prediction.coverage) {
             assert_eq!(a.run, c.run);
             // adequacy counts the first sample too, coverage does not
-            assert!((a.inside_p95 - c.inside_p95).abs() <= 1.0 / c.samples as f64, "{} vs {}", a.inside_p95, c.inside_p95);
+            assert!(
+                (a.inside_p95 - c.inside_p95).abs() <= 1.0 / c.samples as f64,
+                "{} vs {}",
+                a.inside_p95,
+                c.inside_p95
+            );
         }
 
-        let identification = store::identification::read(&dir.join(store::identification::FILE)).unwrap();
-        let g = identification.iter().find(|r| r.run == "all" && r.parameter == "G").expect("the combined G");
+        let identification =
+            store::identification::read(&dir.join(store::identification::FILE)).unwrap();
+        let g = identification
+            .iter()
+            .find(|r| r.run == "all" && r.parameter == "G")
+            .expect("the combined G");
         assert_eq!(g.value, cal.record.identification["G"]);
 
         let stored = store::inference::read(&dir.join(store::inference::FILE)).unwrap();
@@ -61,7 +87,8 @@ fn every_file_reads_back_and_agrees_with_the_others() {
     }
 
     let comparison = store::comparison::read(&out.path().join("comparison")).unwrap();
-    let calibrations: std::collections::BTreeSet<&str> = comparison.rows.iter().map(|r| r.calibration.as_str()).collect();
+    let calibrations: std::collections::BTreeSet<&str> =
+        comparison.rows.iter().map(|r| r.calibration.as_str()).collect();
     assert_eq!(calibrations.into_iter().collect::<Vec<_>>(), ["I0.5A", "I1.0A"]);
     let r0 = comparison.differences.iter().find(|d| d.parameter == "R0").expect("R0 compared");
     assert!((0.0..=1.0).contains(&r0.difference.p_greater));

@@ -19,7 +19,21 @@ fn text(o: &Output) -> String {
 
 /// Eight short replicate calibrations (one run, 1 kHz, fixed 150 steps).
 fn plan(dir: &Path) {
-    let o = mrbp(&["study", "plan", dir.to_str().unwrap(), "--replicates", "8", "--cycles", "1", "--rate", "1000", "--rpm", "200", "--steps", "150"]);
+    let o = mrbp(&[
+        "study",
+        "plan",
+        dir.to_str().unwrap(),
+        "--replicates",
+        "8",
+        "--cycles",
+        "1",
+        "--rate",
+        "1000",
+        "--rpm",
+        "200",
+        "--steps",
+        "150",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
 }
 
@@ -49,7 +63,21 @@ fn a_study_runs_here_once_per_task_and_collects_one_dataset() {
         let part = local.join(format!("collected/results/study=local/task=t00{k}/part-0.parquet"));
         let df = read_parquet(&part).unwrap();
         let names = column_names(&df);
-        for c in ["parameter", "mean", "sd", "truth", "z", "inside_50", "inside_90", "rank", "rank_draws", "seed", "seconds", "steps", "warnings"] {
+        for c in [
+            "parameter",
+            "mean",
+            "sd",
+            "truth",
+            "z",
+            "inside_50",
+            "inside_90",
+            "rank",
+            "rank_draws",
+            "seed",
+            "seconds",
+            "steps",
+            "warnings",
+        ] {
             assert!(names.contains(&c.to_string()), "{c} missing: {names:?}");
         }
         let params = str_column(&df, "parameter", &part).unwrap();
@@ -67,22 +95,47 @@ fn a_study_runs_here_once_per_task_and_collects_one_dataset() {
     let cluster = root.path().join("cluster");
     plan(&cluster);
     let mrbp_path = Path::new(env!("CARGO_BIN_EXE_mrbp"));
-    common::python_check("dask_loopback_check.py", &[mrbp_path, &local, &cluster], "dask.distributed, pandas, pyarrow", "MRBP_DASK_CHECK");
+    common::python_check(
+        "dask_loopback_check.py",
+        &[mrbp_path, &local, &cluster],
+        "dask.distributed, pandas, pyarrow",
+        "MRBP_DASK_CHECK",
+    );
 }
 
 #[test]
 fn study_commands_refuse_what_is_not_a_study() {
     let empty = tempfile::tempdir().unwrap();
-    for args in [vec!["study", "run-task", empty.path().to_str().unwrap(), "t000"], vec!["study", "collect", empty.path().to_str().unwrap()]] {
+    for args in [
+        vec!["study", "run-task", empty.path().to_str().unwrap(), "t000"],
+        vec!["study", "collect", empty.path().to_str().unwrap()],
+    ] {
         let o = mrbp(&args);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
         assert!(text(&o).contains("mrbp study plan"), "{}", text(&o));
     }
-    let o = mrbp(&["study", "plan", empty.path().join("s").to_str().unwrap(), "--replicates", "2", "--resume"]);
+    let o = mrbp(&[
+        "study",
+        "plan",
+        empty.path().join("s").to_str().unwrap(),
+        "--replicates",
+        "2",
+        "--resume",
+    ]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     // --seed is the sampler's, --noise-seed the stand's, each + k for task k
     let seeded = empty.path().join("seeded");
-    let o = mrbp(&["study", "plan", seeded.to_str().unwrap(), "--replicates", "2", "--seed", "10", "--noise-seed", "500"]);
+    let o = mrbp(&[
+        "study",
+        "plan",
+        seeded.to_str().unwrap(),
+        "--replicates",
+        "2",
+        "--seed",
+        "10",
+        "--noise-seed",
+        "500",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let task = std::fs::read_to_string(seeded.join("tasks/t001/task.toml")).unwrap();
     assert!(task.contains("seed = 11\n") && task.contains("seed = 501\n"), "{task}");
@@ -97,7 +150,21 @@ fn study_commands_refuse_what_is_not_a_study() {
 fn the_slurm_array_script_runs_the_task_of_its_index() {
     let root = tempfile::tempdir().unwrap();
     let dir = root.path().join("s");
-    let o = mrbp(&["study", "plan", dir.to_str().unwrap(), "--replicates", "2", "--cycles", "1", "--rate", "1000", "--rpm", "200", "--steps", "60"]);
+    let o = mrbp(&[
+        "study",
+        "plan",
+        dir.to_str().unwrap(),
+        "--replicates",
+        "2",
+        "--cycles",
+        "1",
+        "--rate",
+        "1000",
+        "--rpm",
+        "200",
+        "--steps",
+        "60",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/slurm_study.sh");
     let element = |index: &str| {
@@ -112,7 +179,9 @@ fn the_slurm_array_script_runs_the_task_of_its_index() {
     };
     let o = element("2");
     assert!(o.status.success(), "{}", text(&o));
-    assert!(dir.join("tasks/t001/status.toml").exists() && !dir.join("tasks/t000/status.toml").exists());
+    assert!(
+        dir.join("tasks/t001/status.toml").exists() && !dir.join("tasks/t000/status.toml").exists()
+    );
     let o = element("3");
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
 }
@@ -125,16 +194,41 @@ fn the_slurm_array_script_runs_the_task_of_its_index() {
 fn sbc_with_the_discrepancy_model_draws_each_runs_discrepancy() {
     let root = tempfile::tempdir().unwrap();
     let dir = root.path().join("sbc");
-    let o = mrbp(&["study", "plan", dir.to_str().unwrap(), "--sbc", "4", "--noise", "discrepancy", "--rpm", "100,400", "--rate", "1000"]);
+    let o = mrbp(&[
+        "study",
+        "plan",
+        dir.to_str().unwrap(),
+        "--sbc",
+        "4",
+        "--noise",
+        "discrepancy",
+        "--rpm",
+        "100,400",
+        "--rate",
+        "1000",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let mut times = Vec::new();
     for k in 0..4 {
-        let spec: toml::Value = toml::from_str(&std::fs::read_to_string(dir.join(format!("tasks/t00{k}/task.toml"))).unwrap()).unwrap();
+        let spec: toml::Value = toml::from_str(
+            &std::fs::read_to_string(dir.join(format!("tasks/t00{k}/task.toml"))).unwrap(),
+        )
+        .unwrap();
         let synth = &spec["source"]["synth"];
         let area = synth["geometry"]["area_m2"].as_float().unwrap();
         let extra = &synth["extra_force"];
-        let sd: Vec<f64> = extra["smooth_sd_n"].as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
-        let ell: Vec<f64> = extra["smooth_time_s"].as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+        let sd: Vec<f64> = extra["smooth_sd_n"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_float().unwrap())
+            .collect();
+        let ell: Vec<f64> = extra["smooth_time_s"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_float().unwrap())
+            .collect();
         assert_eq!((sd.len(), ell.len()), (2, 2));
         assert_eq!(extra["viscous_n_s_per_m"].as_float(), Some(0.0));
         for (i, rpm) in [100.0, 400.0].iter().enumerate() {

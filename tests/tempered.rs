@@ -20,7 +20,11 @@ fn campaign(seed: u64, smooth_n: f64) -> (tempfile::TempDir, Campaign) {
         cycles: 1.0,
         rate_hz: 2000.0,
         seed,
-        extra_force: ExtraForce { smooth_sd_n: vec![smooth_n], smooth_time_s: vec![0.02], ..ExtraForce::default() },
+        extra_force: ExtraForce {
+            smooth_sd_n: vec![smooth_n],
+            smooth_time_s: vec![0.02],
+            ..ExtraForce::default()
+        },
         ..SynthSettings::default()
     };
     write_campaign(&settings, dir.path()).unwrap();
@@ -40,7 +44,8 @@ fn each_run_counts_once_per_memory_time() {
     assert!(ids.len() >= 3);
     let mut tempered = settings.clone();
     tempered.likelihood.memory = Memory::Tempered;
-    tempered.likelihood.memory_times = BTreeMap::from([(ids[0].clone(), 4.0), (ids[1].clone(), 2.5)]);
+    tempered.likelihood.memory_times =
+        BTreeMap::from([(ids[0].clone(), 4.0), (ids[1].clone(), 2.5)]);
     let post = tempered.posterior(&campaign, Integrator::default());
     let x = &map.x;
     let own: Vec<f64> = post
@@ -51,12 +56,23 @@ fn each_run_counts_once_per_memory_time() {
             let l = &post.layout;
             let coordinates = std::array::from_fn(|_| l.noise_values(x, j));
             let terms = std::array::from_fn(|_| l.terms(x, j));
-            run_log_likelihood(post.noise.as_ref(), &post.integrator, run, &post.lane_params(&[x], run), &coordinates, terms)[0].unwrap()
+            run_log_likelihood(
+                post.noise.as_ref(),
+                &post.integrator,
+                run,
+                &post.lane_params(&[x], run),
+                &coordinates,
+                terms,
+            )[0]
+            .unwrap()
         })
         .collect();
     let want = post.log_prior(x) + own[0] / 4.0 + own[1] / 2.5 + own[2..].iter().sum::<f64>();
     let got = post.log_density(x);
-    assert!((got - want).abs() < 1e-9 * want.abs(), "tempered log-density {got}, prior plus weighted runs {want}");
+    assert!(
+        (got - want).abs() < 1e-9 * want.abs(),
+        "tempered log-density {got}, prior plus weighted runs {want}"
+    );
     // and the independent posterior is the same with every weight 1
     let independent = settings.posterior(&campaign, Integrator::default());
     let all = independent.log_prior(x) + own.iter().sum::<f64>();
@@ -86,19 +102,27 @@ fn tempering_widens_by_the_root_of_the_memory_time() {
     let cal = calibrate(&white, &quick(Memory::Tempered)).unwrap();
     let times = &cal.calibration.settings.likelihood.memory_times;
     assert_eq!(times.len(), white.runs.len());
-    assert!(times.values().all(|k| (1.0..1.5).contains(k)), "white residuals: memory times {times:?}");
+    assert!(
+        times.values().all(|k| (1.0..1.5).contains(k)),
+        "white residuals: memory times {times:?}"
+    );
 
     let (_s, smooth) = campaign(11, 80.0);
     let independent = calibrate(&smooth, &quick(Memory::Independent)).unwrap();
-    assert!(!independent.start.warnings.is_empty(), "the premise: the independent model warns of memory");
+    assert!(
+        !independent.start.warnings.is_empty(),
+        "the premise: the independent model warns of memory"
+    );
     let tempered = calibrate(&smooth, &quick(Memory::Tempered)).unwrap();
     assert!(tempered.start.warnings.is_empty(), "{:?}", tempered.start.warnings);
-    let times: Vec<f64> = tempered.calibration.settings.likelihood.memory_times.values().copied().collect();
+    let times: Vec<f64> =
+        tempered.calibration.settings.likelihood.memory_times.values().copied().collect();
     let (lo, hi) = times.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &k| (a.min(k), b.max(k)));
     assert!(lo > 5.0, "a 20 ms force at 2 kHz: memory times {times:?}");
     let mut determined = 0;
     for (i, name) in ["G", "R0", "R1", "D1", "m1", "m2", "n"].iter().enumerate() {
-        let ratio = tempered.diagnostics.coordinates[i].sd / independent.diagnostics.coordinates[i].sd;
+        let ratio =
+            tempered.diagnostics.coordinates[i].sd / independent.diagnostics.coordinates[i].sd;
         // a parameter the records do not determine (R1 on one revolution:
         // its sd the prior's) cannot widen past its prior
         let ind = &independent.diagnostics.coordinates[i];
@@ -106,11 +130,21 @@ fn tempering_widens_by_the_root_of_the_memory_time() {
             continue;
         }
         determined += 1;
-        assert!(ratio > 0.7 * lo.sqrt(), "{name}: sd ratio {ratio:.2}, √k {:.2}–{:.2}", lo.sqrt(), hi.sqrt());
+        assert!(
+            ratio > 0.7 * lo.sqrt(),
+            "{name}: sd ratio {ratio:.2}, √k {:.2}–{:.2}",
+            lo.sqrt(),
+            hi.sqrt()
+        );
         // G and n stay in the linear regime; the hardening parameters, once
         // widened, reach the law's curved ridges (R0 with m1) and widen more
         if ["G", "n"].contains(name) {
-            assert!(ratio < 1.3 * hi.sqrt(), "{name}: sd ratio {ratio:.2}, √k {:.2}–{:.2}", lo.sqrt(), hi.sqrt());
+            assert!(
+                ratio < 1.3 * hi.sqrt(),
+                "{name}: sd ratio {ratio:.2}, √k {:.2}–{:.2}",
+                lo.sqrt(),
+                hi.sqrt()
+            );
         }
     }
     assert!(determined >= 3, "only {determined} parameters determined by the records");

@@ -42,7 +42,12 @@ impl Python_ {
         let (ess, r_hat) = self.checked.map_or((None, None), |(e, r)| (Some(e), Some(r)));
         let rate = self.accepted as f64 / state.chains.chains().max(1) as f64;
         let called = Python::attach(|py| {
-            callback.call1(py, (stage, state.step, state.max_steps, ess, state.min_ess, r_hat, rate)).map(|_| ()).map_err(|e| e.is_instance_of::<PyKeyboardInterrupt>(py).then_some(()).ok_or(e.to_string()))
+            callback
+                .call1(py, (stage, state.step, state.max_steps, ess, state.min_ess, r_hat, rate))
+                .map(|_| ())
+                .map_err(|e| {
+                    e.is_instance_of::<PyKeyboardInterrupt>(py).then_some(()).ok_or(e.to_string())
+                })
         });
         match called {
             Ok(()) => Ok(()),
@@ -125,21 +130,44 @@ pub(crate) fn calibrate(
 ) -> PyResult<Calibration> {
     let value = |v: Option<String>| v.map(|s| s.trim().to_string()).filter(|s| !s.is_empty());
     let model = match value(model) {
-        Some(m) => Some(ModelKind::from_str(&m, true).map_err(|_| PyValueError::new_err(format!("model {m:?}: one of 'per-current', 'current-law', 'current-curves'")))?),
+        Some(m) => Some(ModelKind::from_str(&m, true).map_err(|_| {
+            PyValueError::new_err(format!(
+                "model {m:?}: one of 'per-current', 'current-law', 'current-curves'"
+            ))
+        })?),
         None => None,
     };
     let noise = match value(noise) {
         Some(n) => Some(mrbp::noise::NoiseKind::from_str(&n, true).map_err(|_| {
-            let names: Vec<String> = mrbp::noise::NoiseKind::value_variants().iter().filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_string())).collect();
+            let names: Vec<String> = mrbp::noise::NoiseKind::value_variants()
+                .iter()
+                .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_string()))
+                .collect();
             PyValueError::new_err(format!("noise {n:?}: one of {}", names.join(", ")))
         })?),
         None => None,
     };
     let memory = match value(memory) {
-        Some(m) => Some(mrbp::posterior::Memory::from_str(&m, true).map_err(|_| PyValueError::new_err(format!("memory {m:?}: one of 'independent', 'tempered', 'adjusted'")))?),
+        Some(m) => Some(mrbp::posterior::Memory::from_str(&m, true).map_err(|_| {
+            PyValueError::new_err(format!(
+                "memory {m:?}: one of 'independent', 'tempered', 'adjusted'"
+            ))
+        })?),
         None => None,
     };
-    let overrides = Overrides { config, model, walkers, ensembles, steps, seed, noise, memory, exact_input, substeps, ..Default::default() };
+    let overrides = Overrides {
+        config,
+        model,
+        walkers,
+        ensembles,
+        steps,
+        seed,
+        noise,
+        memory,
+        exact_input,
+        substeps,
+        ..Default::default()
+    };
     let settings = overrides.settings().map_err(raise)?;
     let all = campaign.inner.clone();
     let group = if settings.parameter_model().is_current_law() {
@@ -150,17 +178,34 @@ pub(crate) fn calibrate(
     } else {
         let currents = all.currents();
         let c = match (current, currents.as_slice()) {
-            (Some(c), _) if !currents.iter().any(|h| same_current(*h, c)) => return Err(PyValueError::new_err(format!("current {c}: the campaign has runs at {currents:?} A"))),
+            (Some(c), _) if !currents.iter().any(|h| same_current(*h, c)) => {
+                return Err(PyValueError::new_err(format!(
+                    "current {c}: the campaign has runs at {currents:?} A"
+                )))
+            }
             (Some(c), _) => c,
             (None, [only]) => *only,
-            (None, _) => return Err(PyValueError::new_err(format!("current: the campaign has runs at {currents:?} A; say which to calibrate"))),
+            (None, _) => {
+                return Err(PyValueError::new_err(format!(
+                    "current: the campaign has runs at {currents:?} A; say which to calibrate"
+                )))
+            }
         };
         all.at_current(c)
     };
     group.require_usable("the calibration").map_err(raise)?;
     let resume_from = match (&checkpoint, resume) {
-        (None, true) => return Err(PyValueError::new_err("resume: say which checkpoint to continue (checkpoint='the file')")),
-        (Some(path), true) if !path.exists() => return Err(PyValueError::new_err(format!("resume: no checkpoint at {}", path.display()))),
+        (None, true) => {
+            return Err(PyValueError::new_err(
+                "resume: say which checkpoint to continue (checkpoint='the file')",
+            ))
+        }
+        (Some(path), true) if !path.exists() => {
+            return Err(PyValueError::new_err(format!(
+                "resume: no checkpoint at {}",
+                path.display()
+            )))
+        }
         (Some(path), true) => {
             mrbp::pipeline::check_resumable(path, &settings).map_err(raise)?;
             Some(path.clone())
@@ -170,14 +215,20 @@ pub(crate) fn calibrate(
     let made = py
         .detach(move || {
             let start = mrbp::calibrate::start(&group, &settings, &mut |_| {})?;
-            let mut observer = Python_ { progress, checkpoint: checkpoint.clone(), checked: None, accepted: 0 };
+            let mut observer =
+                Python_ { progress, checkpoint: checkpoint.clone(), checked: None, accepted: 0 };
             // the state every 100 steps, beside the one saved at Ctrl-C
-            let mut checkpointer = checkpoint.as_ref().map(|path| Checkpointer { path: path.clone(), every: mrbp::pipeline::CHECKPOINT_EVERY, stop: || false });
+            let mut checkpointer = checkpoint.as_ref().map(|path| Checkpointer {
+                path: path.clone(),
+                every: mrbp::pipeline::CHECKPOINT_EVERY,
+                stop: || false,
+            });
             let mut observers: Vec<&mut dyn Observer> = vec![&mut observer];
             if let Some(c) = checkpointer.as_mut() {
                 observers.push(c);
             }
-            let made = mrbp::calibrate::sample(&group, start, resume_from.as_ref(), &mut observers)?;
+            let made =
+                mrbp::calibrate::sample(&group, start, resume_from.as_ref(), &mut observers)?;
             if let Some(path) = &checkpoint {
                 // the chains are whole in the calibration returned: the checkpoint has done its job
                 let _ = std::fs::remove_file(path);

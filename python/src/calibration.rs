@@ -29,7 +29,9 @@ impl Calibration {
     /// Reads the calibration folder of `mrbp sample` or `mrbp run`.
     #[staticmethod]
     fn load(folder: PathBuf) -> PyResult<Calibration> {
-        mrbp::store::folder::read(&folder).map(|inner| Calibration { inner, made: None }).map_err(raise)
+        mrbp::store::folder::read(&folder)
+            .map(|inner| Calibration { inner, made: None })
+            .map_err(raise)
     }
 
     /// The summary's columns, as `summary.parquet` holds them.
@@ -45,15 +47,33 @@ impl Calibration {
     /// A law's B-P parameters against the coil current, as
     /// `against_current.parquet` holds them: parameter, kind, and the
     /// current and statistics columns; None for a calibration at one current.
-    fn against_current<'py>(&self, py: Python<'py>) -> Option<(Vec<String>, Vec<String>, Arrays<'py>)> {
+    fn against_current<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> Option<(Vec<String>, Vec<String>, Arrays<'py>)> {
         let cal = &self.inner;
         if !cal.is_current_law() {
             return None;
         }
-        let rows = mrbp::compare::against_current(&cal.sample, &cal.draw_positions(mrbp::store::folder::CURRENT_DRAWS), &cal.record.currents);
+        let rows = mrbp::compare::against_current(
+            &cal.sample,
+            &cal.draw_positions(mrbp::store::folder::CURRENT_DRAWS),
+            &cal.record.currents,
+        );
         let f = |g: fn(&mrbp::compare::CurrentRow) -> f64| rows.iter().map(g).collect::<Vec<f64>>();
-        let columns = vec![("current_a", f(|r| r.current_a)), ("mean", f(|r| r.mean)), ("sd", f(|r| r.sd)), ("q05", f(|r| r.q05)), ("q50", f(|r| r.q50)), ("q95", f(|r| r.q95))];
-        Some((rows.iter().map(|r| r.parameter.clone()).collect(), rows.iter().map(|r| r.kind.name().to_string()).collect(), arrays(py, columns)))
+        let columns = vec![
+            ("current_a", f(|r| r.current_a)),
+            ("mean", f(|r| r.mean)),
+            ("sd", f(|r| r.sd)),
+            ("q05", f(|r| r.q05)),
+            ("q50", f(|r| r.q50)),
+            ("q95", f(|r| r.q95)),
+        ];
+        Some((
+            rows.iter().map(|r| r.parameter.clone()).collect(),
+            rows.iter().map(|r| r.kind.name().to_string()).collect(),
+            arrays(py, columns),
+        ))
     }
 
     /// Every walker's every step, as `chains.parquet` holds them: the
@@ -61,7 +81,8 @@ impl Calibration {
     /// coordinates with log_prob.
     fn chain_columns<'py>(&self, py: Python<'py>) -> ChainColumns<'py> {
         let c = mrbp::store::chains::columns(&self.inner.sample);
-        let bookkeeping = c.bookkeeping.into_iter().map(|(n, v)| (n, PyArray1::from_vec(py, v))).collect();
+        let bookkeeping =
+            c.bookkeeping.into_iter().map(|(n, v)| (n, PyArray1::from_vec(py, v))).collect();
         (bookkeeping, arrays(py, c.values), PyArray1::from_vec(py, c.accepted))
     }
 
@@ -85,7 +106,13 @@ impl Calibration {
     /// Warnings of the sampler and of the model's fit.
     #[getter]
     fn warnings(&self) -> Vec<String> {
-        self.inner.record.warnings.iter().chain(&self.inner.record.model_warnings).cloned().collect()
+        self.inner
+            .record
+            .warnings
+            .iter()
+            .chain(&self.inner.record.model_warnings)
+            .cloned()
+            .collect()
     }
 
     /// The folder it was read from or saved to, if any.
@@ -100,14 +127,23 @@ impl Calibration {
     #[pyo3(signature = (folder, force = false))]
     fn save(&mut self, py: Python<'_>, folder: PathBuf, force: bool) -> PyResult<()> {
         let Some((campaign, identification)) = &self.made else {
-            return Err(PyValueError::new_err(format!("this calibration was read from {}: it is saved there already", self.inner.dir.display())));
+            return Err(PyValueError::new_err(format!(
+                "this calibration was read from {}: it is saved there already",
+                self.inner.dir.display()
+            )));
         };
         let cal = self.inner.clone();
         let (campaign, identification) = (campaign.clone(), identification.clone());
         let saved = py
             .detach(move || {
                 let mut quiet = |_: mrbp::pipeline::Event<'_>| {};
-                mrbp::pipeline::Pipeline::new(&mut quiet, false).save(&campaign, &folder, cal, &identification, force)
+                mrbp::pipeline::Pipeline::new(&mut quiet, false).save(
+                    &campaign,
+                    &folder,
+                    cal,
+                    &identification,
+                    force,
+                )
             })
             .map_err(raise)?;
         self.inner = saved;
@@ -134,12 +170,32 @@ impl Calibration {
         let cal = self.inner.clone();
         let (time, displacement) = (values(&time)?, values(&displacement)?);
         let n = time.len();
-        let record = Record { time, displacement, force: vec![f64::NAN; n], current: current_column.map(|c| values(&c)).transpose()? };
+        let record = Record {
+            time,
+            displacement,
+            force: vec![f64::NAN; n],
+            current: current_column.map(|c| values(&c)).transpose()?,
+        };
         let options = mrbp::pipeline::PredictOptions { draws, replicates, seed };
         let (made, notes) = py
-            .detach(move || noted(|p| p.simulation(&cal, std::path::Path::new("excitation"), record, current, &options, None)))
+            .detach(move || {
+                noted(|p| {
+                    p.simulation(
+                        &cal,
+                        std::path::Path::new("excitation"),
+                        record,
+                        current,
+                        &options,
+                        None,
+                    )
+                })
+            })
             .map_err(raise)?;
-        Ok((arrays(py, mrbp::store::simulation::columns(&made)), notes, self.inner.draw_positions(draws)))
+        Ok((
+            arrays(py, mrbp::store::simulation::columns(&made)),
+            notes,
+            self.inner.draw_positions(draws),
+        ))
     }
 
     /// The bands of the calibration's runs (`mrbp predict`): the bytes of
@@ -147,19 +203,31 @@ impl Calibration {
     /// name, the runs that could not be predicted (id, why), and the notes.
     #[pyo3(signature = (draws = 400, replicates = 10, seed = 1))]
     #[allow(clippy::type_complexity)]
-    fn predict<'py>(&self, py: Python<'py>, draws: usize, replicates: usize, seed: u64) -> PyResult<(Vec<(&'static str, Bound<'py, PyBytes>)>, Vec<(String, String)>, Vec<String>)> {
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        draws: usize,
+        replicates: usize,
+        seed: u64,
+    ) -> PyResult<(Vec<(&'static str, Bound<'py, PyBytes>)>, Vec<(String, String)>, Vec<String>)>
+    {
         let cal = self.inner.clone();
         let campaign = self.campaign()?;
         let options = mrbp::pipeline::PredictOptions { draws, replicates, seed };
         let ((tables, failed), notes) = py
             .detach(move || {
                 noted(|pipeline| {
-                    let (prediction, failed) = pipeline.own_prediction(&cal, &campaign, &options)?;
+                    let (prediction, failed) =
+                        pipeline.own_prediction(&cal, &campaign, &options)?;
                     Ok((mrbp::store::prediction::tables(&prediction)?, failed))
                 })
             })
             .map_err(raise)?;
-        Ok((tables.into_iter().map(|(name, b)| (name, PyBytes::new(py, &b))).collect(), failed, notes))
+        Ok((
+            tables.into_iter().map(|(name, b)| (name, PyBytes::new(py, &b))).collect(),
+            failed,
+            notes,
+        ))
     }
 
     /// The calibration as ArviZ's InferenceData, in memory (what
@@ -168,11 +236,18 @@ impl Calibration {
     /// values or a list of strings, attributes as JSON); with the notes.
     #[pyo3(signature = (seed = 1))]
     #[allow(clippy::type_complexity)]
-    fn inference_data<'py>(&self, py: Python<'py>, seed: u64) -> PyResult<(String, Vec<(&'static str, String, Vec<DataNode<'py>>)>, Vec<String>)> {
+    fn inference_data<'py>(
+        &self,
+        py: Python<'py>,
+        seed: u64,
+    ) -> PyResult<(String, Vec<(&'static str, String, Vec<DataNode<'py>>)>, Vec<String>)> {
         let cal = self.inner.clone();
         let campaign = self.campaign()?;
-        let (data, notes) = py.detach(move || noted(|p| p.inference_data(&cal, &campaign, seed))).map_err(raise)?;
-        let json = |m: &serde_json::Map<String, serde_json::Value>| serde_json::Value::Object(m.clone()).to_string();
+        let (data, notes) =
+            py.detach(move || noted(|p| p.inference_data(&cal, &campaign, seed))).map_err(raise)?;
+        let json = |m: &serde_json::Map<String, serde_json::Value>| {
+            serde_json::Value::Object(m.clone()).to_string()
+        };
         let mut groups = Vec::new();
         for g in data.groups {
             let mut nodes = Vec::new();
@@ -193,7 +268,11 @@ impl Calibration {
     }
 
     fn __repr__(&self) -> String {
-        let label = if self.inner.dir.as_os_str().is_empty() { "in memory".to_string() } else { self.inner.label() };
+        let label = if self.inner.dir.as_os_str().is_empty() {
+            "in memory".to_string()
+        } else {
+            self.inner.label()
+        };
         format!("Calibration({label}, max R̂ {:.4})", self.inner.max_rhat())
     }
 }

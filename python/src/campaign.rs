@@ -21,7 +21,9 @@ impl Campaign {
     /// Reads a campaign manifest and its data files, as `mrbp check` does.
     #[staticmethod]
     fn load(manifest: PathBuf) -> PyResult<Campaign> {
-        mrbp::data::Campaign::load(&manifest).map(|c| Campaign { inner: Arc::new(c) }).map_err(raise)
+        mrbp::data::Campaign::load(&manifest)
+            .map(|c| Campaign { inner: Arc::new(c) })
+            .map_err(raise)
     }
 
     /// A campaign from arrays in SI units: `runs` holds, per run, its id,
@@ -34,17 +36,37 @@ impl Campaign {
         name: String,
         area_m2: f64,
         gap_m: f64,
-        runs: Vec<(String, f64, PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>, Option<PyReadonlyArray1<'_, f64>>)>,
+        runs: Vec<(
+            String,
+            f64,
+            PyReadonlyArray1<'_, f64>,
+            PyReadonlyArray1<'_, f64>,
+            PyReadonlyArray1<'_, f64>,
+            Option<PyReadonlyArray1<'_, f64>>,
+        )>,
     ) -> PyResult<Campaign> {
         let mut specs = Vec::new();
         let mut records = Vec::new();
         for (id, current_a, time, displacement, force, current) in runs {
             let current = current.map(|c| values(&c)).transpose()?;
-            records.push(Record { time: values(&time)?, displacement: values(&displacement)?, force: values(&force)?, current });
+            records.push(Record {
+                time: values(&time)?,
+                displacement: values(&displacement)?,
+                force: values(&force)?,
+                current,
+            });
             specs.push(RunSpec::new(id.clone(), PathBuf::from(format!("{id}.csv")), current_a));
         }
-        let manifest = Manifest { name, geometry: Geometry { area_m2, gap_m }, columns: Default::default(), limits: Default::default(), runs: specs };
-        mrbp::data::Campaign::from_records(manifest, records).map(|c| Campaign { inner: Arc::new(c) }).map_err(raise)
+        let manifest = Manifest {
+            name,
+            geometry: Geometry { area_m2, gap_m },
+            columns: Default::default(),
+            limits: Default::default(),
+            runs: specs,
+        };
+        mrbp::data::Campaign::from_records(manifest, records)
+            .map(|c| Campaign { inner: Arc::new(c) })
+            .map_err(raise)
     }
 
     #[getter]
@@ -71,6 +93,11 @@ impl Campaign {
     }
 
     fn __repr__(&self) -> String {
-        format!("Campaign({:?}: {} runs at {:?} A)", self.inner.name, self.inner.runs.len(), self.inner.currents())
+        format!(
+            "Campaign({:?}: {} runs at {:?} A)",
+            self.inner.name,
+            self.inner.runs.len(),
+            self.inner.currents()
+        )
     }
 }

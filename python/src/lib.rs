@@ -31,11 +31,16 @@ pub(crate) fn raise(e: Error) -> PyErr {
 /// A contiguous float64 NumPy array's values, read in place (one copy into
 /// the record Rust owns).
 pub(crate) fn values(a: &PyReadonlyArray1<'_, f64>) -> PyResult<Vec<f64>> {
-    a.as_slice().map(<[f64]>::to_vec).map_err(|_| PyValueError::new_err("an array must be contiguous float64 (numpy.ascontiguousarray)"))
+    a.as_slice().map(<[f64]>::to_vec).map_err(|_| {
+        PyValueError::new_err("an array must be contiguous float64 (numpy.ascontiguousarray)")
+    })
 }
 
 /// Named NumPy arrays, handed over without a copy.
-pub(crate) fn arrays<'py, N: Into<String>>(py: Python<'py>, columns: Vec<(N, Vec<f64>)>) -> Vec<(String, Bound<'py, PyArray1<f64>>)> {
+pub(crate) fn arrays<'py, N: Into<String>>(
+    py: Python<'py>,
+    columns: Vec<(N, Vec<f64>)>,
+) -> Vec<(String, Bound<'py, PyArray1<f64>>)> {
     columns.into_iter().map(|(name, v)| (name.into(), PyArray1::from_vec(py, v))).collect()
 }
 
@@ -44,14 +49,17 @@ pub(crate) type Arrays<'py> = Vec<(String, Bound<'py, PyArray1<f64>>)>;
 
 /// The columns of `chains.parquet`: integer bookkeeping, the coordinates
 /// with log_prob, and `accepted`.
-pub(crate) type ChainColumns<'py> = (Vec<(&'static str, Bound<'py, PyArray1<i64>>)>, Arrays<'py>, Bound<'py, PyArray1<bool>>);
+pub(crate) type ChainColumns<'py> =
+    (Vec<(&'static str, Bound<'py, PyArray1<i64>>)>, Arrays<'py>, Bound<'py, PyArray1<bool>>);
 
 /// One array of an InferenceData group: name, dimensions, values, and
 /// attributes as JSON.
 pub(crate) type DataNode<'py> = (String, Vec<(&'static str, usize)>, Bound<'py, PyAny>, String);
 
 /// Runs `work` on a quiet pipeline whose notes it keeps.
-pub(crate) fn noted<T>(work: impl FnOnce(&mut mrbp::pipeline::Pipeline<'_>) -> mrbp::Result<T>) -> mrbp::Result<(T, Vec<String>)> {
+pub(crate) fn noted<T>(
+    work: impl FnOnce(&mut mrbp::pipeline::Pipeline<'_>) -> mrbp::Result<T>,
+) -> mrbp::Result<(T, Vec<String>)> {
     let mut notes = Vec::new();
     let made = {
         let mut listen = |e: mrbp::pipeline::Event<'_>| {

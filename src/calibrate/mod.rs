@@ -27,8 +27,10 @@ use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
 pub use record::{command_line, CalibrationRecord, StepRow};
 pub use sampling::Sampled;
-pub use start::{confounding_warning, start, Start, CONFOUNDING_RATIO, MEMORY_REMEDY, MEMORY_WARNING};
 pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
+pub use start::{
+    confounding_warning, start, Start, CONFOUNDING_RATIO, MEMORY_REMEDY, MEMORY_WARNING,
+};
 
 /// A calibration: its settings, what it did, its posterior sample and
 /// summary. What `predict`, `report`, `compare`, leave-one-out and studies
@@ -63,7 +65,10 @@ impl Calibration {
 
     /// A short name for tables and legends: the folder's name.
     pub fn label(&self) -> String {
-        self.dir.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_else(|| self.dir.display().to_string())
+        self.dir
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_else(|| self.dir.display().to_string())
     }
 
     /// The campaign's runs that this calibration used.
@@ -87,13 +92,23 @@ impl Calibration {
         if !manifest.exists() {
             return Err(Error::input(
                 self.dir.join("calibration.toml"),
-                format!("the campaign manifest {} it names is not there any more", manifest.display()),
+                format!(
+                    "the campaign manifest {} it names is not there any more",
+                    manifest.display()
+                ),
             ));
         }
         let campaign = Campaign::load(&manifest)?;
         let used = self.used_runs(&campaign);
         if used.runs.len() != self.record.runs.len() {
-            return Err(Error::input(&manifest, format!("does not hold every run of the calibration in {}: {:?}", self.dir.display(), self.record.runs)));
+            return Err(Error::input(
+                &manifest,
+                format!(
+                    "does not hold every run of the calibration in {}: {:?}",
+                    self.dir.display(),
+                    self.record.runs
+                ),
+            ));
         }
         Ok(campaign)
     }
@@ -101,7 +116,9 @@ impl Calibration {
     /// The campaign's geometry: from calibration.toml, or (folders written
     /// before it was stored there) from the manifest it names.
     pub fn geometry(&self) -> Option<Geometry> {
-        self.record.geometry.or_else(|| Manifest::read(Path::new(&self.record.manifest)).ok().map(|m| m.geometry))
+        self.record
+            .geometry
+            .or_else(|| Manifest::read(Path::new(&self.record.manifest)).ok().map(|m| m.geometry))
     }
 
     pub fn is_current_law(&self) -> bool {
@@ -110,7 +127,10 @@ impl Calibration {
 
     /// The lowest and highest current the calibration saw (A).
     pub fn current_range(&self) -> (f64, f64) {
-        self.record.currents.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)))
+        self.record
+            .currents
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)))
     }
 
     /// The largest R̂ and the smallest bulk or tail ESS of the summary.
@@ -158,7 +178,12 @@ pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings) -> Result<
 
 /// Samples the posterior from `start`: from walkers around the MAP, or from
 /// the checkpoint at `resume_from`. `observers` watch the sampler.
-pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBuf>, observers: &mut [&mut dyn Observer]) -> Result<Calibrated> {
+pub fn sample(
+    campaign: &Campaign,
+    mut start: Start,
+    resume_from: Option<&PathBuf>,
+    observers: &mut [&mut dyn Observer],
+) -> Result<Calibrated> {
     let posterior = &start.posterior;
     let s = &start.settings.sampler;
     let sampler_settings = s.sampler(s.walkers, s.seed);
@@ -172,10 +197,18 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
             // the start judged again, unobserved: a checkpoint saved before
             // the walkers started afresh about a higher mode is of a start
             // the run left, and the run goes on from the new one instead
-            let probed = probe::walkers_start(posterior, &start.map, sampler_settings, s.walkers * s.ensembles, &control, &mut [])?;
+            let probed = probe::walkers_start(
+                posterior,
+                &start.map,
+                sampler_settings,
+                s.walkers * s.ensembles,
+                &control,
+                &mut [],
+            )?;
             let resumed = Sampler::resume(posterior, path)?;
             let first = resumed.chains.chains() * resumed.chains.dim;
-            if resumed.chains.positions.get(..first) != probed.sampler.chains.positions.get(..first) {
+            if resumed.chains.positions.get(..first) != probed.sampler.chains.positions.get(..first)
+            {
                 probed
             } else if resumed.settings != probed.sampler.settings {
                 return Err(Error::input(path, "checkpoint of a sampler with other settings (walkers, ensembles, moves or seed)"));
@@ -183,7 +216,14 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
                 probe::Probed { sampler: resumed.with_reference(probed.laplace.clone()), ..probed }
             }
         }
-        None => probe::walkers_start(posterior, &start.map, sampler_settings, s.walkers * s.ensembles, &control, observers)?,
+        None => probe::walkers_start(
+            posterior,
+            &start.map,
+            sampler_settings,
+            s.walkers * s.ensembles,
+            &control,
+            observers,
+        )?,
     };
     // the Laplace approximation and the walkers' start (with its probe's
     // steps) count with the start
@@ -194,7 +234,11 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
     }
     let probe::Probed { mut sampler, map, higher, spread, .. } = probed;
     let mut sampled = sampling::run(posterior, &mut sampler, &control, s.burn_in, observers)?;
-    sampled.diagnostics.warnings.extend(probe::warnings(&higher, misfit, sampler.settings.moves != s.moves));
+    sampled.diagnostics.warnings.extend(probe::warnings(
+        &higher,
+        misfit,
+        sampler.settings.moves != s.moves,
+    ));
     start.settings.sampler.moves = sampler.settings.moves.clone();
     if let Some(map) = map {
         start.map = map;
@@ -202,7 +246,8 @@ pub fn sample(campaign: &Campaign, mut start: Start, resume_from: Option<&PathBu
     let mut record = CalibrationRecord::of(campaign, &start, walkers_start, spread, &sampled);
     if let Some(alone) = &start.law_alone_rms {
         let median: Vec<f64> = sampled.diagnostics.coordinates.iter().map(|c| c.q50).collect();
-        record.confounding = start::confounding(posterior, &posterior.layout.from_si(&median), alone);
+        record.confounding =
+            start::confounding(posterior, &posterior.layout.from_si(&median), alone);
     }
     let calibration = Calibration {
         dir: PathBuf::new(),

@@ -9,7 +9,9 @@
 
 use crate::error::Result;
 use crate::posterior::{map, mode, Posterior};
-use crate::sampler::{Chains, Elliptical, LogDensity, Move, Observer, RunControl, Sampler, SamplerSettings};
+use crate::sampler::{
+    Chains, Elliptical, LogDensity, Move, Observer, RunControl, Sampler, SamplerSettings,
+};
 
 /// The walkers' start, judged.
 pub(super) struct Probed<'t> {
@@ -61,12 +63,15 @@ pub(super) fn walkers_start<'t>(
     let mut new_map = None;
     loop {
         let init = map::initial_walkers(posterior, &laplace, count, settings.seed);
-        let mut sampler = Sampler::new(posterior, settings.clone(), &init)?.with_reference(laplace.clone());
+        let mut sampler =
+            Sampler::new(posterior, settings.clone(), &init)?.with_reference(laplace.clone());
         let spread = misfit(posterior, &sampler.chains, &laplace);
         if let Some(moves) = far(spread).and_then(|_| moves_far_from_laplace(&settings.moves)) {
             sampler.settings.moves = moves;
         }
-        let done = |sampler, laplace, new_map, higher| Ok(Probed { sampler, laplace, map: new_map, higher, spread });
+        let done = |sampler, laplace, new_map, higher| {
+            Ok(Probed { sampler, laplace, map: new_map, higher, spread })
+        };
         if higher.as_ref().is_some_and(|h| h.searches == MAX_SEARCHES) {
             return done(sampler, laplace, new_map, higher);
         }
@@ -74,7 +79,11 @@ pub(super) fn walkers_start<'t>(
             Some((found, better, better_top)) => {
                 let gain = higher.as_ref().map_or(0.0, |h| h.gain) + better_top - top;
                 let searches = higher.as_ref().map_or(0, |h| h.searches) + 1;
-                higher = Some(HigherGround { gain, searches, first_map: higher.map_or(map.log_density, |h| h.first_map) });
+                higher = Some(HigherGround {
+                    gain,
+                    searches,
+                    first_map: higher.map_or(map.log_density, |h| h.first_map),
+                });
                 new_map = Some(found);
                 (laplace, top) = (better, better_top);
             }
@@ -88,11 +97,16 @@ pub(super) fn walkers_start<'t>(
 /// in the anchored move's place (docs/performance.md, "A start far from
 /// equilibrium"); other moves, a user's choice, are kept (`None`).
 pub fn moves_far_from_laplace(moves: &[(Move, f64)]) -> Option<Vec<(Move, f64)>> {
-    (moves == super::settings::SamplingSettings::default().moves.as_slice()).then(|| vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)])
+    (moves == super::settings::SamplingSettings::default().moves.as_slice())
+        .then(|| vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)])
 }
 
 /// What the start's judgement tells the user.
-pub(super) fn warnings(higher: &Option<HigherGround>, misfit: Option<f64>, moves_changed: bool) -> Vec<String> {
+pub(super) fn warnings(
+    higher: &Option<HigherGround>,
+    misfit: Option<f64>,
+    moves_changed: bool,
+) -> Vec<String> {
     let mut out: Vec<String> = higher.iter().map(HigherGround::message).collect();
     out.extend(misfit.map(|m| far_message(m, moves_changed)));
     out
@@ -149,11 +163,17 @@ fn higher_ground(
     }
     let d = posterior.dim();
     let chains = &sampler.chains;
-    let (best, lp) = chains.log_prob.iter().enumerate().fold((0, f64::NEG_INFINITY), |b, (i, &v)| if v > b.1 { (i, v) } else { b });
+    let (best, lp) = chains
+        .log_prob
+        .iter()
+        .enumerate()
+        .fold((0, f64::NEG_INFINITY), |b, (i, &v)| if v > b.1 { (i, v) } else { b });
     if !(lp > top + HIGHER_GROUND) {
         return Ok(None);
     }
-    let Some(map) = map::refine(posterior, &chains.positions[best * d..(best + 1) * d]) else { return Ok(None) };
+    let Some(map) = map::refine(posterior, &chains.positions[best * d..(best + 1) * d]) else {
+        return Ok(None);
+    };
     let laplace = mode::laplace_from(posterior, &map);
     let new_top = posterior.log_density(laplace.mean.as_slice());
     Ok((new_top > top + HIGHER_GROUND).then_some((map, laplace, new_top)))
@@ -188,7 +208,10 @@ pub const FAR_TAU_MULTIPLE: f64 = 100.0;
 pub(super) fn laplace_misfit(chains: &Chains, laplace: &Elliptical) -> f64 {
     let d = chains.dim;
     let walkers = chains.chains();
-    spread((0..walkers).map(|c| chains.log_prob[c] - laplace.log_kernel(None, &chains.positions[c * d..(c + 1) * d], map::START_SPREAD)))
+    spread((0..walkers).map(|c| {
+        chains.log_prob[c]
+            - laplace.log_kernel(None, &chains.positions[c * d..(c + 1) * d], map::START_SPREAD)
+    }))
 }
 
 /// The sd of the finite values of ln p/q (0 with fewer than two).
@@ -225,12 +248,22 @@ fn misfit(posterior: &Posterior, chains: &Chains, laplace: &Elliptical) -> f64 {
         }
     }
     let lp = crate::sampler::density::log_densities(posterior, &points);
-    spread(points.chunks_exact(d).zip(lp).map(|(x, lp)| lp - q.log_kernel(None, &free.iter().map(|&i| x[i]).collect::<Vec<f64>>(), map::START_SPREAD)))
+    spread(points.chunks_exact(d).zip(lp).map(|(x, lp)| {
+        lp - q.log_kernel(
+            None,
+            &free.iter().map(|&i| x[i]).collect::<Vec<f64>>(),
+            map::START_SPREAD,
+        )
+    }))
 }
 
 /// The warning for a posterior far from its Laplace approximation.
 fn far_message(misfit: f64, moves_changed: bool) -> String {
-    let moves = if moves_changed { "the curved move walked in the anchored move's place, and " } else { "" };
+    let moves = if moves_changed {
+        "the curved move walked in the anchored move's place, and "
+    } else {
+        ""
+    };
     format!(
         "the posterior is far from its Laplace approximation at the mode (ln p/q over the initial walkers spreads by {misfit:.1} nats, above {FAR_FROM_LAPLACE}): walkers that start on that approximation fill a curved or skewed posterior slowly and together, which R̂ does not see, so {moves}the run went on to {FAR_TAU_MULTIPLE} τ after burn-in (docs/calibration.md, \"Convergence\")"
     )
@@ -249,18 +282,28 @@ mod tests {
     /// 5 se); and the walkers of later steps do not count.
     #[test]
     fn the_misfit_is_the_spread_of_ln_p_over_q() {
-        let q = Elliptical::new(Moments { mean: DVector::from_vec(vec![1.0, -2.0]), cov: DMatrix::from_row_slice(2, 2, &[2.0, 0.5, 0.5, 1.0]) }).unwrap();
+        let q = Elliptical::new(Moments {
+            mean: DVector::from_vec(vec![1.0, -2.0]),
+            cov: DMatrix::from_row_slice(2, 2, &[2.0, 0.5, 0.5, 1.0]),
+        })
+        .unwrap();
         let mut rng = crate::rng::stream(7, &[]);
         let n = 2000;
         let mut positions = vec![0.0; 2 * n];
         for p in positions.chunks_exact_mut(2) {
             q.draw(None, map::START_SPREAD, &mut rng, p);
         }
-        let exact: Vec<f64> = positions.chunks_exact(2).map(|x| 3.0 + q.log_kernel(None, x, map::START_SPREAD)).collect();
+        let exact: Vec<f64> = positions
+            .chunks_exact(2)
+            .map(|x| 3.0 + q.log_kernel(None, x, map::START_SPREAD))
+            .collect();
         let wider: Vec<f64> = positions
             .chunks_exact(2)
             .map(|x| {
-                let z = q.factor().solve_lower_triangular(&(DVector::from_column_slice(x) - &q.mean)).unwrap();
+                let z = q
+                    .factor()
+                    .solve_lower_triangular(&(DVector::from_column_slice(x) - &q.mean))
+                    .unwrap();
                 3.0 + q.log_kernel(None, x, map::START_SPREAD) + 0.5 * z[0] * z[0]
             })
             .collect();
@@ -270,7 +313,14 @@ mod tests {
             log_prob.extend(std::iter::repeat_n(-1e6, n));
             let mut pos = positions.clone();
             pos.extend(std::iter::repeat_n(50.0, 2 * n));
-            Chains { dim: 2, ensembles: 4, walkers: n / 4, positions: pos, log_prob, accepted: vec![false; 2 * n] }
+            Chains {
+                dim: 2,
+                ensembles: 4,
+                walkers: n / 4,
+                positions: pos,
+                log_prob,
+                accepted: vec![false; 2 * n],
+            }
         };
         assert!(laplace_misfit(&chains(&exact), &q) < 1e-9);
         let m = laplace_misfit(&chains(&wider), &q);

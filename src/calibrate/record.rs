@@ -88,15 +88,18 @@ pub struct CalibrationRecord {
 
 /// A name for a new calibration: when and by which process it was made.
 fn new_calibration_id() -> String {
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
     format!("{nanos:x}-{:x}", std::process::id())
 }
-
 
 /// The command line of this process, for the records.
 pub fn command_line() -> String {
     let mut args = std::env::args();
-    let program = args.next().map(|p| std::path::Path::new(&p).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or(p));
+    let program = args.next().map(|p| {
+        std::path::Path::new(&p).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or(p)
+    });
     program.into_iter().chain(args).collect::<Vec<_>>().join(" ")
 }
 
@@ -111,12 +114,19 @@ impl CalibrationRecord {
     /// took `walkers_start` seconds more to place its walkers (the Laplace
     /// approximation at the mode and the initial positions, over which
     /// ln p/q spread by `laplace_spread` nats) and sampled `sampled`.
-    pub fn of(campaign: &Campaign, start: &Start, walkers_start: f64, laplace_spread: f64, sampled: &Sampled) -> CalibrationRecord {
+    pub fn of(
+        campaign: &Campaign,
+        start: &Start,
+        walkers_start: f64,
+        laplace_spread: f64,
+        sampled: &Sampled,
+    ) -> CalibrationRecord {
         let seconds_start = start.seconds + walkers_start;
         let names = &start.posterior.layout.names;
         let coordinates = start.posterior.layout.coordinate_names();
         let named = |v: &[f64]| names.iter().zip(v).map(|(n, v)| (n.clone(), *v)).collect();
-        let manifest = std::fs::canonicalize(&campaign.manifest_path).unwrap_or(campaign.manifest_path.clone());
+        let manifest = std::fs::canonicalize(&campaign.manifest_path)
+            .unwrap_or(campaign.manifest_path.clone());
         CalibrationRecord {
             mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
             command: command_line(),
@@ -135,10 +145,18 @@ impl CalibrationRecord {
                 .iter()
                 .map(|s| {
                     let (i, v) = s.worst();
-                    StepRow { substeps: s.substeps, largest_shift_sd: v, parameter: coordinates[i].clone() }
+                    StepRow {
+                        substeps: s.substeps,
+                        largest_shift_sd: v,
+                        parameter: coordinates[i].clone(),
+                    }
                 })
                 .collect(),
-            identification: PARAM_NAMES.iter().zip(start.identification.params.to_array()).map(|(n, v)| (n.to_string(), v)).collect(),
+            identification: PARAM_NAMES
+                .iter()
+                .zip(start.identification.params.to_array())
+                .map(|(n, v)| (n.to_string(), v))
+                .collect(),
             map: named(&start.posterior.layout.to_si(&start.map.x)),
             map_log_density: start.map.log_density,
             laplace_sd_log: named(&start.map.log_theta_sd(&start.posterior.layout)),
@@ -149,7 +167,11 @@ impl CalibrationRecord {
             burn_in: sampled.diagnostics.burn_in,
             seconds_start,
             seconds_sampling: sampled.seconds,
-            ess_bulk_per_second: names.iter().zip(&sampled.diagnostics.coordinates).map(|(n, d)| (n.clone(), d.ess_bulk / (seconds_start + sampled.seconds))).collect(),
+            ess_bulk_per_second: names
+                .iter()
+                .zip(&sampled.diagnostics.coordinates)
+                .map(|(n, d)| (n.clone(), d.ess_bulk / (seconds_start + sampled.seconds)))
+                .collect(),
             warnings: sampled.diagnostics.warnings.clone(),
             model_warnings: start.warnings.clone(),
             confounding: Vec::new(),

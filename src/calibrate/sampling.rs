@@ -32,18 +32,35 @@ impl Sampled {
 /// `observers`; convergence is judged on the SI sample after a burn-in of
 /// `burn_in` steps (0: the rule of the diagnostics, 3 τ_max of the
 /// sampler's coordinates).
-pub fn run(posterior: &Posterior, sampler: &mut Sampler<Posterior>, control: &RunControl, burn_in: usize, observers: &mut [&mut dyn Observer]) -> Result<Sampled> {
+pub fn run(
+    posterior: &Posterior,
+    sampler: &mut Sampler<Posterior>,
+    control: &RunControl,
+    burn_in: usize,
+    observers: &mut [&mut dyn Observer],
+) -> Result<Sampled> {
     let clock = Instant::now();
     let layout = &posterior.layout;
     let adaptive = sampler.adaptive();
-    let burn_in_of = |chains: &Chains| if burn_in > 0 { burn_in } else { Diagnostics::burn_in_rule(chains, adaptive) };
+    let burn_in_of = |chains: &Chains| {
+        if burn_in > 0 {
+            burn_in
+        } else {
+            Diagnostics::burn_in_rule(chains, adaptive)
+        }
+    };
     let currents: Vec<f64> = posterior.runs.iter().map(|r| r.current_a).collect();
-    let diagnose = |chains: &Chains| PosteriorSample::from_coordinates(layout, posterior.model, chains, Vec::new()).diagnostics(burn_in_of(chains));
+    let diagnose = |chains: &Chains| {
+        PosteriorSample::from_coordinates(layout, posterior.model, chains, Vec::new())
+            .diagnostics(burn_in_of(chains))
+    };
     sampler.run_until(control, observers, &diagnose)?;
     let chains = sampler.chains.clone();
     let seconds = clock.elapsed().as_secs_f64();
     let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains, currents);
     let mut diagnostics = sample.diagnostics(burn_in_of(&chains));
-    diagnostics.warnings.extend(crate::sampler::stranded::history(&chains).iter().map(|r| r.message()));
+    diagnostics
+        .warnings
+        .extend(crate::sampler::stranded::history(&chains).iter().map(|r| r.message()));
     Ok(Sampled { chains, sample, diagnostics, seconds })
 }

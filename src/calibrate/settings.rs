@@ -10,13 +10,15 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use crate::data::Campaign;
+use crate::data::RecordPart;
 use crate::error::{Error, Result};
 use crate::identify::IdentifySettings;
 use crate::model::{Integrator, Scheme, PARAM_NAMES};
-use crate::data::RecordPart;
 use crate::noise::{NoiseKind, NoiseModel};
 use crate::posterior::prior::default_priors;
-use crate::posterior::{Coordinates, LikelihoodSettings, ModelKind, ModelTerms, ParameterModel, Posterior, Prior};
+use crate::posterior::{
+    Coordinates, LikelihoodSettings, ModelKind, ModelTerms, ParameterModel, Posterior, Prior,
+};
 use crate::sampler::{Move, RunControl, SamplerSettings};
 
 /// Which Euler scheme integrates the likelihood.
@@ -67,7 +69,13 @@ pub struct IntegratorSettings {
 
 impl Default for IntegratorSettings {
     fn default() -> Self {
-        IntegratorSettings { scheme: SchemeChoice::Auto, extrapolate: true, substeps: 0, max_rule_substeps: 16, max_substeps: 1000 }
+        IntegratorSettings {
+            scheme: SchemeChoice::Auto,
+            extrapolate: true,
+            substeps: 0,
+            max_rule_substeps: 16,
+            max_substeps: 1000,
+        }
     }
 }
 
@@ -121,7 +129,10 @@ impl SamplingSettings {
     /// terms only, else every coordinate. The ensemble's width follows the
     /// dimension it explores; the blocks move against their own ensemble's
     /// complementary half.
-    pub fn walkers_for_posterior(posterior: &crate::posterior::Posterior, ensembles: usize) -> usize {
+    pub fn walkers_for_posterior(
+        posterior: &crate::posterior::Posterior,
+        ensembles: usize,
+    ) -> usize {
         // no walkers' memos always fit: the dimension without the blocks
         // (and at least the sampler's 2 × dimension)
         let dim = posterior.layout.dim();
@@ -219,7 +230,13 @@ impl Overrides {
             Some(path) => CalibrationSettings::read(path)?,
             None => CalibrationSettings::default(),
         };
-        let positive = |v: usize, name: &str| if v == 0 { Err(Error::Usage(format!("{name} must be at least 1"))) } else { Ok(v) };
+        let positive = |v: usize, name: &str| {
+            if v == 0 {
+                Err(Error::Usage(format!("{name} must be at least 1")))
+            } else {
+                Ok(v)
+            }
+        };
         if let Some(v) = self.walkers {
             s.sampler.walkers = positive(v, "--walkers")?;
         }
@@ -286,7 +303,11 @@ impl Default for CalibrationSettings {
             integrator: IntegratorSettings::default(),
             sampler: SamplingSettings::default(),
             identify: IdentifySettings::default(),
-            prior: PARAM_NAMES.iter().zip(default_priors()).map(|(n, p)| (n.to_string(), p)).collect(),
+            prior: PARAM_NAMES
+                .iter()
+                .zip(default_priors())
+                .map(|(n, p)| (n.to_string(), p))
+                .collect(),
             sigma_bounds_pa: (1.0, 1.0e6),
             terms: ModelTerms::default(),
         }
@@ -297,9 +318,10 @@ impl CalibrationSettings {
     /// Reads a settings file; missing tables and keys keep their defaults,
     /// priors not named keep theirs.
     pub fn read(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
-        let mut s: CalibrationSettings =
-            toml::from_str(&text).map_err(|e| Error::input(path, format!("invalid settings: {}", e.message())))?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
+        let mut s: CalibrationSettings = toml::from_str(&text)
+            .map_err(|e| Error::input(path, format!("invalid settings: {}", e.message())))?;
         for (name, prior) in PARAM_NAMES.iter().zip(default_priors()) {
             s.prior.entry(name.to_string()).or_insert(prior);
         }
@@ -338,7 +360,9 @@ impl CalibrationSettings {
         }
         if let Some((lo, hi)) = self.anchor_currents_a {
             if !(lo >= 0.0 && hi > lo && hi.is_finite()) {
-                return Err(format!("anchor_currents_a must be two currents 0 ≤ low < high; got [{lo}, {hi}]"));
+                return Err(format!(
+                    "anchor_currents_a must be two currents 0 ≤ low < high; got [{lo}, {hi}]"
+                ));
             }
         }
         if self.sampler.ensembles == 0 {
@@ -354,13 +378,21 @@ impl CalibrationSettings {
 
     /// How θ gives the B-P parameters of each run.
     pub fn parameter_model(&self) -> ParameterModel {
-        ParameterModel::new(self.model, self.reference_current_a, self.anchor_currents_a, self.coil_lag.unwrap_or(false))
+        ParameterModel::new(
+            self.model,
+            self.reference_current_a,
+            self.anchor_currents_a,
+            self.coil_lag.unwrap_or(false),
+        )
     }
 
     /// The curves' anchors, where unset, from the currents calibrated: the
     /// lowest and the highest.
     pub fn fill_anchors(&mut self, currents: &[f64]) {
-        if self.model == ModelKind::CurrentCurves && self.anchor_currents_a.is_none() && currents.len() >= 2 {
+        if self.model == ModelKind::CurrentCurves
+            && self.anchor_currents_a.is_none()
+            && currents.len() >= 2
+        {
             let lo = currents.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = currents.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             self.anchor_currents_a = Some((lo, hi));
@@ -383,14 +415,25 @@ impl CalibrationSettings {
     /// The posterior of the runs of `campaign` with these settings.
     pub fn posterior(&self, campaign: &Campaign, integrator: Integrator) -> Posterior {
         let model = self.parameter_model();
-        Posterior::new(campaign, model, model.priors(&self.priors()), &self.likelihood, self.sigma_bounds_pa, integrator, self.sampler.coordinates, &self.terms)
+        Posterior::new(
+            campaign,
+            model,
+            model.priors(&self.priors()),
+            &self.likelihood,
+            self.sigma_bounds_pa,
+            integrator,
+            self.sampler.coordinates,
+            &self.terms,
+        )
     }
 
     /// Writes the settings file (`config.toml`: the settings a calibration
     /// actually used, which `--config` takes back to repeat it).
     pub fn write(&self, path: &Path) -> Result<()> {
-        let text = toml::to_string(self).map_err(|e| Error::Compute(format!("writing settings: {e}")))?;
-        let header = "# Settings actually used by this calibration; pass back with --config to repeat it.\n";
+        let text =
+            toml::to_string(self).map_err(|e| Error::Compute(format!("writing settings: {e}")))?;
+        let header =
+            "# Settings actually used by this calibration; pass back with --config to repeat it.\n";
         crate::atomic::write(path, format!("{header}{text}").as_bytes())
     }
 }

@@ -34,12 +34,21 @@ pub struct Start {
 }
 
 /// Identification, MAP and step rule. `log` receives a line per stage.
-pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn FnMut(&str)) -> Result<Start> {
+pub fn start(
+    campaign: &Campaign,
+    settings: &CalibrationSettings,
+    log: &mut dyn FnMut(&str),
+) -> Result<Start> {
     let clock = Instant::now();
     let mut settings = settings.clone();
     // an adjustment measured on other runs is measured anew
     let ids: Vec<&str> = campaign.runs.iter().map(|r| r.id()).collect();
-    if settings.likelihood.memory_adjustment.as_ref().is_some_and(|a| !ids.iter().all(|id| a.runs.iter().any(|r| r == id))) {
+    if settings
+        .likelihood
+        .memory_adjustment
+        .as_ref()
+        .is_some_and(|a| !ids.iter().all(|id| a.runs.iter().any(|r| r == id)))
+    {
         settings.likelihood.memory_adjustment = None;
     }
     settings.fill_anchors(&campaign.currents());
@@ -50,7 +59,11 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     let integ = settings.integrator.clone();
     // the MAP search runs on the linearly implicit scheme unless told
     // otherwise: its likelihood is smooth on any record
-    let search_scheme = if integ.scheme == SchemeChoice::Auto { Scheme::LinearlyImplicit } else { integ.scheme.scheme() };
+    let search_scheme = if integ.scheme == SchemeChoice::Auto {
+        Scheme::LinearlyImplicit
+    } else {
+        integ.scheme.scheme()
+    };
     let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
     let posterior = settings.posterior(campaign, base);
     if let Some(a) = posterior.likelihood.adjustment() {
@@ -69,7 +82,8 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     }
     // the identification may be far off (docs/identification.md): also start
     // from the prior medians and keep the better optimum
-    let from_identification: Vec<f64> = model.start(&identification.params, current_a).iter().map(|v| v.ln()).collect();
+    let from_identification: Vec<f64> =
+        model.start(&identification.params, current_a).iter().map(|v| v.ln()).collect();
     let medians: Vec<f64> = posterior
         .priors
         .iter()
@@ -88,7 +102,11 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     let law_alone = law_alone_rms(campaign, &settings, base, &posterior, &starts);
     let (posterior, map) = temper(campaign, &mut settings, base, posterior, map, log)?;
     let (posterior, map) = adjust(campaign, &mut settings, base, posterior, map, log)?;
-    log(&format!("  MAP: log-density {:.1} after {:.1} s; choosing the integrator step", map.log_density, clock.elapsed().as_secs_f64()));
+    log(&format!(
+        "  MAP: log-density {:.1} after {:.1} s; choosing the integrator step",
+        map.log_density,
+        clock.elapsed().as_secs_f64()
+    ));
     let schemes: Vec<Scheme> = match integ.scheme {
         SchemeChoice::Auto => vec![Scheme::Explicit, Scheme::LinearlyImplicit],
         chosen => vec![chosen.scheme()],
@@ -99,23 +117,34 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     for scheme in schemes {
         let scheme_base = Integrator { scheme, ..base };
         let (substeps, at, study) = if integ.substeps == 0 {
-            map::choose_substeps(&posterior.with_integrator(scheme_base), &map, scheme_base, integ.max_rule_substeps)
+            map::choose_substeps(
+                &posterior.with_integrator(scheme_base),
+                &map,
+                scheme_base,
+                integ.max_rule_substeps,
+            )
         } else {
             (integ.substeps, map.clone(), vec![])
         };
         for s in &study {
             let (i, v) = s.worst();
-            log(&format!("  step rule ({scheme:?}): {} sub-step(s): halving moves {} by {v:.3} sd", s.substeps, names[i]));
+            log(&format!(
+                "  step rule ({scheme:?}): {} sub-step(s): halving moves {} by {v:.3} sd",
+                s.substeps, names[i]
+            ));
         }
         let chosen = posterior.with_integrator(Integrator { substeps, ..scheme_base });
         let work = map::euler_steps(&chosen, &at.x);
-        log(&format!("  {scheme:?} with {substeps} sub-step(s): {work} Euler steps per log-density"));
+        log(&format!(
+            "  {scheme:?} with {substeps} sub-step(s): {work} Euler steps per log-density"
+        ));
         candidates.push((work, chosen, at, study));
     }
     // the cheaper scheme at the accuracy the step rule asks for: explicit on
     // smooth records, linearly implicit where stiffness makes the explicit
     // one cut its steps (and its likelihood rugged)
-    let (_, posterior, map, step_study) = candidates.into_iter().min_by_key(|c| c.0).expect("at least one scheme");
+    let (_, posterior, map, step_study) =
+        candidates.into_iter().min_by_key(|c| c.0).expect("at least one scheme");
     // the MAP with the chosen integrator, from the one found; the curvature
     // stays the smooth search's
     let map = match posterior.integrator != base {
@@ -125,13 +154,24 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
     settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
     settings.integrator.substeps = posterior.integrator.substeps;
     if settings.sampler.walkers == 0 {
-        settings.sampler.walkers = SamplingSettings::walkers_for_posterior(&posterior, settings.sampler.ensembles);
+        settings.sampler.walkers =
+            SamplingSettings::walkers_for_posterior(&posterior, settings.sampler.ensembles);
     }
     let warnings = memory_warnings(&posterior, &map);
     for w in &warnings {
         log(&format!("  warning: {w}"));
     }
-    Ok(Start { current_a, settings, identification, map, step_study, posterior, warnings, law_alone_rms: law_alone, seconds: clock.elapsed().as_secs_f64() })
+    Ok(Start {
+        current_a,
+        settings,
+        identification,
+        map,
+        step_study,
+        posterior,
+        warnings,
+        law_alone_rms: law_alone,
+        seconds: clock.elapsed().as_secs_f64(),
+    })
 }
 
 /// With the tempered likelihood ([`Memory::Tempered`]): each run's memory
@@ -139,20 +179,32 @@ pub fn start(campaign: &Campaign, settings: &CalibrationSettings, log: &mut dyn 
 /// written into `settings`, and the MAP searched again on the posterior
 /// whose runs' log-likelihoods count 1/k. Otherwise `posterior` and `map`
 /// as they are.
-fn temper(campaign: &Campaign, settings: &mut CalibrationSettings, base: Integrator, posterior: Posterior, map: MapEstimate, log: &mut dyn FnMut(&str)) -> Result<(Posterior, MapEstimate)> {
+fn temper(
+    campaign: &Campaign,
+    settings: &mut CalibrationSettings,
+    base: Integrator,
+    posterior: Posterior,
+    map: MapEstimate,
+    log: &mut dyn FnMut(&str),
+) -> Result<(Posterior, MapEstimate)> {
     let lik = &mut settings.likelihood;
-    if lik.memory != Memory::Tempered || posterior.runs.iter().all(|r| lik.memory_times.contains_key(&r.id)) {
+    if lik.memory != Memory::Tempered
+        || posterior.runs.iter().all(|r| lik.memory_times.contains_key(&r.id))
+    {
         return Ok((posterior, map));
     }
-    let times = map::memory_times(&posterior, &map).ok_or_else(|| Error::Compute("the residuals at the MAP could not be integrated".into()))?;
+    let times = map::memory_times(&posterior, &map)
+        .ok_or_else(|| Error::Compute("the residuals at the MAP could not be integrated".into()))?;
     for (run, k) in posterior.runs.iter().zip(times) {
         lik.memory_times.entry(run.id.clone()).or_insert(k);
     }
-    let listed: Vec<String> = posterior.runs.iter().map(|r| format!("{} {:.1}", r.id, lik.memory_times[&r.id])).collect();
+    let listed: Vec<String> =
+        posterior.runs.iter().map(|r| format!("{} {:.1}", r.id, lik.memory_times[&r.id])).collect();
     log(&format!("  memory: each run's log-likelihood counts 1/k, k the integrated autocorrelation time of its whitened MAP residuals (samples): {}", listed.join(", ")));
     let tempered = settings.posterior(campaign, base);
     let x = map.x[..tempered.layout.fitted.len()].to_vec();
-    let map = map::refine(&tempered, &x).ok_or_else(|| Error::Compute("the MAP search of the tempered likelihood failed".into()))?;
+    let map = map::refine(&tempered, &x)
+        .ok_or_else(|| Error::Compute("the MAP search of the tempered likelihood failed".into()))?;
     Ok((tempered, map))
 }
 
@@ -161,8 +213,17 @@ fn temper(campaign: &Campaign, settings: &mut CalibrationSettings, base: Integra
 /// (where not set already), written into `settings`, and the MAP searched
 /// again on the adjusted posterior. Otherwise `posterior` and `map` as they
 /// are.
-fn adjust(campaign: &Campaign, settings: &mut CalibrationSettings, base: Integrator, posterior: Posterior, map: MapEstimate, log: &mut dyn FnMut(&str)) -> Result<(Posterior, MapEstimate)> {
-    if settings.likelihood.memory != Memory::Adjusted || settings.likelihood.memory_adjustment.is_some() {
+fn adjust(
+    campaign: &Campaign,
+    settings: &mut CalibrationSettings,
+    base: Integrator,
+    posterior: Posterior,
+    map: MapEstimate,
+    log: &mut dyn FnMut(&str),
+) -> Result<(Posterior, MapEstimate)> {
+    if settings.likelihood.memory != Memory::Adjusted
+        || settings.likelihood.memory_adjustment.is_some()
+    {
         return Ok((posterior, map));
     }
     if settings.parameter_model() != ParameterModel::PerCurrent {
@@ -170,13 +231,16 @@ fn adjust(campaign: &Campaign, settings: &mut CalibrationSettings, base: Integra
     }
     // centred on the mode of the independent posterior, not the surrogate's optimum
     let centre = mode::from_map(&posterior, &map).map_or_else(|| map.x.clone(), |m| m.x);
-    let adjustment = memory::adjustment(&posterior, &map, &centre).ok_or_else(|| Error::Compute("the memory adjustment could not be measured at the MAP".into()))?;
+    let adjustment = memory::adjustment(&posterior, &map, &centre).ok_or_else(|| {
+        Error::Compute("the memory adjustment could not be measured at the MAP".into())
+    })?;
     let (lo, hi) = adjustment.inflation_range();
     log(&format!("  memory: the likelihood's curvature adjusted to its score's covariance given the residuals' memory: variance inflation {lo:.1}–{hi:.1} by direction"));
     settings.likelihood.memory_adjustment = Some(adjustment);
     let adjusted = settings.posterior(campaign, base);
     let x = map.x[..adjusted.layout.fitted.len()].to_vec();
-    let map = map::refine(&adjusted, &x).ok_or_else(|| Error::Compute("the MAP search of the adjusted likelihood failed".into()))?;
+    let map = map::refine(&adjusted, &x)
+        .ok_or_else(|| Error::Compute("the MAP search of the adjusted likelihood failed".into()))?;
     Ok((adjusted, map))
 }
 
@@ -241,7 +305,13 @@ pub const CONFOUNDING_RATIO: f64 = 2.0;
 /// independent Gaussian noise (the law alone, no force of the noise's
 /// own), from the same `starts`; `None` where the noise model has no
 /// force of its own (it does not model memory) or the search fails.
-fn law_alone_rms(campaign: &Campaign, settings: &CalibrationSettings, base: Integrator, posterior: &Posterior, starts: &[Vec<f64>]) -> Option<Vec<f64>> {
+fn law_alone_rms(
+    campaign: &Campaign,
+    settings: &CalibrationSettings,
+    base: Integrator,
+    posterior: &Posterior,
+    starts: &[Vec<f64>],
+) -> Option<Vec<f64>> {
     if !posterior.noise.models_memory() {
         return None;
     }
@@ -259,7 +329,8 @@ fn law_alone_rms(campaign: &Campaign, settings: &CalibrationSettings, base: Inte
 /// median) against the law alone's RMS (`alone`).
 pub(super) fn confounding(posterior: &Posterior, x: &[f64], alone: &[f64]) -> Vec<String> {
     let Some(at) = map::residual_rms(posterior, x) else { return Vec::new() };
-    let runs: Vec<(&str, usize)> = posterior.runs.iter().zip(&at).map(|(r, (_, n))| (r.id.as_str(), *n)).collect();
+    let runs: Vec<(&str, usize)> =
+        posterior.runs.iter().zip(&at).map(|(r, (_, n))| (r.id.as_str(), *n)).collect();
     let rms: Vec<f64> = at.iter().map(|(rms, _)| *rms).collect();
     confounding_warning(&runs, &rms, alone).into_iter().collect()
 }
@@ -281,7 +352,11 @@ pub fn confounding_warning(runs: &[(&str, usize)], rms: &[f64], alone: &[f64]) -
     if all <= CONFOUNDING_RATIO * all_alone {
         return None;
     }
-    let by_run: Vec<String> = runs.iter().zip(rms.iter().zip(alone)).map(|((id, _), (r, a))| format!("{id} {r:.0} Pa against {a:.0} Pa ({:.1}×)", r / a)).collect();
+    let by_run: Vec<String> = runs
+        .iter()
+        .zip(rms.iter().zip(alone))
+        .map(|((id, _), (r, a))| format!("{id} {r:.0} Pa against {a:.0} Pa ({:.1}×)", r / a))
+        .collect();
     Some(format!(
         "the noise model's own force has taken over force the law can carry: the law's path at the posterior median misses the records by \
          {all:.0} Pa RMS where the law fitted alone with independent noise comes within {all_alone:.0} Pa ({:.1}×; by run: {}); \
@@ -313,7 +388,10 @@ mod tests {
         let runs = [("a", 1000), ("b", 1000)];
         let w = confounding_warning(&runs, &[4697.0, 1000.0], &[422.0, 800.0]).unwrap();
         assert!(w.contains("by 3396 Pa RMS where the law fitted alone with independent noise comes within 640 Pa (5.3×"), "{w}");
-        assert!(w.contains("a 4697 Pa against 422 Pa (11.1×), b 1000 Pa against 800 Pa (1.2×)"), "{w}");
+        assert!(
+            w.contains("a 4697 Pa against 422 Pa (11.1×), b 1000 Pa against 800 Pa (1.2×)"),
+            "{w}"
+        );
         // one short run 3× off among long ones that fit: √((300·9 + 2·900·1.2²)/2100) = 1.59× the law alone's 1
         let short = [("fast", 300), ("slow", 900), ("mid", 900)];
         assert_eq!(confounding_warning(&short, &[3.0, 1.2, 1.2], &[1.0, 1.0, 1.0]), None);

@@ -33,7 +33,10 @@ fn dispatch(cli: Cli) -> Result<()> {
         if n == 0 {
             return Err(Error::Usage("--threads must be at least 1".into()));
         }
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| Error::Usage(format!("--threads: {e}")))?;
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| Error::Usage(format!("--threads: {e}")))?;
     }
     let mut listener = print::event;
     let mut pipeline = Pipeline::new(&mut listener, true).rendering(print::render);
@@ -49,12 +52,22 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Check { manifest }) => pipeline.check(&manifest).map(drop),
         Some(Command::Status { dir }) => status(&dir),
         Some(Command::Synth { out, config, seed, options }) => {
-            let manifest = crate::synth::write_campaign(&options.settings(config.as_deref(), seed)?, &out)?;
-            println!("wrote {} virtual runs and campaign.toml to {}", manifest.runs.len(), out.display());
+            let manifest =
+                crate::synth::write_campaign(&options.settings(config.as_deref(), seed)?, &out)?;
+            println!(
+                "wrote {} virtual runs and campaign.toml to {}",
+                manifest.runs.len(),
+                out.display()
+            );
             Ok(())
         }
         Some(Command::Run { manifest, out, options, predict, validation, current_law }) => {
-            let options = RunOptions { sample: options.request()?, predict, leave_one_out: validation.steps(), current_law };
+            let options = RunOptions {
+                sample: options.request()?,
+                predict,
+                leave_one_out: validation.steps(),
+                current_law,
+            };
             pipeline.run(&manifest, &out, &options).map(|reports| print::reports(&reports, clock))
         }
         Some(Command::Identify { manifest, out, force, identify }) => {
@@ -75,12 +88,16 @@ fn dispatch(cli: Cli) -> Result<()> {
                     let out = out.unwrap_or_else(|| dir.join(format!("on-{}", campaign.name)));
                     pipeline.predict_campaign(&cal, &campaign, &out, &options).map(drop)
                 }
-                None => pipeline.predict(&cal, &cal.full_campaign()?, out.as_deref().unwrap_or(&dir), &options).map(drop),
+                None => pipeline
+                    .predict(&cal, &cal.full_campaign()?, out.as_deref().unwrap_or(&dir), &options)
+                    .map(drop),
             }
         }
         Some(Command::Simulate { dir, input, current, out, options, new_test }) => {
             let cal = crate::store::folder::read(&dir)?;
-            let stem = input.file_stem().map_or_else(|| "input".to_string(), |s| s.to_string_lossy().into_owned());
+            let stem = input
+                .file_stem()
+                .map_or_else(|| "input".to_string(), |s| s.to_string_lossy().into_owned());
             let out = out.unwrap_or_else(|| dir.join(format!("simulation-{stem}")));
             pipeline.simulate(&cal, &input, current, &out, &options, new_test).map(drop)
         }
@@ -89,7 +106,9 @@ fn dispatch(cli: Cli) -> Result<()> {
             pipeline.report(&dir, &predict, loo.as_ref()).map(drop)
         }
         Some(Command::Study(command)) => study(&mut pipeline, command),
-        Some(Command::Compare { dirs, out, rpm }) => pipeline.compare(&dirs, out.as_deref().unwrap_or(Path::new("comparison")), rpm).map(drop),
+        Some(Command::Compare { dirs, out, rpm }) => pipeline
+            .compare(&dirs, out.as_deref().unwrap_or(Path::new("comparison")), rpm)
+            .map(drop),
     }
 }
 
@@ -101,13 +120,20 @@ fn status(dir: &Path) -> Result<()> {
     }
     let found = crate::store::status::status(dir)?;
     if found.is_empty() {
-        return Err(Error::input(dir, "no mrbp results here (no calibration, prediction, comparison or virtual campaign)"));
+        return Err(Error::input(
+            dir,
+            "no mrbp results here (no calibration, prediction, comparison or virtual campaign)",
+        ));
     }
     print::status(&found);
     let bad = found.iter().filter(|f| !f.complete()).count();
     match bad {
         0 => Ok(()),
-        _ => Err(Error::Usage(format!("{bad} of {} folder(s) in {} not complete (see above)", found.len(), dir.display()))),
+        _ => Err(Error::Usage(format!(
+            "{bad} of {} folder(s) in {} not complete (see above)",
+            found.len(),
+            dir.display()
+        ))),
     }
 }
 
@@ -118,20 +144,29 @@ fn study(pipeline: &mut Pipeline, command: StudyCommand) -> Result<()> {
         StudyCommand::Plan { dir, options } => {
             let (name, tasks) = options.plan(&dir)?;
             println!("planned study {name}: {} task(s) in {}", tasks.len(), dir.display());
-            println!("run them here with `mrbp study run {}`, or on a cluster (docs/studies.md)", dir.display());
+            println!(
+                "run them here with `mrbp study run {}`, or on a cluster (docs/studies.md)",
+                dir.display()
+            );
             Ok(())
         }
         StudyCommand::RunTask { dir, id } => {
             let (outcome, ran) = study::run_task(pipeline, &dir, &id)?;
             let when = if ran { "" } else { " (done before: skipped)" };
-            let note = if outcome.message.is_empty() { String::new() } else { format!(": {}", outcome.message) };
+            let note = if outcome.message.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", outcome.message)
+            };
             println!("task {id}: {}{when} in {:.1} s{note}", outcome.status, outcome.seconds);
             Ok(())
         }
         StudyCommand::Run { dir, jobs } => {
             let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
             let jobs = jobs.unwrap_or(cores);
-            study::run_local(&dir, jobs, (cores / jobs.max(1)).max(1), &|line: &str| println!("{line}"))?;
+            study::run_local(&dir, jobs, (cores / jobs.max(1)).max(1), &|line: &str| {
+                println!("{line}")
+            })?;
             print::study(&study::collect(&dir)?, &dir);
             Ok(())
         }

@@ -17,12 +17,16 @@ pub fn render(e: Event) -> (bool, String) {
         Event::Note(line) => (true, format!("{line}\n")),
         Event::Checked(campaign) => out(text::campaign(campaign)),
         Event::Identified(results) => out(text::identification(results)),
-        Event::Calibrating { what, dir } => out(format!("\ncalibrating {what} into {}\n", dir.display())),
+        Event::Calibrating { what, dir } => {
+            out(format!("\ncalibrating {what} into {}\n", dir.display()))
+        }
         Event::Calibrated { cal, alone: false } => out(text::calibration(cal)),
         Event::Calibrated { cal, alone: true } => out(text::calibration_alone(cal)),
-        Event::Predicted { record, dir } => {
-            out(format!("{}wrote bands.parquet, coverage.parquet and prediction.toml to {}\n", text::prediction(record), dir.display()))
-        }
+        Event::Predicted { record, dir } => out(format!(
+            "{}wrote bands.parquet, coverage.parquet and prediction.toml to {}\n",
+            text::prediction(record),
+            dir.display()
+        )),
         Event::LeftOneOut { rows, seconds } => out(text::leave_one_out(rows, seconds)),
         Event::Consistency(parameters) => out(text::consistency(parameters)),
         Event::NewTestLeftOut { rows, seconds } => out(text::new_test_left_out(rows, seconds)),
@@ -78,9 +82,21 @@ pub fn study(found: &crate::study::Collected, dir: &std::path::Path) {
     }
     if let Some(first) = found.coverage.first() {
         println!("\nagainst the known truths (binomial se at the nominal share: 50 % ± {:.0}, 90 % ± {:.0}):", 100.0 * first.se_at(0.5), 100.0 * first.se_at(0.9));
-        println!("{:<22} {:>6} {:>8} {:>8} {:>8} {:>7} {:>8}", "coordinate", "tasks", "in 50 %", "in 90 %", "mean z", "sd z", "rank p");
+        println!(
+            "{:<22} {:>6} {:>8} {:>8} {:>8} {:>7} {:>8}",
+            "coordinate", "tasks", "in 50 %", "in 90 %", "mean z", "sd z", "rank p"
+        );
         for r in &found.coverage {
-            println!("{:<22} {:>6} {:>7.0}% {:>7.0}% {:>8.2} {:>7.2} {:>8.3}", r.parameter, r.tasks, 100.0 * r.inside_50, 100.0 * r.inside_90, r.z_mean, r.z_sd, r.rank_p);
+            println!(
+                "{:<22} {:>6} {:>7.0}% {:>7.0}% {:>8.2} {:>7.2} {:>8.3}",
+                r.parameter,
+                r.tasks,
+                100.0 * r.inside_50,
+                100.0 * r.inside_90,
+                r.z_mean,
+                r.z_sd,
+                r.rank_p
+            );
         }
     }
 }

@@ -17,7 +17,8 @@ pub fn loading_branches(x: &[f64], fraction: f64) -> Vec<Range<usize>> {
     if n < 2 {
         return vec![0..n];
     }
-    let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let (lo, hi) =
+        x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     let threshold = fraction * (hi - lo);
     if !(threshold > 0.0) {
         return vec![0..n];
@@ -65,18 +66,16 @@ mod tests {
     #[test]
     fn cosine_cycles_split_at_dead_centres() {
         // two full cycles of 1 − cos: reversals at k = 50, 100, 150
-        let x: Vec<f64> = (0..=200)
-            .map(|k| 1.0 - (std::f64::consts::TAU * k as f64 / 100.0).cos())
-            .collect();
+        let x: Vec<f64> =
+            (0..=200).map(|k| 1.0 - (std::f64::consts::TAU * k as f64 / 100.0).cos()).collect();
         let b = loading_branches(&x, 0.1);
         assert_eq!(b, vec![0..51, 50..101, 100..151, 150..201]);
     }
 
     #[test]
     fn noise_below_threshold_does_not_split() {
-        let x: Vec<f64> = (0..100)
-            .map(|k| k as f64 + if k % 2 == 0 { 0.5 } else { -0.5 })
-            .collect();
+        let x: Vec<f64> =
+            (0..100).map(|k| k as f64 + if k % 2 == 0 { 0.5 } else { -0.5 }).collect();
         assert_eq!(loading_branches(&x, 0.05), vec![0..100]);
         assert_eq!(loading_branches(&[1.0; 10], 0.1), vec![0..10]);
     }

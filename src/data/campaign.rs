@@ -56,7 +56,14 @@ pub struct RunSpec {
 impl RunSpec {
     /// A run of one current, with the defaults of the optional fields.
     pub fn new(id: String, file: PathBuf, current_a: f64) -> RunSpec {
-        RunSpec { id, file, current_a, shear_rate: None, initial_stress_pa: None, current_varies: false }
+        RunSpec {
+            id,
+            file,
+            current_a,
+            shear_rate: None,
+            initial_stress_pa: None,
+            current_varies: false,
+        }
     }
 }
 
@@ -81,7 +88,13 @@ impl Run {
 
     /// The run of `spec` from its `record` (read from, or named as,
     /// `path`), checked against the manifest's limits and current.
-    fn checked(spec: &RunSpec, path: PathBuf, record: Record, manifest: &Manifest, map: &ColumnMap) -> Result<Run> {
+    fn checked(
+        spec: &RunSpec,
+        path: PathBuf,
+        record: Record,
+        manifest: &Manifest,
+        map: &ColumnMap,
+    ) -> Result<Run> {
         record.check_limits(&path, map, &manifest.limits)?;
         match &record.current {
             Some(current) => check_current(&path, map, spec, current)?,
@@ -103,7 +116,10 @@ impl Run {
     /// Why the run cannot be identified or calibrated, if it cannot: no
     /// motion (no loading branch) or no force signal.
     pub fn unusable(&self) -> Option<String> {
-        let span = |v: &[f64]| v.iter().fold(f64::NEG_INFINITY, |m, x| m.max(*x)) - v.iter().fold(f64::INFINITY, |m, x| m.min(*x));
+        let span = |v: &[f64]| {
+            v.iter().fold(f64::NEG_INFINITY, |m, x| m.max(*x))
+                - v.iter().fold(f64::INFINITY, |m, x| m.min(*x))
+        };
         if span(&self.record.displacement) == 0.0 || self.branches.is_empty() {
             Some(format!("run '{}': the displacement never changes direction or never moves (no loading branch)", self.id()))
         } else if span(&self.record.force) == 0.0 {
@@ -132,7 +148,8 @@ pub struct Campaign {
 impl Manifest {
     /// Writes the manifest to `path`, after the comment lines `header`.
     pub fn write(&self, path: &Path, header: &str) -> Result<()> {
-        let body = toml::to_string(self).map_err(|e| Error::Compute(format!("writing {}: {e}", path.display())))?;
+        let body = toml::to_string(self)
+            .map_err(|e| Error::Compute(format!("writing {}: {e}", path.display())))?;
         crate::atomic::write(path, format!("{header}{body}").as_bytes())
     }
 
@@ -147,8 +164,9 @@ impl Manifest {
                 },
             )
         })?;
-        let manifest: Manifest = toml::from_str(&text)
-            .map_err(|e| Error::input(path, format!("invalid manifest: {}", one_line(&e.to_string()))))?;
+        let manifest: Manifest = toml::from_str(&text).map_err(|e| {
+            Error::input(path, format!("invalid manifest: {}", one_line(&e.to_string())))
+        })?;
         manifest.check(path)?;
         Ok(manifest)
     }
@@ -196,7 +214,10 @@ impl Manifest {
             }
             if let Some(s) = run.initial_stress_pa {
                 if !s.is_finite() {
-                    return Err(Error::input(path, format!("run '{}': initial_stress_pa must be finite", run.id)));
+                    return Err(Error::input(
+                        path,
+                        format!("run '{}': initial_stress_pa must be finite", run.id),
+                    ));
                 }
             }
         }
@@ -216,7 +237,12 @@ fn outside(dir: &Path, file: &Path) -> bool {
 /// a coil current: 0 A or more at every sample.
 pub fn check_coil_current(path: &Path, column: &str, current: &[f64]) -> Result<()> {
     match current.iter().position(|v| !(*v >= 0.0)) {
-        Some(k) => Err(Error::input_at(path, Some(k + 1), Some(column), format!("{} A: the law takes a coil current of 0 A or more", current[k]))),
+        Some(k) => Err(Error::input_at(
+            path,
+            Some(k + 1),
+            Some(column),
+            format!("{} A: the law takes a coil current of 0 A or more", current[k]),
+        )),
         None => Ok(()),
     }
 }
@@ -289,7 +315,11 @@ impl Campaign {
         let mut runs = Vec::with_capacity(self.runs.len());
         let mut taken = std::collections::HashSet::new();
         for (i, run) in self.runs.iter().enumerate() {
-            let stem: String = run.id().chars().map(|c| if c.is_ascii_alphanumeric() || "._-".contains(c) { c } else { '_' }).collect();
+            let stem: String = run
+                .id()
+                .chars()
+                .map(|c| if c.is_ascii_alphanumeric() || "._-".contains(c) { c } else { '_' })
+                .collect();
             let file = match taken.insert(stem.clone()) {
                 true => format!("{stem}.csv"),
                 false => format!("{stem}-{i}.csv"),
@@ -297,7 +327,13 @@ impl Campaign {
             crate::atomic::write(&dir.join(&file), super::table::csv_text(&run.record).as_bytes())?;
             runs.push(RunSpec { file: PathBuf::from(file), ..run.spec.clone() });
         }
-        let manifest = Manifest { name: self.name.clone(), geometry: self.geometry, columns: Columns::default(), limits: Default::default(), runs };
+        let manifest = Manifest {
+            name: self.name.clone(),
+            geometry: self.geometry,
+            columns: Columns::default(),
+            limits: Default::default(),
+            runs,
+        };
         let path = dir.join("campaign.toml");
         manifest.write(&path, header)?;
         Ok(path)
@@ -310,7 +346,10 @@ impl Campaign {
         let here = PathBuf::from(format!("campaign '{}'", manifest.name));
         manifest.check(&here)?;
         if records.len() != manifest.runs.len() {
-            return Err(Error::input(&here, format!("{} runs but {} records", manifest.runs.len(), records.len())));
+            return Err(Error::input(
+                &here,
+                format!("{} runs but {} records", manifest.runs.len(), records.len()),
+            ));
         }
         let c = Columns::default();
         let map = ColumnMap::of(&c, true);
@@ -321,7 +360,14 @@ impl Campaign {
             runs.push(Arc::new(Run::checked(spec, path, record, &manifest, &map)?));
         }
         let notes = runs.iter().filter_map(|r| r.unusable()).collect();
-        Ok(Campaign { name: manifest.name.clone(), manifest_path: here, geometry: manifest.geometry, columns: c, runs, notes })
+        Ok(Campaign {
+            name: manifest.name.clone(),
+            manifest_path: here,
+            geometry: manifest.geometry,
+            columns: c,
+            runs,
+            notes,
+        })
     }
 
     /// Refuses a campaign whose runs cannot be identified or calibrated (no
@@ -329,7 +375,10 @@ impl Campaign {
     pub fn require_usable(&self, what: &str) -> Result<()> {
         for run in &self.runs {
             if let Some(problem) = run.unusable() {
-                return Err(Error::input(&run.path, format!("{problem}: nothing for {what} to fit")));
+                return Err(Error::input(
+                    &run.path,
+                    format!("{problem}: nothing for {what} to fit"),
+                ));
             }
         }
         Ok(())
@@ -338,7 +387,8 @@ impl Campaign {
     /// The distinct coil currents of the campaign's runs of one current
     /// (not those whose current varies), ascending.
     pub fn currents(&self) -> Vec<f64> {
-        let mut c: Vec<f64> = self.runs.iter().filter(|r| !r.spec.current_varies).map(|r| r.spec.current_a).collect();
+        let mut c: Vec<f64> =
+            self.runs.iter().filter(|r| !r.spec.current_varies).map(|r| r.spec.current_a).collect();
         c.sort_by(f64::total_cmp);
         c.dedup();
         c
@@ -363,7 +413,9 @@ impl Campaign {
 
     /// Whether any run is held at `current_a`.
     pub fn has_current(&self, current_a: f64) -> bool {
-        self.runs.iter().any(|r| !r.spec.current_varies && same_current(r.spec.current_a, current_a))
+        self.runs
+            .iter()
+            .any(|r| !r.spec.current_varies && same_current(r.spec.current_a, current_a))
     }
 
     /// The ids of the runs whose current varies within the record.

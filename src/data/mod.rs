@@ -10,8 +10,10 @@ pub mod smooth;
 pub mod table;
 
 pub use branches::{loading_branches, REVERSAL_SHARE};
+pub use campaign::{
+    check_coil_current, current_tag, same_current, Campaign, Manifest, Run, RunSpec,
+};
 pub use run_data::{RecordPart, RunData};
-pub use campaign::{check_coil_current, current_tag, same_current, Campaign, Manifest, Run, RunSpec};
 pub use shear::{Geometry, Inelastic, Shear};
 pub use smooth::{local_polynomial, noise_variance, smoothed_strain};
 pub use table::{Columns, Limits, Record};

@@ -119,10 +119,28 @@ impl RunData {
     ) -> RunData {
         let reverses = reversals(&gamma);
         let (step_s, uniform) = sampling_step(&time);
-        let turns: Vec<f64> = time.iter().zip(&reverses).filter(|(_, r)| **r).map(|(t, _)| *t).collect();
+        let turns: Vec<f64> =
+            time.iter().zip(&reverses).filter(|(_, r)| **r).map(|(t, _)| *t).collect();
         let period_s = period_of(&time, &turns);
         let stress_step_pa = resolution(&tau);
-        RunData { id, time, gamma, tau, initial_tau, current_a, current: None, area_m2, gap_m, strain_noise_var, strain_smoothing_share, reverses, step_s, uniform, stress_step_pa, period_s }
+        RunData {
+            id,
+            time,
+            gamma,
+            tau,
+            initial_tau,
+            current_a,
+            current: None,
+            area_m2,
+            gap_m,
+            strain_noise_var,
+            strain_smoothing_share,
+            reverses,
+            step_s,
+            uniform,
+            stress_step_pa,
+            period_s,
+        }
     }
 
     /// Residuals compared: every sample after the first.
@@ -167,8 +185,13 @@ fn resolution(v: &[f64]) -> f64 {
     }
     gaps.sort_by(f64::total_cmp);
     let quantum = gaps[gaps.len() / 10];
-    let whole = gaps.iter().filter(|g| ((*g / quantum) - (*g / quantum).round()).abs() < 0.05).count();
-    if quantum > 0.0 && whole as f64 >= 0.75 * gaps.len() as f64 { quantum } else { 0.0 }
+    let whole =
+        gaps.iter().filter(|g| ((*g / quantum) - (*g / quantum).round()).abs() < 0.05).count();
+    if quantum > 0.0 && whole as f64 >= 0.75 * gaps.len() as f64 {
+        quantum
+    } else {
+        0.0
+    }
 }
 
 /// Twice the median time between the reversals at `turns`; with one
@@ -208,21 +231,26 @@ mod tests {
     #[test]
     fn step_and_period_of_a_sine() {
         let time: Vec<f64> = (0..2001).map(|k| k as f64 * 1e-3).collect();
-        let gamma: Vec<f64> = time.iter().map(|t| (2.0 * std::f64::consts::PI * 4.0 * t).sin()).collect();
-        let run = RunData::new("r".into(), time, gamma.clone(), gamma, 0.0, 1.0, (1.0, 1.0), (0.0, 1.0));
+        let gamma: Vec<f64> =
+            time.iter().map(|t| (2.0 * std::f64::consts::PI * 4.0 * t).sin()).collect();
+        let run =
+            RunData::new("r".into(), time, gamma.clone(), gamma, 0.0, 1.0, (1.0, 1.0), (0.0, 1.0));
         assert!((run.step_s - 1e-3).abs() < 1e-12 && run.uniform);
         assert!((run.period_s - 0.25).abs() < 2e-3, "{}", run.period_s);
         // one cycle from rest (one reversal): its duration, to two sampling
         // intervals (the reversal is marked a sample after the extreme)
-        let one: Vec<f64> = (0..301).map(|k| 1.0 - (2.0 * std::f64::consts::PI * k as f64 / 300.0).cos()).collect();
+        let one: Vec<f64> =
+            (0..301).map(|k| 1.0 - (2.0 * std::f64::consts::PI * k as f64 / 300.0).cos()).collect();
         let time: Vec<f64> = (0..301).map(|k| k as f64 * 1e-3).collect();
-        let run = RunData::new("r".into(), time, one.clone(), one, 0.0, 1.0, (1.0, 1.0), (0.0, 1.0));
+        let run =
+            RunData::new("r".into(), time, one.clone(), one, 0.0, 1.0, (1.0, 1.0), (0.0, 1.0));
         assert!((run.period_s - 0.3).abs() < 2.5e-3, "{}", run.period_s);
     }
 
     #[test]
     fn the_resolution_of_a_quantised_record() {
-        let v: Vec<f64> = (0..2000).map(|k| 3.0 * ((k as f64 * 0.37).sin() * 400.0).round()).collect();
+        let v: Vec<f64> =
+            (0..2000).map(|k| 3.0 * ((k as f64 * 0.37).sin() * 400.0).round()).collect();
         assert!((resolution(&v) - 3.0).abs() < 1e-9, "{}", resolution(&v));
         let smooth: Vec<f64> = (0..2000).map(|k| 1200.0 * (k as f64 * 0.0037).sin()).collect();
         assert_eq!(resolution(&smooth), 0.0);

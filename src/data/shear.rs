@@ -47,11 +47,7 @@ impl Shear {
         let x0 = rec.displacement.first().copied().unwrap_or(0.0);
         Shear {
             time: rec.time.clone(),
-            gamma: rec
-                .displacement
-                .iter()
-                .map(|x| (x - x0) / geometry.gap_m)
-                .collect(),
+            gamma: rec.displacement.iter().map(|x| (x - x0) / geometry.gap_m).collect(),
             tau: rec.force.iter().map(|f| f / geometry.area_m2).collect(),
             initial_tau: initial_tau.unwrap_or(0.0),
         }
@@ -73,17 +69,8 @@ impl Shear {
         Inelastic {
             strain_smooth: gamma_s.iter().zip(&tau_s).map(|(gm, t)| gm - t / g).collect(),
             tau_smooth: tau_s,
-            strain: self
-                .gamma
-                .iter()
-                .zip(&self.tau)
-                .map(|(gm, t)| gm - t / g)
-                .collect(),
-            rate: gamma_rate
-                .iter()
-                .zip(&tau_rate)
-                .map(|(gd, td)| gd - td / g)
-                .collect(),
+            strain: self.gamma.iter().zip(&self.tau).map(|(gm, t)| gm - t / g).collect(),
+            rate: gamma_rate.iter().zip(&tau_rate).map(|(gd, td)| gd - td / g).collect(),
         }
     }
 }
@@ -100,10 +87,7 @@ mod tests {
             force: vec![0.0, 50.0, 100.0],
             current: None,
         };
-        let g = Geometry {
-            area_m2: 0.05,
-            gap_m: 1e-3,
-        };
+        let g = Geometry { area_m2: 0.05, gap_m: 1e-3 };
         let s = Shear::from_record(&rec, &g, None);
         assert_eq!(s.tau, vec![0.0, 1000.0, 2000.0]);
         assert!((s.gamma[2] - 3.0).abs() < 1e-12);

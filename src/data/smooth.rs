@@ -9,7 +9,12 @@
 /// A cubic keeps the bias of value and slope at a sharp bend (the yield
 /// knee) an order smaller than a straight line over the same window, at the
 /// price of more noise.
-pub fn local_polynomial(t: &[f64], y: &[f64], half_window: usize, degree: usize) -> (Vec<f64>, Vec<f64>) {
+pub fn local_polynomial(
+    t: &[f64],
+    y: &[f64],
+    half_window: usize,
+    degree: usize,
+) -> (Vec<f64>, Vec<f64>) {
     use nalgebra::{DMatrix, DVector};
     let n = t.len();
     let h = half_window.max(1);
@@ -122,7 +127,10 @@ mod tests {
         let mut rng = crate::rng::stream(11, &[]);
         let t: Vec<f64> = (0..4000).map(|k| k as f64 / 2000.0).collect();
         let clean: Vec<f64> = t.iter().map(|t| 5.0 * (std::f64::consts::TAU * t).sin()).collect();
-        let noisy: Vec<f64> = clean.iter().map(|c| c + 2e-3 * rng.sample::<f64, _>(rand_distr::StandardNormal)).collect();
+        let noisy: Vec<f64> = clean
+            .iter()
+            .map(|c| c + 2e-3 * rng.sample::<f64, _>(rand_distr::StandardNormal))
+            .collect();
         let w0 = centre_weight(&t, 2.0);
         let v = noise_variance(&noisy, &smoothed_strain(&t, &noisy, 2.0), w0);
         assert!((v / 4e-6 - 1.0).abs() < 0.1, "{v}");
@@ -135,7 +143,8 @@ mod tests {
 
     #[test]
     fn derivative_is_exact_on_lines_and_close_on_smooth_curves() {
-        let t: Vec<f64> = (0..200).map(|k| 0.001 * k as f64 + 0.3 * (k as f64).sqrt() * 1e-4).collect();
+        let t: Vec<f64> =
+            (0..200).map(|k| 0.001 * k as f64 + 0.3 * (k as f64).sqrt() * 1e-4).collect();
         let y: Vec<f64> = t.iter().map(|t| 3.0 * t - 1.0).collect();
         for d in local_polynomial(&t, &y, 5, 1).1 {
             assert!((d - 3.0).abs() < 1e-9);

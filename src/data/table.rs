@@ -130,7 +130,12 @@ impl Record {
     pub fn check_limits(&self, path: &Path, columns: &ColumnMap, limits: &Limits) -> Result<()> {
         let mut checks: Vec<(&[f64], &str, f64, &str)> = vec![
             (&self.time, columns.time.0, limits.time_s, "limits.time_s"),
-            (&self.displacement, columns.displacement.0, limits.displacement_m, "limits.displacement_m"),
+            (
+                &self.displacement,
+                columns.displacement.0,
+                limits.displacement_m,
+                "limits.displacement_m",
+            ),
             (&self.force, columns.force.0, limits.force_n, "limits.force_n"),
         ];
         if let Some(current) = &self.current {
@@ -152,10 +157,7 @@ impl Record {
     /// Reads a `.csv` or `.parquet` file and checks it: at least MIN_ROWS rows,
     /// every value a finite number, time strictly increasing.
     pub fn read(path: &Path, columns: &ColumnMap) -> Result<Record> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
+        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
         let record = match ext.as_deref() {
             Some("csv") => read_csv(path, columns)?,
             Some("parquet") => read_parquet(path, columns)?,
@@ -182,10 +184,19 @@ impl Record {
     /// value finite, time strictly increasing; `path` names it in messages.
     pub fn check(&self, path: &Path, columns: &ColumnMap) -> Result<()> {
         let n = self.time.len();
-        let series: [(&[f64], &str); 3] = [(&self.time, columns.time.0), (&self.displacement, columns.displacement.0), (&self.force, columns.force.0)];
+        let series: [(&[f64], &str); 3] = [
+            (&self.time, columns.time.0),
+            (&self.displacement, columns.displacement.0),
+            (&self.force, columns.force.0),
+        ];
         for (i, (values, name)) in series.into_iter().enumerate() {
             if values.len() != n {
-                return Err(Error::input_at(path, None, Some(name), format!("{} values where the time has {n}", values.len())));
+                return Err(Error::input_at(
+                    path,
+                    None,
+                    Some(name),
+                    format!("{} values where the time has {n}", values.len()),
+                ));
             }
             // an excitation to simulate has no force to check
             let checked = i < 2 || columns.force_required;
@@ -195,7 +206,12 @@ impl Record {
         }
         if let Some(current) = &self.current {
             if current.len() != n {
-                return Err(Error::input_at(path, None, Some(columns.current), format!("{} values where the time has {n}", current.len())));
+                return Err(Error::input_at(
+                    path,
+                    None,
+                    Some(columns.current),
+                    format!("{} values where the time has {n}", current.len()),
+                ));
             }
             if let Some(k) = current.iter().position(|v| !v.is_finite()) {
                 finite(path, k + 1, columns.current, current[k])?;
@@ -227,7 +243,12 @@ impl Record {
 
 fn parse_cell(path: &Path, row: usize, column: &str, text: &str) -> Result<f64> {
     let value: f64 = text.trim().parse().map_err(|_| {
-        Error::input_at(path, Some(row), Some(column), format!("'{}' is text where a number belongs", shown(text)))
+        Error::input_at(
+            path,
+            Some(row),
+            Some(column),
+            format!("'{}' is text where a number belongs", shown(text)),
+        )
     })?;
     finite(path, row, column, value)
 }
@@ -273,7 +294,11 @@ fn read_csv(path: &Path, columns: &ColumnMap) -> Result<Record> {
                 path,
                 None,
                 Some(h),
-                format!("the header names this column twice (columns {} and {}): which one is meant?", i + 1, i + j + 2),
+                format!(
+                    "the header names this column twice (columns {} and {}): which one is meant?",
+                    i + 1,
+                    i + j + 2
+                ),
             ));
         }
     }
@@ -288,22 +313,18 @@ fn read_csv(path: &Path, columns: &ColumnMap) -> Result<Record> {
     };
     let current_index = find(columns.current);
 
-    let mut rec = Record {
-        current: current_index.map(|_| Vec::new()),
-        ..Record::default()
-    };
+    let mut rec = Record { current: current_index.map(|_| Vec::new()), ..Record::default() };
     for (i, row) in reader.records().enumerate() {
         let row_no = i + 1;
         let row = row.map_err(|e| Error::input_at(path, Some(row_no), None, e.to_string()))?;
         let cell = |col: usize, name: &str| -> Result<f64> {
-            let text = row.get(col).ok_or_else(|| {
-                Error::input_at(path, Some(row_no), Some(name), "missing value")
-            })?;
+            let text = row
+                .get(col)
+                .ok_or_else(|| Error::input_at(path, Some(row_no), Some(name), "missing value"))?;
             parse_cell(path, row_no, name, text)
         };
         rec.time.push(cell(index[0], columns.time.0)? * columns.time.1);
-        rec.displacement
-            .push(cell(index[1], columns.displacement.0)? * columns.displacement.1);
+        rec.displacement.push(cell(index[1], columns.displacement.0)? * columns.displacement.1);
         rec.force.push(match force_index {
             Some(fi) => cell(fi, columns.force.0)? * columns.force.1,
             None => f64::NAN,
@@ -320,8 +341,12 @@ fn read_parquet(path: &Path, columns: &ColumnMap) -> Result<Record> {
     let file = std::fs::File::open(path)
         .map_err(|e| Error::input(path, format!("cannot open: {}", e.kind())))?;
     let df = crate::error::guard_foreign(|| ParquetReader::new(file).finish())
-        .ok_or_else(|| Error::input(path, "not a readable Parquet file (damaged: its decoder failed)"))?
-        .map_err(|e| Error::input(path, format!("not a readable Parquet file: {}", one_line(&e.to_string()))))?;
+        .ok_or_else(|| {
+            Error::input(path, "not a readable Parquet file (damaged: its decoder failed)")
+        })?
+        .map_err(|e| {
+            Error::input(path, format!("not a readable Parquet file: {}", one_line(&e.to_string())))
+        })?;
     let column = |name: &str, scale: f64| -> Result<Vec<f64>> {
         let raw = df.column(name).map_err(|_| missing_column(path, name))?.as_materialized_series();
         if let Ok(text) = raw.str() {

@@ -7,10 +7,13 @@
 /// so τ(γ) is a straight line of slope G. Returns (G, samples used).
 pub fn elastic_modulus(gamma: &[f64], tau: &[f64], tau_smooth: &[f64], share: f64) -> (f64, usize) {
     let start = tau_smooth[0];
-    let peak = tau_smooth
-        .iter()
-        .copied()
-        .fold(start, |m, v| if (v - start).abs() > (m - start).abs() { v } else { m });
+    let peak = tau_smooth.iter().copied().fold(start, |m, v| {
+        if (v - start).abs() > (m - start).abs() {
+            v
+        } else {
+            m
+        }
+    });
     let limit = share * (peak - start).abs();
     let end = tau_smooth
         .iter()
@@ -41,7 +44,8 @@ mod tests {
         // the share 0.4 of that rise stops the fit below τ = 17.52, i.e. after
         // the 18 samples τ = 0…17, inside the straight part
         let gamma: Vec<f64> = (0..100).map(|i| i as f64 * 0.1).collect();
-        let tau: Vec<f64> = gamma.iter().map(|g| (10.0 * g).min(30.0 + (g - 3.0).max(0.0) * 2.0)).collect();
+        let tau: Vec<f64> =
+            gamma.iter().map(|g| (10.0 * g).min(30.0 + (g - 3.0).max(0.0) * 2.0)).collect();
         let (g, used) = elastic_modulus(&gamma, &tau, &tau, 0.4);
         assert!((g - 10.0).abs() < 1e-9, "{g}");
         assert_eq!(used, 18);

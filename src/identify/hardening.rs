@@ -67,11 +67,7 @@ pub fn fit_eq7(x: &[f64], y: &[f64]) -> CurveFit {
     };
     let fit = least_squares(&start, &residuals, Some(&jacobian));
     let eq7 = Eq7 { a: fit.params[0], b: fit.params[1], c: fit.params[2], d: fit.params[3] };
-    CurveFit {
-        eq7,
-        converged: fit.converged,
-        rms: (2.0 * fit.cost / x.len() as f64).sqrt(),
-    }
+    CurveFit { eq7, converged: fit.converged, rms: (2.0 * fit.cost / x.len() as f64).sqrt() }
 }
 
 /// A straight line ψ = intercept − m τ fitted to one end of ψ(τ).
@@ -153,7 +149,12 @@ mod tests {
         assert!(fit.converged);
         let e = fit.eq7;
         assert!((e.a / truth.a - 1.0).abs() < 1e-5, "{e:?}");
-        assert!((e.b - truth.b).abs() < 1e-6 && (e.c - truth.c).abs() < 1e-7 && (e.d / truth.d - 1.0).abs() < 1e-6, "{e:?}");
+        assert!(
+            (e.b - truth.b).abs() < 1e-6
+                && (e.c - truth.c).abs() < 1e-7
+                && (e.d / truth.d - 1.0).abs() < 1e-6,
+            "{e:?}"
+        );
         assert!(fit.rms < 1e-3);
     }
 
@@ -169,7 +170,8 @@ mod tests {
         let psi: Vec<f64> = tau.iter().map(|t| (a2 - m2 * t).max(a1 - m1 * t)).collect();
         let (small, large) = asymptotes(&tau, &psi, 0.15).unwrap();
         assert!((small.m - m2).abs() < 1e-9 * m2 && (large.m - m1).abs() < 1e-9 * m1);
-        let (r1_hat, d1_hat) = solve_r1_d1(large.intercept, small.intercept, large.m, small.m, r0, kappa);
+        let (r1_hat, d1_hat) =
+            solve_r1_d1(large.intercept, small.intercept, large.m, small.m, r0, kappa);
         assert!((r1_hat - r1).abs() < 1e-6 * r1, "{r1_hat}");
         assert!((d1_hat - d1).abs() < 1e-6 * d1, "{d1_hat}");
     }

@@ -44,9 +44,16 @@ pub struct IdentifyOptions {
 impl IdentifyOptions {
     pub fn settings(&self) -> crate::Result<IdentifySettings> {
         if !(self.smooth_ms > 0.0) {
-            return Err(crate::Error::Usage(format!("--smooth-ms must be positive, got {}", self.smooth_ms)));
+            return Err(crate::Error::Usage(format!(
+                "--smooth-ms must be positive, got {}",
+                self.smooth_ms
+            )));
         }
-        Ok(IdentifySettings { branch: self.branch, smooth_ms: self.smooth_ms, ..IdentifySettings::default() })
+        Ok(IdentifySettings {
+            branch: self.branch,
+            smooth_ms: self.smooth_ms,
+            ..IdentifySettings::default()
+        })
     }
 }
 
@@ -116,7 +123,13 @@ pub struct RunIdentification {
 impl RunIdentification {
     /// A run's identification with G found on `branch` and nothing past
     /// yield yet: the route (from rest, or steady cycles) fills in the rest.
-    fn with_g(run: &Run, branch: std::ops::Range<usize>, g: f64, elastic_points: usize, warnings: Vec<String>) -> Self {
+    fn with_g(
+        run: &Run,
+        branch: std::ops::Range<usize>,
+        g: f64,
+        elastic_points: usize,
+        warnings: Vec<String>,
+    ) -> Self {
         RunIdentification {
             run: run.id().to_string(),
             current_a: run.spec.current_a,
@@ -185,14 +198,10 @@ fn identify_run(run: &Run, s: &IdentifySettings) -> RunIdentification {
         return identify_steady(run, s);
     }
     let mut warnings = Vec::new();
-    let branch = run
-        .branches
-        .get(s.branch)
-        .cloned()
-        .unwrap_or_else(|| {
-            warnings.push(format!("run has {} branches; using the first", run.branches.len()));
-            run.branches[0].clone()
-        });
+    let branch = run.branches.get(s.branch).cloned().unwrap_or_else(|| {
+        warnings.push(format!("run has {} branches; using the first", run.branches.len()));
+        run.branches[0].clone()
+    });
     let sh = &run.shear;
     let dt = (sh.time[sh.len() - 1] - sh.time[0]) / (sh.len() - 1) as f64;
     let half_window = ((s.smooth_ms * 1e-3 / dt).round() as usize).max(1);
@@ -219,11 +228,14 @@ fn identify_run(run: &Run, s: &IdentifySettings) -> RunIdentification {
     // γᴵ at the start of the branch: its mean over the elastic samples, where
     // it is constant but for noise (a single sample would shift the offset
     // by the noise, which is as large as the 0.2 % offset itself)
-    let x0 = ie.strain[b.start..b.start + elastic_points].iter().sum::<f64>() / elastic_points as f64;
+    let x0 =
+        ie.strain[b.start..b.start + elastic_points].iter().sum::<f64>() / elastic_points as f64;
     let strain: Vec<f64> = ie.strain_smooth[b.clone()].iter().map(|v| sign * (v - x0)).collect();
     let tau: Vec<f64> = ie.tau_smooth[b.clone()].iter().map(|v| sign * v).collect();
     let rate: Vec<f64> = ie.rate[b.clone()].iter().map(|v| sign * v).collect();
-    let Some((tau02, rate02, k02)) = yield_stress::offset_yield(&strain, &tau, &rate, s.offset_strain) else {
+    let Some((tau02, rate02, k02)) =
+        yield_stress::offset_yield(&strain, &tau, &rate, s.offset_strain)
+    else {
         out.warnings.push(format!("inelastic strain never reaches {} %", s.offset_strain * 100.0));
         return out;
     };
@@ -239,9 +251,16 @@ fn identify_run(run: &Run, s: &IdentifySettings) -> RunIdentification {
 /// Step 3 for one run: eq. 7 on τ(γᴵ) from the yield sample `k02` up to the
 /// peak of τ (beyond it the falling crank speed, not hardening, shapes the
 /// curve), ψ(τ) along it, and m1, m2 from its end slopes.
-fn fit_hardening(out: &mut RunIdentification, strain: &[f64], tau: &[f64], k02: usize, s: &IdentifySettings) {
+fn fit_hardening(
+    out: &mut RunIdentification,
+    strain: &[f64],
+    tau: &[f64],
+    k02: usize,
+    s: &IdentifySettings,
+) {
     let peak = (k02..tau.len()).max_by(|&i, &j| tau[i].total_cmp(&tau[j])).unwrap_or(k02);
-    let (xs, ys) = resample_log(&strain[k02..=peak], &tau[k02..=peak], s.offset_strain, s.curve_points);
+    let (xs, ys) =
+        resample_log(&strain[k02..=peak], &tau[k02..=peak], s.offset_strain, s.curve_points);
     if xs.len() < 8 {
         out.warnings.push(format!("only {} points past yield for eq. 7", xs.len()));
         out.curve_data = (xs, ys);
@@ -288,7 +307,10 @@ fn identify_steady(run: &Run, s: &IdentifySettings) -> RunIdentification {
     let branch = run.branches[steady::first_full_stroke(run)].clone();
     let g = fit.as_ref().map_or(f64::NAN, |f| f.g);
     let elastic_points = fit.as_ref().map_or(0, |f| f.reversals);
-    RunIdentification { steady: fit.ok(), ..RunIdentification::with_g(run, branch, g, elastic_points, warnings) }
+    RunIdentification {
+        steady: fit.ok(),
+        ..RunIdentification::with_g(run, branch, g, elastic_points, warnings)
+    }
 }
 
 /// `n` points of the curve y(x) at x log-spaced from `from` to the largest x,
@@ -328,12 +350,17 @@ fn resample_log(x: &[f64], y: &[f64], from: f64, n: usize) -> (Vec<f64>, Vec<f64
 }
 
 /// The whole identification of the runs of one current level.
-pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySettings) -> CurrentIdentification {
+pub fn identify_current(
+    campaign: &Campaign,
+    current_a: f64,
+    s: &IdentifySettings,
+) -> CurrentIdentification {
     let group = campaign.at_current(current_a);
     let mut runs: Vec<RunIdentification> = group.runs.iter().map(|r| identify_run(r, s)).collect();
     let mut warnings = Vec::new();
 
-    let points: Vec<(f64, f64)> = runs.iter().filter_map(|r| r.yield_point.map(|(t, g)| (g, t))).collect();
+    let points: Vec<(f64, f64)> =
+        runs.iter().filter_map(|r| r.yield_point.map(|(t, g)| (g, t))).collect();
     let steady: Vec<&steady::SteadyFit> = runs.iter().filter_map(|r| r.steady.as_ref()).collect();
     let steady_z = median(&steady.iter().map(|f| f.z).collect::<Vec<_>>());
     let steady_n = median(&steady.iter().map(|f| f.n).collect::<Vec<_>>());
@@ -350,7 +377,10 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
             note: None,
         };
     } else if yield_fit.n == 1.0 && yield_fit.note.is_some() && steady_n.is_finite() {
-        yield_fit.note = Some(format!("{}; n = {steady_n:.3} from the flow curve of steady cycles instead", yield_fit.note.as_deref().unwrap_or("")));
+        yield_fit.note = Some(format!(
+            "{}; n = {steady_n:.3} from the flow curve of steady cycles instead",
+            yield_fit.note.as_deref().unwrap_or("")
+        ));
         yield_fit.n = steady_n;
     }
     if let Some(note) = &yield_fit.note {
@@ -359,13 +389,22 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
     for r in runs.iter_mut() {
         if let (Some((tau02, _)), Some((small, large))) = (r.yield_point, r.ends) {
             let kappa = tau02 / yield_fit.r0;
-            let (r1, d1) = hardening::solve_r1_d1(large.intercept, small.intercept, large.m, small.m, yield_fit.r0, kappa);
+            let (r1, d1) = hardening::solve_r1_d1(
+                large.intercept,
+                small.intercept,
+                large.m,
+                small.m,
+                yield_fit.r0,
+                kappa,
+            );
             r.r1 = r1;
             r.d1 = d1;
         }
     }
     // per-run values that are not positive are not estimates: left out
-    let positive = |f: &dyn Fn(&RunIdentification) -> f64| runs.iter().map(f).filter(|v| *v > 0.0).collect::<Vec<f64>>();
+    let positive = |f: &dyn Fn(&RunIdentification) -> f64| {
+        runs.iter().map(f).filter(|v| *v > 0.0).collect::<Vec<f64>>()
+    };
     let g = positive(&|r| r.g);
     let mut raw = [
         g.iter().sum::<f64>() / g.len().max(1) as f64,
@@ -417,13 +456,28 @@ pub fn identify_current(campaign: &Campaign, current_a: f64, s: &IdentifySetting
         ));
     }
     let (euler_rms, euler_tau) = euler_check(&group, &params, s, &mut warnings);
-    CurrentIdentification { current_a, runs, yield_fit, raw, params, euler_rms, euler_tau, route, warnings }
+    CurrentIdentification {
+        current_a,
+        runs,
+        yield_fit,
+        raw,
+        params,
+        euler_rms,
+        euler_tau,
+        route,
+        warnings,
+    }
 }
 
 /// The paper's check of the combined estimate: the explicit Euler solution
 /// along every run of `group`, driven by the strain the calibration uses
 /// (smooth, not quantised), and its RMS misfit per run.
-fn euler_check(group: &Campaign, params: &Params, s: &IdentifySettings, warnings: &mut Vec<String>) -> (Vec<f64>, Vec<Vec<f64>>) {
+fn euler_check(
+    group: &Campaign,
+    params: &Params,
+    s: &IdentifySettings,
+    warnings: &mut Vec<String>,
+) -> (Vec<f64>, Vec<Vec<f64>>) {
     let integ = Integrator { max_substeps: 100_000, ..Integrator::default() };
     group
         .runs

@@ -57,11 +57,13 @@ pub fn starts_from_rest(run: &Run) -> bool {
     let spans: Vec<f64> = run.branches.iter().map(|b| span(&run.shear.gamma[b.clone()])).collect();
     let largest = spans.iter().copied().fold(0.0, f64::max);
     let peak = run.shear.tau.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    spans.first().is_some_and(|s| *s >= FULL_STROKE * largest) && (run.shear.tau[0] - run.shear.initial_tau).abs() < 0.1 * peak
+    spans.first().is_some_and(|s| *s >= FULL_STROKE * largest)
+        && (run.shear.tau[0] - run.shear.initial_tau).abs() < 0.1 * peak
 }
 
 fn span(x: &[f64]) -> f64 {
-    let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+    let (lo, hi) =
+        x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
     hi - lo
 }
 
@@ -70,8 +72,13 @@ fn span(x: &[f64]) -> f64 {
 pub fn identify(run: &Run, tau: &[f64], gamma: &[f64], rate: &[f64]) -> Result<SteadyFit, String> {
     let spans: Vec<f64> = run.branches.iter().map(|b| span(&gamma[b.clone()])).collect();
     let largest = spans.iter().copied().fold(0.0, f64::max);
-    let strokes: Vec<std::ops::Range<usize>> =
-        run.branches.iter().zip(&spans).filter(|(_, s)| **s >= FULL_STROKE * largest).map(|(b, _)| b.clone()).collect();
+    let strokes: Vec<std::ops::Range<usize>> = run
+        .branches
+        .iter()
+        .zip(&spans)
+        .filter(|(_, s)| **s >= FULL_STROKE * largest)
+        .map(|(b, _)| b.clone())
+        .collect();
     if strokes.is_empty() {
         return Err("no full stroke in the record".into());
     }
@@ -82,13 +89,24 @@ pub fn identify(run: &Run, tau: &[f64], gamma: &[f64], rate: &[f64]) -> Result<S
         .filter_map(|b| {
             let t0 = tau[b.start];
             let swing = tau[b.clone()].iter().map(|v| (v - t0).abs()).fold(0.0, f64::max);
-            let inside: Vec<usize> = b.clone().take_while(|&k| (tau[k] - t0).abs() <= SWING.1 * swing).filter(|&k| (tau[k] - t0).abs() >= SWING.0 * swing).collect();
-            (inside.len() >= 3).then(|| super::elastic::slope(&inside.iter().map(|&k| gamma[k]).collect::<Vec<_>>(), &inside.iter().map(|&k| tau[k]).collect::<Vec<_>>()))
+            let inside: Vec<usize> = b
+                .clone()
+                .take_while(|&k| (tau[k] - t0).abs() <= SWING.1 * swing)
+                .filter(|&k| (tau[k] - t0).abs() >= SWING.0 * swing)
+                .collect();
+            (inside.len() >= 3).then(|| {
+                super::elastic::slope(
+                    &inside.iter().map(|&k| gamma[k]).collect::<Vec<_>>(),
+                    &inside.iter().map(|&k| tau[k]).collect::<Vec<_>>(),
+                )
+            })
         })
         .filter(|g| *g > 0.0)
         .collect();
     if slopes.is_empty() {
-        return Err("no reversal has three samples inside its elastic swing: G cannot be measured".into());
+        return Err(
+            "no reversal has three samples inside its elastic swing: G cannot be measured".into()
+        );
     }
     slopes.sort_by(f64::total_cmp);
     let g = slopes[slopes.len() / 2];
@@ -99,24 +117,45 @@ pub fn identify(run: &Run, tau: &[f64], gamma: &[f64], rate: &[f64]) -> Result<S
         let top = tau[b.clone()].iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for k in b.clone() {
             let (t, r) = (tau[k], rate[k]);
-            if t.abs() >= SETTLED * top && r.abs() >= FLOWING * top_rate && t * r > 0.0 && r.abs() < 2.0 * D0 {
+            if t.abs() >= SETTLED * top
+                && r.abs() >= FLOWING * top_rate
+                && t * r > 0.0
+                && r.abs() < 2.0 * D0
+            {
                 flow.push((r.abs(), t.abs()));
             }
         }
     }
     if flow.len() < 10 {
-        return Err(format!("only {} samples of settled flow: the flow curve cannot be fitted", flow.len()));
+        return Err(format!(
+            "only {} samples of settled flow: the flow curve cannot be fitted",
+            flow.len()
+        ));
     }
-    let model = |p: &[f64], rate: f64| p[0] - SQRT_3.ln() - ((2.0 * p[1].exp() / (p[1].exp() + 1.0)) * (2.0 * D0 / rate).ln()).ln() / (2.0 * p[1].exp());
+    let model = |p: &[f64], rate: f64| {
+        p[0] - SQRT_3.ln()
+            - ((2.0 * p[1].exp() / (p[1].exp() + 1.0)) * (2.0 * D0 / rate).ln()).ln()
+                / (2.0 * p[1].exp())
+    };
     let residuals = |p: &[f64]| Some(flow.iter().map(|(r, t)| model(p, *r) - t.ln()).collect());
     // start at n = 1 with z matching the mean level
-    let z0 = flow.iter().map(|(r, t)| t.ln() - model(&[0.0, 0.0], *r)).sum::<f64>() / flow.len() as f64;
+    let z0 =
+        flow.iter().map(|(r, t)| t.ln() - model(&[0.0, 0.0], *r)).sum::<f64>() / flow.len() as f64;
     let fit = least_squares(&[z0, 0.0], &residuals, None);
     let (z, n) = (fit.params[0].exp(), fit.params[1].exp());
-    if !fit.converged || !(super::yield_stress::N_TRUSTED.0..=super::yield_stress::N_TRUSTED.1).contains(&n) {
+    if !fit.converged
+        || !(super::yield_stress::N_TRUSTED.0..=super::yield_stress::N_TRUSTED.1).contains(&n)
+    {
         return Err(format!("the flow curve does not determine n (fit gave n = {n:.3e})"));
     }
-    Ok(SteadyFit { g, z, n, reversals: slopes.len(), flow_samples: flow.len(), rms_log: (2.0 * fit.cost / flow.len() as f64).sqrt() })
+    Ok(SteadyFit {
+        g,
+        z,
+        n,
+        reversals: slopes.len(),
+        flow_samples: flow.len(),
+        rms_log: (2.0 * fit.cost / flow.len() as f64).sqrt(),
+    })
 }
 
 #[cfg(test)]
@@ -134,12 +173,32 @@ mod tests {
         let p = Params { r0: 1.0e5, ..Params::reference_1a() };
         let rate = 2000.0;
         let t: Vec<f64> = (0..8000).map(|k| k as f64 / rate).collect();
-        let x: Vec<f64> = t.iter().map(|t| 8e-3 * (t / 1.0).min(1.0) * (2.0 * std::f64::consts::PI * 2.0 * t).sin()).collect();
+        let x: Vec<f64> = t
+            .iter()
+            .map(|t| 8e-3 * (t / 1.0).min(1.0) * (2.0 * std::f64::consts::PI * 2.0 * t).sin())
+            .collect();
         let gamma: Vec<f64> = x.iter().map(|x| x / 1e-3).collect();
-        let tau = Integrator { substeps: 8, extrapolate: true, max_substeps: 100_000, ..Integrator::default() }.run(&p, &t, &gamma).unwrap().tau;
+        let tau = Integrator {
+            substeps: 8,
+            extrapolate: true,
+            max_substeps: 100_000,
+            ..Integrator::default()
+        }
+        .run(&p, &t, &gamma)
+        .unwrap()
+        .tau;
         let dir = tempfile::tempdir().unwrap();
-        let rec = crate::data::Record { time: t, displacement: x, force: tau.iter().map(|v| v * 0.05).collect(), current: None };
-        std::fs::write(dir.path().join("r.csv"), crate::data::table::csv_text(&rec).replace(",NaN", ",1")).unwrap();
+        let rec = crate::data::Record {
+            time: t,
+            displacement: x,
+            force: tau.iter().map(|v| v * 0.05).collect(),
+            current: None,
+        };
+        std::fs::write(
+            dir.path().join("r.csv"),
+            crate::data::table::csv_text(&rec).replace(",NaN", ",1"),
+        )
+        .unwrap();
         let manifest = Manifest {
             name: "t".into(),
             geometry: Geometry { area_m2: 0.05, gap_m: 1e-3 },

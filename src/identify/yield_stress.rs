@@ -9,10 +9,13 @@ const SQRT_3: f64 = 1.732_050_807_568_877_2;
 /// the branch) last rises through `offset`, by linear interpolation between
 /// the two samples around it. The last crossing, so that noise around the
 /// offset before yield cannot pick an early one. `None` if it never does.
-pub fn offset_yield(strain: &[f64], tau: &[f64], rate: &[f64], offset: f64) -> Option<(f64, f64, usize)> {
-    let k = (0..strain.len() - 1)
-        .rev()
-        .find(|&k| strain[k] < offset && strain[k + 1] >= offset)?;
+pub fn offset_yield(
+    strain: &[f64],
+    tau: &[f64],
+    rate: &[f64],
+    offset: f64,
+) -> Option<(f64, f64, usize)> {
+    let k = (0..strain.len() - 1).rev().find(|&k| strain[k] < offset && strain[k + 1] >= offset)?;
     let w = (offset - strain[k]) / (strain[k + 1] - strain[k]);
     let lerp = |v: &[f64]| v[k] + w * (v[k + 1] - v[k]);
     Some((lerp(tau), lerp(rate), k))
@@ -46,7 +49,13 @@ pub fn fit_eq6(points: &[(f64, f64)]) -> YieldFit {
         .filter(|(rate, tau)| *rate > 0.0 && *rate < 2.0 * D0 && *tau > 0.0)
         .collect();
     if usable.is_empty() {
-        return YieldFit { r0: f64::NAN, n: f64::NAN, converged: false, rms_log: f64::NAN, note: Some("no usable yield point".into()) };
+        return YieldFit {
+            r0: f64::NAN,
+            n: f64::NAN,
+            converged: false,
+            rms_log: f64::NAN,
+            note: Some("no usable yield point".into()),
+        };
     }
     if usable.len() == 1 {
         let (rate, tau) = usable[0];
@@ -59,9 +68,11 @@ pub fn fit_eq6(points: &[(f64, f64)]) -> YieldFit {
         };
     }
     let model = |p: &[f64], rate: f64| eq6(p[0].exp(), p[1].exp(), rate).ln();
-    let residuals = |p: &[f64]| Some(usable.iter().map(|(rate, tau)| model(p, *rate) - tau.ln()).collect());
+    let residuals =
+        |p: &[f64]| Some(usable.iter().map(|(rate, tau)| model(p, *rate) - tau.ln()).collect());
     // start at n = 1 with R0 matching the mean level
-    let start_r0 = usable.iter().map(|(rate, tau)| tau / eq6(1.0, 1.0, *rate)).sum::<f64>() / usable.len() as f64;
+    let start_r0 = usable.iter().map(|(rate, tau)| tau / eq6(1.0, 1.0, *rate)).sum::<f64>()
+        / usable.len() as f64;
     let fit = least_squares(&[start_r0.ln(), 0.0], &residuals, None);
     let n = fit.params[1].exp();
     if fit.converged && (N_TRUSTED.0..=N_TRUSTED.1).contains(&n) {
@@ -75,7 +86,9 @@ pub fn fit_eq6(points: &[(f64, f64)]) -> YieldFit {
     }
     // τ02 changes by only a few percent over a decade of rate, so a percent
     // of noise in τ02 can send n anywhere: hold n at 1 and fit R0 alone
-    let residuals_r0 = |p: &[f64]| Some(usable.iter().map(|(rate, tau)| model(&[p[0], 0.0], *rate) - tau.ln()).collect());
+    let residuals_r0 = |p: &[f64]| {
+        Some(usable.iter().map(|(rate, tau)| model(&[p[0], 0.0], *rate) - tau.ln()).collect())
+    };
     let held = least_squares(&[start_r0.ln()], &residuals_r0, None);
     YieldFit {
         r0: held.params[0].exp(),
@@ -117,7 +130,8 @@ mod tests {
     fn fit_recovers_known_r0_and_n() {
         // τ02 by hand for R0 = 1.2e5, n = 1.2 at 30, 60, 120 1/s:
         // τ02 = R0/(√3 [(2.4/2.2) ln(2e4/γ̇)]^(1/2.4))
-        let hand = |rate: f64| 1.2e5 / (3f64.sqrt() * ((2.4 / 2.2) * (2.0e4 / rate).ln()).powf(1.0 / 2.4));
+        let hand =
+            |rate: f64| 1.2e5 / (3f64.sqrt() * ((2.4 / 2.2) * (2.0e4 / rate).ln()).powf(1.0 / 2.4));
         let pts: Vec<(f64, f64)> = [30.0, 60.0, 120.0].iter().map(|&r| (r, hand(r))).collect();
         let fit = fit_eq6(&pts);
         assert!(fit.converged);
@@ -133,7 +147,8 @@ mod tests {
         assert_eq!(fit.n, 1.0);
         assert!(fit.note.unwrap().contains("n held at 1"));
         // R0 then matches the mean level of eq. 6 with n = 1
-        let mean_ratio: f64 = pts.iter().map(|(r, t)| (t / eq6(fit.r0, 1.0, *r)).ln()).sum::<f64>() / 3.0;
+        let mean_ratio: f64 =
+            pts.iter().map(|(r, t)| (t / eq6(fit.r0, 1.0, *r)).ln()).sum::<f64>() / 3.0;
         assert!(mean_ratio.abs() < 1e-6);
     }
 

@@ -102,9 +102,17 @@ mod tests {
 
     #[test]
     fn curves_pass_through_their_anchors_and_have_an_off_state() {
-        let low = Params { g: 2.5e5, r0: 4.0e4, r1: 5.0e4, d1: 3.0e4, m1: 2e-7, m2: 2.5e-3, n: 0.33 };
-        let high = Params { g: 1.7e5, r0: 8.5e4, r1: 6.0e4, d1: 1.65e5, m1: 8e-6, m2: 3.6e-4, n: 0.36 };
-        let c = CurrentCurves { low_a: 0.25, high_a: 1.0, low, high, bend: [4.0, 0.25, 1.0, 2.0, 0.1, 3.0, 1.0] };
+        let low =
+            Params { g: 2.5e5, r0: 4.0e4, r1: 5.0e4, d1: 3.0e4, m1: 2e-7, m2: 2.5e-3, n: 0.33 };
+        let high =
+            Params { g: 1.7e5, r0: 8.5e4, r1: 6.0e4, d1: 1.65e5, m1: 8e-6, m2: 3.6e-4, n: 0.36 };
+        let c = CurrentCurves {
+            low_a: 0.25,
+            high_a: 1.0,
+            low,
+            high,
+            bend: [4.0, 0.25, 1.0, 2.0, 0.1, 3.0, 1.0],
+        };
         for (k, (a, b)) in c.params_at(0.25).to_array().iter().zip(low.to_array()).enumerate() {
             assert!((a / b - 1.0).abs() < 1e-14, "{k}");
         }

@@ -39,7 +39,12 @@ pub struct CurrentLaw {
 impl CurrentLaw {
     /// The law whose parameters at `reference_a` are `p`, with the share
     /// `g_field_share` of G from the field.
-    pub fn through(p: &Params, reference_a: f64, saturation_a: f64, g_field_share: f64) -> CurrentLaw {
+    pub fn through(
+        p: &Params,
+        reference_a: f64,
+        saturation_a: f64,
+        g_field_share: f64,
+    ) -> CurrentLaw {
         CurrentLaw {
             reference_a,
             saturation_a,

@@ -57,7 +57,11 @@ impl FieldCurrent {
     #[inline]
     pub fn hold(&mut self, current_a: f64, dt: f64) -> f64 {
         let gap = self.field_a - current_a;
-        self.field_a = if !(self.lag_s > 0.0) || gap == 0.0 { current_a } else { current_a + gap * (-dt / self.lag_s).exp() };
+        self.field_a = if !(self.lag_s > 0.0) || gap == 0.0 {
+            current_a
+        } else {
+            current_a + gap * (-dt / self.lag_s).exp()
+        };
         self.field_a
     }
 }

@@ -90,7 +90,9 @@ pub enum IntegrationError {
     InvalidParams(String),
     #[error("invalid strain history: {0}")]
     InvalidHistory(String),
-    #[error("too stiff: more than {substeps} sub-steps needed in one sample interval at t = {time} s")]
+    #[error(
+        "too stiff: more than {substeps} sub-steps needed in one sample interval at t = {time} s"
+    )]
     TooStiff { time: f64, substeps: u32 },
     #[error("non-finite stress or work at t = {time} s")]
     NonFinite { time: f64 },
@@ -137,13 +139,20 @@ impl<S: F64xN> Track<S> {
 /// (`current`, held from sample to sample) sets them through `laws`, the
 /// field lagging by `lags_s`; and the schedule of the parameters at each
 /// later sample time, which names them only where some lane's change.
-fn along<'a>(laws: &'a [FieldLaw; LANES], lags_s: &[f64; LANES], current: &'a [f64], t: &'a [f64]) -> ([Params; LANES], impl FnMut(usize) -> Option<[Params; LANES]> + 'a) {
-    let mut fields: [FieldCurrent; LANES] = std::array::from_fn(|lane| FieldCurrent::steady(lags_s[lane], current[0]));
+fn along<'a>(
+    laws: &'a [FieldLaw; LANES],
+    lags_s: &[f64; LANES],
+    current: &'a [f64],
+    t: &'a [f64],
+) -> ([Params; LANES], impl FnMut(usize) -> Option<[Params; LANES]> + 'a) {
+    let mut fields: [FieldCurrent; LANES] =
+        std::array::from_fn(|lane| FieldCurrent::steady(lags_s[lane], current[0]));
     let first: [Params; LANES] = std::array::from_fn(|lane| laws[lane].params_at(current[0]));
     let mut last = first;
     let schedule = move |k: usize| {
         let dt = t[k + 1] - t[k];
-        let p: [Params; LANES] = std::array::from_fn(|lane| laws[lane].params_at(fields[lane].hold(current[k], dt)));
+        let p: [Params; LANES] =
+            std::array::from_fn(|lane| laws[lane].params_at(fields[lane].hold(current[k], dt)));
         (p != last).then(|| {
             last = p;
             p
@@ -157,7 +166,9 @@ pub fn uses_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         static DETECTED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-        *DETECTED.get_or_init(|| std::env::var_os("MRBP_NO_AVX2").is_none() && is_x86_feature_detected!("avx2"))
+        *DETECTED.get_or_init(|| {
+            std::env::var_os("MRBP_NO_AVX2").is_none() && is_x86_feature_detected!("avx2")
+        })
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -201,11 +212,17 @@ impl Integrator {
         visit: impl FnMut(usize, &LaneStates),
     ) -> [Result<(), IntegrationError>; LANES] {
         if current.len() != t.len() {
-            let e = IntegrationError::InvalidHistory(format!("{} times but {} currents", t.len(), current.len()));
+            let e = IntegrationError::InvalidHistory(format!(
+                "{} times but {} currents",
+                t.len(),
+                current.len()
+            ));
             return std::array::from_fn(|_| Err(e.clone()));
         }
         if t.len() < 2 {
-            let p = std::array::from_fn(|lane| laws[lane].params_at(current.first().copied().unwrap_or(0.0)));
+            let p = std::array::from_fn(|lane| {
+                laws[lane].params_at(current.first().copied().unwrap_or(0.0))
+            });
             return self.run_lanes(&p, t, gamma, initial_tau, visit);
         }
         let (first, schedule) = along(laws, lags_s, current, t);
@@ -215,14 +232,35 @@ impl Integrator {
     /// [`Integrator::euler_steps`] with the parameters following the coil
     /// current (one lane of [`Integrator::run_lanes_along`]).
     #[allow(clippy::too_many_arguments)]
-    pub fn euler_steps_along(&self, law: &FieldLaw, lag_s: f64, current: &[f64], t: &[f64], gamma: &[f64], initial_tau: f64) -> u64 {
+    pub fn euler_steps_along(
+        &self,
+        law: &FieldLaw,
+        lag_s: f64,
+        current: &[f64],
+        t: &[f64],
+        gamma: &[f64],
+        initial_tau: f64,
+    ) -> u64 {
         if current.len() != t.len() || t.len() < 2 {
-            return self.euler_steps(&law.params_at(current.first().copied().unwrap_or(0.0)), t, gamma, initial_tau);
+            return self.euler_steps(
+                &law.params_at(current.first().copied().unwrap_or(0.0)),
+                t,
+                gamma,
+                initial_tau,
+            );
         }
         let laws = [*law; LANES];
         let (first, mut schedule) = along(&laws, &[lag_s; LANES], current, t);
         let mut outcome = std::array::from_fn(|_| Ok(()));
-        self.integrate::<Portable, true>(&first, t, gamma, initial_tau, &mut outcome, &mut schedule, &mut |_, _| {})
+        self.integrate::<Portable, true>(
+            &first,
+            t,
+            gamma,
+            initial_tau,
+            &mut outcome,
+            &mut schedule,
+            &mut |_, _| {},
+        )
     }
 
     /// The integration of every lane from `params` (at `t[0]`), with
@@ -242,7 +280,11 @@ impl Integrator {
     ) -> [Result<(), IntegrationError>; LANES] {
         let mut outcome: [Result<(), IntegrationError>; LANES] = std::array::from_fn(|_| Ok(()));
         if t.len() != gamma.len() {
-            let e = IntegrationError::InvalidHistory(format!("{} times but {} strains", t.len(), gamma.len()));
+            let e = IntegrationError::InvalidHistory(format!(
+                "{} times but {} strains",
+                t.len(),
+                gamma.len()
+            ));
             return std::array::from_fn(|_| Err(e.clone()));
         }
         // a lane with invalid parameters runs a valid set and is reported failed
@@ -259,10 +301,28 @@ impl Integrator {
         #[cfg(target_arch = "x86_64")]
         if uses_avx2() {
             // SAFETY: the CPU has AVX2 (checked just above)
-            unsafe { self.integrate_avx2::<VARYING>(&usable, t, gamma, initial_tau, &mut outcome, &mut schedule, &mut visit) };
+            unsafe {
+                self.integrate_avx2::<VARYING>(
+                    &usable,
+                    t,
+                    gamma,
+                    initial_tau,
+                    &mut outcome,
+                    &mut schedule,
+                    &mut visit,
+                )
+            };
             return outcome;
         }
-        self.integrate::<Portable, VARYING>(&usable, t, gamma, initial_tau, &mut outcome, &mut schedule, &mut visit);
+        self.integrate::<Portable, VARYING>(
+            &usable,
+            t,
+            gamma,
+            initial_tau,
+            &mut outcome,
+            &mut schedule,
+            &mut visit,
+        );
         outcome
     }
 
@@ -280,7 +340,15 @@ impl Integrator {
         schedule: &mut impl FnMut(usize) -> Option<[Params; LANES]>,
         visit: &mut impl FnMut(usize, &LaneStates),
     ) {
-        self.integrate::<super::simd::avx2::Avx2, VARYING>(params, t, gamma, initial_tau, outcome, schedule, visit);
+        self.integrate::<super::simd::avx2::Avx2, VARYING>(
+            params,
+            t,
+            gamma,
+            initial_tau,
+            outcome,
+            schedule,
+            visit,
+        );
     }
 
     /// The Euler steps one integration of `p` along the history takes (both
@@ -288,7 +356,15 @@ impl Integrator {
     /// log-density costs, which stiff records raise for the explicit scheme.
     pub fn euler_steps(&self, p: &Params, t: &[f64], gamma: &[f64], initial_tau: f64) -> u64 {
         let mut outcome = std::array::from_fn(|_| Ok(()));
-        self.integrate::<Portable, false>(&[*p; LANES], t, gamma, initial_tau, &mut outcome, &mut |_| None, &mut |_, _| {})
+        self.integrate::<Portable, false>(
+            &[*p; LANES],
+            t,
+            gamma,
+            initial_tau,
+            &mut outcome,
+            &mut |_| None,
+            &mut |_, _| {},
+        )
     }
 
     /// The loop over the samples of a record, in the lanes of `S`, with
@@ -317,7 +393,10 @@ impl Integrator {
         for k in 0..t.len() - 1 {
             let dt = t[k + 1] - t[k];
             if !(dt > 0.0) {
-                let e = IntegrationError::InvalidHistory(format!("time does not increase at sample {}", k + 1));
+                let e = IntegrationError::InvalidHistory(format!(
+                    "time does not increase at sample {}",
+                    k + 1
+                ));
                 *outcome = std::array::from_fn(|_| Err(e.clone()));
                 return steps;
             }
@@ -332,7 +411,10 @@ impl Integrator {
                     for (lane, q) in p.iter_mut().enumerate() {
                         if let Err(e) = q.validate() {
                             if outcome[lane].is_ok() {
-                                outcome[lane] = Err(IntegrationError::InvalidParams(format!("at t = {} s: {e}", t[k + 1])));
+                                outcome[lane] = Err(IntegrationError::InvalidParams(format!(
+                                    "at t = {} s: {e}",
+                                    t[k + 1]
+                                )));
                             }
                             *q = Params::reference_1a();
                         }
@@ -341,8 +423,24 @@ impl Integrator {
                 }
             };
             let (taken, tau, w) = match &next {
-                Some(to) if VARYING => self.interval(&fine, &Moving { from: &law, to }, (&mut coarse, &mut finer), strain_rate, dt, t[k], outcome),
-                _ => self.interval(&fine, &Steady(&law), (&mut coarse, &mut finer), strain_rate, dt, t[k], outcome),
+                Some(to) if VARYING => self.interval(
+                    &fine,
+                    &Moving { from: &law, to },
+                    (&mut coarse, &mut finer),
+                    strain_rate,
+                    dt,
+                    t[k],
+                    outcome,
+                ),
+                _ => self.interval(
+                    &fine,
+                    &Steady(&law),
+                    (&mut coarse, &mut finer),
+                    strain_rate,
+                    dt,
+                    t[k],
+                    outcome,
+                ),
             };
             steps += taken;
             if let Some(to) = next {
@@ -404,11 +502,13 @@ impl Integrator {
     }
 
     /// τ and Wᴵ at every sample time, from the virgin state τ = 0, Wᴵ = 0.
-    pub fn run(&self, p: &Params, t: &[f64], gamma: &[f64]) -> Result<Trajectory, IntegrationError> {
-        let mut out = Trajectory {
-            tau: vec![0.0; t.len()],
-            w: vec![0.0; t.len()],
-        };
+    pub fn run(
+        &self,
+        p: &Params,
+        t: &[f64],
+        gamma: &[f64],
+    ) -> Result<Trajectory, IntegrationError> {
+        let mut out = Trajectory { tau: vec![0.0; t.len()], w: vec![0.0; t.len()] };
         self.run_with(p, t, gamma, State::default(), |k, s| {
             out.tau[k] = s.tau;
             out.w[k] = s.w;
@@ -459,7 +559,8 @@ impl Integrator {
         let done_below = S::splat(1e-12 * dt);
         let shortest = S::splat(1e-9 * dt);
         // lanes that already failed do not step
-        let failed = S::from_array(outcome.each_ref().map(|o| if o.is_err() { 1.0 } else { 0.0 })).gt(zero);
+        let failed =
+            S::from_array(outcome.each_ref().map(|o| if o.is_err() { 1.0 } else { 0.0 })).gt(zero);
         let mut left = S::select(failed, zero, S::splat(dt));
         let mut h_cap = h_max;
         let mut attempts = 0u32;
@@ -472,7 +573,10 @@ impl Integrator {
             if attempts > self.max_substeps {
                 for (lane, r) in running.mask_to_bools().into_iter().enumerate() {
                     if r && outcome[lane].is_ok() {
-                        outcome[lane] = Err(IntegrationError::TooStiff { time: t0, substeps: self.max_substeps });
+                        outcome[lane] = Err(IntegrationError::TooStiff {
+                            time: t0,
+                            substeps: self.max_substeps,
+                        });
                     }
                 }
                 break;
@@ -507,7 +611,8 @@ impl Integrator {
             let too_long = (g_end * slope * h).gt(S::splat(2.0));
             let reject = if explicit { running.and(too_long).and(h.gt(shortest)) } else { zero };
             let accept = reject.and_not(running);
-            h_cap = S::select(reject, h * S::splat(0.5), S::select(accept, (h + h).min(h_max), h_cap));
+            h_cap =
+                S::select(reject, h * S::splat(0.5), S::select(accept, (h + h).min(h_max), h_cap));
             tr.tau = S::select(accept, tau, tr.tau);
             tr.w = S::select(accept, w, tr.w);
             tr.rate = S::select(accept, rate, tr.rate);
@@ -623,7 +728,11 @@ mod tests {
         let (t, g) = ramp(10.0, 0.01, 100);
         let tr = integrate(&p, &t, &g).unwrap();
         for (tau, gamma) in tr.tau.iter().zip(&g) {
-            assert!((tau - p.g * gamma).abs() <= 1e-9 * p.g * gamma.max(1e-12), "{tau} vs {}", p.g * gamma);
+            assert!(
+                (tau - p.g * gamma).abs() <= 1e-9 * p.g * gamma.max(1e-12),
+                "{tau} vs {}",
+                p.g * gamma
+            );
         }
         assert!(tr.w.iter().all(|&w| w < 1e-6));
     }
@@ -634,12 +743,7 @@ mod tests {
         let p = Params::reference_1a();
         let rate = 100.0;
         let (t, g) = ramp(rate, 3.0, 30_000);
-        let tr = Integrator {
-            substeps: 4,
-            ..Integrator::default()
-        }
-        .run(&p, &t, &g)
-        .unwrap();
+        let tr = Integrator { substeps: 4, ..Integrator::default() }.run(&p, &t, &g).unwrap();
         let (r, d) = hardening(&p, *tr.w.last().unwrap());
         assert!((r + d - (p.r1 + p.d1)).abs() < 1e-6 * (p.r1 + p.d1));
         let expected = flow_stress(&p, rate, p.r1 + p.d1);
@@ -652,12 +756,7 @@ mod tests {
         let p = Params::reference_1a();
         let (t, g) = crank(2000);
         for scheme in [Scheme::Explicit, Scheme::LinearlyImplicit] {
-            let tr = Integrator {
-                scheme,
-                ..Integrator::default()
-            }
-            .run(&p, &t, &g)
-            .unwrap();
+            let tr = Integrator { scheme, ..Integrator::default() }.run(&p, &t, &g).unwrap();
             assert!(tr.w.windows(2).all(|w| w[1] >= w[0]), "{scheme:?}");
             assert!(*tr.w.last().unwrap() > 0.0);
         }
@@ -672,20 +771,10 @@ mod tests {
     fn errors(scheme: Scheme, p: &Params) -> Vec<f64> {
         let (t, g) = crank(1000);
         let run = |substeps| {
-            Integrator {
-                scheme,
-                substeps,
-                ..Integrator::default()
-            }
-            .run(p, &t, &g)
-            .unwrap()
-            .tau
+            Integrator { scheme, substeps, ..Integrator::default() }.run(p, &t, &g).unwrap().tau
         };
         let reference = run(512);
-        [1, 2, 4, 8]
-            .iter()
-            .map(|&m| max_diff(&run(m), &reference))
-            .collect()
+        [1, 2, 4, 8].iter().map(|&m| max_diff(&run(m), &reference)).collect()
     }
 
     #[test]
@@ -712,7 +801,13 @@ mod tests {
     fn soft_curves() -> FieldLaw {
         let low = Params { g: 5.0e4, r0: 4.0e4, r1: 5.0e4, d1: 1.0e4, m1: 3e-6, m2: 4e-4, n: 0.8 };
         let high = Params { g: 4.0e4, r0: 9.0e4, r1: 1.2e5, d1: 3.0e4, m1: 4e-6, m2: 2e-4, n: 0.9 };
-        FieldLaw::Curves(crate::model::CurrentCurves { low_a: 0.25, high_a: 1.0, low, high, bend: [2.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0] })
+        FieldLaw::Curves(crate::model::CurrentCurves {
+            low_a: 0.25,
+            high_a: 1.0,
+            low,
+            high,
+            bend: [2.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0],
+        })
     }
 
     /// The current of [`switched`]: 0.25 A, 1 A from 0.27 s, 0.5 A from
@@ -740,9 +835,18 @@ mod tests {
     /// at `steps` steps over the record; τ at the times `t`.
     fn reference(law: &FieldLaw, lag: f64, t: &[f64], steps: usize) -> Vec<f64> {
         let period = 0.6;
-        let rate = |t: f64| 6.75 * 2.0 * std::f64::consts::PI / period * (2.0 * std::f64::consts::PI * t / period).sin();
+        let rate = |t: f64| {
+            6.75 * 2.0 * std::f64::consts::PI / period
+                * (2.0 * std::f64::consts::PI * t / period).sin()
+        };
         // I_f from `from` on, starting at `f` there, under the current held at `now`
-        let relax = |f: f64, now: f64, elapsed: f64| if lag > 0.0 { now + (f - now) * (-elapsed / lag).exp() } else { now };
+        let relax = |f: f64, now: f64, elapsed: f64| {
+            if lag > 0.0 {
+                now + (f - now) * (-elapsed / lag).exp()
+            } else {
+                now
+            }
+        };
         let field = |t: f64| {
             let (mut f, mut from) = (0.25, 0.0);
             for at in [0.27, 0.405].into_iter().filter(|at| t >= *at) {
@@ -796,7 +900,15 @@ mod tests {
             for n in [1000, 2000, 4000, 8000] {
                 let (t, g, i) = switched(n);
                 let mut tau = vec![0.0; t.len()];
-                let [out, ..] = Integrator::default().run_lanes_along(&[law; LANES], &[lag; LANES], &i, &t, &g, 0.0, |k, s| tau[k] = s.tau[0]);
+                let [out, ..] = Integrator::default().run_lanes_along(
+                    &[law; LANES],
+                    &[lag; LANES],
+                    &i,
+                    &t,
+                    &g,
+                    0.0,
+                    |k, s| tau[k] = s.tau[0],
+                );
                 out.unwrap();
                 let reference = reference(&law, lag, &t, 32 * 8000);
                 errors.push(max_diff(&tau, &reference));
@@ -818,7 +930,15 @@ mod tests {
         let fixed = Integrator::default().run(&law.params_at(0.6), &t, &g).unwrap().tau;
         for lag in [0.0, 0.01] {
             let mut tau = vec![0.0; t.len()];
-            let [out, ..] = Integrator::default().run_lanes_along(&[law; LANES], &[lag; LANES], &vec![0.6; t.len()], &t, &g, 0.0, |k, s| tau[k] = s.tau[0]);
+            let [out, ..] = Integrator::default().run_lanes_along(
+                &[law; LANES],
+                &[lag; LANES],
+                &vec![0.6; t.len()],
+                &t,
+                &g,
+                0.0,
+                |k, s| tau[k] = s.tau[0],
+            );
             out.unwrap();
             assert_eq!(tau, fixed, "lag {lag}");
         }
@@ -827,19 +947,52 @@ mod tests {
         let (t2, g2, i2) = switched(1000);
         let before = Integrator::default().run(&law.params_at(0.25), &t2, &g2).unwrap().tau;
         let mut tau = vec![0.0; t2.len()];
-        let [out, ..] = Integrator::default().run_lanes_along(&[law; LANES], &[0.0; LANES], &i2, &t2, &g2, 0.0, |k, s| tau[k] = s.tau[0]);
+        let [out, ..] = Integrator::default().run_lanes_along(
+            &[law; LANES],
+            &[0.0; LANES],
+            &i2,
+            &t2,
+            &g2,
+            0.0,
+            |k, s| tau[k] = s.tau[0],
+        );
         out.unwrap();
         assert_eq!(tau[..=500], before[..=500]);
         assert!(tau[501..505] != before[501..505], "the switch shows at once");
         // the tanh law has no yield stress at 0 A: a lane switched off fails
-        let tanh = FieldLaw::Law(crate::model::CurrentLaw::through(&Params::reference_1a(), 1.0, 1.0, 0.5));
+        let tanh = FieldLaw::Law(crate::model::CurrentLaw::through(
+            &Params::reference_1a(),
+            1.0,
+            1.0,
+            0.5,
+        ));
         let mut laws = [law; LANES];
         laws[1] = tanh;
         let off: Vec<f64> = t.iter().map(|&t| if t < 0.3 { 1.0 } else { 0.0 }).collect();
-        let out = Integrator::default().run_lanes_along(&laws, &[0.0; LANES], &off, &t, &g, 0.0, |_, _| {});
+        let out = Integrator::default().run_lanes_along(
+            &laws,
+            &[0.0; LANES],
+            &off,
+            &t,
+            &g,
+            0.0,
+            |_, _| {},
+        );
         assert!(out[0].is_ok() && out[2].is_ok());
-        assert!(matches!(&out[1], Err(IntegrationError::InvalidParams(m)) if m.contains("at t = 0.3")), "{:?}", out[1]);
-        let short = Integrator::default().run_lanes_along(&laws, &[0.0; LANES], &off[1..], &t, &g, 0.0, |_, _| {});
+        assert!(
+            matches!(&out[1], Err(IntegrationError::InvalidParams(m)) if m.contains("at t = 0.3")),
+            "{:?}",
+            out[1]
+        );
+        let short = Integrator::default().run_lanes_along(
+            &laws,
+            &[0.0; LANES],
+            &off[1..],
+            &t,
+            &g,
+            0.0,
+            |_, _| {},
+        );
         assert!(matches!(&short[0], Err(IntegrationError::InvalidHistory(_))));
     }
 
@@ -850,7 +1003,10 @@ mod tests {
         p.n = 0.8;
         let (t, g) = crank(1000);
         let run = |substeps, extrapolate| {
-            Integrator { substeps, extrapolate, max_substeps: 100_000, ..Integrator::default() }.run(&p, &t, &g).unwrap().tau
+            Integrator { substeps, extrapolate, max_substeps: 100_000, ..Integrator::default() }
+                .run(&p, &t, &g)
+                .unwrap()
+                .tau
         };
         // reference: extrapolated with 256 sub-steps, itself second order
         let reference = run(256, true);
@@ -871,19 +1027,13 @@ mod tests {
         p.n = 3.0;
         let (t, g) = crank(500);
         // λΔt is about 3000 here: explicit needs that many sub-steps per interval
-        let patient = Integrator {
-            max_substeps: 100_000,
-            ..Integrator::default()
-        };
+        let patient = Integrator { max_substeps: 100_000, ..Integrator::default() };
         let tr = patient.run(&p, &t, &g).unwrap();
         let bound = 2.0 * flow_stress(&p, 1e-3, p.r1 + p.d1);
         assert!(tr.tau.iter().all(|x| x.abs() < bound));
-        let li = Integrator {
-            scheme: Scheme::LinearlyImplicit,
-            ..Integrator::default()
-        }
-        .run(&p, &t, &g)
-        .unwrap();
+        let li = Integrator { scheme: Scheme::LinearlyImplicit, ..Integrator::default() }
+            .run(&p, &t, &g)
+            .unwrap();
         assert!(li.tau.iter().all(|x| x.abs() < bound));
     }
 
@@ -901,7 +1051,10 @@ mod tests {
         let integ = Integrator { max_substeps: 50, ..Integrator::default() };
         let alone = integ.run(&p, &t, &g).unwrap().tau;
         let mut mixed = vec![[0.0; LANES]; t.len()];
-        let outcome = integ.run_lanes(&[stiff, bad, p, p, stiff, p, bad, p], &t, &g, 0.0, |k, s| mixed[k] = s.tau);
+        let outcome =
+            integ.run_lanes(&[stiff, bad, p, p, stiff, p, bad, p], &t, &g, 0.0, |k, s| {
+                mixed[k] = s.tau
+            });
         assert!(matches!(outcome[0], Err(IntegrationError::TooStiff { .. })));
         assert!(matches!(outcome[1], Err(IntegrationError::InvalidParams(_))));
         for lane in [2, 3, 5, 7] {
@@ -926,17 +1079,49 @@ mod tests {
         stiff.g = 2.0e6;
         stiff.n = 3.0;
         let p = Params::reference_1a();
-        let params = [p, stiff, Params { n: 0.6, ..p }, Params { m2: 1e-3, ..p }, Params { g: 5e4, ..p }, Params { r0: 3e4, ..p }, Params { d1: 1e5, ..p }, Params { m1: 1e-5, ..p }];
-        for integ in [Integrator { extrapolate: true, substeps: 2, ..Integrator::default() }, Integrator { scheme: Scheme::LinearlyImplicit, ..Integrator::default() }] {
+        let params = [
+            p,
+            stiff,
+            Params { n: 0.6, ..p },
+            Params { m2: 1e-3, ..p },
+            Params { g: 5e4, ..p },
+            Params { r0: 3e4, ..p },
+            Params { d1: 1e5, ..p },
+            Params { m1: 1e-5, ..p },
+        ];
+        for integ in [
+            Integrator { extrapolate: true, substeps: 2, ..Integrator::default() },
+            Integrator { scheme: Scheme::LinearlyImplicit, ..Integrator::default() },
+        ] {
             let run = |avx: bool| {
                 let mut out = Vec::new();
                 let mut outcome = std::array::from_fn(|_| Ok(()));
-                let mut visit = |_: usize, s: &LaneStates| out.extend(s.tau.iter().chain(&s.w).map(|v| v.to_bits()));
+                let mut visit = |_: usize, s: &LaneStates| {
+                    out.extend(s.tau.iter().chain(&s.w).map(|v| v.to_bits()))
+                };
                 if avx {
                     // SAFETY: AVX2 detected above
-                    unsafe { integ.integrate_avx2::<false>(&params, &t, &g, 0.0, &mut outcome, &mut |_| None, &mut visit) };
+                    unsafe {
+                        integ.integrate_avx2::<false>(
+                            &params,
+                            &t,
+                            &g,
+                            0.0,
+                            &mut outcome,
+                            &mut |_| None,
+                            &mut visit,
+                        )
+                    };
                 } else {
-                    integ.integrate::<Portable, false>(&params, &t, &g, 0.0, &mut outcome, &mut |_| None, &mut visit);
+                    integ.integrate::<Portable, false>(
+                        &params,
+                        &t,
+                        &g,
+                        0.0,
+                        &mut outcome,
+                        &mut |_| None,
+                        &mut visit,
+                    );
                 }
                 (out, outcome)
             };
@@ -959,12 +1144,18 @@ mod tests {
         // the lane flow rule agrees with the scalar one of law.rs
         let law = LaneLaw::<Portable>::new(&[p; LANES]);
         let z = crate::model::law::Law::new(&p).hardening_sum(1.0e4);
-        let (rate, slope) = law.flow(Portable::from_array([3.0e4, -3.2e4, 0.0, 2.0e3, 3.0e4, -3.2e4, 0.0, 2.0e3]), Portable::splat(z));
+        let (rate, slope) = law.flow(
+            Portable::from_array([3.0e4, -3.2e4, 0.0, 2.0e3, 3.0e4, -3.2e4, 0.0, 2.0e3]),
+            Portable::splat(z),
+        );
         let scalar = crate::model::law::Law::new(&p);
         for (i, tau) in [3.0e4, -3.2e4, 0.0, 2.0e3].iter().enumerate() {
             let f = scalar.flow(*tau, z);
             assert!((rate.to_array()[i] - f.rate).abs() <= 1e-11 * f.rate.abs() + 1e-300, "{tau}");
-            assert!((slope.to_array()[i] - f.slope).abs() <= 1e-11 * f.slope.abs() + 1e-300, "{tau}");
+            assert!(
+                (slope.to_array()[i] - f.slope).abs() <= 1e-11 * f.slope.abs() + 1e-300,
+                "{tau}"
+            );
         }
         assert!((law.hardening_sum(Portable::splat(1.0e4)).to_array()[0] - z).abs() < 1e-9 * z);
     }
@@ -975,10 +1166,7 @@ mod tests {
         p.g = 5.0e7;
         p.n = 3.0;
         let (t, g) = crank(100);
-        let tight = Integrator {
-            max_substeps: 2,
-            ..Integrator::default()
-        };
+        let tight = Integrator { max_substeps: 2, ..Integrator::default() };
         let r = tight.run(&p, &t, &g);
         assert!(matches!(r, Err(IntegrationError::TooStiff { .. })), "{r:?}");
         let mut bad = Params::reference_1a();
@@ -986,9 +1174,15 @@ mod tests {
         assert!(matches!(integrate(&bad, &t, &g), Err(IntegrationError::InvalidParams(_))));
         let mut g2 = g.clone();
         g2[50] = f64::NAN;
-        assert!(matches!(integrate(&Params::reference_1a(), &t, &g2), Err(IntegrationError::NonFinite { .. })));
+        assert!(matches!(
+            integrate(&Params::reference_1a(), &t, &g2),
+            Err(IntegrationError::NonFinite { .. })
+        ));
         let mut t2 = t.clone();
         t2[10] = t2[9];
-        assert!(matches!(integrate(&Params::reference_1a(), &t2, &g), Err(IntegrationError::InvalidHistory(_))));
+        assert!(matches!(
+            integrate(&Params::reference_1a(), &t2, &g),
+            Err(IntegrationError::InvalidHistory(_))
+        ));
     }
 }

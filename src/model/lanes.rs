@@ -82,7 +82,8 @@ impl<S: F64xN> LaneLaw<S> {
         let inv_abs_tau = S::splat(1.0) / tau.abs();
         // at τ = 0 the ratio is +∞, the logarithm too, and the cap makes q
         // finite and huge; z > 0 (R0, R1 > 0) keeps the ratio positive
-        let log_q = (self.two_n * ln_of_positive(z * S::splat(INV_SQRT_3) * inv_abs_tau)).min(S::splat(MAX_LOG_Q));
+        let log_q = (self.two_n * ln_of_positive(z * S::splat(INV_SQRT_3) * inv_abs_tau))
+            .min(S::splat(MAX_LOG_Q));
         let q = exp_of_finite(log_q);
         let magnitude = S::splat(2.0 * D0) * exp_of_finite(-self.half_n1_over_n * q);
         let flowing = magnitude.gt(S::splat(0.0));

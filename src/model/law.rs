@@ -68,11 +68,7 @@ pub struct Law {
 
 impl Law {
     pub fn new(p: &Params) -> Self {
-        Law {
-            p: *p,
-            half_n1_over_n: 0.5 * (p.n + 1.0) / p.n,
-            two_n: 2.0 * p.n,
-        }
+        Law { p: *p, half_n1_over_n: 0.5 * (p.n + 1.0) / p.n, two_n: 2.0 * p.n }
     }
 
     /// Total hardening R + D after inelastic work `w` (eq. 4).
@@ -93,15 +89,9 @@ impl Law {
         let magnitude = 2.0 * D0 * (-self.half_n1_over_n * q).exp();
         if magnitude == 0.0 {
             // far below yield (or τ = 0): no flow, and no stiffness either
-            return Flow {
-                rate: 0.0,
-                slope: 0.0,
-            };
+            return Flow { rate: 0.0, slope: 0.0 };
         }
-        Flow {
-            rate: magnitude.copysign(tau),
-            slope: magnitude * (self.p.n + 1.0) * q / abs_tau,
-        }
+        Flow { rate: magnitude.copysign(tau), slope: magnitude * (self.p.n + 1.0) * q / abs_tau }
     }
 }
 

@@ -16,7 +16,9 @@ pub mod simd;
 pub use current_curves::CurrentCurves;
 pub use current_law::CurrentLaw;
 pub use field::{FieldCurrent, FieldLaw};
-pub use integrate::{integrate, uses_avx2, IntegrationError, Integrator, LaneStates, Scheme, State, Trajectory};
+pub use integrate::{
+    integrate, uses_avx2, IntegrationError, Integrator, LaneStates, Scheme, State, Trajectory,
+};
 pub use lanes::LANES;
 pub use law::tangent_stiffness;
 pub use params::{Params, D0, PARAM_NAMES, PARAM_UNITS, PHYSICAL_RANGE, PLAUSIBLE_RANGE};

@@ -18,13 +18,13 @@ pub const PARAM_UNITS: [&str; 7] = ["Pa", "Pa", "Pa", "Pa", "1/Pa", "1/Pa", "-"]
 /// what is physically absurd: it is the support of the default priors and
 /// the box that the identification clamps its results into.
 pub const PHYSICAL_RANGE: [(f64, f64); 7] = [
-    (1.0e3, 1.0e8),  // G
-    (1.0e3, 1.0e7),  // R0
-    (1.0e3, 1.0e7),  // R1
-    (1.0e1, 1.0e7),  // D1
+    (1.0e3, 1.0e8),   // G
+    (1.0e3, 1.0e7),   // R0
+    (1.0e3, 1.0e7),   // R1
+    (1.0e1, 1.0e7),   // D1
     (1.0e-9, 1.0e-2), // m1
-    (1.0e-7, 1.0),   // m2
-    (0.1, 10.0),     // n
+    (1.0e-7, 1.0),    // m2
+    (0.1, 10.0),      // n
 ];
 
 /// The plausible values of each parameter for an RD-1005-3-class damper
@@ -71,24 +71,13 @@ impl Params {
     }
 
     pub fn from_array(a: [f64; 7]) -> Self {
-        Params {
-            g: a[0],
-            r0: a[1],
-            r1: a[2],
-            d1: a[3],
-            m1: a[4],
-            m2: a[5],
-            n: a[6],
-        }
+        Params { g: a[0], r0: a[1], r1: a[2], d1: a[3], m1: a[4], m2: a[5], n: a[6] }
     }
 
     /// Checks that every parameter is finite and inside [`PHYSICAL_RANGE`];
     /// the message names the first one that is not.
     pub fn validate(&self) -> Result<(), String> {
-        for ((name, value), (lo, hi)) in PARAM_NAMES
-            .iter()
-            .zip(self.to_array())
-            .zip(PHYSICAL_RANGE)
+        for ((name, value), (lo, hi)) in PARAM_NAMES.iter().zip(self.to_array()).zip(PHYSICAL_RANGE)
         {
             if !value.is_finite() || value < lo || value > hi {
                 return Err(format!(
@@ -107,11 +96,7 @@ impl Params {
         let mut moved = Vec::new();
         for (i, (lo, hi)) in PHYSICAL_RANGE.iter().enumerate() {
             let v = a[i];
-            let c = if v.is_finite() {
-                v.clamp(*lo, *hi)
-            } else {
-                (lo * hi).sqrt()
-            };
+            let c = if v.is_finite() { v.clamp(*lo, *hi) } else { (lo * hi).sqrt() };
             if c != v {
                 moved.push(PARAM_NAMES[i]);
                 a[i] = c;
@@ -129,15 +114,7 @@ impl Params {
     /// Plausible values at 1 A for an RD-1005-3-class damper (design page):
     /// peak force about 2.5–2.9 kN at 100–400 rpm with A = 0.05 m².
     pub fn reference_1a() -> Self {
-        Params {
-            g: 2.0e5,
-            r0: 1.2e5,
-            r1: 1.6e5,
-            d1: 3.0e4,
-            m1: 4.0e-6,
-            m2: 2.0e-4,
-            n: 1.2,
-        }
+        Params { g: 2.0e5, r0: 1.2e5, r1: 1.6e5, d1: 3.0e4, m1: 4.0e-6, m2: 2.0e-4, n: 1.2 }
     }
 }
 

@@ -23,7 +23,14 @@ pub const LANES: usize = 8;
 
 /// [`LANES`] f64 lanes. A *mask* is a value whose lanes are all ones (true) or
 /// all zeros (false) bit for bit, as the comparisons return.
-pub trait F64xN: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self> + Neg<Output = Self> {
+pub trait F64xN:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
     fn splat(v: f64) -> Self;
     fn from_array(a: [f64; LANES]) -> Self;
     fn to_array(self) -> [f64; LANES];
@@ -279,7 +286,9 @@ pub fn ln_of_positive<S: F64xN>(x: S) -> S {
     let z = s * s;
     let w = z * z;
     let t1 = w * (S::splat(LN_LG[1]) + w * (S::splat(LN_LG[3]) + w * S::splat(LN_LG[5])));
-    let t2 = z * (S::splat(LN_LG[0]) + w * (S::splat(LN_LG[2]) + w * (S::splat(LN_LG[4]) + w * S::splat(LN_LG[6]))));
+    let t2 = z
+        * (S::splat(LN_LG[0])
+            + w * (S::splat(LN_LG[2]) + w * (S::splat(LN_LG[4]) + w * S::splat(LN_LG[6]))));
     let r = t2 + t1;
     let hfsq = S::splat(0.5) * f * f;
     let y = k * S::splat(LN2_HI) - ((hfsq - (s * (hfsq + r) + k * S::splat(LN2_LO))) - f);
@@ -295,7 +304,8 @@ pub fn ln<S: F64xN>(x: S) -> S {
     // subnormals: scaled into the normal range first
     let subnormal = x.lt(S::splat(f64::MIN_POSITIVE)).and(positive);
     let scaled = S::select(subnormal, x * S::splat(TWO_54), x);
-    let y = ln_of_positive(scaled) - S::select(subnormal, S::splat(54.0 * std::f64::consts::LN_2), zero);
+    let y = ln_of_positive(scaled)
+        - S::select(subnormal, S::splat(54.0 * std::f64::consts::LN_2), zero);
     let y = S::select(positive.or(negative).and_not(x.finite()), S::splat(f64::NEG_INFINITY), y);
     let y = S::select(negative, S::splat(f64::NAN), y);
     // a NaN is neither positive, nor negative, nor zero: it stays NaN

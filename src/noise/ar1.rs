@@ -8,7 +8,10 @@ use std::sync::Arc;
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
-use super::model::{log_uniform, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform};
+use super::model::{
+    log_uniform, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues,
+    Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform,
+};
 use crate::data::RunData;
 use crate::model::LANES;
 
@@ -59,7 +62,11 @@ impl NoiseModel for Ar1 {
         true
     }
 
-    fn scorer<'a>(&'a self, _run: &'a RunData, coordinates: &[NoiseValues; LANES]) -> Box<dyn RunScorer + 'a> {
+    fn scorer<'a>(
+        &'a self,
+        _run: &'a RunData,
+        coordinates: &[NoiseValues; LANES],
+    ) -> Box<dyn RunScorer + 'a> {
         Box::new(Scorer {
             n: 0.0,
             log_sigma: coordinates.map(|c| c[0]),
@@ -72,7 +79,14 @@ impl NoiseModel for Ar1 {
         })
     }
 
-    fn pointwise(&self, run: &RunData, model: &[f64], _stiffness: &[f64], values: &NoiseValues, rng: &mut dyn Rng) -> Pointwise {
+    fn pointwise(
+        &self,
+        run: &RunData,
+        model: &[f64],
+        _stiffness: &[f64],
+        values: &NoiseValues,
+        rng: &mut dyn Rng,
+    ) -> Pointwise {
         let n = run.time.len().min(model.len());
         let (sigma, rho) = (values[0], values[1]);
         let (mut prev_res, mut prev_noise) = (0.0f64, 0.0f64);
@@ -94,11 +108,26 @@ impl NoiseModel for Ar1 {
         out
     }
 
-    fn simulator(&self, _run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator> {
-        Box::new(Simulator { draws: draws.iter().map(|v| (v[0], v[1])).collect(), replicates, state: Vec::new() })
+    fn simulator(
+        &self,
+        _run: &RunData,
+        draws: &[NoiseValues],
+        replicates: usize,
+    ) -> Box<dyn NoiseSimulator> {
+        Box::new(Simulator {
+            draws: draws.iter().map(|v| (v[0], v[1])).collect(),
+            replicates,
+            state: Vec::new(),
+        })
     }
 
-    fn marginal_ln_pdf(&self, _run: &RunData, r: f64, _stiffness: f64, values: &NoiseValues) -> f64 {
+    fn marginal_ln_pdf(
+        &self,
+        _run: &RunData,
+        r: f64,
+        _stiffness: f64,
+        values: &NoiseValues,
+    ) -> f64 {
         normal_ln_pdf(r, stationary_sd(values[0], values[1]))
     }
 
@@ -125,7 +154,9 @@ impl NoiseModel for Ar1 {
         let cross: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
         let lag_sq: f64 = r[..r.len().saturating_sub(1)].iter().map(|v| v * v).sum();
         let rho = (cross / lag_sq).clamp(-0.99, 0.99);
-        let innov = (sum_sq - r[0] * r[0]) - 2.0 * rho * cross + rho * rho * lag_sq + (1.0 - rho * rho) * r[0] * r[0];
+        let innov = (sum_sq - r[0] * r[0]) - 2.0 * rho * cross
+            + rho * rho * lag_sq
+            + (1.0 - rho * rho) * r[0] * r[0];
         -0.5 * n * (innov / n).ln() + 0.5 * (1.0 - rho * rho).ln()
     }
 }
@@ -213,7 +244,9 @@ mod tests {
         let r: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - path[k]).collect();
         let n = r.len();
         let (sigma, rho): (f64, f64) = (220.0, 0.6);
-        let cov = DMatrix::from_fn(n, n, |i, j| sigma * sigma * rho.powi((i as i32 - j as i32).abs()) / (1.0 - rho * rho));
+        let cov = DMatrix::from_fn(n, n, |i, j| {
+            sigma * sigma * rho.powi((i as i32 - j as i32).abs()) / (1.0 - rho * rho)
+        });
         let chol = cov.cholesky().unwrap();
         let x = DVector::from_column_slice(&r);
         let log_det: f64 = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
@@ -221,7 +254,8 @@ mod tests {
         let m = Ar1::new(&NoiseOptions::default());
         let ll = scored(&m, &run, &path, [sigma.ln(), rho.atanh(), 0.0, 0.0], 5e6);
         assert!((ll - direct).abs() < 1e-9 * direct.abs(), "{ll} vs {direct}");
-        let sum = pointwise_sum(&m, &run, &path, [sigma, rho, 0.0, 0.0], 5e6) + n as f64 * HALF_LN_2PI;
+        let sum =
+            pointwise_sum(&m, &run, &path, [sigma, rho, 0.0, 0.0], 5e6) + n as f64 * HALF_LN_2PI;
         assert!((sum - direct).abs() < 1e-9 * direct.abs(), "{sum} vs {direct}");
     }
 

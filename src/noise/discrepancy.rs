@@ -27,13 +27,22 @@ use std::sync::Arc;
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
-use super::model::{log_uniform, log_variance_term, DiscrepancySettings, Explained, Kernel, normal_ln_pdf, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Transform, Whiten};
+use super::model::{
+    log_uniform, log_variance_term, normal_ln_pdf, DiscrepancySettings, Explained, Kernel,
+    NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile,
+    RunScorer, Transform, Whiten,
+};
 use crate::data::RunData;
 use crate::model::LANES;
 
 const PARAMETERS: &[Parameter] = &[
     Parameter { name: "sigma", unit: "Pa", transform: Transform::Log, pool: Pool::RootMeanSquare },
-    Parameter { name: "discrepancy_sd", unit: "Pa", transform: Transform::Log, pool: Pool::RootMeanSquare },
+    Parameter {
+        name: "discrepancy_sd",
+        unit: "Pa",
+        transform: Transform::Log,
+        pool: Pool::RootMeanSquare,
+    },
     Parameter { name: "discrepancy_time", unit: "s", transform: Transform::Log, pool: Pool::Mean },
 ];
 
@@ -46,11 +55,19 @@ pub struct Discrepancy {
 
 impl Discrepancy {
     pub fn new(options: &NoiseOptions) -> Self {
-        Discrepancy { sigma_bounds: options.sigma_bounds, errors_in_variables: options.errors_in_variables, settings: options.discrepancy.clone() }
+        Discrepancy {
+            sigma_bounds: options.sigma_bounds,
+            errors_in_variables: options.errors_in_variables,
+            settings: options.discrepancy.clone(),
+        }
     }
 
     fn strain_var(&self, run: &RunData) -> f64 {
-        if self.errors_in_variables { run.strain_noise_var } else { 0.0 }
+        if self.errors_in_variables {
+            run.strain_noise_var
+        } else {
+            0.0
+        }
     }
 
     /// The bounds of the scales σ and σ_δ on `run` (Pa): the noise scales'
@@ -91,7 +108,13 @@ impl Discrepancy {
 /// A path of the Matérn process of scale `sd` and time scale `ell` at the
 /// times `time`, started from its stationary state: exact at any spacing
 /// (the virtual stand's known discrepancy, `mrbp synth`).
-pub fn sample_path(kernel: Kernel, sd: f64, ell: f64, time: &[f64], rng: &mut impl Rng) -> Vec<f64> {
+pub fn sample_path(
+    kernel: Kernel,
+    sd: f64,
+    ell: f64,
+    time: &[f64],
+    rng: &mut impl Rng,
+) -> Vec<f64> {
     let mut process = Process::new(kernel, sd, ell, 0.0);
     let mut z = || -> f64 { rng.sample(StandardNormal) };
     let mut state = process.draw_start(z(), z());
@@ -144,7 +167,11 @@ impl Process {
             Kernel::Matern32 => {
                 self.phi = [[e * (1.0 + x), e * dt], [-e * l * x, e * (1.0 - x)]];
                 // 1 − e^{−2x}(1 + 2x + 2x²) = 4x³/3 − 2x⁴ + 8x⁵/5 − …
-                let q00 = if x < 1e-3 { x * x * x * (4.0 / 3.0 - 2.0 * x + 1.6 * x * x) } else { -(-2.0 * x).exp_m1() - e2 * (2.0 * x + 2.0 * x * x) };
+                let q00 = if x < 1e-3 {
+                    x * x * x * (4.0 / 3.0 - 2.0 * x + 1.6 * x * x)
+                } else {
+                    -(-2.0 * x).exp_m1() - e2 * (2.0 * x + 2.0 * x * x)
+                };
                 let q11 = -(-2.0 * x).exp_m1() + e2 * (2.0 * x - 2.0 * x * x);
                 self.q = [s2 * q00, 2.0 * s2 * l * x * x * e2, s2 * l * l * q11];
             }
@@ -261,12 +288,21 @@ impl Filter {
 /// reversal), with errors in variables of variance `strain_var`.
 #[inline(always)]
 fn branch_start(run: &RunData, k: usize, strain_var: f64) -> Option<f64> {
-    (strain_var > 0.0 && (k == 1 || run.reverses[k])).then_some(strain_var * run.strain_smoothing_share)
+    (strain_var > 0.0 && (k == 1 || run.reverses[k]))
+        .then_some(strain_var * run.strain_smoothing_share)
 }
 
 /// The filter's innovations along a run: for each sample k ≥ 1 of the
 /// residuals `r` (indexed from k = 1) the innovation and its variance.
-fn filter_run(run: &RunData, process: &Process, sigma: f64, strain_var: f64, stiffness: Option<&[f64]>, r: &[f64], mut visit: impl FnMut(usize, f64, f64)) {
+fn filter_run(
+    run: &RunData,
+    process: &Process,
+    sigma: f64,
+    strain_var: f64,
+    stiffness: Option<&[f64]>,
+    r: &[f64],
+    mut visit: impl FnMut(usize, f64, f64),
+) {
     let mut f = Filter::start(process);
     let mut step = *process;
     for (i, &res) in r.iter().enumerate() {
@@ -286,7 +322,14 @@ fn filter_run(run: &RunData, process: &Process, sigma: f64, strain_var: f64, sti
 /// (its transition 0, its noise the offset's variance). Singular predicted
 /// covariances (ν = 1/2 uses one state; no errors in variables, no b) are
 /// inverted by SVD.
-fn smooth_run(run: &RunData, process: &Process, sigma: f64, strain_var: f64, stiffness: Option<&[f64]>, r: &[f64]) -> Explained {
+fn smooth_run(
+    run: &RunData,
+    process: &Process,
+    sigma: f64,
+    strain_var: f64,
+    stiffness: Option<&[f64]>,
+    r: &[f64],
+) -> Explained {
     use nalgebra::{Matrix3, RowVector3, Vector3};
     let n = r.len();
     let mut step = *process;
@@ -304,7 +347,8 @@ fn smooth_run(run: &RunData, process: &Process, sigma: f64, strain_var: f64, sti
         let [[a, b], [c, d]] = step.phi;
         let [q00, q01, q11] = step.q;
         let branch = branch_start(run, k, strain_var);
-        let phi = Matrix3::new(a, b, 0.0, c, d, 0.0, 0.0, 0.0, if branch.is_some() { 0.0 } else { 1.0 });
+        let phi =
+            Matrix3::new(a, b, 0.0, c, d, 0.0, 0.0, 0.0, if branch.is_some() { 0.0 } else { 1.0 });
         let q = Matrix3::new(q00, q01, 0.0, q01, q11, 0.0, 0.0, 0.0, branch.unwrap_or(0.0));
         let (mp, pp) = (phi * m, phi * p * phi.transpose() + q);
         let cs = stiffness.map_or(0.0, |s| s[k]);
@@ -342,7 +386,10 @@ fn smooth_run(run: &RunData, process: &Process, sigma: f64, strain_var: f64, sti
 /// orders (δ in Pa, δ′ in Pa/s, b in strain): inverted as a correlation
 /// matrix, by SVD, so a state without variance (unused) drops out.
 fn scaled_inverse(p: &nalgebra::Matrix3<f64>) -> nalgebra::Matrix3<f64> {
-    let scale = nalgebra::Vector3::from_fn(|i, _| if p[(i, i)] > 0.0 { 1.0 / p[(i, i)].sqrt() } else { 0.0 });
+    let scale =
+        nalgebra::Vector3::from_fn(
+            |i, _| if p[(i, i)] > 0.0 { 1.0 / p[(i, i)].sqrt() } else { 0.0 },
+        );
     let d = nalgebra::Matrix3::from_diagonal(&scale);
     let correlation = d * p * d;
     let inverse = correlation.pseudo_inverse(1e-12).unwrap_or_else(|_| nalgebra::Matrix3::zeros());
@@ -364,23 +411,39 @@ impl NoiseModel for Discrepancy {
 
     fn log_prior(&self, run: &RunData, c: &[f64]) -> f64 {
         let scales = self.scale_bounds(run);
-        log_uniform(c[0], scales) + log_uniform(c[1], scales) + log_uniform(c[2], self.time_bounds(run))
+        log_uniform(c[0], scales)
+            + log_uniform(c[1], scales)
+            + log_uniform(c[2], self.time_bounds(run))
     }
 
     /// σ from the samples; σ_δ and ℓ from about duration/ℓ independent
     /// stretches of the discrepancy.
     fn laplace_sd(&self, run: &RunData, c: &NoiseValues) -> NoiseValues {
         let n = run.compared().max(1) as f64;
-        let duration = run.time.last().copied().unwrap_or(0.0) - run.time.first().copied().unwrap_or(0.0);
+        let duration =
+            run.time.last().copied().unwrap_or(0.0) - run.time.first().copied().unwrap_or(0.0);
         let stretches = (duration / c[2].exp()).clamp(1.0, n);
         [1.0 / (2.0 * n).sqrt(), 1.0 / (2.0 * stretches).sqrt(), 1.0 / stretches.sqrt(), 0.0]
     }
 
     /// The smoothed discrepancy (Rauch–Tung–Striebel) and the filter's
     /// standardised innovations.
-    fn explain(&self, run: &RunData, r: &[f64], stiffness: &[f64], values: &NoiseValues) -> Option<Explained> {
+    fn explain(
+        &self,
+        run: &RunData,
+        r: &[f64],
+        stiffness: &[f64],
+        values: &NoiseValues,
+    ) -> Option<Explained> {
         let strain_var = self.strain_var(run);
-        Some(smooth_run(run, &self.process(run, values), values[0], strain_var, (strain_var > 0.0).then_some(stiffness), r))
+        Some(smooth_run(
+            run,
+            &self.process(run, values),
+            values[0],
+            strain_var,
+            (strain_var > 0.0).then_some(stiffness),
+            r,
+        ))
     }
 
     fn uses_stiffness(&self, run: &RunData) -> bool {
@@ -395,7 +458,11 @@ impl NoiseModel for Discrepancy {
         true
     }
 
-    fn scorer<'a>(&'a self, run: &'a RunData, coordinates: &[NoiseValues; LANES]) -> Box<dyn RunScorer + 'a> {
+    fn scorer<'a>(
+        &'a self,
+        run: &'a RunData,
+        coordinates: &[NoiseValues; LANES],
+    ) -> Box<dyn RunScorer + 'a> {
         let values = coordinates.map(|c| [c[0].exp(), c[1].exp(), c[2].exp(), 0.0]);
         let processes = values.map(|v| self.process(run, &v));
         Box::new(Scorer {
@@ -408,13 +475,28 @@ impl NoiseModel for Discrepancy {
         })
     }
 
-    fn pointwise(&self, run: &RunData, model: &[f64], stiffness: &[f64], values: &NoiseValues, rng: &mut dyn Rng) -> Pointwise {
+    fn pointwise(
+        &self,
+        run: &RunData,
+        model: &[f64],
+        stiffness: &[f64],
+        values: &NoiseValues,
+        rng: &mut dyn Rng,
+    ) -> Pointwise {
         let n = run.time.len().min(model.len());
         let r: Vec<f64> = (1..n).map(|k| run.tau[k] - model[k]).collect();
         let strain_var = self.strain_var(run);
         let process = self.process(run, values);
         let mut out = Pointwise::default();
-        filter_run(run, &process, values[0], strain_var, (strain_var > 0.0).then_some(stiffness), &r, |_, v, s| out.log_likelihood.push(normal_ln_pdf(v, s.sqrt())));
+        filter_run(
+            run,
+            &process,
+            values[0],
+            strain_var,
+            (strain_var > 0.0).then_some(stiffness),
+            &r,
+            |_, v, s| out.log_likelihood.push(normal_ln_pdf(v, s.sqrt())),
+        );
         let mut sim = self.simulator(run, std::slice::from_ref(values), 1);
         let mut e = [0.0];
         for k in 0..n {
@@ -426,7 +508,12 @@ impl NoiseModel for Discrepancy {
         out
     }
 
-    fn simulator(&self, run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator> {
+    fn simulator(
+        &self,
+        run: &RunData,
+        draws: &[NoiseValues],
+        replicates: usize,
+    ) -> Box<dyn NoiseSimulator> {
         let v_branch = self.strain_var(run) * run.strain_smoothing_share;
         Box::new(Simulator {
             processes: draws.iter().map(|v| self.process(run, v)).collect(),
@@ -456,18 +543,38 @@ impl NoiseModel for Discrepancy {
         let strain_var = self.strain_var(run);
         let stiffness = (strain_var > 0.0).then(|| stiffness_of_residuals(run, residuals, g));
         let noise = Observed { strain_var, stiffness: stiffness.as_deref() };
-        let fit = fit(run, self.settings.kernel, residuals, self.time_bounds(run), self.scale_bounds(run), &noise);
+        let fit = fit(
+            run,
+            self.settings.kernel,
+            residuals,
+            self.time_bounds(run),
+            self.scale_bounds(run),
+            &noise,
+        );
         let (sigma, sd) = (fit.sigma, fit.sd);
         let values = [sigma, sd, fit.ell, 0.0];
         Profile {
             scale: (sigma * sigma + sd * sd).sqrt(),
-            whitening: Arc::new(Whitening { run: run.clone(), process: self.process(run, &values), sigma, strain_var }),
+            whitening: Arc::new(Whitening {
+                run: run.clone(),
+                process: self.process(run, &values),
+                sigma,
+                strain_var,
+            }),
             coordinates: [sigma.ln(), sd.ln(), fit.ell.ln(), 0.0],
         }
     }
 
     fn profile_log_likelihood(&self, run: &RunData, residuals: &[f64]) -> f64 {
-        fit(run, self.settings.kernel, residuals, self.time_bounds(run), self.scale_bounds(run), &Observed { strain_var: 0.0, stiffness: None }).log_likelihood
+        fit(
+            run,
+            self.settings.kernel,
+            residuals,
+            self.time_bounds(run),
+            self.scale_bounds(run),
+            &Observed { strain_var: 0.0, stiffness: None },
+        )
+        .log_likelihood
     }
 }
 
@@ -501,7 +608,14 @@ struct Observed<'a> {
 /// σ²), then golden sections on each coordinate of the exact likelihood,
 /// the strain's noise and branch offsets included — the conditional
 /// maximum the MAP search alternates with the law's parameters.
-fn fit(run: &RunData, kernel: Kernel, r: &[f64], time_bounds: (f64, f64), sigma_bounds: (f64, f64), observed: &Observed) -> Fit {
+fn fit(
+    run: &RunData,
+    kernel: Kernel,
+    r: &[f64],
+    time_bounds: (f64, f64),
+    sigma_bounds: (f64, f64),
+    observed: &Observed,
+) -> Fit {
     let n = r.len().max(1) as f64;
     // −2 ln L at unit σ, with σ² profiled: n ln(Σ v²/S / n) + Σ ln S
     let profiled = |log_ratio: f64, log_ell: f64| -> (f64, f64) {
@@ -519,7 +633,8 @@ fn fit(run: &RunData, kernel: Kernel, r: &[f64], time_bounds: (f64, f64), sigma_
     let mut best = (f64::INFINITY, 0.0, 0.0);
     for i in 0..12 {
         for j in 0..12 {
-            let (lr, ll) = (r_lo + (r_hi - r_lo) * i as f64 / 11.0, l_lo + (l_hi - l_lo) * j as f64 / 11.0);
+            let (lr, ll) =
+                (r_lo + (r_hi - r_lo) * i as f64 / 11.0, l_lo + (l_hi - l_lo) * j as f64 / 11.0);
             let (v, _) = profiled(lr, ll);
             if v < best.0 {
                 best = (v, lr, ll);
@@ -529,12 +644,24 @@ fn fit(run: &RunData, kernel: Kernel, r: &[f64], time_bounds: (f64, f64), sigma_
     let (_, sigma2) = profiled(best.1, best.2);
     let (s_lo, s_hi) = (sigma_bounds.0.ln(), sigma_bounds.1.ln());
     // ln σ, ln σ_δ, ln ℓ, inside the prior's support
-    let mut x = [(0.5 * sigma2.ln()).clamp(s_lo, s_hi), (0.5 * sigma2.ln() + best.1).clamp(s_lo, s_hi), best.2];
+    let mut x = [
+        (0.5 * sigma2.ln()).clamp(s_lo, s_hi),
+        (0.5 * sigma2.ln() + best.1).clamp(s_lo, s_hi),
+        best.2,
+    ];
     let bounds = [(s_lo, s_hi), (s_lo, s_hi), (l_lo, l_hi)];
     let minus_two_ll = |x: &[f64; 3]| -> f64 {
         let process = Process::new(kernel, x[1].exp(), x[2].exp(), run.step_s);
         let mut value = 0.0;
-        filter_run(run, &process, x[0].exp(), observed.strain_var, observed.stiffness, r, |_, v, s| value += s.ln() + v * v / s);
+        filter_run(
+            run,
+            &process,
+            x[0].exp(),
+            observed.strain_var,
+            observed.stiffness,
+            r,
+            |_, v, s| value += s.ln() + v * v / s,
+        );
         value
     };
     let widths = [1.0, (r_hi - r_lo) / 11.0, (l_hi - l_lo) / 11.0];
@@ -554,7 +681,12 @@ fn fit(run: &RunData, kernel: Kernel, r: &[f64], time_bounds: (f64, f64), sigma_
             );
         }
     }
-    Fit { sigma: x[0].exp(), sd: x[1].exp(), ell: x[2].exp(), log_likelihood: -0.5 * minus_two_ll(&x) }
+    Fit {
+        sigma: x[0].exp(),
+        sd: x[1].exp(),
+        ell: x[2].exp(),
+        log_likelihood: -0.5 * minus_two_ll(&x),
+    }
 }
 
 /// The filter of each lane: ln L = −½ Σ (ln S_k + v_k²/S_k), up to −n/2 ln 2π.
@@ -579,7 +711,8 @@ impl RunScorer for Scorer<'_> {
             }
             let c = stiffness[l];
             self.filters[l].predict(&self.processes[l], branch);
-            let (v, s) = self.filters[l].update(residual[l], c, self.sigma2[l] + c * c * self.strain_var);
+            let (v, s) =
+                self.filters[l].update(residual[l], c, self.sigma2[l] + c * c * self.strain_var);
             self.ll[l] -= 0.5 * (s.ln() + v * v / s);
         }
     }
@@ -605,14 +738,23 @@ impl Whiten for Whitening {
     /// innovations' variances, at least the white noise's σ², follow the
     /// model only through that stiffness.
     fn whiten(&self, residuals: &[f64], g: f64, white: &mut Vec<f64>, terms: &mut Vec<f64>) {
-        let stiffness = (self.strain_var > 0.0).then(|| stiffness_of_residuals(&self.run, residuals, g));
+        let stiffness =
+            (self.strain_var > 0.0).then(|| stiffness_of_residuals(&self.run, residuals, g));
         let floor = self.sigma * self.sigma;
-        filter_run(&self.run, &self.process, self.sigma, self.strain_var, stiffness.as_deref(), residuals, |_, v, s| {
-            white.push(v / s.sqrt());
-            if stiffness.is_some() {
-                terms.push(log_variance_term(s, floor));
-            }
-        });
+        filter_run(
+            &self.run,
+            &self.process,
+            self.sigma,
+            self.strain_var,
+            stiffness.as_deref(),
+            residuals,
+            |_, v, s| {
+                white.push(v / s.sqrt());
+                if stiffness.is_some() {
+                    terms.push(log_variance_term(s, floor));
+                }
+            },
+        );
     }
 }
 
@@ -642,11 +784,17 @@ impl NoiseSimulator for Simulator {
                 process.step(self.time[k] - self.time[k - 1]);
             }
             let factor = process.noise_factor();
-            let white = (self.sigma[d] * self.sigma[d] + stiffness[d] * stiffness[d] * self.strain_var).sqrt();
+            let white = (self.sigma[d] * self.sigma[d]
+                + stiffness[d] * stiffness[d] * self.strain_var)
+                .sqrt();
             for p in d * self.replicates..(d + 1) * self.replicates {
                 let z: [f64; 4] = std::array::from_fn(|_| rng.sample(StandardNormal));
                 let s = &mut self.state[p];
-                let [x0, x1] = if k == 0 { process.draw_start(z[0], z[1]) } else { process.advance(factor, [s[0], s[1]], z[0], z[1]) };
+                let [x0, x1] = if k == 0 {
+                    process.draw_start(z[0], z[1])
+                } else {
+                    process.advance(factor, [s[0], s[1]], z[0], z[1])
+                };
                 (s[0], s[1]) = (x0, x1);
                 if new_branch {
                     s[2] = self.v_branch.sqrt() * z[3];
@@ -666,7 +814,11 @@ mod tests {
     use nalgebra::{DMatrix, DVector};
 
     fn model(kernel: Kernel, eiv: bool) -> Discrepancy {
-        Discrepancy::new(&NoiseOptions { errors_in_variables: eiv, discrepancy: DiscrepancySettings { kernel, ..DiscrepancySettings::default() }, ..NoiseOptions::default() })
+        Discrepancy::new(&NoiseOptions {
+            errors_in_variables: eiv,
+            discrepancy: DiscrepancySettings { kernel, ..DiscrepancySettings::default() },
+            ..NoiseOptions::default()
+        })
     }
 
     /// The Matérn kernel at lag `tau`.
@@ -704,7 +856,9 @@ mod tests {
             let n = run.compared();
             let stiffness = super::super::model::stiffness_path(run, path, G);
             let v = strain_var * run.strain_smoothing_share;
-            let k_delta = DMatrix::from_fn(n, n, |i, j| kernel(kernel_kind, SD, ELL, run.time[i + 1] - run.time[j + 1]));
+            let k_delta = DMatrix::from_fn(n, n, |i, j| {
+                kernel(kernel_kind, SD, ELL, run.time[i + 1] - run.time[j + 1])
+            });
             let mut cov = k_delta.clone();
             let branch = super::super::testing::branches(run);
             for i in 0..n {
@@ -726,7 +880,12 @@ mod tests {
     /// Cholesky — an independent computation — for both kernels.
     #[test]
     fn the_filter_is_the_dense_gaussian_process() {
-        for (kernel_kind, strain_var) in [(Kernel::Matern32, 0.0), (Kernel::Matern12, 0.0), (Kernel::Matern32, 1e-8), (Kernel::Matern12, 1e-8)] {
+        for (kernel_kind, strain_var) in [
+            (Kernel::Matern32, 0.0),
+            (Kernel::Matern12, 0.0),
+            (Kernel::Matern32, 1e-8),
+            (Kernel::Matern12, 1e-8),
+        ] {
             let (run, path) = run(strain_var);
             let (sigma, sd, ell, g) = (SIGMA, SD, ELL, G);
             let n = run.compared();
@@ -737,9 +896,16 @@ mod tests {
             let direct = -(n as f64) * HALF_LN_2PI - 0.5 * log_det - 0.5 * r.dot(&chol.solve(&r));
             let m = model(kernel_kind, true);
             let sum = pointwise_sum(&m, &run, &path, [sigma, sd, ell, 0.0], g);
-            assert!((sum - direct).abs() < 1e-8 * direct.abs(), "{kernel_kind:?}, {strain_var}: pointwise {sum} vs {direct}");
-            let scored = scored(&m, &run, &path, [sigma.ln(), sd.ln(), ell.ln(), 0.0], g) - n as f64 * HALF_LN_2PI;
-            assert!((scored - direct).abs() < 1e-8 * direct.abs(), "{kernel_kind:?}, {strain_var}: scorer {scored} vs {direct}");
+            assert!(
+                (sum - direct).abs() < 1e-8 * direct.abs(),
+                "{kernel_kind:?}, {strain_var}: pointwise {sum} vs {direct}"
+            );
+            let scored = scored(&m, &run, &path, [sigma.ln(), sd.ln(), ell.ln(), 0.0], g)
+                - n as f64 * HALF_LN_2PI;
+            assert!(
+                (scored - direct).abs() < 1e-8 * direct.abs(),
+                "{kernel_kind:?}, {strain_var}: scorer {scored} vs {direct}"
+            );
         }
     }
 
@@ -762,14 +928,24 @@ mod tests {
                 let n = run.compared();
                 let chol = d.cov.clone().cholesky().unwrap();
                 let log_det: f64 = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
-                let direct = -(n as f64) * HALF_LN_2PI - 0.5 * log_det - 0.5 * d.r.dot(&chol.solve(&d.r));
-                let w = Whitening { run: run.clone(), process: Process::new(kernel_kind, SD, ELL, run.step_s), sigma: SIGMA, strain_var };
+                let direct =
+                    -(n as f64) * HALF_LN_2PI - 0.5 * log_det - 0.5 * d.r.dot(&chol.solve(&d.r));
+                let w = Whitening {
+                    run: run.clone(),
+                    process: Process::new(kernel_kind, SD, ELL, run.step_s),
+                    sigma: SIGMA,
+                    strain_var,
+                };
                 let (mut white, mut terms) = (Vec::new(), Vec::new());
                 w.whiten(d.r.as_slice(), G, &mut white, &mut terms);
                 assert_eq!((white.len(), terms.len()), (n, n));
-                let sum: f64 = white.iter().map(|v| v * v).sum::<f64>() + terms.iter().map(|u| u * u - 1.0).sum::<f64>();
+                let sum: f64 = white.iter().map(|v| v * v).sum::<f64>()
+                    + terms.iter().map(|u| u * u - 1.0).sum::<f64>();
                 let searched = -0.5 * (sum + n as f64 * (2.0 * SIGMA.ln() + 2.0 * HALF_LN_2PI));
-                assert!((searched - direct).abs() < 1e-8 * direct.abs(), "{kernel_kind:?}: searched {searched} vs {direct}");
+                assert!(
+                    (searched - direct).abs() < 1e-8 * direct.abs(),
+                    "{kernel_kind:?}: searched {searched} vs {direct}"
+                );
             }
         }
     }
@@ -780,11 +956,17 @@ mod tests {
     /// 1e-6 of the sd; its innovations are the filter's.
     #[test]
     fn the_smoother_is_the_dense_conditional() {
-        for (kernel_kind, strain_var) in [(Kernel::Matern32, 0.0), (Kernel::Matern12, 0.0), (Kernel::Matern32, 1e-8), (Kernel::Matern12, 1e-8)] {
+        for (kernel_kind, strain_var) in [
+            (Kernel::Matern32, 0.0),
+            (Kernel::Matern12, 0.0),
+            (Kernel::Matern32, 1e-8),
+            (Kernel::Matern12, 1e-8),
+        ] {
             let (run, path) = run(strain_var);
             let (sigma, sd, ell) = (SIGMA, SD, ELL);
             let n = run.compared();
-            let Dense { k_delta, cov, r, stiffness } = Dense::of(kernel_kind, &run, &path, strain_var);
+            let Dense { k_delta, cov, r, stiffness } =
+                Dense::of(kernel_kind, &run, &path, strain_var);
             let chol = cov.cholesky().unwrap();
             let mean = &k_delta * chol.solve(&r);
             let var = &k_delta - &k_delta * chol.solve(&k_delta);
@@ -793,12 +975,29 @@ mod tests {
             let e = m.explain(&run, &residuals, &stiffness, &[sigma, sd, ell, 0.0]).unwrap();
             for i in 0..n {
                 let sd_i = var[(i, i)].sqrt();
-                assert!((e.mean[i] - mean[i]).abs() < 1e-6 * sd_i, "{kernel_kind:?}, {strain_var}, {i}: mean {} vs {}", e.mean[i], mean[i]);
-                assert!((e.sd[i] - sd_i).abs() < 1e-6 * sd_i, "{kernel_kind:?}, {strain_var}, {i}: sd {} vs {sd_i}", e.sd[i]);
+                assert!(
+                    (e.mean[i] - mean[i]).abs() < 1e-6 * sd_i,
+                    "{kernel_kind:?}, {strain_var}, {i}: mean {} vs {}",
+                    e.mean[i],
+                    mean[i]
+                );
+                assert!(
+                    (e.sd[i] - sd_i).abs() < 1e-6 * sd_i,
+                    "{kernel_kind:?}, {strain_var}, {i}: sd {} vs {sd_i}",
+                    e.sd[i]
+                );
             }
             let mut innovations = Vec::new();
             let process = m.process(&run, &[sigma, sd, ell, 0.0]);
-            filter_run(&run, &process, sigma, m.strain_var(&run), (strain_var > 0.0).then_some(&stiffness[..]), &residuals, |_, v, s| innovations.push(v / s.sqrt()));
+            filter_run(
+                &run,
+                &process,
+                sigma,
+                m.strain_var(&run),
+                (strain_var > 0.0).then_some(&stiffness[..]),
+                &residuals,
+                |_, v, s| innovations.push(v / s.sqrt()),
+            );
             for (a, b) in e.innovations.iter().zip(&innovations) {
                 assert!((a - b).abs() < 1e-9, "innovation {a} vs {b}");
             }
@@ -844,12 +1043,16 @@ mod tests {
         let (sd, ell, paths) = (2.0, 0.004, 20_000);
         for kernel_kind in [Kernel::Matern12, Kernel::Matern32] {
             let mut rng = crate::rng::stream(23, &[]);
-            let samples: Vec<Vec<f64>> = (0..paths).map(|_| sample_path(kernel_kind, sd, ell, &time, &mut rng)).collect();
+            let samples: Vec<Vec<f64>> =
+                (0..paths).map(|_| sample_path(kernel_kind, sd, ell, &time, &mut rng)).collect();
             for i in 0..time.len() {
                 for j in i..time.len() {
                     let cov = samples.iter().map(|p| p[i] * p[j]).sum::<f64>() / paths as f64;
                     let expected = kernel(kernel_kind, sd, ell, time[j] - time[i]);
-                    assert!((cov - expected).abs() < 0.04 * sd * sd, "{kernel_kind:?} ({i}, {j}): {cov} vs {expected}");
+                    assert!(
+                        (cov - expected).abs() < 0.04 * sd * sd,
+                        "{kernel_kind:?} ({i}, {j}): {cov} vs {expected}"
+                    );
                 }
             }
         }
@@ -862,8 +1065,18 @@ mod tests {
     fn the_profile_recovers_known_noise() {
         let n = 2001;
         let time: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
-        let gamma: Vec<f64> = time.iter().map(|t| (2.0 * std::f64::consts::PI * 2.0 * t).sin()).collect();
-        let flat = RunData::new("r".into(), time.clone(), gamma.clone(), vec![0.0; n], 0.0, 1.0, (1.0, 1.0), (0.0, 1.0));
+        let gamma: Vec<f64> =
+            time.iter().map(|t| (2.0 * std::f64::consts::PI * 2.0 * t).sin()).collect();
+        let flat = RunData::new(
+            "r".into(),
+            time.clone(),
+            gamma.clone(),
+            vec![0.0; n],
+            0.0,
+            1.0,
+            (1.0, 1.0),
+            (0.0, 1.0),
+        );
         let m = model(Kernel::Matern32, false);
         let (sigma, sd, ell) = (40.0, 200.0, 0.02);
         let mut sim = m.simulator(&flat, &[[sigma, sd, ell, 0.0]], 1);

@@ -17,11 +17,19 @@ use std::sync::Arc;
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
-use super::model::{log_uniform, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform, Whiten, log_variance_term};
+use super::model::{
+    log_uniform, log_variance_term, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator,
+    NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform, Whiten,
+};
 use crate::data::RunData;
 use crate::model::{tangent_stiffness, LANES};
 
-const PARAMETERS: &[Parameter] = &[Parameter { name: "sigma", unit: "Pa", transform: Transform::Log, pool: Pool::RootMeanSquare }];
+const PARAMETERS: &[Parameter] = &[Parameter {
+    name: "sigma",
+    unit: "Pa",
+    transform: Transform::Log,
+    pool: Pool::RootMeanSquare,
+}];
 
 #[derive(Clone, Debug)]
 pub struct Gaussian {
@@ -31,12 +39,19 @@ pub struct Gaussian {
 
 impl Gaussian {
     pub fn new(options: &NoiseOptions) -> Self {
-        Gaussian { sigma_bounds: options.sigma_bounds, errors_in_variables: options.errors_in_variables }
+        Gaussian {
+            sigma_bounds: options.sigma_bounds,
+            errors_in_variables: options.errors_in_variables,
+        }
     }
 
     /// The strain noise variance that reaches this run's stress (0: none).
     fn strain_var(&self, run: &RunData) -> f64 {
-        if self.errors_in_variables { run.strain_noise_var } else { 0.0 }
+        if self.errors_in_variables {
+            run.strain_noise_var
+        } else {
+            0.0
+        }
     }
 }
 
@@ -57,7 +72,11 @@ impl NoiseModel for Gaussian {
         self.strain_var(run) > 0.0
     }
 
-    fn scorer<'a>(&'a self, run: &'a RunData, coordinates: &[NoiseValues; LANES]) -> Box<dyn RunScorer + 'a> {
+    fn scorer<'a>(
+        &'a self,
+        run: &'a RunData,
+        coordinates: &[NoiseValues; LANES],
+    ) -> Box<dyn RunScorer + 'a> {
         let log_sigma = coordinates.map(|c| c[0]);
         if self.uses_stiffness(run) {
             Box::new(EivScorer::new(run, log_sigma, self.strain_var(run)))
@@ -66,7 +85,14 @@ impl NoiseModel for Gaussian {
         }
     }
 
-    fn pointwise(&self, run: &RunData, model: &[f64], stiffness: &[f64], values: &NoiseValues, rng: &mut dyn Rng) -> Pointwise {
+    fn pointwise(
+        &self,
+        run: &RunData,
+        model: &[f64],
+        stiffness: &[f64],
+        values: &NoiseValues,
+        rng: &mut dyn Rng,
+    ) -> Pointwise {
         let n = run.time.len().min(model.len());
         let sigma = values[0];
         let sigma2 = sigma * sigma;
@@ -74,7 +100,10 @@ impl NoiseModel for Gaussian {
         let v = strain_var * run.strain_smoothing_share;
         // the branch's information on its offset so far: Σ c²/d and Σ c r/d
         let (mut info, mut score, mut offset) = (0.0f64, 0.0f64, 0.0f64);
-        let mut out = Pointwise { log_likelihood: Vec::with_capacity(n.saturating_sub(1)), replicate: Vec::with_capacity(n.saturating_sub(1)) };
+        let mut out = Pointwise {
+            log_likelihood: Vec::with_capacity(n.saturating_sub(1)),
+            replicate: Vec::with_capacity(n.saturating_sub(1)),
+        };
         for k in 1..n {
             let res = run.tau[k] - model[k];
             let z: f64 = rng.sample(StandardNormal);
@@ -103,8 +132,17 @@ impl NoiseModel for Gaussian {
         out
     }
 
-    fn simulator(&self, run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator> {
-        Box::new(Simulator { sigma: draws.iter().map(|v| v[0]).collect(), replicates, strain_var: self.strain_var(run) })
+    fn simulator(
+        &self,
+        run: &RunData,
+        draws: &[NoiseValues],
+        replicates: usize,
+    ) -> Box<dyn NoiseSimulator> {
+        Box::new(Simulator {
+            sigma: draws.iter().map(|v| v[0]).collect(),
+            replicates,
+            strain_var: self.strain_var(run),
+        })
     }
 
     fn marginal_ln_pdf(&self, run: &RunData, r: f64, stiffness: f64, values: &NoiseValues) -> f64 {
@@ -321,7 +359,9 @@ impl RunScorer for EivScorer<'_> {
 
     fn finish(&mut self) -> [f64; LANES] {
         self.close();
-        std::array::from_fn(|l| -self.n * self.log_sigma[l] - 0.5 * self.log_inflation[l] - 0.5 * self.weighted[l])
+        std::array::from_fn(|l| {
+            -self.n * self.log_sigma[l] - 0.5 * self.log_inflation[l] - 0.5 * self.weighted[l]
+        })
     }
 }
 
@@ -362,7 +402,9 @@ mod tests {
     fn independent_residuals_are_a_sum_of_normal_log_densities() {
         let (run, path) = run(0.0);
         let sigma: f64 = 250.0;
-        let direct: f64 = (1..run.time.len()).map(|k| -sigma.ln() - 0.5 * ((run.tau[k] - path[k]) / sigma).powi(2)).sum();
+        let direct: f64 = (1..run.time.len())
+            .map(|k| -sigma.ln() - 0.5 * ((run.tau[k] - path[k]) / sigma).powi(2))
+            .sum();
         let m = model(true);
         let ll = scored(&m, &run, &path, [sigma.ln(), 0.0, 0.0, 0.0], 5e6);
         assert!((ll - direct).abs() < 1e-9 * direct.abs(), "{ll} vs {direct}");
@@ -385,13 +427,21 @@ mod tests {
         for p in [path.clone(), path.iter().map(|v| 1.3 * v).collect::<Vec<f64>>()] {
             let stiffness = super::super::stiffness_path(&run, &p, g);
             let r: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - p[k]).collect();
-            let direct: f64 = r.iter().enumerate().map(|(i, r)| normal_ln_pdf(*r, (sigma2 + stiffness[i + 1].powi(2) * var).sqrt())).sum();
+            let direct: f64 = r
+                .iter()
+                .enumerate()
+                .map(|(i, r)| normal_ln_pdf(*r, (sigma2 + stiffness[i + 1].powi(2) * var).sqrt()))
+                .sum();
             let (mut white, mut terms) = (Vec::new(), Vec::new());
             w.whiten(&r, g, &mut white, &mut terms);
             let n = r.len() as f64;
-            let sum: f64 = white.iter().map(|v| v * v).sum::<f64>() + terms.iter().map(|u| u * u - 1.0).sum::<f64>();
+            let sum: f64 = white.iter().map(|v| v * v).sum::<f64>()
+                + terms.iter().map(|u| u * u - 1.0).sum::<f64>();
             let searched = -0.5 * (sum + n * (sigma2.ln() + 2.0 * HALF_LN_2PI));
-            assert!((searched - direct).abs() < 1e-9 * direct.abs(), "searched {searched} vs {direct}");
+            assert!(
+                (searched - direct).abs() < 1e-9 * direct.abs(),
+                "searched {searched} vs {direct}"
+            );
         }
     }
 
@@ -406,7 +456,11 @@ mod tests {
         for sigma in [250.0f64, 0.02] {
             let g = 5e6;
             let n = run.compared();
-            let (s2, sv, v) = (sigma * sigma, run.strain_noise_var, run.strain_noise_var * run.strain_smoothing_share);
+            let (s2, sv, v) = (
+                sigma * sigma,
+                run.strain_noise_var,
+                run.strain_noise_var * run.strain_smoothing_share,
+            );
             let mut cov = DMatrix::zeros(n, n);
             let mut c = vec![0.0; n];
             let branch = super::super::testing::branches(&run);
@@ -433,20 +487,36 @@ mod tests {
                 per_branch[branch[k]] += (c[k] * c[k] * sv / s2).ln_1p();
             }
             let most = per_branch.iter().fold(0.0f64, |m, v| m.max(*v));
-            assert!(sigma > 100.0 || most > FOLD_INFLATION.ln(), "σ = {sigma}: log-product {most} never folds");
+            assert!(
+                sigma > 100.0 || most > FOLD_INFLATION.ln(),
+                "σ = {sigma}: log-product {most} never folds"
+            );
             let m = model(true);
             let sum = pointwise_sum(&m, &run, &path, [sigma, 0.0, 0.0, 0.0], g);
             assert!((sum - direct).abs() < 1e-8 * direct.abs(), "pointwise {sum} vs {direct}");
-            let scored = scored(&m, &run, &path, [sigma.ln(), 0.0, 0.0, 0.0], g) - (n as f64) * HALF_LN_2PI;
+            let scored =
+                scored(&m, &run, &path, [sigma.ln(), 0.0, 0.0, 0.0], g) - (n as f64) * HALF_LN_2PI;
             assert!((scored - direct).abs() < 1e-8 * direct.abs(), "scorer {scored} vs {direct}");
             // switched off, the same run scores as independent noise
             let plain = scored_plain(&run, &path, sigma);
-            assert!((super::super::testing::scored(&model(false), &run, &path, [sigma.ln(), 0.0, 0.0, 0.0], g) - plain).abs() < 1e-9 * plain.abs());
+            assert!(
+                (super::super::testing::scored(
+                    &model(false),
+                    &run,
+                    &path,
+                    [sigma.ln(), 0.0, 0.0, 0.0],
+                    g
+                ) - plain)
+                    .abs()
+                    < 1e-9 * plain.abs()
+            );
         }
     }
 
     fn scored_plain(run: &RunData, path: &[f64], sigma: f64) -> f64 {
-        (1..run.time.len()).map(|k| -sigma.ln() - 0.5 * ((run.tau[k] - path[k]) / sigma).powi(2)).sum()
+        (1..run.time.len())
+            .map(|k| -sigma.ln() - 0.5 * ((run.tau[k] - path[k]) / sigma).powi(2))
+            .sum()
     }
 
     /// The replicate of a noise-free draw is the path itself.
@@ -454,7 +524,13 @@ mod tests {
     fn replicates_centre_on_the_path() {
         let (run, path) = run(0.0);
         let stiffness = super::super::stiffness_path(&run, &path, 5e6);
-        let p = model(false).pointwise(&run, &path, &stiffness, &[1e-9, 0.0, 0.0, 0.0], &mut crate::rng::stream(2, &[]));
+        let p = model(false).pointwise(
+            &run,
+            &path,
+            &stiffness,
+            &[1e-9, 0.0, 0.0, 0.0],
+            &mut crate::rng::stream(2, &[]),
+        );
         for (rep, m) in p.replicate.iter().zip(&path[1..]) {
             assert!((rep - m).abs() < 1e-6);
         }
@@ -469,6 +545,12 @@ mod tests {
         let m = model(true);
         let p = m.profile(&run, &residuals, 5e6);
         let at = |f: f64| scored(&m, &run, &path, [p.coordinates[0] + f.ln(), 0.0, 0.0, 0.0], 5e6);
-        assert!(at(1.0) > at(1.05) && at(1.0) > at(1.0 / 1.05), "{} {} {}", at(1.0), at(1.05), at(1.0 / 1.05));
+        assert!(
+            at(1.0) > at(1.05) && at(1.0) > at(1.0 / 1.05),
+            "{} {} {}",
+            at(1.0),
+            at(1.05),
+            at(1.0 / 1.05)
+        );
     }
 }

@@ -104,14 +104,33 @@ pub(crate) mod testing {
         let time: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
         let gamma: Vec<f64> = (0..n).map(|k| 0.02 * (k as f64 * 0.15).sin()).collect();
         let path: Vec<f64> = gamma.iter().map(|g| 4e4 * (g / 0.01).tanh()).collect();
-        let tau: Vec<f64> = path.iter().enumerate().map(|(k, p)| p + 300.0 * ((k as f64) * 1.7).sin() + 120.0 * ((k as f64) * 0.31).cos()).collect();
-        let run = RunData::new("r".into(), time, gamma, tau, path[0], 1.0, (1.0, 1.0), (strain_noise_var, 0.3));
+        let tau: Vec<f64> = path
+            .iter()
+            .enumerate()
+            .map(|(k, p)| p + 300.0 * ((k as f64) * 1.7).sin() + 120.0 * ((k as f64) * 0.31).cos())
+            .collect();
+        let run = RunData::new(
+            "r".into(),
+            time,
+            gamma,
+            tau,
+            path[0],
+            1.0,
+            (1.0, 1.0),
+            (strain_noise_var, 0.3),
+        );
         (run, path)
     }
 
     /// The log-likelihood a model's scorer gives `run` at `coordinates`
     /// (every lane alike), with the residuals about `path`.
-    pub fn scored(model: &dyn NoiseModel, run: &RunData, path: &[f64], coordinates: NoiseValues, g: f64) -> f64 {
+    pub fn scored(
+        model: &dyn NoiseModel,
+        run: &RunData,
+        path: &[f64],
+        coordinates: NoiseValues,
+        g: f64,
+    ) -> f64 {
         let stiffness = stiffness_path(run, path, g);
         let mut scorer = model.scorer(run, &[coordinates; LANES]);
         for k in 1..run.time.len() {
@@ -140,7 +159,13 @@ pub(crate) mod testing {
     }
 
     /// The sum of a model's pointwise terms along `path`.
-    pub fn pointwise_sum(model: &dyn NoiseModel, run: &RunData, path: &[f64], values: NoiseValues, g: f64) -> f64 {
+    pub fn pointwise_sum(
+        model: &dyn NoiseModel,
+        run: &RunData,
+        path: &[f64],
+        values: NoiseValues,
+        g: f64,
+    ) -> f64 {
         let stiffness = stiffness_path(run, path, g);
         let p = model.pointwise(run, path, &stiffness, &values, &mut crate::rng::stream(1, &[]));
         assert_eq!(p.log_likelihood.len(), run.compared());
@@ -159,7 +184,10 @@ mod tests {
         assert_eq!(unit_of("G"), None);
         for kind in NoiseKind::ALL {
             let m = kind.model(&NoiseOptions::default());
-            assert!(!m.parameters().is_empty() && m.parameters().len() <= MAX_PARAMETERS, "{kind:?}");
+            assert!(
+                !m.parameters().is_empty() && m.parameters().len() <= MAX_PARAMETERS,
+                "{kind:?}"
+            );
         }
     }
 

@@ -68,11 +68,19 @@ impl Pool {
         match self {
             Pool::RootMeanSquare => {
                 let sum: f64 = values.iter().map(|v| v.powi(2)).fold(0.0, |s, v| s + v);
-                if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
+                if n == 0 {
+                    0.0
+                } else {
+                    (sum / n as f64).sqrt()
+                }
             }
             Pool::Mean => {
                 let sum: f64 = values.iter().fold(0.0, |s, v| s + v);
-                if n == 0 { 0.0 } else { sum / n as f64 }
+                if n == 0 {
+                    0.0
+                } else {
+                    sum / n as f64
+                }
             }
         }
     }
@@ -111,7 +119,11 @@ pub struct DiscrepancySettings {
 
 impl Default for DiscrepancySettings {
     fn default() -> Self {
-        DiscrepancySettings { kernel: Kernel::Matern32, time_scale_min_samples: 2.0, time_scale_max_period: 0.25 }
+        DiscrepancySettings {
+            kernel: Kernel::Matern32,
+            time_scale_min_samples: 2.0,
+            time_scale_max_period: 0.25,
+        }
     }
 }
 
@@ -131,7 +143,12 @@ pub struct NoiseOptions {
 
 impl Default for NoiseOptions {
     fn default() -> Self {
-        NoiseOptions { sigma_bounds: (1.0, 1.0e6), student_nu: 5.0, errors_in_variables: true, discrepancy: Default::default() }
+        NoiseOptions {
+            sigma_bounds: (1.0, 1.0e6),
+            student_nu: 5.0,
+            errors_in_variables: true,
+            discrepancy: Default::default(),
+        }
     }
 }
 
@@ -264,22 +281,44 @@ pub trait NoiseModel: Send + Sync + std::fmt::Debug {
     /// [`Explained`] for `run`'s residuals `r` (k = 1…) with noise `values`
     /// (SI) and the law's tangent stiffness `stiffness` (from k = 0); None
     /// for a model without a force of its own.
-    fn explain(&self, _run: &RunData, _r: &[f64], _stiffness: &[f64], _values: &NoiseValues) -> Option<Explained> {
+    fn explain(
+        &self,
+        _run: &RunData,
+        _r: &[f64],
+        _stiffness: &[f64],
+        _values: &NoiseValues,
+    ) -> Option<Explained> {
         None
     }
 
     /// A scorer of `run` for [`LANES`] points with these noise coordinates.
-    fn scorer<'a>(&'a self, run: &'a RunData, coordinates: &[NoiseValues; LANES]) -> Box<dyn RunScorer + 'a>;
+    fn scorer<'a>(
+        &'a self,
+        run: &'a RunData,
+        coordinates: &[NoiseValues; LANES],
+    ) -> Box<dyn RunScorer + 'a>;
 
     /// The pointwise terms of one draw with noise `values` (SI) along `run`,
     /// whose model stress with its terms is `model` and the law's tangent
     /// stiffness `stiffness` (both indexed by sample from 0); the
     /// replicate's noise comes from `rng`.
-    fn pointwise(&self, run: &RunData, model: &[f64], stiffness: &[f64], values: &NoiseValues, rng: &mut dyn Rng) -> Pointwise;
+    fn pointwise(
+        &self,
+        run: &RunData,
+        model: &[f64],
+        stiffness: &[f64],
+        values: &NoiseValues,
+        rng: &mut dyn Rng,
+    ) -> Pointwise;
 
     /// The noise of new records along `run`: `replicates` of them for each
     /// draw's noise `draws` (SI).
-    fn simulator(&self, run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator>;
+    fn simulator(
+        &self,
+        run: &RunData,
+        draws: &[NoiseValues],
+        replicates: usize,
+    ) -> Box<dyn NoiseSimulator>;
 
     /// ln density of one residual `r` of `run` on its own (marginally over
     /// the others), where the stiffness is `stiffness`.
@@ -298,7 +337,17 @@ pub trait NoiseModel: Send + Sync + std::fmt::Debug {
 /// of `run` (G at the first).
 pub fn stiffness_path(run: &RunData, path: &[f64], g: f64) -> Vec<f64> {
     (0..path.len())
-        .map(|k| if k == 0 { g } else { crate::model::tangent_stiffness(path[k] - path[k - 1], run.gamma[k] - run.gamma[k - 1], g) })
+        .map(|k| {
+            if k == 0 {
+                g
+            } else {
+                crate::model::tangent_stiffness(
+                    path[k] - path[k - 1],
+                    run.gamma[k] - run.gamma[k - 1],
+                    g,
+                )
+            }
+        })
         .collect()
 }
 
@@ -331,4 +380,3 @@ pub fn log_uniform(log_sigma: f64, bounds: (f64, f64)) -> f64 {
         f64::NEG_INFINITY
     }
 }
-

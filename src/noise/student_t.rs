@@ -7,11 +7,19 @@ use std::sync::Arc;
 use rand::{Rng, RngExt};
 use rand_distr::{StandardNormal, StudentT as StudentTDistribution};
 
-use super::model::{log_uniform, rms, student_t_log_constant, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform};
+use super::model::{
+    log_uniform, rms, student_t_log_constant, NoiseModel, NoiseOptions, NoiseSimulator,
+    NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform,
+};
 use crate::data::RunData;
 use crate::model::LANES;
 
-const PARAMETERS: &[Parameter] = &[Parameter { name: "sigma", unit: "Pa", transform: Transform::Log, pool: Pool::RootMeanSquare }];
+const PARAMETERS: &[Parameter] = &[Parameter {
+    name: "sigma",
+    unit: "Pa",
+    transform: Transform::Log,
+    pool: Pool::RootMeanSquare,
+}];
 
 #[derive(Clone, Debug)]
 pub struct StudentT {
@@ -24,7 +32,11 @@ pub struct StudentT {
 impl StudentT {
     pub fn new(options: &NoiseOptions) -> Self {
         let nu = options.student_nu;
-        StudentT { sigma_bounds: options.sigma_bounds, nu, log_constant: student_t_log_constant(nu) }
+        StudentT {
+            sigma_bounds: options.sigma_bounds,
+            nu,
+            log_constant: student_t_log_constant(nu),
+        }
     }
 
     /// ln t_ν(r; 0, s) with ν s² written as `nu_s2`.
@@ -53,7 +65,11 @@ impl NoiseModel for StudentT {
         [1.0 / (2.0 * run.compared().max(1) as f64).sqrt(), 0.0, 0.0, 0.0]
     }
 
-    fn scorer<'a>(&'a self, _run: &'a RunData, coordinates: &[NoiseValues; LANES]) -> Box<dyn RunScorer + 'a> {
+    fn scorer<'a>(
+        &'a self,
+        _run: &'a RunData,
+        coordinates: &[NoiseValues; LANES],
+    ) -> Box<dyn RunScorer + 'a> {
         let log_sigma = coordinates.map(|c| c[0]);
         let inv_nu_s2 = log_sigma.map(|l| {
             let s = l.exp();
@@ -62,7 +78,14 @@ impl NoiseModel for StudentT {
         Box::new(Scorer { model: self, n: 0.0, log_sigma, inv_nu_s2, log_t: [0.0; LANES] })
     }
 
-    fn pointwise(&self, run: &RunData, model: &[f64], _stiffness: &[f64], values: &NoiseValues, rng: &mut dyn Rng) -> Pointwise {
+    fn pointwise(
+        &self,
+        run: &RunData,
+        model: &[f64],
+        _stiffness: &[f64],
+        values: &NoiseValues,
+        rng: &mut dyn Rng,
+    ) -> Pointwise {
         let n = run.time.len().min(model.len());
         let sigma = values[0];
         let sigma2 = sigma * sigma;
@@ -78,11 +101,26 @@ impl NoiseModel for StudentT {
         out
     }
 
-    fn simulator(&self, _run: &RunData, draws: &[NoiseValues], replicates: usize) -> Box<dyn NoiseSimulator> {
-        Box::new(Simulator { sigma: draws.iter().map(|v| v[0]).collect(), replicates, student: StudentTDistribution::new(self.nu).ok() })
+    fn simulator(
+        &self,
+        _run: &RunData,
+        draws: &[NoiseValues],
+        replicates: usize,
+    ) -> Box<dyn NoiseSimulator> {
+        Box::new(Simulator {
+            sigma: draws.iter().map(|v| v[0]).collect(),
+            replicates,
+            student: StudentTDistribution::new(self.nu).ok(),
+        })
     }
 
-    fn marginal_ln_pdf(&self, _run: &RunData, r: f64, _stiffness: f64, values: &NoiseValues) -> f64 {
+    fn marginal_ln_pdf(
+        &self,
+        _run: &RunData,
+        r: f64,
+        _stiffness: f64,
+        values: &NoiseValues,
+    ) -> f64 {
         let sigma = values[0];
         self.ln_pdf(r, sigma, self.nu * sigma * sigma)
     }
@@ -92,7 +130,11 @@ impl NoiseModel for StudentT {
         let ms = rms(residuals).max(1e-9).powi(2);
         let (lo, hi) = self.sigma_bounds;
         let coordinate = rms(residuals).max(1e-9).clamp(lo, hi).ln();
-        Profile { scale: ms.sqrt(), whitening: Arc::new(Scales(vec![ms.sqrt(); residuals.len()])), coordinates: [coordinate, 0.0, 0.0, 0.0] }
+        Profile {
+            scale: ms.sqrt(),
+            whitening: Arc::new(Scales(vec![ms.sqrt(); residuals.len()])),
+            coordinates: [coordinate, 0.0, 0.0, 0.0],
+        }
     }
 
     /// The likelihood at the scale that maximises it, found by
@@ -103,7 +145,8 @@ impl NoiseModel for StudentT {
         let nu = self.nu;
         let ll = |log_s: f64| {
             let s2 = (2.0 * log_s).exp();
-            -n * log_s - 0.5 * (nu + 1.0) * r.iter().map(|v| (v * v / (nu * s2)).ln_1p()).sum::<f64>()
+            -n * log_s
+                - 0.5 * (nu + 1.0) * r.iter().map(|v| (v * v / (nu * s2)).ln_1p()).sum::<f64>()
         };
         let centre = 0.5 * (sum_sq / n).ln();
         ll(crate::fit::golden_section(|log_s| -ll(log_s), centre - 3.0, centre + 1.0, 60))
@@ -131,7 +174,9 @@ impl RunScorer for Scorer<'_> {
 
     fn finish(&mut self) -> [f64; LANES] {
         let (n, nu) = (self.n, self.model.nu);
-        std::array::from_fn(|l| n * self.model.log_constant - n * self.log_sigma[l] - 0.5 * (nu + 1.0) * self.log_t[l])
+        std::array::from_fn(|l| {
+            n * self.model.log_constant - n * self.log_sigma[l] - 0.5 * (nu + 1.0) * self.log_t[l]
+        })
     }
 }
 
@@ -184,7 +229,8 @@ mod tests {
         let n = r.len() as f64;
         let g = -0.5 * n * (r.iter().map(|v| v * v).sum::<f64>() / n).ln();
         let (run, _) = super::super::testing::run(0.0);
-        let t = StudentT::new(&NoiseOptions { student_nu: 1e6, ..NoiseOptions::default() }).profile_log_likelihood(&run, &r);
+        let t = StudentT::new(&NoiseOptions { student_nu: 1e6, ..NoiseOptions::default() })
+            .profile_log_likelihood(&run, &r);
         assert!((t - (g - 0.5 * n)).abs() < 1e-3 * n, "{t} vs {}", g - 0.5 * n);
     }
 }

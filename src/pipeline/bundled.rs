@@ -36,18 +36,29 @@ impl Pipeline<'_> {
             Ok(RunOptions {
                 sample: sample.request()?,
                 predict: Default::default(),
-                leave_one_out: LooOptions { leave_one_out, loo_steps: crate::validate::LooSettings::default().steps }.steps(),
+                leave_one_out: LooOptions {
+                    leave_one_out,
+                    loo_steps: crate::validate::LooSettings::default().steps,
+                }
+                .steps(),
                 current_law: false,
             })
         };
         let replace = SampleOptions { force: true, ..Default::default() };
-        let into = |manifest: &Path| -> Result<PathBuf> { Ok(Path::new("reports").join(Manifest::read(manifest)?.name)) };
+        let into = |manifest: &Path| -> Result<PathBuf> {
+            Ok(Path::new("reports").join(Manifest::read(manifest)?.name))
+        };
         let (manifest, measured) = (Path::new(BUNDLED), Path::new(MEASURED));
         let mut parts = vec![(manifest, into(manifest)?, job(replace.clone(), true)?)];
         if measured.exists() {
-            parts.push((measured, into(measured)?, job(SampleOptions { current: Some(MEASURED_CURRENT_A), ..replace }, false)?));
+            parts.push((
+                measured,
+                into(measured)?,
+                job(SampleOptions { current: Some(MEASURED_CURRENT_A), ..replace }, false)?,
+            ));
         }
-        let reports = self.side_by_side(&parts, |p, (manifest, out, options)| p.run(manifest, out, options))?;
+        let reports =
+            self.side_by_side(&parts, |p, (manifest, out, options)| p.run(manifest, out, options))?;
         Ok(reports.into_iter().flatten().collect())
     }
 }

@@ -4,6 +4,7 @@ use std::path::Path;
 
 use super::{folders, Event, Pipeline, SampleRequest};
 use crate::calibrate::{self, Calibration, CalibrationSettings};
+use crate::data::RunData;
 use crate::data::{current_tag, same_current, Campaign};
 use crate::error::{Error, Result};
 use crate::identify::{identify_campaign, CurrentIdentification, IdentifySettings};
@@ -13,12 +14,10 @@ use crate::store;
 use crate::validate::between_runs::{self, BetweenRuns, GibbsSettings, LayerRun, LeftOut};
 use crate::validate::consistency::consistency;
 use crate::validate::LooSettings;
-use crate::data::RunData;
 use std::time::Instant;
 
 /// Steps between two checkpoints of the sampler.
 pub const CHECKPOINT_EVERY: usize = 100;
-
 
 /// Checks a checkpoint against the options before any work: readable, the
 /// same sampler (ensembles, walkers where given, moves — or the curved
@@ -44,7 +43,10 @@ pub fn check_resumable(checkpoint: &Path, settings: &CalibrationSettings) -> Res
     }
     // the moves asked for, or those a start far from its Laplace
     // approximation walks with instead (docs/calibration.md, "The start")
-    if saved.moves != s.moves && crate::calibrate::probe::moves_far_from_laplace(&s.moves).is_none_or(|m| m != saved.moves) {
+    if saved.moves != s.moves
+        && crate::calibrate::probe::moves_far_from_laplace(&s.moves)
+            .is_none_or(|m| m != saved.moves)
+    {
         return mismatch("moves", format!("{:?}", saved.moves), format!("{:?}", s.moves));
     }
     let done = chains.steps().saturating_sub(1);
@@ -58,7 +60,13 @@ impl Pipeline<'_> {
     /// The paper's identification of every current level of `campaign`:
     /// `identification.parquet` and Figs. 1–5 in `out` (an earlier
     /// identification there is replaced only if `force`).
-    pub fn identify(&mut self, campaign: &Campaign, out: &Path, settings: &IdentifySettings, force: bool) -> Result<Vec<CurrentIdentification>> {
+    pub fn identify(
+        &mut self,
+        campaign: &Campaign,
+        out: &Path,
+        settings: &IdentifySettings,
+        force: bool,
+    ) -> Result<Vec<CurrentIdentification>> {
         self.prepare(out, "--out", &[campaign], &folders::IDENTIFICATION, force)?;
         campaign.require_usable("the identification")?;
         let results = identify_campaign(campaign, settings);
@@ -71,17 +79,30 @@ impl Pipeline<'_> {
     /// Calibrations of `campaign` as `request` says: one per current level
     /// (in `out`, or `out/I<current>A/` when there are several), or one
     /// current law over the currents not held out. Returns the folders.
-    pub fn sample(&mut self, campaign: &Campaign, out: &Path, request: &SampleRequest) -> Result<Vec<Calibration>> {
+    pub fn sample(
+        &mut self,
+        campaign: &Campaign,
+        out: &Path,
+        request: &SampleRequest,
+    ) -> Result<Vec<Calibration>> {
         let settings = &request.settings;
         campaign.require_usable("the calibration")?;
         self.prepare(out, "--out", &[campaign], &[], true)?;
         if settings.parameter_model().is_current_law() {
             let held = &request.hold_out_current;
             if let Some(h) = held.iter().find(|h| !campaign.has_current(**h)) {
-                return Err(Error::Usage(format!("--hold-out-current {h}: no run at {h} A (currents: {:?})", campaign.currents())));
+                return Err(Error::Usage(format!(
+                    "--hold-out-current {h}: no run at {h} A (currents: {:?})",
+                    campaign.currents()
+                )));
             }
-            let used = campaign.filtered(|r| !held.iter().any(|h| same_current(r.spec.current_a, *h)));
-            let law = if settings.model == crate::posterior::ModelKind::CurrentCurves { "the current curves" } else { "the current law" };
+            let used =
+                campaign.filtered(|r| !held.iter().any(|h| same_current(r.spec.current_a, *h)));
+            let law = if settings.model == crate::posterior::ModelKind::CurrentCurves {
+                "the current curves"
+            } else {
+                "the current law"
+            };
             let what = format!(
                 "{law} on {} run(s) at {:?} A{}",
                 used.runs.len(),
@@ -91,7 +112,9 @@ impl Pipeline<'_> {
             return Ok(vec![self.calibrate_into(&used, out, request, &what, false)?]);
         }
         if !request.hold_out_current.is_empty() {
-            return Err(Error::Usage("--hold-out-current needs --model current-law or current-curves".into()));
+            return Err(Error::Usage(
+                "--hold-out-current needs --model current-law or current-curves".into(),
+            ));
         }
         let varying = campaign.varying_runs();
         if !varying.is_empty() {
@@ -102,7 +125,11 @@ impl Pipeline<'_> {
         }
         let currents = match request.current {
             Some(c) if !campaign.has_current(c) => {
-                return Err(Error::Usage(format!("no run at {c} A in {} (currents: {:?})", campaign.manifest_path.display(), campaign.currents())))
+                return Err(Error::Usage(format!(
+                    "no run at {c} A in {} (currents: {:?})",
+                    campaign.manifest_path.display(),
+                    campaign.currents()
+                )))
             }
             Some(c) => vec![c],
             None => campaign.currents(),
@@ -120,23 +147,38 @@ impl Pipeline<'_> {
 
     /// The runs of `campaign` at current `c` calibrated together into
     /// `dir`, and with `--per-run` each alone into `dir/runs/<run>/`.
-    pub fn calibrate_current(&mut self, campaign: &Campaign, c: f64, dir: &Path, request: &SampleRequest) -> Result<CurrentCalibrations> {
+    pub fn calibrate_current(
+        &mut self,
+        campaign: &Campaign,
+        c: f64,
+        dir: &Path,
+        request: &SampleRequest,
+    ) -> Result<CurrentCalibrations> {
         let runs = campaign.at_current(c);
         let what = format!("{} run(s) at {c} A", runs.runs.len());
         let joint = self.calibrate_into(&runs, dir, request, &what, false)?;
-        let alone = if request.per_run { self.runs_alone(&runs, &joint, request)? } else { Vec::new() };
+        let alone =
+            if request.per_run { self.runs_alone(&runs, &joint, request)? } else { Vec::new() };
         Ok(CurrentCalibrations { joint, runs, alone })
     }
 
     /// Each run of `campaign` calibrated alone as `request` says, into
     /// `runs/<run>/` of the joint calibration's folder.
-    pub fn runs_alone(&mut self, campaign: &Campaign, joint: &Calibration, request: &SampleRequest) -> Result<Vec<(String, Calibration)>> {
+    pub fn runs_alone(
+        &mut self,
+        campaign: &Campaign,
+        joint: &Calibration,
+        request: &SampleRequest,
+    ) -> Result<Vec<(String, Calibration)>> {
         let mut alone = Vec::new();
         for run in &campaign.runs {
             let id = run.id().to_string();
             let one = campaign.filtered(|r| r.id() == id);
             let dir = joint.dir.join(folders::RUNS).join(&id);
-            alone.push((id.clone(), self.calibrate_into(&one, &dir, request, &format!("run {id} alone"), true)?));
+            alone.push((
+                id.clone(),
+                self.calibrate_into(&one, &dir, request, &format!("run {id} alone"), true)?,
+            ));
         }
         for (id, cal) in &alone {
             let rhat = cal.max_rhat();
@@ -153,7 +195,11 @@ impl Pipeline<'_> {
     /// layer's interval for a new test (`consistency.parquet`), the layer's
     /// draws (`between_runs.parquet`), and, with `loo`, each run predicted
     /// as a new test by the layer fitted without it (`loo_new_test.parquet`).
-    pub fn between_runs(&mut self, stages: &[CurrentCalibrations], loo: Option<&LooSettings>) -> Result<()> {
+    pub fn between_runs(
+        &mut self,
+        stages: &[CurrentCalibrations],
+        loo: Option<&LooSettings>,
+    ) -> Result<()> {
         let Some(first) = stages.iter().find(|s| !s.alone.is_empty()) else {
             return Ok(());
         };
@@ -162,19 +208,38 @@ impl Pipeline<'_> {
             return Ok(());
         }
         let lik = &first.joint.settings.likelihood;
-        let datas: Vec<Vec<RunData>> = stages.iter().map(|s| s.runs.runs.iter().map(|r| RunData::from_run(r, lik.part, lik.smooth_strain_ms)).collect()).collect();
+        let datas: Vec<Vec<RunData>> = stages
+            .iter()
+            .map(|s| {
+                s.runs
+                    .runs
+                    .iter()
+                    .map(|r| RunData::from_run(r, lik.part, lik.smooth_strain_ms))
+                    .collect()
+            })
+            .collect();
         let layer_runs: Vec<LayerRun> = stages
             .iter()
             .zip(&datas)
             .flat_map(|(s, datas)| {
                 s.alone.iter().filter_map(move |(id, cal)| {
                     let j = s.runs.runs.iter().position(|r| r.id() == id)?;
-                    Some(LayerRun { id, current_a: s.runs.runs[j].spec.current_a, cal, data: &datas[j] })
+                    Some(LayerRun {
+                        id,
+                        current_a: s.runs.runs[j].spec.current_a,
+                        cal,
+                        data: &datas[j],
+                    })
                 })
             })
             .collect();
         let clock = Instant::now();
-        let layer = BetweenRuns::fit(&layer_runs, &[], GibbsSettings::default(), first.joint.settings.sampler.seed)?;
+        let layer = BetweenRuns::fit(
+            &layer_runs,
+            &[],
+            GibbsSettings::default(),
+            first.joint.settings.sampler.seed,
+        )?;
         let settled = layer.max_rhat < 1.01 && layer.min_ess >= 400.0;
         self.note(&format!(
             "\nbetween-run layer: {} runs alone at {:?} A, {} Gibbs chains: largest R̂ {:.4}, smallest ESS {:.0} ({:.1} s){}",
@@ -186,32 +251,73 @@ impl Pipeline<'_> {
             clock.elapsed().as_secs_f64(),
             if settled { "" } else { " — not converged: its new-test intervals are not to be trusted" }
         ));
-        let folders: Vec<(&Path, &str)> = layer_runs.iter().map(|r| (r.cal.dir.as_path(), r.cal.record.calibration_id.as_str())).collect();
-        let typical = layer.against_current(store::between_runs::ROWS, first.joint.settings.sampler.seed);
+        let folders: Vec<(&Path, &str)> = layer_runs
+            .iter()
+            .map(|r| (r.cal.dir.as_path(), r.cal.record.calibration_id.as_str()))
+            .collect();
+        let typical =
+            layer.against_current(store::between_runs::ROWS, first.joint.settings.sampler.seed);
         for stage in stages.iter().filter(|s| !s.alone.is_empty()) {
             let joint = &stage.joint;
             let Some(group) = layer.group(joint.record.current_a) else { continue };
             self.prepare(&joint.dir, "--out", &[], &[], true)?;
             let meta = store::between_runs::layer_runs(&joint.dir, &folders);
-            store::between_runs::write(&joint.dir, &layer, group, &joint.record.calibration_id, &meta)?;
+            store::between_runs::write(
+                &joint.dir,
+                &layer,
+                group,
+                &joint.record.calibration_id,
+                &meta,
+            )?;
             if let Some(rows) = &typical {
-                store::between_runs::write_typical(&joint.dir, rows, &joint.record.calibration_id, &meta)?;
+                store::between_runs::write_typical(
+                    &joint.dir,
+                    rows,
+                    &joint.record.calibration_id,
+                    &meta,
+                )?;
             }
             if stage.alone.len() >= 2 {
                 let parameters = consistency(joint, &stage.alone, &layer);
-                let ids: Vec<(String, String)> = stage.alone.iter().map(|(run, cal)| (run.clone(), cal.record.calibration_id.clone())).collect();
-                store::consistency::write(&joint.dir, &parameters, &joint.record.calibration_id, &ids, &meta)?;
+                let ids: Vec<(String, String)> = stage
+                    .alone
+                    .iter()
+                    .map(|(run, cal)| (run.clone(), cal.record.calibration_id.clone()))
+                    .collect();
+                store::consistency::write(
+                    &joint.dir,
+                    &parameters,
+                    &joint.record.calibration_id,
+                    &ids,
+                    &meta,
+                )?;
                 self.emit(Event::Consistency(&parameters));
             }
             if let Some(loo) = loo {
                 let clock = Instant::now();
                 let mut rows = Vec::new();
                 for left_out in [LeftOut::Run, LeftOut::Current] {
-                    rows.extend(between_runs::leave_out(joint, &stage.runs, &layer_runs, left_out, loo.draws, loo.replicates, loo.seed)?);
+                    rows.extend(between_runs::leave_out(
+                        joint,
+                        &stage.runs,
+                        &layer_runs,
+                        left_out,
+                        loo.draws,
+                        loo.replicates,
+                        loo.seed,
+                    )?);
                 }
                 if !rows.is_empty() {
-                    store::between_runs::write_leave_one_out(&joint.dir, &rows, &joint.record.calibration_id, &meta)?;
-                    self.emit(Event::NewTestLeftOut { rows: &rows, seconds: clock.elapsed().as_secs_f64() });
+                    store::between_runs::write_leave_one_out(
+                        &joint.dir,
+                        &rows,
+                        &joint.record.calibration_id,
+                        &meta,
+                    )?;
+                    self.emit(Event::NewTestLeftOut {
+                        rows: &rows,
+                        seconds: clock.elapsed().as_secs_f64(),
+                    });
                 }
             }
         }
@@ -222,32 +328,56 @@ impl Pipeline<'_> {
     /// chains, summary, settings and record; the files derived from an
     /// earlier calibration there are removed. `what` names the calibration
     /// in messages.
-    pub fn calibrate_into(&mut self, campaign: &Campaign, dir: &Path, request: &SampleRequest, what: &str, alone: bool) -> Result<Calibration> {
+    pub fn calibrate_into(
+        &mut self,
+        campaign: &Campaign,
+        dir: &Path,
+        request: &SampleRequest,
+        what: &str,
+        alone: bool,
+    ) -> Result<Calibration> {
         let settings = &request.settings;
         let checkpoint = dir.join(store::folder::CHECKPOINT);
-        self.prepare(dir, "--out", &[campaign], &folders::CALIBRATION, request.force || request.resume)?;
+        self.prepare(
+            dir,
+            "--out",
+            &[campaign],
+            &folders::CALIBRATION,
+            request.force || request.resume,
+        )?;
         if request.resume {
             check_resumable(&checkpoint, settings)?;
         }
         let resume = request.resume && {
             let found = checkpoint.exists();
             if !found {
-                self.note(&format!("--resume: no {} in {} (stopped before sampling began?): starting from scratch", store::folder::CHECKPOINT, dir.display()));
+                self.note(&format!(
+                    "--resume: no {} in {} (stopped before sampling began?): starting from scratch",
+                    store::folder::CHECKPOINT,
+                    dir.display()
+                ));
             }
             found
         };
         self.emit(Event::Calibrating { what, dir });
-        let start = calibrate::start(campaign, settings, &mut |line| (self.listener)(Event::Note(line)))?;
+        let start =
+            calibrate::start(campaign, settings, &mut |line| (self.listener)(Event::Note(line)))?;
         if resume {
             self.note(&format!("  resuming from {}", checkpoint.display()));
         }
         let mut observers = self.observers();
-        let mut checkpointer = Checkpointer { path: checkpoint.clone(), every: CHECKPOINT_EVERY, stop: crate::interrupt::requested };
-        let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
+        let mut checkpointer = Checkpointer {
+            path: checkpoint.clone(),
+            every: CHECKPOINT_EVERY,
+            stop: crate::interrupt::requested,
+        };
+        let mut refs: Vec<&mut dyn Observer> =
+            observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
         refs.push(&mut checkpointer);
         let made = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)?;
 
-        let cal = self.write_calibration(campaign, dir, made.calibration, &made.start.identification)?;
+        let cal =
+            self.write_calibration(campaign, dir, made.calibration, &made.start.identification)?;
         // the chains are complete in chains.parquet: the checkpoint has done its job
         let _ = std::fs::remove_file(&checkpoint);
         self.emit(Event::Calibrated { cal: &cal, alone });
@@ -261,7 +391,14 @@ impl Pipeline<'_> {
     /// A campaign that has no manifest on disk (made from records in
     /// memory) is written beside it first, into `records/`, so that the
     /// command line's predict and report find its records.
-    pub fn save(&mut self, campaign: &Campaign, dir: &Path, mut cal: Calibration, identification: &CurrentIdentification, force: bool) -> Result<Calibration> {
+    pub fn save(
+        &mut self,
+        campaign: &Campaign,
+        dir: &Path,
+        mut cal: Calibration,
+        identification: &CurrentIdentification,
+        force: bool,
+    ) -> Result<Calibration> {
         self.prepare(dir, "the folder", &[campaign], &folders::CALIBRATION, force)?;
         if !campaign.manifest_path.is_file() {
             let records = dir.join(folders::RECORDS);
@@ -270,20 +407,31 @@ impl Pipeline<'_> {
             }
             let header = format!("# The records of the calibration in this folder's parent, written by mrbp from records in memory ({}).\n", campaign.manifest_path.display());
             let manifest = campaign.write(&records, &header)?;
-            cal.record.manifest = std::fs::canonicalize(&manifest).unwrap_or(manifest).display().to_string();
+            cal.record.manifest =
+                std::fs::canonicalize(&manifest).unwrap_or(manifest).display().to_string();
         }
         self.write_calibration(campaign, dir, cal, identification)
     }
 
     /// The files of a calibration into the folder `dir`, held already.
-    fn write_calibration(&mut self, campaign: &Campaign, dir: &Path, mut cal: Calibration, identification: &CurrentIdentification) -> Result<Calibration> {
+    fn write_calibration(
+        &mut self,
+        campaign: &Campaign,
+        dir: &Path,
+        mut cal: Calibration,
+        identification: &CurrentIdentification,
+    ) -> Result<Calibration> {
         // the folder's earlier calibration is incomplete from here on
         // (no calibration.toml) until the new one is whole
         store::folder::retire(dir)?;
         folders::clear_derived(dir)?;
         let group = campaign.at_current(identification.current_a);
         let identification = std::slice::from_ref(identification);
-        store::identification::write(&dir.join(store::identification::FILE), identification, Some(&cal.record.calibration_id))?;
+        store::identification::write(
+            &dir.join(store::identification::FILE),
+            identification,
+            Some(&cal.record.calibration_id),
+        )?;
         report::identification::write(dir, &group, identification)?;
         store::folder::write(dir, &mut cal)?;
         Ok(cal)

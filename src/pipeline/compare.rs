@@ -42,14 +42,20 @@ impl Pipeline<'_> {
             let _reading = crate::lock::read(d)?;
             let cal = store::folder::read(d)?;
             // bands made from other chains than the folder's are left out
-            let prediction = store::prediction::read(d)?.filter(|p| p.record.calibration_id == cal.record.calibration_id);
+            let prediction = store::prediction::read(d)?
+                .filter(|p| p.record.calibration_id == cal.record.calibration_id);
             entries.push(entry(cal, prediction));
         }
         self.compare_entries(entries, out, rpm)
     }
 
     /// [`Pipeline::compare`] of calibrations already at hand.
-    pub(super) fn compare_entries(&mut self, mut entries: Vec<Entry>, out: &Path, rpm: Option<f64>) -> Result<PathBuf> {
+    pub(super) fn compare_entries(
+        &mut self,
+        mut entries: Vec<Entry>,
+        out: &Path,
+        rpm: Option<f64>,
+    ) -> Result<PathBuf> {
         // folders of one name in different places: tell them apart by path
         for i in 1..entries.len() {
             if entries[..i].iter().any(|e| e.label == entries[i].label) {
@@ -60,7 +66,10 @@ impl Pipeline<'_> {
         let record = ComparisonRecord {
             mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
             command: crate::calibrate::command_line(),
-            compared: entries.iter().map(|e| Compared::new(&e.label, &e.cal.dir, &e.cal.record.calibration_id, out)).collect(),
+            compared: entries
+                .iter()
+                .map(|e| Compared::new(&e.label, &e.cal.dir, &e.cal.record.calibration_id, out))
+                .collect(),
         };
         let tables: Vec<compare::Entry> = entries
             .iter()
@@ -70,7 +79,11 @@ impl Pipeline<'_> {
                 summary: &e.cal.summary,
                 sample: &e.cal.sample,
                 positions: e.positions.clone(),
-                law_currents: if e.cal.is_current_law() { e.cal.record.currents.clone() } else { Vec::new() },
+                law_currents: if e.cal.is_current_law() {
+                    e.cal.record.currents.clone()
+                } else {
+                    Vec::new()
+                },
                 layer: layer_centre(&e.cal),
             })
             .collect();
@@ -79,8 +92,13 @@ impl Pipeline<'_> {
         store::comparison::write(out, &comparison, &store::comparison::ids_text(&record))?;
         // the between-run layer's typical test against the current, from the
         // first folder that holds one
-        let typical = entries.iter().find_map(|e| store::between_runs::read_typical(&e.cal.dir, &e.cal.record.calibration_id).ok().flatten());
-        let path = crate::report::comparison::write(out, &entries, &comparison, rpm, typical.as_deref())?;
+        let typical = entries.iter().find_map(|e| {
+            store::between_runs::read_typical(&e.cal.dir, &e.cal.record.calibration_id)
+                .ok()
+                .flatten()
+        });
+        let path =
+            crate::report::comparison::write(out, &entries, &comparison, rpm, typical.as_deref())?;
         store::comparison::write_record(out, &record)?;
         self.emit(Event::Wrote(&path));
         Ok(path)

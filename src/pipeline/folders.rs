@@ -38,10 +38,25 @@ pub const RECORDS: &str = "records";
 
 /// The report's figures (SVG and PNG) start so; the identification's
 /// (`fig1…fig5`), which the calibration itself writes, do not.
-const FIGURES: [&str; 8] = ["bands_", "adequacy_", "residuals", "corner", "marginals", "traces", "diagnostics", "consistency"];
+const FIGURES: [&str; 8] = [
+    "bands_",
+    "adequacy_",
+    "residuals",
+    "corner",
+    "marginals",
+    "traces",
+    "diagnostics",
+    "consistency",
+];
 
 /// The results of `mrbp sample` in a calibration folder.
-pub const CALIBRATION: [&str; 5] = [store::folder::CHAINS, store::folder::SUMMARY, store::folder::RECORD, store::folder::CONFIG, store::identification::FILE];
+pub const CALIBRATION: [&str; 5] = [
+    store::folder::CHAINS,
+    store::folder::SUMMARY,
+    store::folder::RECORD,
+    store::folder::CONFIG,
+    store::identification::FILE,
+];
 
 /// The results of `mrbp identify`.
 pub const IDENTIFICATION: [&str; 1] = [store::identification::FILE];
@@ -52,7 +67,13 @@ pub const IDENTIFICATION: [&str; 1] = [store::identification::FILE];
 /// unless `force` — a folder that already holds any of `results`, listing
 /// them. Holds the folder while the returned value lives, and removes what
 /// killed writes left there.
-pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str], force: bool) -> Result<Writing> {
+pub fn prepare(
+    out: &Path,
+    option: &str,
+    inputs: &[&Campaign],
+    results: &[&str],
+    force: bool,
+) -> Result<Writing> {
     let shown = out.display();
     if out.is_file() {
         return Err(Error::Usage(format!("{option} {shown}: this is a file, not a folder")));
@@ -60,7 +81,11 @@ pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str],
     let canonical = |p: &Path| std::fs::canonicalize(p).ok();
     if let Some(here) = canonical(out) {
         for c in inputs {
-            let dir = c.manifest_path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+            let dir = c
+                .manifest_path
+                .parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new("."));
             if canonical(dir).as_ref() == Some(&here) {
                 return Err(Error::Usage(format!(
                     "{option} {shown}: this is the folder of the campaign {} itself; results go to a folder of their own",
@@ -69,8 +94,12 @@ pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str],
             }
         }
     }
-    std::fs::create_dir_all(out).map_err(|e| Error::Usage(format!("{option} {shown}: cannot create this folder ({})", reason(&e))))?;
-    tempfile::NamedTempFile::new_in(out).map_err(|e| Error::Usage(format!("{option} {shown}: cannot write in this folder ({})", reason(&e))))?;
+    std::fs::create_dir_all(out).map_err(|e| {
+        Error::Usage(format!("{option} {shown}: cannot create this folder ({})", reason(&e)))
+    })?;
+    tempfile::NamedTempFile::new_in(out).map_err(|e| {
+        Error::Usage(format!("{option} {shown}: cannot write in this folder ({})", reason(&e)))
+    })?;
     let held = crate::lock::write(out)?;
     crate::atomic::clean_leftovers(out)?;
     let present: Vec<&str> = results.iter().copied().filter(|f| out.join(f).exists()).collect();
@@ -85,7 +114,10 @@ pub fn prepare(out: &Path, option: &str, inputs: &[&Campaign], results: &[&str],
 
 /// Removes the files derived from an earlier calibration in `dir`.
 pub fn clear_derived(dir: &Path) -> Result<()> {
-    let figure = |name: &str| FIGURES.iter().any(|p| name.starts_with(p)) && (name.ends_with(".png") || name.ends_with(".svg"));
+    let figure = |name: &str| {
+        FIGURES.iter().any(|p| name.starts_with(p))
+            && (name.ends_with(".png") || name.ends_with(".svg"))
+    };
     let listed = std::fs::read_dir(dir).map_err(|e| Error::output(dir, e))?;
     for entry in listed.flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();

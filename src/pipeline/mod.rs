@@ -23,8 +23,8 @@ use crate::calibrate::{Calibration, CalibrationSettings};
 use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::CurrentIdentification;
-use crate::sampler::{Observer, Progress};
 use crate::predict::PredictionRecord;
+use crate::sampler::{Observer, Progress};
 use crate::validate::between_runs::NewTestRow;
 use crate::validate::consistency::ParameterConsistency;
 use crate::validate::{LooRow, LooSettings};
@@ -40,23 +40,41 @@ pub enum Event<'a> {
     Checked(&'a Campaign),
     Identified(&'a [CurrentIdentification]),
     /// A calibration (of `what`: runs and currents) is about to start.
-    Calibrating { what: &'a str, dir: &'a Path },
+    Calibrating {
+        what: &'a str,
+        dir: &'a Path,
+    },
     /// A calibration is done; `alone`: one run of a `--per-run` study
     /// calibrated by itself (its summary is in its folder; a listener may
     /// say less of it).
-    Calibrated { cal: &'a Calibration, alone: bool },
-    Predicted { record: &'a PredictionRecord, dir: &'a Path },
-    LeftOneOut { rows: &'a [LooRow], seconds: f64 },
+    Calibrated {
+        cal: &'a Calibration,
+        alone: bool,
+    },
+    Predicted {
+        record: &'a PredictionRecord,
+        dir: &'a Path,
+    },
+    LeftOneOut {
+        rows: &'a [LooRow],
+        seconds: f64,
+    },
     /// The runs of a calibration, each calibrated alone, against the joint one.
     Consistency(&'a [ParameterConsistency]),
     /// Each run predicted as a new test by the between-run layer fitted
     /// without it, or without its current.
-    NewTestLeftOut { rows: &'a [NewTestRow], seconds: f64 },
+    NewTestLeftOut {
+        rows: &'a [NewTestRow],
+        seconds: f64,
+    },
     /// A file of results (a report) was written.
     Wrote(&'a Path),
     /// What a stage that ran beside another said, as the pipeline's
     /// [`Render`] put it: shown after the stage it ran beside.
-    Said { to_stderr: bool, text: &'a str },
+    Said {
+        to_stderr: bool,
+        text: &'a str,
+    },
 }
 
 /// How a listener puts an event into words: whether for standard error,
@@ -104,12 +122,21 @@ impl SampleOptions {
     pub fn request(&self) -> Result<SampleRequest> {
         let settings = self.settings.settings()?;
         if !self.hold_out_current.is_empty() && !settings.model.is_law() {
-            return Err(Error::Usage("--hold-out-current needs --model current-law or current-curves".into()));
+            return Err(Error::Usage(
+                "--hold-out-current needs --model current-law or current-curves".into(),
+            ));
         }
         if self.per_run && settings.model.is_law() {
             return Err(Error::Usage("--per-run calibrates each run alone, which a current law cannot (one run has one current): use the per-current model".into()));
         }
-        Ok(SampleRequest { settings, current: self.current, hold_out_current: self.hold_out_current.clone(), resume: self.resume, force: self.force, per_run: self.per_run })
+        Ok(SampleRequest {
+            settings,
+            current: self.current,
+            hold_out_current: self.hold_out_current.clone(),
+            resume: self.resume,
+            force: self.force,
+            per_run: self.per_run,
+        })
     }
 }
 
@@ -193,15 +220,26 @@ impl<'a> Pipeline<'a> {
     /// each other on a thread of its own, told whole after the one before),
     /// else in turn, stopping at the first error. The first error ends the
     /// whole; what the later items met is told as notes.
-    fn side_by_side<I: Sync, T: Send>(&mut self, items: &[I], work: impl Fn(&mut Pipeline<'_>, &I) -> Result<T> + Sync) -> Result<Vec<T>> {
+    fn side_by_side<I: Sync, T: Send>(
+        &mut self,
+        items: &[I],
+        work: impl Fn(&mut Pipeline<'_>, &I) -> Result<T> + Sync,
+    ) -> Result<Vec<T>> {
         let done: Vec<Result<T>> = match (self.render, items.split_first()) {
-            (Some(render), Some((first, rest))) if !rest.is_empty() => std::thread::scope(|scope| {
-                let work = &work;
-                let others: Vec<_> = rest.iter().map(|item| scope.spawn(move || Pipeline::beside(render, |p| work(p, item)))).collect();
-                let mut done = vec![work(self, first)];
-                done.extend(others.into_iter().map(|o| self.join_beside(o.join())));
-                done
-            }),
+            (Some(render), Some((first, rest))) if !rest.is_empty() => {
+                std::thread::scope(|scope| {
+                    let work = &work;
+                    let others: Vec<_> = rest
+                        .iter()
+                        .map(|item| {
+                            scope.spawn(move || Pipeline::beside(render, |p| work(p, item)))
+                        })
+                        .collect();
+                    let mut done = vec![work(self, first)];
+                    done.extend(others.into_iter().map(|o| self.join_beside(o.join())));
+                    done
+                })
+            }
             _ => {
                 let mut done = Vec::new();
                 for item in items {
@@ -243,7 +281,9 @@ impl<'a> Pipeline<'a> {
     /// Tells what a stage run [`Pipeline::beside`] said, keeps its folders
     /// held, and returns its result.
     fn join_beside<T>(&mut self, done: std::thread::Result<Beside<T>>) -> Result<T> {
-        let done = done.map_err(|_| Error::Compute("a part of the job running beside another stopped unexpectedly".into()))?;
+        let done = done.map_err(|_| {
+            Error::Compute("a part of the job running beside another stopped unexpectedly".into())
+        })?;
         for (to_stderr, text) in &done.said {
             self.emit(Event::Said { to_stderr: *to_stderr, text });
         }
@@ -253,7 +293,14 @@ impl<'a> Pipeline<'a> {
 
     /// [`folders::prepare`]: `out` made ready for results and held until
     /// the pipeline ends.
-    fn prepare(&mut self, out: &Path, option: &str, inputs: &[&Campaign], results: &[&str], force: bool) -> Result<()> {
+    fn prepare(
+        &mut self,
+        out: &Path,
+        option: &str,
+        inputs: &[&Campaign],
+        results: &[&str],
+        force: bool,
+    ) -> Result<()> {
         let held = folders::prepare(out, option, inputs, results, force)?;
         self.held.push(held);
         Ok(())
@@ -299,6 +346,12 @@ impl<'a> Pipeline<'a> {
     /// Leave-one-out settings with `steps` per held-out run and the bands'
     /// draws, replicates and seed.
     pub fn loo_settings(&self, steps: usize, predict: &PredictOptions) -> LooSettings {
-        LooSettings { steps, draws: predict.draws, replicates: predict.replicates, seed: predict.seed, ..LooSettings::default() }
+        LooSettings {
+            steps,
+            draws: predict.draws,
+            replicates: predict.replicates,
+            seed: predict.seed,
+            ..LooSettings::default()
+        }
     }
 }

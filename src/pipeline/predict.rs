@@ -4,12 +4,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::{Event, Pipeline, PredictOptions};
-use crate::predict::adequacy::{self, AdequacyRow};
 use crate::calibrate::{command_line, Calibration};
 use crate::data::{same_current, Campaign, RecordPart, Run, RunData};
 use crate::error::{Error, Result};
 use crate::pointwise::{pointwise_draws, POINTWISE_DRAWS};
 use crate::posterior::Draw;
+use crate::predict::adequacy::{self, AdequacyRow};
 use crate::predict::{predict_run, Prediction, PredictionRecord, RunBands};
 use crate::report::{self, CalibrationReport, PredictionReport};
 use crate::store::{self, inference::StoreInfo};
@@ -20,7 +20,13 @@ impl Pipeline<'_> {
     /// `campaign` that it should predict (its own runs; every run for a
     /// current law, seen or not): `bands.parquet`, `coverage.parquet`,
     /// `adequacy.parquet` and `prediction.toml` into `out`.
-    pub fn predict(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<Prediction> {
+    pub fn predict(
+        &mut self,
+        cal: &Calibration,
+        campaign: &Campaign,
+        out: &Path,
+        options: &PredictOptions,
+    ) -> Result<Prediction> {
         self.prepare(out, "--out", &[campaign], &[], true)?;
         let (prediction, failed) = self.own_prediction(cal, campaign, options)?;
         self.write_prediction(&prediction, out)?;
@@ -32,13 +38,24 @@ impl Pipeline<'_> {
     /// [`Pipeline::prediction`] of the runs of `campaign` that `cal` should
     /// predict (its own runs; every run for a current law, seen or not), in
     /// memory.
-    pub fn own_prediction(&mut self, cal: &Calibration, campaign: &Campaign, options: &PredictOptions) -> Result<(Prediction, Vec<(String, String)>)> {
+    pub fn own_prediction(
+        &mut self,
+        cal: &Calibration,
+        campaign: &Campaign,
+        options: &PredictOptions,
+    ) -> Result<(Prediction, Vec<(String, String)>)> {
         let runs = if cal.is_current_law() { campaign.clone() } else { cal.used_runs(campaign) };
         self.prediction(cal, &runs, &|run| cal.saw(run.id()), options)
     }
 
     /// `inference.zarr`: [`Pipeline::inference_data`] into `out`.
-    fn write_inference_data(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, seed: u64) -> Result<()> {
+    fn write_inference_data(
+        &mut self,
+        cal: &Calibration,
+        campaign: &Campaign,
+        out: &Path,
+        seed: u64,
+    ) -> Result<()> {
         let data = self.inference_data(cal, campaign, seed)?;
         let path = out.join(store::inference::FILE);
         store::inference::write(&path, &data)?;
@@ -49,7 +66,12 @@ impl Pipeline<'_> {
     /// The posterior, the pointwise log-likelihood and replicated records of
     /// a thinned set of draws, along the runs of `campaign` the calibration
     /// saw, as ArviZ's InferenceData (in memory).
-    pub fn inference_data(&mut self, cal: &Calibration, campaign: &Campaign, seed: u64) -> Result<store::inference::InferenceData> {
+    pub fn inference_data(
+        &mut self,
+        cal: &Calibration,
+        campaign: &Campaign,
+        seed: u64,
+    ) -> Result<store::inference::InferenceData> {
         let likelihood = &cal.settings.likelihood;
         let runs: Vec<RunData> = campaign
             .runs
@@ -58,17 +80,32 @@ impl Pipeline<'_> {
             .map(|run| RunData::from_run(run, likelihood.part, likelihood.smooth_strain_ms))
             .collect();
         if runs.len() != cal.record.runs.len() {
-            return Err(Error::Usage(format!("{} does not hold every run of the calibration: {:?}", campaign.name, cal.record.runs)));
+            return Err(Error::Usage(format!(
+                "{} does not hold every run of the calibration: {:?}",
+                campaign.name, cal.record.runs
+            )));
         }
         let chains = &cal.sample.chains;
         let stride = cal.draws().thin;
         let steps = cal.draws().steps(chains, POINTWISE_DRAWS);
         let integrator = cal.predict_settings(1, seed).integrator;
-        let draws = pointwise_draws(&cal.sample, &runs, &steps, &integrator, cal.settings.noise_model().as_ref(), seed);
+        let draws = pointwise_draws(
+            &cal.sample,
+            &runs,
+            &steps,
+            &integrator,
+            cal.settings.noise_model().as_ref(),
+            seed,
+        );
         if draws.failed > 0 {
             self.note(&format!("inference data: {} of {} pointwise draws could not be integrated along every run (their log-likelihood is -inf)", draws.failed, steps.len() * chains.chains()));
         }
-        let info = StoreInfo { calibration_id: &cal.record.calibration_id, burn_in: cal.burn_in(), ensembles: chains.ensembles, stride };
+        let info = StoreInfo {
+            calibration_id: &cal.record.calibration_id,
+            burn_in: cal.burn_in(),
+            ensembles: chains.ensembles,
+            stride,
+        };
         Ok(store::inference::inference_data(&cal.sample, draws, &info))
     }
 
@@ -78,13 +115,23 @@ impl Pipeline<'_> {
     /// and a report into `out`. No run counts as seen unless `campaign` is
     /// the calibration's own manifest. A per-current calibration predicts
     /// only the runs at its current.
-    pub fn predict_campaign(&mut self, cal: &Calibration, campaign: &Campaign, out: &Path, options: &PredictOptions) -> Result<(PathBuf, Prediction)> {
+    pub fn predict_campaign(
+        &mut self,
+        cal: &Calibration,
+        campaign: &Campaign,
+        out: &Path,
+        options: &PredictOptions,
+    ) -> Result<(PathBuf, Prediction)> {
         self.prepare(out, "--out", &[campaign], &[], true)?;
         let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
         let own = canonical(&campaign.manifest_path) == canonical(Path::new(&cal.record.manifest));
         let runs = if cal.is_current_law() {
             let (lo, hi) = cal.current_range();
-            for run in campaign.runs.iter().filter(|r| r.spec.current_a < lo - 1e-9 || r.spec.current_a > hi + 1e-9) {
+            for run in campaign
+                .runs
+                .iter()
+                .filter(|r| r.spec.current_a < lo - 1e-9 || r.spec.current_a > hi + 1e-9)
+            {
                 self.note(&format!("{}: {} A is outside the calibrated currents {lo}–{hi} A: the current law extrapolates", run.id(), run.spec.current_a));
             }
             campaign.clone()
@@ -104,10 +151,16 @@ impl Pipeline<'_> {
             }
             kept
         };
-        let (prediction, failed) = self.prediction(cal, &runs, &|run| own && cal.saw(run.id()), options)?;
+        let (prediction, failed) =
+            self.prediction(cal, &runs, &|run| own && cal.saw(run.id()), options)?;
         self.write_prediction(&prediction, out)?;
         let predicted = runs.filtered(|r| !failed.iter().any(|(id, _)| id == r.id()));
-        let path = report::prediction::write(&PredictionReport { cal, campaign: &predicted, dir: out, prediction: &prediction })?;
+        let path = report::prediction::write(&PredictionReport {
+            cal,
+            campaign: &predicted,
+            dir: out,
+            prediction: &prediction,
+        })?;
         self.emit(Event::Wrote(&path));
         unpredicted(&failed, out)?;
         Ok((path, prediction))
@@ -125,7 +178,13 @@ impl Pipeline<'_> {
     /// offset) from those it did not (the others' typical ones). A run that
     /// cannot be predicted (no draw integrates along it) is left out, with
     /// why (the second value); if none can be, an error.
-    pub fn prediction(&mut self, cal: &Calibration, campaign: &Campaign, seen: &dyn Fn(&Run) -> bool, options: &PredictOptions) -> Result<(Prediction, Vec<(String, String)>)> {
+    pub fn prediction(
+        &mut self,
+        cal: &Calibration,
+        campaign: &Campaign,
+        seen: &dyn Fn(&Run) -> bool,
+        options: &PredictOptions,
+    ) -> Result<(Prediction, Vec<(String, String)>)> {
         options.check()?;
         let clock = Instant::now();
         let positions = cal.draw_positions(options.draws);
@@ -135,12 +194,19 @@ impl Pipeline<'_> {
         let mut coverage = Vec::new();
         let mut failed = Vec::new();
         for (j, run) in campaign.runs.iter().enumerate() {
-            let data = RunData::from_run(run, RecordPart::WholeRecord, cal.settings.likelihood.smooth_strain_ms);
+            let data = RunData::from_run(
+                run,
+                RecordPart::WholeRecord,
+                cal.settings.likelihood.smooth_strain_ms,
+            );
             let calibrated = seen(run);
             let (id, current) = (run.id(), run.spec.current_a);
             let draws: Vec<Draw> = match calibrated {
                 true => cal.sample.draws(&positions, id, current),
-                false => positions.iter().map(|&(s, c)| cal.sample.draw_without(s, c, id, current)).collect(),
+                false => positions
+                    .iter()
+                    .map(|&(s, c)| cal.sample.draw_without(s, c, id, current))
+                    .collect(),
             };
             match predict_run(run, &data, j, &draws, &settings, calibrated, &|| bar.inc(1)) {
                 Ok(p) => {
@@ -157,7 +223,8 @@ impl Pipeline<'_> {
             return Err(Error::Compute(format!("no run could be predicted: {}", whys.join("; "))));
         }
         let geometry = &campaign.geometry;
-        let adequacy: Vec<AdequacyRow> = bands.iter().map(|b| adequacy::assess(b, geometry.area_m2, geometry.gap_m)).collect();
+        let adequacy: Vec<AdequacyRow> =
+            bands.iter().map(|b| adequacy::assess(b, geometry.area_m2, geometry.gap_m)).collect();
         let record = PredictionRecord {
             mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
             command: command_line(),
@@ -178,13 +245,24 @@ impl Pipeline<'_> {
     /// The leave-one-out study of `cal` (whose runs are in `campaign`):
     /// `loo.parquet` and `loo_bands.parquet` in its folder. A calibration of
     /// a single run has nothing to leave out: `None`.
-    pub fn leave_one_out(&mut self, cal: &Calibration, campaign: &Campaign, loo: &LooSettings) -> Result<Option<LeaveOneOut>> {
+    pub fn leave_one_out(
+        &mut self,
+        cal: &Calibration,
+        campaign: &Campaign,
+        loo: &LooSettings,
+    ) -> Result<Option<LeaveOneOut>> {
         if loo.steps < 10 {
-            return Err(Error::Usage(format!("--loo-steps must be at least 10, got {}", loo.steps)));
+            return Err(Error::Usage(format!(
+                "--loo-steps must be at least 10, got {}",
+                loo.steps
+            )));
         }
         let campaign = cal.used_runs(campaign);
         if campaign.runs.len() < 2 {
-            self.note(&format!("leave-one-out skipped: the calibration in {} has a single run", cal.dir.display()));
+            self.note(&format!(
+                "leave-one-out skipped: the calibration in {} has a single run",
+                cal.dir.display()
+            ));
             return Ok(None);
         }
         // the study goes into the calibration's folder: held before the work
@@ -197,7 +275,8 @@ impl Pipeline<'_> {
             Pipeline::observers_for(progress)
         };
         let held = leave_one_out(cal, &campaign, loo, &mut observe)?;
-        let (bands, rows): (Vec<RunBands>, Vec<LooRow>) = held.into_iter().map(|h| (h.prediction.bands, h.row)).unzip();
+        let (bands, rows): (Vec<RunBands>, Vec<LooRow>) =
+            held.into_iter().map(|h| (h.prediction.bands, h.row)).unzip();
         let study = LeaveOneOut { rows, bands };
         store::coverage::write_leave_one_out(&cal.dir, &study, &cal.record.calibration_id)?;
         self.emit(Event::LeftOneOut { rows: &study.rows, seconds: clock.elapsed().as_secs_f64() });
@@ -224,7 +303,12 @@ impl Pipeline<'_> {
     /// The report of the calibration folder `dir`, from its files: the bands
     /// are predicted first if the folder has none, and the leave-one-out
     /// study is run if `loo` is given (else an earlier one is shown).
-    pub fn report(&mut self, dir: &Path, options: &PredictOptions, loo: Option<&LooSettings>) -> Result<PathBuf> {
+    pub fn report(
+        &mut self,
+        dir: &Path,
+        options: &PredictOptions,
+        loo: Option<&LooSettings>,
+    ) -> Result<PathBuf> {
         self.prepare(dir, "DIR", &[], &[], true)?;
         let cal = store::folder::read(dir)?;
         let campaign = cal.full_campaign()?;
@@ -246,13 +330,27 @@ impl Pipeline<'_> {
         self.write_report(&cal, &campaign, &prediction, loo.as_ref())
     }
 
-    pub(super) fn write_report(&mut self, cal: &Calibration, campaign: &Campaign, prediction: &Prediction, loo: Option<&LeaveOneOut>) -> Result<PathBuf> {
+    pub(super) fn write_report(
+        &mut self,
+        cal: &Calibration,
+        campaign: &Campaign,
+        prediction: &Prediction,
+        loo: Option<&LeaveOneOut>,
+    ) -> Result<PathBuf> {
         let consistency = match cal.dir.join(store::consistency::FILE).exists() {
             true => Some(store::consistency::read(&cal.dir, &cal.record.calibration_id)?),
             false => None,
         };
-        let new_test_loo = store::between_runs::read_leave_one_out(&cal.dir, &cal.record.calibration_id)?;
-        let report = CalibrationReport { cal, campaign: &cal.used_runs(campaign), prediction, loo, consistency: consistency.as_deref(), new_test_loo: new_test_loo.as_deref() };
+        let new_test_loo =
+            store::between_runs::read_leave_one_out(&cal.dir, &cal.record.calibration_id)?;
+        let report = CalibrationReport {
+            cal,
+            campaign: &cal.used_runs(campaign),
+            prediction,
+            loo,
+            consistency: consistency.as_deref(),
+            new_test_loo: new_test_loo.as_deref(),
+        };
         let path = report::calibration::write(&report)?;
         self.emit(Event::Wrote(&path));
         Ok(path)
@@ -264,7 +362,12 @@ impl Pipeline<'_> {
             return indicatif::ProgressBar::hidden();
         }
         let bar = indicatif::ProgressBar::new(len);
-        bar.set_style(indicatif::ProgressStyle::with_template("predicting {bar:30} {pos}/{len} run draws  ETA {eta}").expect("valid template"));
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "predicting {bar:30} {pos}/{len} run draws  ETA {eta}",
+            )
+            .expect("valid template"),
+        );
         bar
     }
 }

@@ -2,14 +2,14 @@
 
 use std::path::{Path, PathBuf};
 
+use super::calibrate::CurrentCalibrations;
 use super::{compare, Pipeline, RunOptions, SampleRequest};
 use crate::data::{current_tag, Campaign};
 use crate::error::Result;
 use crate::posterior::ModelKind;
+use crate::predict::Prediction;
 use crate::report::comparison::Entry;
 use crate::validate::{LeaveOneOut, LooSettings};
-use crate::predict::Prediction;
-use super::calibrate::CurrentCalibrations;
 
 impl Pipeline<'_> {
     /// The whole job on one campaign: one calibration folder per current in
@@ -20,7 +20,12 @@ impl Pipeline<'_> {
     /// ([`Pipeline::rendering`]) the currents are calibrated side by side,
     /// each telling its events whole after the one before; the results are
     /// the same bits as in turn.
-    pub fn run(&mut self, manifest: &Path, out: &Path, options: &RunOptions) -> Result<Vec<PathBuf>> {
+    pub fn run(
+        &mut self,
+        manifest: &Path,
+        out: &Path,
+        options: &RunOptions,
+    ) -> Result<Vec<PathBuf>> {
         let campaign = self.check(manifest)?;
         let all = campaign.currents();
         let currents = match options.sample.current {
@@ -29,18 +34,25 @@ impl Pipeline<'_> {
         };
         let loo = options.leave_one_out.map(|steps| self.loo_settings(steps, &options.predict));
         let several = options.sample.current.is_none() && all.len() >= 2;
-        let held: Vec<f64> = if several && all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };
+        let held: Vec<f64> =
+            if several && all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };
         // the law stage fits the law the settings name (`--model
         // current-curves`), else the current law; every current alone is per-current
-        let law_kind = if options.sample.settings.model.is_law() { options.sample.settings.model } else { ModelKind::CurrentLaw };
-        let stem = if law_kind == ModelKind::CurrentCurves { "current-curves" } else { "current-law" };
+        let law_kind = if options.sample.settings.model.is_law() {
+            options.sample.settings.model
+        } else {
+            ModelKind::CurrentLaw
+        };
+        let stem =
+            if law_kind == ModelKind::CurrentCurves { "current-curves" } else { "current-law" };
         let law = match held.first() {
             Some(h) => format!("{stem}-without-{}", current_tag(*h)),
             None => stem.to_string(),
         };
         // every folder of the job is held from the start: another command
         // cannot slip into one of them half-way through
-        let mut folders: Vec<PathBuf> = currents.iter().map(|c| out.join(current_tag(*c))).collect();
+        let mut folders: Vec<PathBuf> =
+            currents.iter().map(|c| out.join(current_tag(*c))).collect();
         if several {
             folders.extend(options.current_law.then(|| out.join(&law)));
             folders.push(out.join("comparison"));
@@ -50,8 +62,11 @@ impl Pipeline<'_> {
         }
         let mut reports = Vec::new();
         let mut entries = Vec::new();
-        let stages = self.side_by_side(&currents, |p, &c| p.at_current(&campaign, out, c, options, loo.as_ref()))?;
-        let (done, deferred): (Vec<CurrentStage>, Vec<CurrentStage>) = stages.into_iter().partition(|s| s.deferred.is_none());
+        let stages = self.side_by_side(&currents, |p, &c| {
+            p.at_current(&campaign, out, c, options, loo.as_ref())
+        })?;
+        let (done, deferred): (Vec<CurrentStage>, Vec<CurrentStage>) =
+            stages.into_iter().partition(|s| s.deferred.is_none());
         for stage in done {
             reports.extend(stage.reports);
             entries.extend(stage.entries);
@@ -60,11 +75,17 @@ impl Pipeline<'_> {
         // alone before each current's report shows what it says
         let deferred: Vec<Deferred> = deferred.into_iter().filter_map(|s| s.deferred).collect();
         if !deferred.is_empty() {
-            let calibrations: Vec<CurrentCalibrations> = deferred.iter().map(|d| d.calibrations.clone()).collect();
+            let calibrations: Vec<CurrentCalibrations> =
+                deferred.iter().map(|d| d.calibrations.clone()).collect();
             self.between_runs(&calibrations, loo.as_ref())?;
             for d in deferred {
                 let joint = d.calibrations.joint;
-                reports.push(self.write_report(&joint, &campaign, &d.prediction, d.loo.as_ref())?);
+                reports.push(self.write_report(
+                    &joint,
+                    &campaign,
+                    &d.prediction,
+                    d.loo.as_ref(),
+                )?);
                 entries.push(compare::entry(joint, Some(d.prediction)));
             }
         }
@@ -74,9 +95,11 @@ impl Pipeline<'_> {
                 let name = law;
                 let mut settings = options.sample.settings.clone();
                 settings.model = law_kind;
-                let request = SampleRequest { settings, hold_out_current: held, ..options.sample.clone() };
+                let request =
+                    SampleRequest { settings, hold_out_current: held, ..options.sample.clone() };
                 for cal in self.sample(&campaign, &out.join(name), &request)? {
-                    let (report, prediction) = self.predict_and_report(&cal, &campaign, &options.predict, None)?;
+                    let (report, prediction) =
+                        self.predict_and_report(&cal, &campaign, &options.predict, None)?;
                     reports.push(report);
                     entries.push(compare::entry(cal, Some(prediction)));
                 }
@@ -89,8 +112,16 @@ impl Pipeline<'_> {
     /// One current of the whole job: its calibration, bands, leave-one-out
     /// (if `loo`) and report, in `out/I<current>A/`; with `--per-run` also
     /// each run alone, and the report left for after the between-run layer.
-    fn at_current(&mut self, campaign: &Campaign, out: &Path, c: f64, options: &RunOptions, loo: Option<&LooSettings>) -> Result<CurrentStage> {
-        let mut request = SampleRequest { current: Some(c), per_run: false, ..options.sample.clone() };
+    fn at_current(
+        &mut self,
+        campaign: &Campaign,
+        out: &Path,
+        c: f64,
+        options: &RunOptions,
+        loo: Option<&LooSettings>,
+    ) -> Result<CurrentStage> {
+        let mut request =
+            SampleRequest { current: Some(c), per_run: false, ..options.sample.clone() };
         request.settings.model = ModelKind::PerCurrent;
         let mut stage = CurrentStage { reports: Vec::new(), entries: Vec::new(), deferred: None };
         for joint in self.sample(campaign, &out.join(current_tag(c)), &request)? {
@@ -102,10 +133,15 @@ impl Pipeline<'_> {
                     Some(settings) => self.leave_one_out(&joint, campaign, settings)?,
                     None => None,
                 };
-                stage.deferred = Some(Deferred { calibrations: CurrentCalibrations { joint, runs, alone }, prediction, loo });
+                stage.deferred = Some(Deferred {
+                    calibrations: CurrentCalibrations { joint, runs, alone },
+                    prediction,
+                    loo,
+                });
                 continue;
             }
-            let (report, prediction) = self.predict_and_report(&joint, campaign, &options.predict, loo)?;
+            let (report, prediction) =
+                self.predict_and_report(&joint, campaign, &options.predict, loo)?;
             stage.reports.push(report);
             stage.entries.push(compare::entry(joint, Some(prediction)));
         }

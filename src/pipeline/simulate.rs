@@ -8,7 +8,10 @@ use std::time::Instant;
 use super::{Event, Pipeline, PredictOptions};
 use crate::calibrate::{command_line, Calibration};
 use crate::data::table::ColumnMap;
-use crate::data::{check_coil_current, loading_branches, same_current, Columns, Limits, Record, RecordPart, Run, RunData, RunSpec, Shear, REVERSAL_SHARE};
+use crate::data::{
+    check_coil_current, loading_branches, same_current, Columns, Limits, Record, RecordPart, Run,
+    RunData, RunSpec, Shear, REVERSAL_SHARE,
+};
 use crate::error::{Error, Result};
 use crate::predict::bands;
 use crate::store::simulation::{Simulation, SimulationRecord};
@@ -37,14 +40,23 @@ impl Pipeline<'_> {
     /// folder's between-run layer (`between_runs.parquet`, `--per-run`),
     /// not the calibration's posterior: the band a test not yet run at this
     /// current would fall in.
-    pub fn simulate(&mut self, cal: &Calibration, input: &Path, current: Option<f64>, out: &Path, options: &PredictOptions, new_test: bool) -> Result<Simulation> {
+    pub fn simulate(
+        &mut self,
+        cal: &Calibration,
+        input: &Path,
+        current: Option<f64>,
+        out: &Path,
+        options: &PredictOptions,
+        new_test: bool,
+    ) -> Result<Simulation> {
         let c = Columns::default();
         let record = Record::read(input, &ColumnMap::of(&c, false))?;
         let source = match new_test {
             true => Source::NewTest,
             false => Source::Posterior,
         };
-        let simulation = self.simulation_from(cal, input, record, current, options, Some(out), source)?;
+        let simulation =
+            self.simulation_from(cal, input, record, current, options, Some(out), source)?;
         crate::report::simulation::write(out, &simulation, &cal.label())?;
         crate::store::simulation::write(out, &simulation)?;
         let path = out.join(crate::store::simulation::FILE);
@@ -55,13 +67,30 @@ impl Pipeline<'_> {
     /// [`Pipeline::simulate`] of a record in memory (time, displacement and
     /// optionally current; its force is ignored) named by `input` in
     /// messages, without writing anything but holding `out` if given.
-    pub fn simulation(&mut self, cal: &Calibration, input: &Path, record: Record, current: Option<f64>, options: &PredictOptions, out: Option<&Path>) -> Result<Simulation> {
+    pub fn simulation(
+        &mut self,
+        cal: &Calibration,
+        input: &Path,
+        record: Record,
+        current: Option<f64>,
+        options: &PredictOptions,
+        out: Option<&Path>,
+    ) -> Result<Simulation> {
         self.simulation_from(cal, input, record, current, options, out, Source::Posterior)
     }
 
     /// [`Pipeline::simulation`] with the draws from `source`.
     #[allow(clippy::too_many_arguments)]
-    fn simulation_from(&mut self, cal: &Calibration, input: &Path, mut record: Record, current: Option<f64>, options: &PredictOptions, out: Option<&Path>, source: Source) -> Result<Simulation> {
+    fn simulation_from(
+        &mut self,
+        cal: &Calibration,
+        input: &Path,
+        mut record: Record,
+        current: Option<f64>,
+        options: &PredictOptions,
+        out: Option<&Path>,
+        source: Source,
+    ) -> Result<Simulation> {
         options.check()?;
         let layer = match source {
             Source::Posterior => None,
@@ -85,24 +114,40 @@ impl Pipeline<'_> {
             Some(g) => g,
             None => cal.full_campaign()?.geometry,
         };
-        let id = input.file_stem().map_or_else(|| "input".to_string(), |s| s.to_string_lossy().into_owned());
+        let id = input
+            .file_stem()
+            .map_or_else(|| "input".to_string(), |s| s.to_string_lossy().into_owned());
         let shear = Shear::from_record(&record, &geometry, None);
         let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
         if varies && !cal.sample.model.has_lag() {
             self.note("the law was calibrated without records whose current changes, so it has no coil lag: the field follows the current at once here");
         }
-        let spec = RunSpec { current_varies: varies, ..RunSpec::new(id.clone(), input.to_path_buf(), current_a) };
+        let spec = RunSpec {
+            current_varies: varies,
+            ..RunSpec::new(id.clone(), input.to_path_buf(), current_a)
+        };
         let run = Run { spec, path: input.to_path_buf(), record, shear, branches, geometry };
         if let Some(out) = out {
             self.prepare(out, "--out", &[], &[], true)?;
         }
         let clock = Instant::now();
-        let data = RunData::from_run(&run, RecordPart::WholeRecord, cal.settings.likelihood.smooth_strain_ms);
+        let data = RunData::from_run(
+            &run,
+            RecordPart::WholeRecord,
+            cal.settings.likelihood.smooth_strain_ms,
+        );
         let draws: Vec<_> = match &layer {
             // new tests of the damper, spread evenly over the layer's draws
-            Some((tests, _)) => crate::posterior::evenly_spaced(tests.len(), options.draws).into_iter().map(|i| tests[i]).collect(),
+            Some((tests, _)) => crate::posterior::evenly_spaced(tests.len(), options.draws)
+                .into_iter()
+                .map(|i| tests[i])
+                .collect(),
             // the posterior with the typical noise level and force offset of the runs seen
-            None => cal.draw_positions(options.draws).iter().map(|&(s, c)| cal.sample.draw_without(s, c, &id, current_a)).collect(),
+            None => cal
+                .draw_positions(options.draws)
+                .iter()
+                .map(|&(s, c)| cal.sample.draw_without(s, c, &id, current_a))
+                .collect(),
         };
         let settings = cal.predict_settings(options.replicates, options.seed);
         let bar = self.bar(draws.len() as u64);
@@ -125,10 +170,23 @@ impl Pipeline<'_> {
             layer_runs: layer.map(|(_, runs)| runs).unwrap_or_default(),
         };
         if b.failed > 0 {
-            self.note(&format!("{} of {} posterior draws could not be integrated along {} (left out of the bands)", b.failed, b.failed + b.draws, input.display()));
+            self.note(&format!(
+                "{} of {} posterior draws could not be integrated along {} (left out of the bands)",
+                b.failed,
+                b.failed + b.draws,
+                input.display()
+            ));
         }
         let current = data.current.clone().unwrap_or_else(|| vec![current_a; data.time.len()]);
-        Ok(Simulation { time: data.time.clone(), displacement: run.record.displacement.clone(), current, gamma_model: data.gamma.clone(), model: b.model, predictive: b.predictive, record })
+        Ok(Simulation {
+            time: data.time.clone(),
+            displacement: run.record.displacement.clone(),
+            current,
+            gamma_model: data.gamma.clone(),
+            model: b.model,
+            predictive: b.predictive,
+            record,
+        })
     }
 
     /// The current to simulate at, and its lowest and highest where it
@@ -136,12 +194,20 @@ impl Pipeline<'_> {
     /// follows it where it changes; one parameter set cannot), else a
     /// per-current calibration's own. Where it changes, the current
     /// returned is its mean.
-    fn simulated_current(&mut self, cal: &Calibration, input: &Path, record: &Record, current: Option<f64>) -> Result<(f64, Option<(f64, f64)>)> {
+    fn simulated_current(
+        &mut self,
+        cal: &Calibration,
+        input: &Path,
+        record: &Record,
+        current: Option<f64>,
+    ) -> Result<(f64, Option<(f64, f64)>)> {
         let column = Columns::default().current;
         let from_file = match &record.current {
             None => None,
             Some(values) => {
-                let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+                let (lo, hi) = values
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
                 let mid = 0.5 * (lo + hi);
                 if !same_current(lo, mid) || !same_current(hi, mid) {
                     if !cal.is_current_law() {
@@ -157,7 +223,9 @@ impl Pipeline<'_> {
                         ));
                     }
                     check_coil_current(input, &column, values)?;
-                    if lo <= 0.0 && cal.sample.model.kind() == crate::posterior::ModelKind::CurrentLaw {
+                    if lo <= 0.0
+                        && cal.sample.model.kind() == crate::posterior::ModelKind::CurrentLaw
+                    {
                         return Err(Error::Usage(format!(
                             "the current of {} reaches 0 A, where the current law has no yield stress (R0, R1, D1 ∝ s(I)); the current curves (--model current-curves) have an off-state",
                             input.display()
@@ -189,7 +257,9 @@ impl Pipeline<'_> {
     /// current law extrapolates to it (with a note).
     fn check_current(&mut self, cal: &Calibration, current_a: f64) -> Result<bool> {
         if !(current_a.is_finite() && current_a >= 0.0) {
-            return Err(Error::Usage(format!("the current must be a finite number ≥ 0 A, got {current_a}")));
+            return Err(Error::Usage(format!(
+                "the current must be a finite number ≥ 0 A, got {current_a}"
+            )));
         }
         if !cal.is_current_law() {
             let own = cal.record.current_a;

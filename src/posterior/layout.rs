@@ -69,7 +69,13 @@ impl Hardening {
     pub fn reference_work(runs: &[crate::data::RunData]) -> Option<f64> {
         let mut works: Vec<f64> = runs
             .iter()
-            .map(|r| r.tau.windows(2).zip(r.gamma.windows(2)).map(|(t, g)| 0.5 * (t[0] + t[1]) * (g[1] - g[0])).sum::<f64>())
+            .map(|r| {
+                r.tau
+                    .windows(2)
+                    .zip(r.gamma.windows(2))
+                    .map(|(t, g)| 0.5 * (t[0] + t[1]) * (g[1] - g[0]))
+                    .sum::<f64>()
+            })
             .collect();
         works.sort_by(f64::total_cmp);
         let n = works.len();
@@ -90,7 +96,8 @@ impl Hardening {
     fn log_theta(&self, x: &[f64], log: &mut [f64]) {
         (log[self.r0], log[self.d1]) = parts(x[self.r0], x[self.d1]);
         let (e1, e2) = (self.hardened(x[self.m1]), self.hardened(x[self.m2]));
-        let r1 = (x[self.r1].exp() - log[self.r0].exp() * (1.0 - e1) - log[self.d1].exp() * e2) / e1;
+        let r1 =
+            (x[self.r1].exp() - log[self.r0].exp() * (1.0 - e1) - log[self.d1].exp() * e2) / e1;
         log[self.r1] = if r1 > 0.0 && r1.is_finite() { r1.ln() } else { f64::NEG_INFINITY };
     }
 
@@ -152,7 +159,13 @@ fn parts(sum: f64, share: f64) -> (f64, f64) {
 }
 
 impl Layout {
-    pub fn new(model: &ParameterModel, runs: &[String], noise: &dyn NoiseModel, coordinates: Coordinates, terms: &ModelTerms) -> Layout {
+    pub fn new(
+        model: &ParameterModel,
+        runs: &[String],
+        noise: &dyn NoiseModel,
+        coordinates: Coordinates,
+        terms: &ModelTerms,
+    ) -> Layout {
         let nt = model.names().len();
         let nr = runs.len();
         let ns = usize::from(terms.gas_spring);
@@ -195,7 +208,14 @@ impl Layout {
     pub fn harden(&mut self, model: &ParameterModel, work: Option<f64>) {
         if let (ParameterModel::PerCurrent, Some(work)) = (model, work) {
             let at = |n: &str| model.index(n);
-            self.hardening = Some(Hardening { r0: at("R0"), r1: at("R1"), d1: at("D1"), m1: at("m1"), m2: at("m2"), work });
+            self.hardening = Some(Hardening {
+                r0: at("R0"),
+                r1: at("R1"),
+                d1: at("D1"),
+                m1: at("m1"),
+                m2: at("m2"),
+                work,
+            });
         }
     }
 
@@ -238,7 +258,8 @@ impl Layout {
     pub fn pooled_noise(&self, x: &[f64], runs: &[usize]) -> NoiseValues {
         let mut v = [0.0; MAX_PARAMETERS];
         for (p, parameter) in self.noise_parameters.iter().enumerate() {
-            let values: Vec<f64> = runs.iter().map(|&j| x[self.noise.start + p * self.runs.len() + j]).collect();
+            let values: Vec<f64> =
+                runs.iter().map(|&j| x[self.noise.start + p * self.runs.len() + j]).collect();
             v[p] = parameter.pool.of(&values);
         }
         v
@@ -253,7 +274,13 @@ impl Layout {
     /// two nearest (a damper's misfit grows with its force, and so with the
     /// current); a calibrated current its own runs' pool; a current
     /// outside the calibrated ones that of the nearest, not extrapolated.
-    pub fn noise_at_current(&self, x: &[f64], others: &[usize], run_currents: &[f64], current_a: f64) -> NoiseValues {
+    pub fn noise_at_current(
+        &self,
+        x: &[f64],
+        others: &[usize],
+        run_currents: &[f64],
+        current_a: f64,
+    ) -> NoiseValues {
         let known = run_currents.len() == self.runs.len();
         let mut levels: Vec<f64> = match known {
             true => others.iter().map(|&i| run_currents[i]).collect(),
@@ -265,10 +292,15 @@ impl Layout {
             return self.pooled_noise(x, others);
         }
         let at = |level: f64| {
-            let runs: Vec<usize> = others.iter().copied().filter(|&i| crate::data::same_current(run_currents[i], level)).collect();
+            let runs: Vec<usize> = others
+                .iter()
+                .copied()
+                .filter(|&i| crate::data::same_current(run_currents[i], level))
+                .collect();
             self.pooled_noise(x, &runs)
         };
-        let above = levels.partition_point(|&c| c < current_a && !crate::data::same_current(c, current_a));
+        let above =
+            levels.partition_point(|&c| c < current_a && !crate::data::same_current(c, current_a));
         match above {
             0 => at(levels[0]),
             k if k == levels.len() => at(levels[k - 1]),
@@ -391,14 +423,22 @@ impl Layout {
     /// A point in SI units (θ, terms, noise) from the sampler's coordinates.
     pub fn to_si(&self, x: &[f64]) -> Vec<f64> {
         let theta = self.log_theta(x).into_iter().map(f64::exp);
-        let rest = x.iter().enumerate().skip(self.theta.end).map(|(i, v)| self.transform(i).map_or(*v, |t| t.to_si(*v)));
+        let rest = x
+            .iter()
+            .enumerate()
+            .skip(self.theta.end)
+            .map(|(i, v)| self.transform(i).map_or(*v, |t| t.to_si(*v)));
         theta.chain(rest).collect()
     }
 
     /// The sampler's coordinates of a point in SI units (inverse of [`Self::to_si`]).
     pub fn from_si(&self, si: &[f64]) -> Vec<f64> {
         let log: Vec<f64> = si[self.theta.clone()].iter().map(|v| v.ln()).collect();
-        let rest = si.iter().enumerate().skip(self.theta.end).map(|(i, v)| self.transform(i).map_or(*v, |t| t.to_coordinate(*v)));
+        let rest = si
+            .iter()
+            .enumerate()
+            .skip(self.theta.end)
+            .map(|(i, v)| self.transform(i).map_or(*v, |t| t.to_coordinate(*v)));
         self.theta_coordinates(&log).into_iter().chain(rest).collect()
     }
 }
@@ -428,12 +468,21 @@ mod tests {
         let runs = vec!["a".to_string(), "b".to_string()];
         let ar1 = NoiseKind::Ar1.model(&NoiseOptions::default());
         let gaussian = NoiseKind::Gaussian.model(&NoiseOptions::default());
-        let l = Layout::new(&ParameterModel::PerCurrent, &runs, ar1.as_ref(), Coordinates::Log, &ModelTerms::default());
+        let l = Layout::new(
+            &ParameterModel::PerCurrent,
+            &runs,
+            ar1.as_ref(),
+            Coordinates::Log,
+            &ModelTerms::default(),
+        );
         assert_eq!(l.dim(), 11);
         assert_eq!(&l.names[7..], ["sigma_a", "sigma_b", "rho_a", "rho_b"]);
         assert_eq!(l.noise, 7..11);
         assert_eq!(l.coordinate_names()[10], "atanh rho_b");
-        assert_eq!(l.noise_values(&(0..11).map(f64::from).collect::<Vec<_>>(), 1), [8.0, 10.0, 0.0, 0.0]);
+        assert_eq!(
+            l.noise_values(&(0..11).map(f64::from).collect::<Vec<_>>(), 1),
+            [8.0, 10.0, 0.0, 0.0]
+        );
         assert!(l.is_noise("rho_b") && !l.is_noise("G") && !l.is_noise("nope"));
         let x: Vec<f64> = (0..11).map(|i| 0.1 * i as f64 - 0.5).collect();
         let si = l.to_si(&x);
@@ -441,10 +490,22 @@ mod tests {
         for (a, b) in l.from_si(&si).iter().zip(&x) {
             assert!((a - b).abs() < 1e-12);
         }
-        let g = Layout::new(&ParameterModel::CurrentLaw { reference_a: 1.0, lag: false }, &runs, gaussian.as_ref(), Coordinates::Log, &ModelTerms::default());
+        let g = Layout::new(
+            &ParameterModel::CurrentLaw { reference_a: 1.0, lag: false },
+            &runs,
+            gaussian.as_ref(),
+            Coordinates::Log,
+            &ModelTerms::default(),
+        );
         assert_eq!((g.dim(), g.noise.len()), (11, 2));
         let terms = ModelTerms { force_offset: true, gas_spring: true, ..ModelTerms::default() };
-        let t = Layout::new(&ParameterModel::PerCurrent, &runs, gaussian.as_ref(), Coordinates::Log, &terms);
+        let t = Layout::new(
+            &ParameterModel::PerCurrent,
+            &runs,
+            gaussian.as_ref(),
+            Coordinates::Log,
+            &terms,
+        );
         assert_eq!(&t.names[7..10], ["gas_spring_n_per_m", "force_offset_n_a", "force_offset_n_b"]);
         assert_eq!((t.fitted.clone(), t.noise.clone()), (0..10, 10..12));
         let x: Vec<f64> = (0..12).map(|i| i as f64 - 3.0).collect();
@@ -458,10 +519,18 @@ mod tests {
     #[test]
     fn saturation_share_coordinates_invert_with_unit_jacobian() {
         let runs = vec!["a".to_string()];
-        let l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseKind::Gaussian.model(&NoiseOptions::default()).as_ref(), Coordinates::SaturationShare, &ModelTerms::default());
+        let l = Layout::new(
+            &ParameterModel::PerCurrent,
+            &runs,
+            NoiseKind::Gaussian.model(&NoiseOptions::default()).as_ref(),
+            Coordinates::SaturationShare,
+            &ModelTerms::default(),
+        );
         let si = [2e5, 1.2e5, 1.6e5, 3e4, 4e-6, 2e-4, 1.2, 300.0];
         let x = l.from_si(&si);
-        assert!((x[2] - (1.9e5f64).ln()).abs() < 1e-12 && (x[3] - (3e4f64 / 1.6e5).ln()).abs() < 1e-12);
+        assert!(
+            (x[2] - (1.9e5f64).ln()).abs() < 1e-12 && (x[3] - (3e4f64 / 1.6e5).ln()).abs() < 1e-12
+        );
         for (a, b) in l.to_si(&x).iter().zip(&si) {
             assert!((a / b - 1.0).abs() < 1e-12, "{a} vs {b}");
         }
@@ -489,14 +558,27 @@ mod tests {
     #[test]
     fn hardening_coordinates_invert_and_carry_their_jacobian() {
         let runs = vec!["a".to_string()];
-        let mut l = Layout::new(&ParameterModel::PerCurrent, &runs, NoiseKind::Gaussian.model(&NoiseOptions::default()).as_ref(), Coordinates::Hardening, &ModelTerms::default());
+        let mut l = Layout::new(
+            &ParameterModel::PerCurrent,
+            &runs,
+            NoiseKind::Gaussian.model(&NoiseOptions::default()).as_ref(),
+            Coordinates::Hardening,
+            &ModelTerms::default(),
+        );
         let w = 4e6;
         l.harden(&ParameterModel::PerCurrent, Some(w));
-        for si in [[2e5, 5e4, 1.3e5, 2.5e4, 1.2e-8, 2e-3, 0.33, 300.0], [2e5, 1.2e5, 0.9e5, 3e4, 4e-6, 2e-4, 1.2, 300.0]] {
+        for si in [
+            [2e5, 5e4, 1.3e5, 2.5e4, 1.2e-8, 2e-3, 0.33, 300.0],
+            [2e5, 1.2e5, 0.9e5, 3e4, 4e-6, 2e-4, 1.2, 300.0],
+        ] {
             let x = l.from_si(&si);
             let (e1, e2) = (1.0 - (-si[4] * w).exp(), 1.0 - (-si[5] * w).exp());
             let z = si[2] * e1 + si[1] * (1.0 - e1) + si[3] * e2;
-            assert!((x[1] - (si[1] + si[3]).ln()).abs() < 1e-12 && (x[3] - (si[3] / si[1]).ln()).abs() < 1e-12 && (x[2] - z.ln()).abs() < 1e-12);
+            assert!(
+                (x[1] - (si[1] + si[3]).ln()).abs() < 1e-12
+                    && (x[3] - (si[3] / si[1]).ln()).abs() < 1e-12
+                    && (x[2] - z.ln()).abs() < 1e-12
+            );
             for (a, b) in l.to_si(&x).iter().zip(&si) {
                 assert!((a / b - 1.0).abs() < 1e-9, "{a} vs {b}");
             }

@@ -8,7 +8,9 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use crate::data::{RecordPart, RunData};
-use crate::model::{tangent_stiffness, FieldLaw, IntegrationError, Integrator, LaneStates, Params, LANES};
+use crate::model::{
+    tangent_stiffness, FieldLaw, IntegrationError, Integrator, LaneStates, Params, LANES,
+};
 use crate::noise::{DiscrepancySettings, NoiseKind, NoiseModel, NoiseOptions, NoiseValues};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -112,24 +114,39 @@ impl MemoryAdjustment {
         self.matrix
             .iter()
             .zip(c)
-            .map(|(row, ci)| ci + row.iter().zip(x.iter().zip(c)).map(|(a, (v, cj))| a * (v - cj)).sum::<f64>())
+            .map(|(row, ci)| {
+                ci + row.iter().zip(x.iter().zip(c)).map(|(a, (v, cj))| a * (v - cj)).sum::<f64>()
+            })
             .collect()
     }
 
     /// The smallest and largest variance inflation.
     pub fn inflation_range(&self) -> (f64, f64) {
-        (self.inflation.last().copied().unwrap_or(1.0), self.inflation.first().copied().unwrap_or(1.0))
+        (
+            self.inflation.last().copied().unwrap_or(1.0),
+            self.inflation.first().copied().unwrap_or(1.0),
+        )
     }
 
     fn check(&self) -> Result<(), String> {
         let d = self.centre.len();
-        if d == 0 || self.matrix.len() != d || self.matrix.iter().any(|r| r.len() != d) || self.coordinates.len() != d {
+        if d == 0
+            || self.matrix.len() != d
+            || self.matrix.iter().any(|r| r.len() != d)
+            || self.coordinates.len() != d
+        {
             return Err(format!("memory_adjustment: the matrix must be {d} × {d} and name {d} coordinates, as many as centre has values"));
         }
         if self.reference_work_pa.is_some_and(|w| !(w > 0.0 && w.is_finite())) {
             return Err("memory_adjustment: reference_work_pa must be positive".into());
         }
-        if self.centre.iter().chain(self.matrix.iter().flatten()).chain(&self.inflation).any(|v| !v.is_finite()) {
+        if self
+            .centre
+            .iter()
+            .chain(self.matrix.iter().flatten())
+            .chain(&self.inflation)
+            .any(|v| !v.is_finite())
+        {
             return Err("memory_adjustment: every value must be finite".into());
         }
         if self.inflation.iter().any(|v| *v < 1.0) {
@@ -178,8 +195,12 @@ impl LikelihoodSettings {
         if !(self.smooth_strain_ms >= 0.0) {
             return Err("smooth_strain_ms must be 0 or positive".into());
         }
-        if let Some((id, k)) = self.memory_times.iter().find(|(_, k)| !(**k >= 1.0 && k.is_finite())) {
-            return Err(format!("memory_times: run {id} has {k}; an integrated autocorrelation time is at least 1"));
+        if let Some((id, k)) =
+            self.memory_times.iter().find(|(_, k)| !(**k >= 1.0 && k.is_finite()))
+        {
+            return Err(format!(
+                "memory_times: run {id} has {k}; an integrated autocorrelation time is at least 1"
+            ));
         }
         if let Some(a) = &self.memory_adjustment {
             a.check()?;
@@ -200,8 +221,11 @@ impl LikelihoodSettings {
     /// `None` where the residuals are taken as independent (or no time is
     /// known yet).
     pub fn memory_range(&self) -> Option<(f64, f64)> {
-        (self.memory == Memory::Tempered && !self.memory_times.is_empty())
-            .then(|| self.memory_times.values().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &k| (a.min(k), b.max(k))))
+        (self.memory == Memory::Tempered && !self.memory_times.is_empty()).then(|| {
+            self.memory_times
+                .values()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &k| (a.min(k), b.max(k)))
+        })
     }
 
     /// The curvature adjustment in force: with `memory = "adjusted"` and
@@ -246,10 +270,29 @@ pub enum LaneParams {
 impl LaneParams {
     /// Integrates every lane along `run` ([`Integrator::run_lanes`], or
     /// [`Integrator::run_lanes_along`] the run's current where it varies).
-    pub fn integrate(&self, integrator: &Integrator, run: &RunData, visit: impl FnMut(usize, &LaneStates)) -> [Result<(), IntegrationError>; LANES] {
+    pub fn integrate(
+        &self,
+        integrator: &Integrator,
+        run: &RunData,
+        visit: impl FnMut(usize, &LaneStates),
+    ) -> [Result<(), IntegrationError>; LANES] {
         match (self, &run.current) {
-            (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.run_lanes_along(laws, lags_s, current, &run.time, &run.gamma, run.initial_tau, visit),
-            _ => integrator.run_lanes(&self.at(run.current_a), &run.time, &run.gamma, run.initial_tau, visit),
+            (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.run_lanes_along(
+                laws,
+                lags_s,
+                current,
+                &run.time,
+                &run.gamma,
+                run.initial_tau,
+                visit,
+            ),
+            _ => integrator.run_lanes(
+                &self.at(run.current_a),
+                &run.time,
+                &run.gamma,
+                run.initial_tau,
+                visit,
+            ),
         }
     }
 
@@ -257,8 +300,20 @@ impl LaneParams {
     /// ([`Integrator::euler_steps`], or its twin along a varying current).
     pub fn euler_steps(&self, integrator: &Integrator, run: &RunData) -> u64 {
         match (self, &run.current) {
-            (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.euler_steps_along(&laws[0], lags_s[0], current, &run.time, &run.gamma, run.initial_tau),
-            _ => integrator.euler_steps(&self.at(run.current_a)[0], &run.time, &run.gamma, run.initial_tau),
+            (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.euler_steps_along(
+                &laws[0],
+                lags_s[0],
+                current,
+                &run.time,
+                &run.gamma,
+                run.initial_tau,
+            ),
+            _ => integrator.euler_steps(
+                &self.at(run.current_a)[0],
+                &run.time,
+                &run.gamma,
+                run.initial_tau,
+            ),
         }
     }
 
@@ -266,7 +321,9 @@ impl LaneParams {
     pub fn at(&self, current_a: f64) -> [Params; LANES] {
         match self {
             LaneParams::Fixed(p) => *p,
-            LaneParams::Along { laws, .. } => std::array::from_fn(|lane| laws[lane].params_at(current_a)),
+            LaneParams::Along { laws, .. } => {
+                std::array::from_fn(|lane| laws[lane].params_at(current_a))
+            }
         }
     }
 
@@ -276,8 +333,12 @@ impl LaneParams {
     pub fn g_bound(&self, run: &RunData) -> [f64; LANES] {
         match (self, &run.current) {
             (LaneParams::Along { laws, .. }, Some(current)) => {
-                let (lo, hi) = current.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
-                std::array::from_fn(|lane| laws[lane].params_at(lo).g.max(laws[lane].params_at(hi).g))
+                let (lo, hi) = current
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
+                std::array::from_fn(|lane| {
+                    laws[lane].params_at(lo).g.max(laws[lane].params_at(hi).g)
+                })
             }
             _ => self.at(run.current_a).map(|p| p.g),
         }
@@ -327,7 +388,11 @@ pub fn run_log_likelihood_memo(
         let obs = run.tau[k];
         let dg = run.gamma[k] - run.gamma[k - 1];
         for lane in 0..LANES {
-            let model = if with_terms { s.tau[lane] + run.terms_stress(k, terms[lane].0, terms[lane].1) } else { s.tau[lane] };
+            let model = if with_terms {
+                s.tau[lane] + run.terms_stress(k, terms[lane].0, terms[lane].1)
+            } else {
+                s.tau[lane]
+            };
             residual[lane] = obs - model;
             if stiff {
                 stiffness[lane] = tangent_stiffness(s.tau[lane] - prev_model[lane], dg, g[lane]);
@@ -349,10 +414,16 @@ pub fn run_log_likelihood_memo(
 /// The noise model's log-likelihood of `run` for up to [`LANES`] memos of
 /// [`run_log_likelihood_memo`] (each this run's part) with these noise
 /// coordinates: the same numbers, without integrating the law.
-pub fn run_score(noise: &dyn NoiseModel, run: &RunData, coordinates: &[NoiseValues; LANES], memos: &[&[f64]]) -> [f64; LANES] {
+pub fn run_score(
+    noise: &dyn NoiseModel,
+    run: &RunData,
+    coordinates: &[NoiseValues; LANES],
+    memos: &[&[f64]],
+) -> [f64; LANES] {
     let stride = if noise.uses_stiffness(run) { 2 } else { 1 };
     // a memo cut short (an integration that failed) is never a walker's
-    let short: [bool; LANES] = std::array::from_fn(|lane| memos[lane.min(memos.len() - 1)].len() < memo_len(noise, run));
+    let short: [bool; LANES] =
+        std::array::from_fn(|lane| memos[lane.min(memos.len() - 1)].len() < memo_len(noise, run));
     if short.iter().any(|s| *s) {
         return [f64::NEG_INFINITY; LANES];
     }

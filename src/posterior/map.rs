@@ -83,7 +83,12 @@ const JACOBIAN_STEP: f64 = 1e-6;
 
 /// Residuals τ_obs − τ_model of run `r` for up to [`LANES`] parameter sets
 /// with their model terms (gas-spring stiffness, force offset).
-fn run_residuals(post: &Posterior, r: &RunData, xs: &[&[f64]], terms: &[(f64, f64)]) -> Vec<Option<Vec<f64>>> {
+fn run_residuals(
+    post: &Posterior,
+    r: &RunData,
+    xs: &[&[f64]],
+    terms: &[(f64, f64)],
+) -> Vec<Option<Vec<f64>>> {
     let params = post.lane_params(xs, r);
     let mut out = vec![Vec::with_capacity(r.compared()); xs.len()];
     let outcome = params.integrate(&post.integrator, r, |k, s| {
@@ -99,14 +104,17 @@ fn run_residuals(post: &Posterior, r: &RunData, xs: &[&[f64]], terms: &[(f64, f6
 /// Residuals of every run at each of the θ points `xs` (`None` where an
 /// integration fails), `[point][run]`.
 fn residuals_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<Vec<f64>>>> {
-    let groups: Vec<(usize, usize)> = (0..post.runs.len()).flat_map(|r| (0..xs.len()).step_by(LANES).map(move |g| (r, g))).collect();
+    let groups: Vec<(usize, usize)> = (0..post.runs.len())
+        .flat_map(|r| (0..xs.len()).step_by(LANES).map(move |g| (r, g)))
+        .collect();
     let pieces: Vec<Vec<Option<Vec<f64>>>> = groups
         .par_iter()
         .map(|&(r, g)| {
             let run = &post.runs[r];
             let group = &xs[g..(g + LANES).min(xs.len())];
             // the likelihood's points (the adjusted likelihood's ln θ*)
-            let moved: Vec<std::borrow::Cow<[f64]>> = group.iter().map(|x| post.likelihood_point(x)).collect();
+            let moved: Vec<std::borrow::Cow<[f64]>> =
+                group.iter().map(|x| post.likelihood_point(x)).collect();
             let points: Vec<&[f64]> = moved.iter().map(|x| x.as_ref()).collect();
             let terms: Vec<(f64, f64)> = group.iter().map(|x| post.layout.terms(x, r)).collect();
             run_residuals(post, run, &points, &terms)
@@ -162,17 +170,26 @@ enum Support {
 /// every term's: their squares sum to −2 ln p up to a constant, at the
 /// noise the search holds. With [`Support::Truncated`], points outside
 /// the prior support are infeasible.
-fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<Vec<Vec<f64>>>, support: Support) -> Option<Vec<f64>> {
+fn whiten(
+    post: &Posterior,
+    whitening: &Whitening,
+    x: &[f64],
+    residuals: Option<Vec<Vec<f64>>>,
+    support: Support,
+) -> Option<Vec<f64>> {
     let log_theta = post.layout.log_theta(x);
     // outside what the coordinates can reach (no positive R1, say)
     if log_theta.iter().any(|v| !v.is_finite()) {
         return None;
     }
-    if support == Support::Truncated && post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY) {
+    if support == Support::Truncated
+        && post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY)
+    {
         return None;
     }
     let res = residuals?;
-    let mut out: Vec<f64> = Vec::with_capacity(res.iter().map(Vec::len).sum::<usize>() + log_theta.len());
+    let mut out: Vec<f64> =
+        Vec::with_capacity(res.iter().map(Vec::len).sum::<usize>() + log_theta.len());
     // every run's whitened residuals, then every run's log-variance terms
     // (the rows of the whitened residuals first and together, as
     // [`super::memory`] reads them); a tempered run's count by the square
@@ -199,7 +216,12 @@ fn whiten(post: &Posterior, whitening: &Whitening, x: &[f64], residuals: Option<
     Some(out)
 }
 
-fn whitened(post: &Posterior, whitening: &Whitening, x: &[f64], support: Support) -> Option<Vec<f64>> {
+fn whitened(
+    post: &Posterior,
+    whitening: &Whitening,
+    x: &[f64],
+    support: Support,
+) -> Option<Vec<f64>> {
     let res = residuals_many(post, std::slice::from_ref(&x.to_vec())).pop().flatten();
     whiten(post, whitening, x, res, support)
 }
@@ -208,7 +230,12 @@ fn whitened(post: &Posterior, whitening: &Whitening, x: &[f64], support: Support
 /// every point integrated in one batch; a coordinate whose forward point
 /// leaves the prior's support (a MAP at a truncation bound) is
 /// differenced backwards instead.
-fn jacobian(post: &Posterior, whitening: &Whitening, x: &[f64], support: Support) -> Option<DMatrix<f64>> {
+fn jacobian(
+    post: &Posterior,
+    whitening: &Whitening,
+    x: &[f64],
+    support: Support,
+) -> Option<DMatrix<f64>> {
     let n = x.len();
     let displaced = |sign: f64, which: &[usize]| -> Vec<Vec<f64>> {
         which
@@ -224,11 +251,19 @@ fn jacobian(post: &Posterior, whitening: &Whitening, x: &[f64], support: Support
     };
     let all: Vec<usize> = (0..=n).collect();
     let points = displaced(1.0, &all);
-    let mut white: Vec<Option<Vec<f64>>> = residuals_many(post, &points).into_iter().zip(&points).map(|(r, q)| whiten(post, whitening, q, r, support)).collect();
+    let mut white: Vec<Option<Vec<f64>>> = residuals_many(post, &points)
+        .into_iter()
+        .zip(&points)
+        .map(|(r, q)| whiten(post, whitening, q, r, support))
+        .collect();
     let r0 = white[0].take()?;
     let outside: Vec<usize> = (1..=n).filter(|&j| white[j].is_none()).collect();
     let back_points = displaced(-1.0, &outside);
-    let back: Vec<Option<Vec<f64>>> = residuals_many(post, &back_points).into_iter().zip(&back_points).map(|(r, q)| whiten(post, whitening, q, r, support)).collect();
+    let back: Vec<Option<Vec<f64>>> = residuals_many(post, &back_points)
+        .into_iter()
+        .zip(&back_points)
+        .map(|(r, q)| whiten(post, whitening, q, r, support))
+        .collect();
     let mut jac = DMatrix::zeros(r0.len(), n);
     for j in 1..=n {
         let column: Vec<f64> = match &white[j] {
@@ -311,7 +346,9 @@ const SEARCH_FTOL: f64 = 1.49e-8;
 
 /// The Levenberg-Marquardt search of [`refine`] from the fitted point `x`.
 fn search_from(post: &Posterior, mut x: Vec<f64>, fits: usize) -> Option<Found> {
-    let whitening_of = |profiles: Vec<Profile>| -> (Vec<f64>, Vec<Arc<dyn Whiten>>) { profiles.into_iter().map(|p| (p.scale, p.whitening)).unzip() };
+    let whitening_of = |profiles: Vec<Profile>| -> (Vec<f64>, Vec<Arc<dyn Whiten>>) {
+        profiles.into_iter().map(|p| (p.scale, p.whitening)).unzip()
+    };
     let (mut scales, mut whitening) = whitening_of(profiles(post, &x)?);
     let mut converged = false;
     // the search crosses the box where it must; an optimum outside it is
@@ -334,7 +371,8 @@ fn search_from(post: &Posterior, mut x: Vec<f64>, fits: usize) -> Option<Found> 
             x = fit.params;
             converged = fit.converged;
             let (new_scales, new_whitening) = whitening_of(profiles(post, &x)?);
-            let scale_change = new_scales.iter().zip(&scales).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
+            let scale_change =
+                new_scales.iter().zip(&scales).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max);
             (scales, whitening) = (new_scales, new_whitening);
             if moved < 1e-6 && scale_change < 1e-3 {
                 break;
@@ -360,7 +398,13 @@ fn project(post: &Posterior, log_theta: &[f64]) -> Vec<f64> {
 /// Each run's noise fitted to its residuals at the fitted point `x`.
 fn profiles(post: &Posterior, x: &[f64]) -> Option<Vec<Profile>> {
     let res = residuals_many(post, &[x.to_vec()]).pop()??;
-    Some(res.iter().zip(&post.runs).zip(moduli(post, x)).map(|((r, run), g)| post.noise.profile(run, r, g)).collect())
+    Some(
+        res.iter()
+            .zip(&post.runs)
+            .zip(moduli(post, x))
+            .map(|((r, run), g)| post.noise.profile(run, r, g))
+            .collect(),
+    )
 }
 
 /// Each run's shear modulus at the fitted point `x` (`g_bound`: where the
@@ -390,7 +434,14 @@ fn with_noise(post: &Posterior, theta: &[f64]) -> Option<Vec<f64>> {
 /// what its one-step-ahead innovations keep.
 pub fn whitened_autocorrelation(post: &Posterior, map: &MapEstimate) -> Option<Vec<f64>> {
     let white = whitened_residuals(post, map)?;
-    Some(white.iter().map(|w| crate::sampler::diagnostics::autocorrelation(w).get(1).copied().unwrap_or(f64::NAN)).collect())
+    Some(
+        white
+            .iter()
+            .map(|w| {
+                crate::sampler::diagnostics::autocorrelation(w).get(1).copied().unwrap_or(f64::NAN)
+            })
+            .collect(),
+    )
 }
 
 /// Each run's integrated autocorrelation time (samples) of its residuals
@@ -439,7 +490,11 @@ pub struct StepCheck {
 
 impl StepCheck {
     pub fn worst(&self) -> (usize, f64) {
-        self.shifts.iter().copied().enumerate().fold((0, 0.0), |b, (i, v)| if v > b.1 { (i, v) } else { b })
+        self.shifts
+            .iter()
+            .copied()
+            .enumerate()
+            .fold((0, 0.0), |b, (i, v)| if v > b.1 { (i, v) } else { b })
     }
 }
 
@@ -476,7 +531,12 @@ fn shift(map: &MapEstimate, post: &Posterior, finer: &Posterior) -> Option<DVect
 /// `max_m`) for which halving the step moves no MAP coordinate of θ by
 /// [`step_shift_limit`] sd or more. Returns the chosen m, the MAP moved to
 /// it, and the study.
-pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, max_m: u32) -> (u32, MapEstimate, Vec<StepCheck>) {
+pub fn choose_substeps(
+    post: &Posterior,
+    start: &MapEstimate,
+    base: Integrator,
+    max_m: u32,
+) -> (u32, MapEstimate, Vec<StepCheck>) {
     let mut m = base.substeps.max(1);
     let mut current = start.clone();
     let mut coarse = post.with_integrator(Integrator { substeps: m, ..base });
@@ -495,7 +555,8 @@ pub fn choose_substeps(post: &Posterior, start: &MapEstimate, base: Integrator, 
             return (m, current, study);
         }
         // the MAP with the finer step: moved by the shift, noise re-profiled
-        let theta: Vec<f64> = current.x[..step.len()].iter().zip(step.iter()).map(|(x, s)| x + s).collect();
+        let theta: Vec<f64> =
+            current.x[..step.len()].iter().zip(step.iter()).map(|(x, s)| x + s).collect();
         if let Some(full) = with_noise(&finer, &theta) {
             current.log_density = finer.log_density(&full);
             current.x = full;
@@ -515,13 +576,19 @@ pub fn laplace(post: &Posterior, map: &MapEstimate) -> Elliptical {
     let nt = l.fitted.len();
     let mut chol = DMatrix::zeros(d, d);
     // a θ covariance that is not positive definite: a tiny ball instead
-    let theta = map.cov.clone().cholesky().map(|c| c.l()).unwrap_or_else(|| DMatrix::identity(nt, nt) * 1e-4);
+    let theta = map
+        .cov
+        .clone()
+        .cholesky()
+        .map(|c| c.l())
+        .unwrap_or_else(|| DMatrix::identity(nt, nt) * 1e-4);
     chol.view_mut((0, 0), (nt, nt)).copy_from(&theta);
     let nr = post.runs.len();
     for i in l.noise.clone() {
         let (p, j) = ((i - l.noise.start) / nr, (i - l.noise.start) % nr);
         // a tempered run's noise is known as from n/k samples
-        chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p] / post.weight(j).sqrt();
+        chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p]
+            / post.weight(j).sqrt();
     }
     Elliptical::from_factor(DVector::from_column_slice(&map.x), chol)
 }
@@ -546,9 +613,15 @@ pub const START_SPREAD: f64 = 1.0;
 /// attempt; the attempts of all walkers still without a position are
 /// evaluated together, in batches on every thread (one at a time they cost
 /// a real calibration seconds: 264 walkers × 30 ms at 0.25 A).
-pub fn initial_walkers(post: &Posterior, start: &Elliptical, count: usize, seed: u64) -> Vec<Vec<f64>> {
+pub fn initial_walkers(
+    post: &Posterior,
+    start: &Elliptical,
+    count: usize,
+    seed: u64,
+) -> Vec<Vec<f64>> {
     let d = post.dim();
-    let mut rngs: Vec<_> = (0..count).map(|c| crate::rng::stream(seed, &[u64::MAX - 1, c as u64])).collect();
+    let mut rngs: Vec<_> =
+        (0..count).map(|c| crate::rng::stream(seed, &[u64::MAX - 1, c as u64])).collect();
     let mut placed: Vec<Option<Vec<f64>>> = vec![None; count];
     for attempt in 0..100 {
         let waiting: Vec<usize> = (0..count).filter(|&c| placed[c].is_none()).collect();

@@ -64,7 +64,8 @@ pub fn adjustment(post: &Posterior, map: &MapEstimate, centre: &[f64]) -> Option
         let n = w.len();
         let (rho, window) = correlations(w);
         let jr = j.rows(from, n);
-        let flat: Vec<f64> = (0..n).flat_map(|t| jr.row(t).iter().copied().collect::<Vec<_>>()).collect();
+        let flat: Vec<f64> =
+            (0..n).flat_map(|t| jr.row(t).iter().copied().collect::<Vec<_>>()).collect();
         let mut k = DMatrix::<f64>::zeros(n, nf);
         let mut row = vec![0.0; nf];
         for t in 0..n {
@@ -83,7 +84,8 @@ pub fn adjustment(post: &Posterior, map: &MapEstimate, centre: &[f64]) -> Option
         from += n;
     }
     // θ's information and score with the terms profiled out
-    let (h_tt, v_tt) = (hess.view((0, 0), (nt, nt)).into_owned(), v.view((0, 0), (nt, nt)).into_owned());
+    let (h_tt, v_tt) =
+        (hess.view((0, 0), (nt, nt)).into_owned(), v.view((0, 0), (nt, nt)).into_owned());
     let (h_eff, v_eff) = if nf > nt {
         let h_ff = hess.view((nt, nt), (nf - nt, nf - nt)).into_owned();
         let b_tail = -(hess.view((0, nt), (nt, nf - nt)) * h_ff.try_inverse()?);
@@ -99,7 +101,12 @@ pub fn adjustment(post: &Posterior, map: &MapEstimate, centre: &[f64]) -> Option
     let eigen = SymmetricEigen::new(d);
     let samples = rows as f64;
     let inflation: Vec<f64> = eigen.eigenvalues.iter().map(|v| v.clamp(1.0, samples)).collect();
-    let d_inverse_root = &eigen.eigenvectors * DMatrix::from_diagonal(&DVector::from_iterator(nt, inflation.iter().map(|v| v.powf(-0.5)))) * eigen.eigenvectors.transpose();
+    let d_inverse_root = &eigen.eigenvectors
+        * DMatrix::from_diagonal(&DVector::from_iterator(
+            nt,
+            inflation.iter().map(|v| v.powf(-0.5)),
+        ))
+        * eigen.eigenvectors.transpose();
     let c = inverse_root * d_inverse_root * root;
     let mut sorted = inflation;
     sorted.sort_by(|a, b| b.total_cmp(a));
@@ -121,7 +128,13 @@ pub fn adjustment(post: &Posterior, map: &MapEstimate, centre: &[f64]) -> Option
 fn correlations(w: &[f64]) -> (Vec<f64>, usize) {
     let n = w.len();
     let c0: f64 = w.iter().map(|v| v * v).sum();
-    let at = |l: usize| if c0 > 0.0 { w[..n - l].iter().zip(&w[l..]).map(|(a, b)| a * b).sum::<f64>() / c0 } else { 0.0 };
+    let at = |l: usize| {
+        if c0 > 0.0 {
+            w[..n - l].iter().zip(&w[l..]).map(|(a, b)| a * b).sum::<f64>() / c0
+        } else {
+            0.0
+        }
+    };
     // the pair (ρ_0, ρ_1) first, then pairs while their sum is positive
     let mut rho = vec![1.0, if n > 1 { at(1) } else { 0.0 }];
     while rho.len() + 2 <= n / 2 {

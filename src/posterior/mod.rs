@@ -36,7 +36,10 @@ use crate::noise::{NoiseModel, NoiseValues, MAX_PARAMETERS};
 use crate::sampler::LogDensity;
 use layout::Hardening;
 pub use layout::{unit_of, Coordinates, Layout};
-pub use likelihood::{run_log_likelihood, run_log_likelihood_memo, run_score, Allowance, LaneParams, LikelihoodSettings, Memory, MemoryAdjustment};
+pub use likelihood::{
+    run_log_likelihood, run_log_likelihood_memo, run_score, Allowance, LaneParams,
+    LikelihoodSettings, Memory, MemoryAdjustment,
+};
 pub use parameters::{ModelKind, ParameterModel, CURVE_NAMES, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, Draws, PosteriorSample, SummaryRow};
@@ -75,8 +78,11 @@ impl Posterior {
         coordinates: Coordinates,
         terms: &ModelTerms,
     ) -> Posterior {
-        let runs: Vec<RunData> =
-            campaign.runs.iter().map(|r| RunData::from_run(r, likelihood.part, likelihood.smooth_strain_ms)).collect();
+        let runs: Vec<RunData> = campaign
+            .runs
+            .iter()
+            .map(|r| RunData::from_run(r, likelihood.part, likelihood.smooth_strain_ms))
+            .collect();
         let ids: Vec<String> = runs.iter().map(|r| r.id.clone()).collect();
         let noise = likelihood.noise_model(sigma_bounds);
         let mut layout = Layout::new(&model, &ids, noise.as_ref(), coordinates, terms);
@@ -108,7 +114,8 @@ impl Posterior {
     /// discrepancy model's noise is then moved on its own), otherwise all.
     pub fn proposed_dimension(&self, walkers: usize) -> usize {
         let blocks = self.blocks();
-        let memo = self.runs.len() + self.runs.iter().map(|r| likelihood::memo_len(self.noise.as_ref(), r)).sum::<usize>();
+        let memo = self.runs.len()
+            + self.runs.iter().map(|r| likelihood::memo_len(self.noise.as_ref(), r)).sum::<usize>();
         match !blocks.is_empty() && crate::sampler::ensemble::memos_fit(memo, walkers) {
             true => crate::sampler::density::free_coordinates(self.dim(), &blocks).len(),
             false => self.dim(),
@@ -133,7 +140,8 @@ impl Posterior {
             None => a.apply(&x[theta.clone()]),
             // through ln θ from the coordinates searched in
             Some(own) => {
-                let log_theta = own.log_theta(&a.apply(&own.theta_coordinates(&self.layout.log_theta(x))));
+                let log_theta =
+                    own.log_theta(&a.apply(&own.theta_coordinates(&self.layout.log_theta(x))));
                 self.layout.theta_coordinates(&log_theta)
             }
         };
@@ -145,7 +153,10 @@ impl Posterior {
     /// This posterior walked in the coordinates `layout` (the MAP search's):
     /// an adjusted likelihood still acts in those it was measured in.
     pub fn in_layout(&self, layout: Layout) -> Posterior {
-        let adjusted_in = self.adjusted_in.clone().or_else(|| self.likelihood.adjustment().map(|_| Arc::new(self.layout.clone())));
+        let adjusted_in = self
+            .adjusted_in
+            .clone()
+            .or_else(|| self.likelihood.adjustment().map(|_| Arc::new(self.layout.clone())));
         Posterior { layout, adjusted_in, ..self.clone() }
     }
 
@@ -189,10 +200,13 @@ impl Posterior {
     pub fn lane_params(&self, xs: &[&[f64]], run: &RunData) -> LaneParams {
         let point = |lane: usize| xs[lane.min(xs.len() - 1)];
         if run.current.is_some() && self.model.is_current_law() {
-            let fields: [(FieldLaw, f64); LANES] = std::array::from_fn(|lane| self.field_at(point(lane)).expect("a law"));
+            let fields: [(FieldLaw, f64); LANES] =
+                std::array::from_fn(|lane| self.field_at(point(lane)).expect("a law"));
             return LaneParams::Along { laws: fields.map(|f| f.0), lags_s: fields.map(|f| f.1) };
         }
-        LaneParams::Fixed(std::array::from_fn(|lane| self.params_at_current(point(lane), run.current_a)))
+        LaneParams::Fixed(std::array::from_fn(|lane| {
+            self.params_at_current(point(lane), run.current_a)
+        }))
     }
 
     /// Log-prior of the coordinates (the priors are densities of ln θ,
@@ -208,8 +222,14 @@ impl Posterior {
         lp += l.log_jacobian(x, &log_theta);
         // zero-mean normal priors of the model terms
         let normal = |v: f64, sd: f64| -0.5 * (v / sd) * (v / sd);
-        lp += x[l.spring.clone()].iter().map(|v| normal(*v, self.terms.gas_spring_sd_n_per_m)).sum::<f64>();
-        lp += x[l.offset.clone()].iter().map(|v| normal(*v, self.terms.force_offset_sd_n)).sum::<f64>();
+        lp += x[l.spring.clone()]
+            .iter()
+            .map(|v| normal(*v, self.terms.gas_spring_sd_n_per_m))
+            .sum::<f64>();
+        lp += x[l.offset.clone()]
+            .iter()
+            .map(|v| normal(*v, self.terms.force_offset_sd_n))
+            .sum::<f64>();
         for (j, run) in self.runs.iter().enumerate() {
             lp += self.noise.log_prior(run, &l.noise_values(x, j));
         }
@@ -238,7 +258,15 @@ impl Posterior {
             m.clear();
             m.resize(self.runs.len(), f64::NEG_INFINITY);
         }
-        let moved: Vec<Cow<[f64]>> = (0..count).map(|lane| self.likelihood_point(point(if out[lane] > f64::NEG_INFINITY { lane } else { first_alive }))).collect();
+        let moved: Vec<Cow<[f64]>> = (0..count)
+            .map(|lane| {
+                self.likelihood_point(point(if out[lane] > f64::NEG_INFINITY {
+                    lane
+                } else {
+                    first_alive
+                }))
+            })
+            .collect();
         let alive: Vec<&[f64]> = moved.iter().map(|p| p.as_ref()).collect();
         let mut params = LaneParams::Fixed([Params::reference_1a(); LANES]);
         for (i, r) in self.runs.iter().enumerate() {
@@ -247,10 +275,29 @@ impl Posterior {
             if i == 0 || self.model.is_current_law() {
                 params = self.lane_params(&alive, r);
             }
-            let coordinates: [NoiseValues; LANES] =
-                std::array::from_fn(|lane| if lane < count { l.noise_values(point(lane), i) } else { [0.0; MAX_PARAMETERS] });
-            let terms = std::array::from_fn(|lane| if lane < count { l.terms(point(lane), i) } else { (0.0, 0.0) });
-            let ll = run_log_likelihood_memo(self.noise.as_ref(), &self.integrator, r, &params, &coordinates, terms, memos);
+            let coordinates: [NoiseValues; LANES] = std::array::from_fn(|lane| {
+                if lane < count {
+                    l.noise_values(point(lane), i)
+                } else {
+                    [0.0; MAX_PARAMETERS]
+                }
+            });
+            let terms = std::array::from_fn(|lane| {
+                if lane < count {
+                    l.terms(point(lane), i)
+                } else {
+                    (0.0, 0.0)
+                }
+            });
+            let ll = run_log_likelihood_memo(
+                self.noise.as_ref(),
+                &self.integrator,
+                r,
+                &params,
+                &coordinates,
+                terms,
+                memos,
+            );
             let weight = self.weight(i);
             for (lane, m) in memos.iter_mut().enumerate() {
                 if let Some(v) = ll[lane] {
@@ -299,12 +346,18 @@ impl LogDensity for Posterior {
         if !self.noise.updated_alone() || l.noise.is_empty() {
             return Vec::new();
         }
-        (0..nr).map(|j| (0..self.noise.parameters().len()).map(|p| l.noise.start + p * nr + j).collect()).collect()
+        (0..nr)
+            .map(|j| {
+                (0..self.noise.parameters().len()).map(|p| l.noise.start + p * nr + j).collect()
+            })
+            .collect()
     }
 
     fn log_density_batch_memo(&self, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
         let d = self.dim();
-        for ((x, o), m) in xs.chunks(d * LANES).zip(out.chunks_mut(LANES)).zip(memos.chunks_mut(LANES)) {
+        for ((x, o), m) in
+            xs.chunks(d * LANES).zip(out.chunks_mut(LANES)).zip(memos.chunks_mut(LANES))
+        {
             self.log_density_lanes(x, o, m);
         }
     }
@@ -314,10 +367,15 @@ impl LogDensity for Posterior {
     /// then each run's residuals in turn).
     fn block_log_density_batch(&self, b: usize, xs: &[f64], memos: &[&[f64]], out: &mut [f64]) {
         let (d, l, run) = (self.dim(), &self.layout, &self.runs[b]);
-        let start: usize = self.runs.len() + self.runs[..b].iter().map(|r| likelihood::memo_len(self.noise.as_ref(), r)).sum::<usize>();
+        let start: usize = self.runs.len()
+            + self.runs[..b]
+                .iter()
+                .map(|r| likelihood::memo_len(self.noise.as_ref(), r))
+                .sum::<usize>();
         let end = start + likelihood::memo_len(self.noise.as_ref(), run);
         let weight = self.weight(b);
-        for ((x, o), m) in xs.chunks(d * LANES).zip(out.chunks_mut(LANES)).zip(memos.chunks(LANES)) {
+        for ((x, o), m) in xs.chunks(d * LANES).zip(out.chunks_mut(LANES)).zip(memos.chunks(LANES))
+        {
             let count = o.len();
             let point = |lane: usize| &x[lane * d..(lane + 1) * d];
             for (lane, o) in o.iter_mut().enumerate() {
@@ -326,12 +384,21 @@ impl LogDensity for Posterior {
             let Some(alive) = (0..count).find(|&lane| o[lane] > f64::NEG_INFINITY) else {
                 continue;
             };
-            let coordinates: [NoiseValues; LANES] =
-                std::array::from_fn(|lane| l.noise_values(point(if lane < count && o[lane] > f64::NEG_INFINITY { lane } else { alive }), b));
-            let parts: Vec<&[f64]> = m.iter().map(|memo| memo.get(start..end).unwrap_or(&[])).collect();
+            let coordinates: [NoiseValues; LANES] = std::array::from_fn(|lane| {
+                l.noise_values(
+                    point(if lane < count && o[lane] > f64::NEG_INFINITY { lane } else { alive }),
+                    b,
+                )
+            });
+            let parts: Vec<&[f64]> =
+                m.iter().map(|memo| memo.get(start..end).unwrap_or(&[])).collect();
             let ll = likelihood::run_score(self.noise.as_ref(), run, &coordinates, &parts);
             for (o, ll) in o.iter_mut().zip(ll) {
-                *o = if *o > f64::NEG_INFINITY && ll.is_finite() { *o + weight * ll } else { f64::NEG_INFINITY };
+                *o = if *o > f64::NEG_INFINITY && ll.is_finite() {
+                    *o + weight * ll
+                } else {
+                    f64::NEG_INFINITY
+                };
             }
         }
     }

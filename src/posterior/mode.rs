@@ -132,8 +132,10 @@ impl<'a, T: LogDensity> Whitened<'a, T> {
         let mut sources = vec![false; points.len()];
         points.iter().filter_map(|p| p.from).for_each(|(k, _)| sources[k] = true);
         let full: Vec<usize> = (0..points.len()).filter(|&k| points[k].from.is_none()).collect();
-        let (with_memo, plain): (Vec<usize>, Vec<usize>) = full.into_iter().partition(|&k| sources[k]);
-        let xs = |ks: &[usize]| -> Vec<f64> { ks.iter().flat_map(|&k| self.x(&points[k].z)).collect() };
+        let (with_memo, plain): (Vec<usize>, Vec<usize>) =
+            full.into_iter().partition(|&k| sources[k]);
+        let xs =
+            |ks: &[usize]| -> Vec<f64> { ks.iter().flat_map(|&k| self.x(&points[k].z)).collect() };
         for (&k, v) in plain.iter().zip(log_densities(self.target, &xs(&plain))) {
             out[k] = v;
         }
@@ -144,10 +146,14 @@ impl<'a, T: LogDensity> Whitened<'a, T> {
         for (m, &k) in with_memo.iter().enumerate() {
             (out[k], memo_of[k]) = (values[m], m);
         }
-        let blocks = points.iter().filter_map(|p| p.from.map(|(_, b)| b)).max().map_or(0, |b| b + 1);
+        let blocks =
+            points.iter().filter_map(|p| p.from.map(|(_, b)| b)).max().map_or(0, |b| b + 1);
         for b in 0..blocks {
-            let ks: Vec<usize> = (0..points.len()).filter(|&k| points[k].from.is_some_and(|(_, c)| c == b)).collect();
-            let memo_refs: Vec<&[f64]> = ks.iter().map(|&k| memos[memo_of[points[k].from.unwrap().0]].as_slice()).collect();
+            let ks: Vec<usize> = (0..points.len())
+                .filter(|&k| points[k].from.is_some_and(|(_, c)| c == b))
+                .collect();
+            let memo_refs: Vec<&[f64]> =
+                ks.iter().map(|&k| memos[memo_of[points[k].from.unwrap().0]].as_slice()).collect();
             let terms = block_log_densities(self.target, b, &xs(&ks), &memo_refs);
             for (&k, t) in ks.iter().zip(terms) {
                 let (src, _) = points[k].from.unwrap();
@@ -246,11 +252,18 @@ impl<'a, T: LogDensity> Whitened<'a, T> {
                         pairs.push(((i, j), None));
                         continue;
                     }
-                    (Some(a), Some(_)) => points.extend(signs.map(|(si, sj)| Point { z: offset(z, &[(i, si), (j, sj)]), from: base.map(|k| (k, a)) })),
-                    (None, None) => points.extend(signs.map(|(si, sj)| Point::full(offset(z, &[(i, si), (j, sj)])))),
+                    (Some(a), Some(_)) => points.extend(signs.map(|(si, sj)| Point {
+                        z: offset(z, &[(i, si), (j, sj)]),
+                        from: base.map(|k| (k, a)),
+                    })),
+                    (None, None) => points
+                        .extend(signs.map(|(si, sj)| Point::full(offset(z, &[(i, si), (j, sj)])))),
                     // one free axis, one in block b: from the free axis's point
                     (bi, bj) => {
-                        let (b, free_k, free_first) = match bi { Some(b) => (b, kb, false), None => (bj.unwrap(), ka, true) };
+                        let (b, free_k, free_first) = match bi {
+                            Some(b) => (b, kb, false),
+                            None => (bj.unwrap(), ka, true),
+                        };
                         points.extend(signs.map(|(si, sj)| {
                             let s_free = if free_first { si } else { sj };
                             let source = axis_at[free_k] + usize::from(s_free > 0.0);
@@ -317,7 +330,13 @@ fn axis_blocks(blocks: &[Vec<usize>], l: &DMatrix<f64>) -> Option<Vec<Option<usi
 /// Backtracking from the full `step` until the log-density rises by a
 /// share of the `gain` the quadratic model expects: the share of the step
 /// taken, the point and its log-density.
-fn line_search<T: LogDensity>(w: &Whitened<T>, z: &DVector<f64>, f: f64, step: &DVector<f64>, gain: f64) -> Option<(f64, DVector<f64>, f64)> {
+fn line_search<T: LogDensity>(
+    w: &Whitened<T>,
+    z: &DVector<f64>,
+    f: f64,
+    step: &DVector<f64>,
+    gain: f64,
+) -> Option<(f64, DVector<f64>, f64)> {
     let mut alpha = 1.0;
     for _ in 0..12 {
         let trial = z + step * alpha;
@@ -381,7 +400,8 @@ pub fn newton(target: &impl LogDensity, start: &Elliptical) -> Option<Mode> {
             Some((alpha, trial, ft)) => {
                 (z, f, fresh) = (trial, ft, false);
                 if alpha < 1.0 && measured < MAX_HESSIANS {
-                    (cov, fresh, measured) = (covariance(&w.hessian(&z, f, &mut held)), true, measured + 1);
+                    (cov, fresh, measured) =
+                        (covariance(&w.hessian(&z, f, &mut held)), true, measured + 1);
                 }
                 g = w.gradient(&z, &mut held);
             }
@@ -391,7 +411,10 @@ pub fn newton(target: &impl LogDensity, start: &Elliptical) -> Option<Mode> {
                 break;
             }
             // … or by one measured elsewhere: measure it here and go on
-            None => (cov, fresh, measured) = (covariance(&w.hessian(&z, f, &mut held)), true, measured + 1),
+            None => {
+                (cov, fresh, measured) =
+                    (covariance(&w.hessian(&z, f, &mut held)), true, measured + 1)
+            }
         }
     }
     if !fresh {
@@ -401,7 +424,12 @@ pub fn newton(target: &impl LogDensity, start: &Elliptical) -> Option<Mode> {
     let cov_x = l * cov * l.transpose();
     let factor = cov_x.cholesky()?.l();
     let x = w.x(&z);
-    Some(Mode { laplace: Elliptical::from_factor(DVector::from_column_slice(&x), factor), x, log_density: f, converged })
+    Some(Mode {
+        laplace: Elliptical::from_factor(DVector::from_column_slice(&x), factor),
+        x,
+        log_density: f,
+        converged,
+    })
 }
 
 /// `v` with its held entries set to 0.
@@ -439,7 +467,10 @@ mod tests {
     /// A start 3 target sds off in every coordinate, its scale half the
     /// target's and without the correlations.
     fn poor_start() -> Elliptical {
-        Elliptical::from_factor(DVector::from_column_slice(&[7.0, 1.0, -1.0]), DMatrix::from_diagonal(&DVector::from_column_slice(&[1.0, 0.5, 0.25])))
+        Elliptical::from_factor(
+            DVector::from_column_slice(&[7.0, 1.0, -1.0]),
+            DMatrix::from_diagonal(&DVector::from_column_slice(&[1.0, 0.5, 0.25])),
+        )
     }
 
     #[test]
@@ -476,7 +507,10 @@ mod tests {
                 A * x[0] - x[0].exp() - 2.0 * (x[1] - x[0]).powi(2) - 0.5 * x[2] * x[2]
             }
         }
-        let start = Elliptical::from_factor(DVector::from_column_slice(&[-1.0, 0.5, 2.0]), DMatrix::identity(3, 3));
+        let start = Elliptical::from_factor(
+            DVector::from_column_slice(&[-1.0, 0.5, 2.0]),
+            DMatrix::identity(3, 3),
+        );
         let mode = newton(&Skewed, &start).unwrap();
         let expected = [A.ln(), A.ln(), 0.0];
         for (a, b) in mode.x.iter().zip(expected) {
@@ -487,8 +521,13 @@ mod tests {
         // e^(x₀) within a (e^0.06 − 1) = 0.19 of a, times 1 + h²/12 = 1.005
         // over ±HESSIAN_STEP: within 0.21 = 3 % of a + 4; the rest exact
         let precision = mode.laplace.covariance().try_inverse().unwrap();
-        let exact = DMatrix::from_row_slice(3, 3, &[A + 4.0, -4.0, 0.0, -4.0, 4.0, 0.0, 0.0, 0.0, 1.0]);
-        assert!((precision - &exact).abs().max() < 0.03 * (A + 4.0), "precision {}", mode.laplace.covariance().try_inverse().unwrap());
+        let exact =
+            DMatrix::from_row_slice(3, 3, &[A + 4.0, -4.0, 0.0, -4.0, 4.0, 0.0, 0.0, 0.0, 1.0]);
+        assert!(
+            (precision - &exact).abs().max() < 0.03 * (A + 4.0),
+            "precision {}",
+            mode.laplace.covariance().try_inverse().unwrap()
+        );
     }
 
     #[test]
@@ -505,21 +544,37 @@ mod tests {
                 3
             }
             fn log_density(&self, x: &[f64]) -> f64 {
-                if x[2] < 0.45 { f64::NEG_INFINITY } else { self.0.log_density(x) }
+                if x[2] < 0.45 {
+                    f64::NEG_INFINITY
+                } else {
+                    self.0.log_density(x)
+                }
             }
         }
         let (target, cov) = gaussian();
         let mean = target.mean.clone();
-        let start = Elliptical::from_factor(DVector::from_column_slice(&[2.0, -1.0, 0.46]), DMatrix::from_diagonal(&DVector::from_column_slice(&[1.0, 0.5, 0.25])));
+        let start = Elliptical::from_factor(
+            DVector::from_column_slice(&[2.0, -1.0, 0.46]),
+            DMatrix::from_diagonal(&DVector::from_column_slice(&[1.0, 0.5, 0.25])),
+        );
         let mode = newton(&Cut(target), &start).unwrap();
         let dx2 = 0.46 - mean[2];
         for i in 0..2 {
             let expected = mean[i] + cov[(i, 2)] / cov[(2, 2)] * dx2;
-            assert!((mode.x[i] - expected).abs() < 1e-6, "mode {:?}, expected {expected} at {i}", mode.x);
+            assert!(
+                (mode.x[i] - expected).abs() < 1e-6,
+                "mode {:?}, expected {expected} at {i}",
+                mode.x
+            );
         }
         assert_eq!(mode.x[2], 0.46);
         let got = mode.laplace.covariance();
-        assert!((got[(2, 2)] - 0.0625).abs() < 1e-12 && got[(0, 2)].abs() < 1e-12 && got[(1, 2)].abs() < 1e-12, "covariance {got}");
+        assert!(
+            (got[(2, 2)] - 0.0625).abs() < 1e-12
+                && got[(0, 2)].abs() < 1e-12
+                && got[(1, 2)].abs() < 1e-12,
+            "covariance {got}"
+        );
     }
 
     #[test]
@@ -535,7 +590,10 @@ mod tests {
                 -0.5 * x[0] * x[0]
             }
         }
-        let start = Elliptical::from_factor(DVector::from_column_slice(&[0.5, 0.0]), DMatrix::identity(2, 2));
+        let start = Elliptical::from_factor(
+            DVector::from_column_slice(&[0.5, 0.0]),
+            DMatrix::identity(2, 2),
+        );
         let mode = newton(&Flat, &start).unwrap();
         let cov = mode.laplace.covariance();
         assert!((cov[(0, 0)] - 1.0).abs() < 1e-6);
@@ -561,7 +619,8 @@ mod tests {
                 3
             }
             fn log_density(&self, x: &[f64]) -> f64 {
-                let quad: f64 = (0..3).flat_map(|i| (0..3).map(move |j| x[i] * P[i][j] * x[j])).sum();
+                let quad: f64 =
+                    (0..3).flat_map(|i| (0..3).map(move |j| x[i] * P[i][j] * x[j])).sum();
                 -0.5 * quad + B * x[0].powi(3) + C * x[0].powi(2) * x[1].powi(2)
             }
         }
@@ -636,12 +695,21 @@ mod tests {
             -0.5 * (r.transpose() * &self.precision * &r)[(0, 0)]
         }
         fn blocks(&self) -> Vec<Vec<usize>> {
-            if self.blocks { BLOCKS.iter().map(|b| b.to_vec()).collect() } else { Vec::new() }
+            if self.blocks {
+                BLOCKS.iter().map(|b| b.to_vec()).collect()
+            } else {
+                Vec::new()
+            }
         }
         fn log_density_batch_memo(&self, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
             for ((x, o), m) in xs.chunks_exact(5).zip(out.iter_mut()).zip(memos.iter_mut()) {
                 *o = self.log_density(x);
-                *m = vec![self.block_terms(0, x, &x[..2]), self.block_terms(1, x, &x[..2]), x[0], x[1]];
+                *m = vec![
+                    self.block_terms(0, x, &x[..2]),
+                    self.block_terms(1, x, &x[..2]),
+                    x[0],
+                    x[1],
+                ];
             }
         }
         fn block_log_density_batch(&self, b: usize, xs: &[f64], memos: &[&[f64]], out: &mut [f64]) {
@@ -714,5 +782,4 @@ mod tests {
         assert_eq!(axis_blocks(&Blocked::new(true).blocks(), &l), None);
         assert_eq!(axis_blocks(&[], &l), None);
     }
-
 }

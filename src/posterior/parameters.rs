@@ -36,38 +36,48 @@ impl ModelKind {
 }
 
 /// Names of a current law's θ coordinates (SI units in outputs).
-pub const LAW_NAMES: [&str; 9] = ["G_field", "R0", "R1", "D1", "m1", "m2", "n", "saturation_current_a", "G_zero"];
+pub const LAW_NAMES: [&str; 9] =
+    ["G_field", "R0", "R1", "D1", "m1", "m2", "n", "saturation_current_a", "G_zero"];
 
 /// The coil's lag τ_c (s), the last θ coordinate of a law whose runs'
 /// current varies ([`crate::model::FieldCurrent`]).
 pub const LAG_NAME: &str = "coil_lag_s";
 
 /// [`LAW_NAMES`] and the coil's lag.
-const LAW_NAMES_LAGGED: [&str; 10] = ["G_field", "R0", "R1", "D1", "m1", "m2", "n", "saturation_current_a", "G_zero", LAG_NAME];
+const LAW_NAMES_LAGGED: [&str; 10] =
+    ["G_field", "R0", "R1", "D1", "m1", "m2", "n", "saturation_current_a", "G_zero", LAG_NAME];
 
 /// Names of the current curves' θ coordinates: the parameters at the low
 /// anchor current, at the high one, and each curve's bend κ.
 pub const CURVE_NAMES: [&str; 21] = [
-    "G_low", "R0_low", "R1_low", "D1_low", "m1_low", "m2_low", "n_low", "G_high", "R0_high", "R1_high", "D1_high", "m1_high", "m2_high", "n_high", "G_bend", "R0_bend",
-    "R1_bend", "D1_bend", "m1_bend", "m2_bend", "n_bend",
+    "G_low", "R0_low", "R1_low", "D1_low", "m1_low", "m2_low", "n_low", "G_high", "R0_high",
+    "R1_high", "D1_high", "m1_high", "m2_high", "n_high", "G_bend", "R0_bend", "R1_bend",
+    "D1_bend", "m1_bend", "m2_bend", "n_bend",
 ];
 
 /// [`CURVE_NAMES`] and the coil's lag.
 const CURVE_NAMES_LAGGED: [&str; 22] = [
-    "G_low", "R0_low", "R1_low", "D1_low", "m1_low", "m2_low", "n_low", "G_high", "R0_high", "R1_high", "D1_high", "m1_high", "m2_high", "n_high", "G_bend", "R0_bend",
-    "R1_bend", "D1_bend", "m1_bend", "m2_bend", "n_bend", LAG_NAME,
+    "G_low", "R0_low", "R1_low", "D1_low", "m1_low", "m2_low", "n_low", "G_high", "R0_high",
+    "R1_high", "D1_high", "m1_high", "m2_high", "n_high", "G_bend", "R0_bend", "R1_bend",
+    "D1_bend", "m1_bend", "m2_bend", "n_bend", LAG_NAME,
 ];
 
 /// The prior of the coil's lag τ_c: log-normal about 10 ms (a damper
 /// coil's field settles in 5–30 ms) with a factor-e spread, within
 /// [0.1 ms, 1 s].
-pub const LAG_PRIOR: Prior = Prior::LogNormal { median: 0.01, sd_log: 1.0, lower: 1.0e-4, upper: 1.0 };
+pub const LAG_PRIOR: Prior =
+    Prior::LogNormal { median: 0.01, sd_log: 1.0, lower: 1.0e-4, upper: 1.0 };
 
 /// The prior of each curve's bend κ: ln κ normal about 0 (a straight line in
 /// ln p against I) with sd 2, so that ±1 sd puts the middle of the change
 /// between 27 % and 73 % of the way between the anchors (ln κ = ∓2), within
 /// ln κ ∈ [−6, 6] (5 % and 95 %).
-pub const BEND_PRIOR: Prior = Prior::LogNormal { median: 1.0, sd_log: 2.0, lower: 0.002_478_752_176_666_358, upper: 403.428_793_492_735_1 };
+pub const BEND_PRIOR: Prior = Prior::LogNormal {
+    median: 1.0,
+    sd_log: 2.0,
+    lower: 0.002_478_752_176_666_358,
+    upper: 403.428_793_492_735_1,
+};
 
 /// How θ maps to the B-P parameters of a run.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -86,7 +96,12 @@ impl ParameterModel {
     /// The model of `kind`; the curves' anchors (`anchors_a`) are known
     /// once the calibrated currents are (NaN until then). A law has the
     /// coil's lag as a coordinate where `lag` (runs whose current varies).
-    pub fn new(kind: ModelKind, reference_a: f64, anchors_a: Option<(f64, f64)>, lag: bool) -> Self {
+    pub fn new(
+        kind: ModelKind,
+        reference_a: f64,
+        anchors_a: Option<(f64, f64)>,
+        lag: bool,
+    ) -> Self {
         match kind {
             ModelKind::PerCurrent => ParameterModel::PerCurrent,
             ModelKind::CurrentLaw => ParameterModel::CurrentLaw { reference_a, lag },
@@ -99,7 +114,11 @@ impl ParameterModel {
 
     /// Whether θ ends with the coil's lag.
     pub fn has_lag(&self) -> bool {
-        matches!(self, ParameterModel::CurrentLaw { lag: true, .. } | ParameterModel::CurrentCurves { lag: true, .. })
+        matches!(
+            self,
+            ParameterModel::CurrentLaw { lag: true, .. }
+                | ParameterModel::CurrentCurves { lag: true, .. }
+        )
     }
 
     /// How the B-P parameters follow the coil current at θ (SI); `None`
@@ -107,8 +126,12 @@ impl ParameterModel {
     pub fn field_law(&self, theta: &[f64]) -> Option<FieldLaw> {
         match *self {
             ParameterModel::PerCurrent => None,
-            ParameterModel::CurrentLaw { reference_a, .. } => Some(FieldLaw::Law(Self::law(reference_a, theta))),
-            ParameterModel::CurrentCurves { low_a, high_a, .. } => Some(FieldLaw::Curves(Self::curves(low_a, high_a, theta))),
+            ParameterModel::CurrentLaw { reference_a, .. } => {
+                Some(FieldLaw::Law(Self::law(reference_a, theta)))
+            }
+            ParameterModel::CurrentCurves { low_a, high_a, .. } => {
+                Some(FieldLaw::Curves(Self::curves(low_a, high_a, theta)))
+            }
         }
     }
 
@@ -155,7 +178,10 @@ impl ParameterModel {
     /// share, walked together in [`super::Coordinates::SaturationShare`].
     pub fn saturation_pairs(&self) -> Vec<(usize, usize)> {
         match self {
-            ParameterModel::CurrentCurves { .. } => vec![(self.index("R1_low"), self.index("D1_low")), (self.index("R1_high"), self.index("D1_high"))],
+            ParameterModel::CurrentCurves { .. } => vec![
+                (self.index("R1_low"), self.index("D1_low")),
+                (self.index("R1_high"), self.index("D1_high")),
+            ],
             _ => vec![(self.index("R1"), self.index("D1"))],
         }
     }
@@ -175,7 +201,12 @@ impl ParameterModel {
         match *self {
             ParameterModel::PerCurrent => {}
             ParameterModel::CurrentLaw { reference_a, .. } => {
-                p.push(Prior::LogNormal { median: reference_a, sd_log: 1.0, lower: 0.05 * reference_a, upper: 20.0 * reference_a });
+                p.push(Prior::LogNormal {
+                    median: reference_a,
+                    sd_log: 1.0,
+                    lower: 0.05 * reference_a,
+                    upper: 20.0 * reference_a,
+                });
                 p.push(bp[0]);
             }
             ParameterModel::CurrentCurves { .. } => {
@@ -220,8 +251,12 @@ impl ParameterModel {
     pub fn params(&self, theta: &[f64], current_a: f64) -> Params {
         match *self {
             ParameterModel::PerCurrent => Params::from_array(std::array::from_fn(|i| theta[i])),
-            ParameterModel::CurrentLaw { reference_a, .. } => Self::law(reference_a, theta).params_at(current_a),
-            ParameterModel::CurrentCurves { low_a, high_a, .. } => Self::curves(low_a, high_a, theta).params_at(current_a),
+            ParameterModel::CurrentLaw { reference_a, .. } => {
+                Self::law(reference_a, theta).params_at(current_a)
+            }
+            ParameterModel::CurrentCurves { low_a, high_a, .. } => {
+                Self::curves(low_a, high_a, theta).params_at(current_a)
+            }
         }
     }
 
@@ -271,13 +306,22 @@ impl ParameterModel {
         match *self {
             ParameterModel::PerCurrent => match currents {
                 [c] => Ok(*c),
-                _ => Err(Error::Usage(format!("a calibration takes runs of one current; got {currents:?} A"))),
+                _ => Err(Error::Usage(format!(
+                    "a calibration takes runs of one current; got {currents:?} A"
+                ))),
             },
-            ParameterModel::CurrentLaw { reference_a, .. } | ParameterModel::CurrentCurves { high_a: reference_a, .. } => {
+            ParameterModel::CurrentLaw { reference_a, .. }
+            | ParameterModel::CurrentCurves { high_a: reference_a, .. } => {
                 if currents.len() < 2 {
-                    return Err(Error::Usage(format!("the current law needs runs at two or more currents; got {currents:?} A")));
+                    return Err(Error::Usage(format!(
+                        "the current law needs runs at two or more currents; got {currents:?} A"
+                    )));
                 }
-                Ok(currents.iter().copied().min_by(|a, b| (a - reference_a).abs().total_cmp(&(b - reference_a).abs())).unwrap_or(reference_a))
+                Ok(currents
+                    .iter()
+                    .copied()
+                    .min_by(|a, b| (a - reference_a).abs().total_cmp(&(b - reference_a).abs()))
+                    .unwrap_or(reference_a))
             }
         }
     }

@@ -22,7 +22,9 @@ impl Prior {
             return f64::NEG_INFINITY;
         }
         match *self {
-            Prior::LogNormal { median, sd_log, .. } => -0.5 * ((log_value - median.ln()) / sd_log).powi(2),
+            Prior::LogNormal { median, sd_log, .. } => {
+                -0.5 * ((log_value - median.ln()) / sd_log).powi(2)
+            }
             Prior::LogUniform { .. } => 0.0,
         }
     }
@@ -49,7 +51,9 @@ impl Prior {
 
     pub fn bounds(&self) -> (f64, f64) {
         match *self {
-            Prior::LogNormal { lower, upper, .. } | Prior::LogUniform { lower, upper } => (lower, upper),
+            Prior::LogNormal { lower, upper, .. } | Prior::LogUniform { lower, upper } => {
+                (lower, upper)
+            }
         }
     }
 

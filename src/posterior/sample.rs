@@ -70,8 +70,18 @@ pub struct PosteriorSample {
 impl PosteriorSample {
     /// The sample of sampler chains in unconstrained coordinates, of runs
     /// at `run_currents`.
-    pub fn from_coordinates(layout: &Layout, model: ParameterModel, chains: &Chains, run_currents: Vec<f64>) -> Self {
-        PosteriorSample { layout: layout.clone(), model, chains: chains.map_points(|x| layout.to_si(x)), run_currents }
+    pub fn from_coordinates(
+        layout: &Layout,
+        model: ParameterModel,
+        chains: &Chains,
+        run_currents: Vec<f64>,
+    ) -> Self {
+        PosteriorSample {
+            layout: layout.clone(),
+            model,
+            chains: chains.map_points(|x| layout.to_si(x)),
+            run_currents,
+        }
     }
 
     /// Diagnostics of every coordinate in SI units after `burn_in` steps.
@@ -105,7 +115,13 @@ impl PosteriorSample {
         match self.layout.run_index(run) {
             Some(j) => {
                 let (spring_n_per_m, offset_n) = self.layout.terms(x, j);
-                Draw { params: self.params_at(step, chain, current_a), field: self.field_at(step, chain), spring_n_per_m, offset_n, noise: self.layout.noise_values(x, j) }
+                Draw {
+                    params: self.params_at(step, chain, current_a),
+                    field: self.field_at(step, chain),
+                    spring_n_per_m,
+                    offset_n,
+                    noise: self.layout.noise_values(x, j),
+                }
             }
             None => self.draw_without(step, chain, run, current_a),
         }
@@ -152,7 +168,12 @@ impl std::ops::Deref for SummaryRow {
 impl SummaryRow {
     /// The rows of `diagnostics`, named by `layout`.
     pub fn rows(layout: &Layout, diagnostics: &Diagnostics) -> Vec<SummaryRow> {
-        layout.names.iter().zip(&diagnostics.coordinates).map(|(n, d)| SummaryRow { parameter: n.clone(), stats: d.clone() }).collect()
+        layout
+            .names
+            .iter()
+            .zip(&diagnostics.coordinates)
+            .map(|(n, d)| SummaryRow { parameter: n.clone(), stats: d.clone() })
+            .collect()
     }
 }
 
@@ -178,7 +199,10 @@ impl Draws {
     /// fewer), each as `(step, chain)`.
     pub fn positions(self, chains: &Chains, count: usize) -> Vec<(usize, usize)> {
         let n = chains.chains();
-        let all: Vec<(usize, usize)> = (self.burn_in..chains.steps()).step_by(self.thin.max(1)).flat_map(|s| (0..n).map(move |c| (s, c))).collect();
+        let all: Vec<(usize, usize)> = (self.burn_in..chains.steps())
+            .step_by(self.thin.max(1))
+            .flat_map(|s| (0..n).map(move |c| (s, c)))
+            .collect();
         evenly_spaced(all.len(), count).into_iter().map(|i| all[i]).collect()
     }
 
@@ -188,8 +212,12 @@ impl Draws {
     pub fn steps(self, chains: &Chains, count: usize) -> Vec<usize> {
         let steps = chains.steps();
         let available = steps.saturating_sub(self.burn_in).max(1);
-        let per_chain = count.div_ceil(chains.chains().max(1)).min(available.div_ceil(self.thin.max(1))).max(1);
-        evenly_spaced(available, per_chain).into_iter().map(|i| (self.burn_in + i).min(steps.saturating_sub(1))).collect()
+        let per_chain =
+            count.div_ceil(chains.chains().max(1)).min(available.div_ceil(self.thin.max(1))).max(1);
+        evenly_spaced(available, per_chain)
+            .into_iter()
+            .map(|i| (self.burn_in + i).min(steps.saturating_sub(1)))
+            .collect()
     }
 }
 
@@ -218,16 +246,37 @@ mod tests {
     fn draws_take_the_runs_own_noise_or_the_pooled_one() {
         let runs = vec!["a".to_string(), "b".to_string()];
         let ar1 = NoiseKind::Ar1.model(&NoiseOptions::default());
-        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, ar1.as_ref(), crate::posterior::Coordinates::Log, &Default::default());
+        let layout = Layout::new(
+            &ParameterModel::PerCurrent,
+            &runs,
+            ar1.as_ref(),
+            crate::posterior::Coordinates::Log,
+            &Default::default(),
+        );
         let mut point = Params::reference_1a().to_array().to_vec();
         point.extend([3.0, 4.0, 0.2, 0.6]);
-        let chains = Chains { dim: 11, ensembles: 1, walkers: 1, positions: point, log_prob: vec![0.0], accepted: vec![false] };
-        let sample = PosteriorSample { layout, model: ParameterModel::PerCurrent, chains, run_currents: Vec::new() };
+        let chains = Chains {
+            dim: 11,
+            ensembles: 1,
+            walkers: 1,
+            positions: point,
+            log_prob: vec![0.0],
+            accepted: vec![false],
+        };
+        let sample = PosteriorSample {
+            layout,
+            model: ParameterModel::PerCurrent,
+            chains,
+            run_currents: Vec::new(),
+        };
         let own = sample.draw(0, 0, "b", 1.0);
         assert_eq!((own.noise, own.offset_n), ([4.0, 0.6, 0.0, 0.0], 0.0));
         assert_eq!(own.params, Params::reference_1a());
         let unseen = sample.draw(0, 0, "c", 1.0);
-        assert!((unseen.noise[0] - 12.5f64.sqrt()).abs() < 1e-12 && (unseen.noise[1] - 0.4).abs() < 1e-12);
+        assert!(
+            (unseen.noise[0] - 12.5f64.sqrt()).abs() < 1e-12
+                && (unseen.noise[1] - 0.4).abs() < 1e-12
+        );
     }
 
     /// An unseen run's σ follows the current: its own current's runs
@@ -237,11 +286,29 @@ mod tests {
     fn an_unseen_runs_noise_follows_the_current() {
         let runs: Vec<String> = ["a", "b", "c"].iter().map(|s| s.to_string()).collect();
         let gaussian = NoiseKind::Gaussian.model(&NoiseOptions::default());
-        let layout = Layout::new(&ParameterModel::PerCurrent, &runs, gaussian.as_ref(), crate::posterior::Coordinates::Log, &Default::default());
+        let layout = Layout::new(
+            &ParameterModel::PerCurrent,
+            &runs,
+            gaussian.as_ref(),
+            crate::posterior::Coordinates::Log,
+            &Default::default(),
+        );
         let mut point = Params::reference_1a().to_array().to_vec();
         point.extend([100.0, 100.0, 300.0]);
-        let chains = Chains { dim: 10, ensembles: 1, walkers: 1, positions: point, log_prob: vec![0.0], accepted: vec![false] };
-        let mut sample = PosteriorSample { layout, model: ParameterModel::PerCurrent, chains, run_currents: vec![0.25, 0.25, 1.0] };
+        let chains = Chains {
+            dim: 10,
+            ensembles: 1,
+            walkers: 1,
+            positions: point,
+            log_prob: vec![0.0],
+            accepted: vec![false],
+        };
+        let mut sample = PosteriorSample {
+            layout,
+            model: ParameterModel::PerCurrent,
+            chains,
+            run_currents: vec![0.25, 0.25, 1.0],
+        };
         let sigma = |s: &PosteriorSample, current: f64| s.draw(0, 0, "new", current).noise[0];
         // 100 + (0.5 − 0.25) / (1 − 0.25) × (300 − 100)
         assert!((sigma(&sample, 0.5) - (100.0 + 200.0 / 3.0)).abs() < 1e-9);

@@ -22,7 +22,12 @@ pub struct ModelTerms {
 
 impl Default for ModelTerms {
     fn default() -> Self {
-        ModelTerms { force_offset: false, force_offset_sd_n: 100.0, gas_spring: false, gas_spring_sd_n_per_m: 1.0e4 }
+        ModelTerms {
+            force_offset: false,
+            force_offset_sd_n: 100.0,
+            gas_spring: false,
+            gas_spring_sd_n_per_m: 1.0e4,
+        }
     }
 }
 

@@ -74,7 +74,10 @@ impl Excitation {
         let mm = self.amplitude_m * 1e3;
         let amp = if mm >= 10.0 { format!("±{mm:.0} mm") } else { format!("±{mm:.1} mm") };
         if self.frequency_hz.is_finite() {
-            format!("{amp}, {} Hz", crate::plot::tick(crate::plot::significant(self.frequency_hz, 2)))
+            format!(
+                "{amp}, {} Hz",
+                crate::plot::tick(crate::plot::significant(self.frequency_hz, 2))
+            )
         } else {
             amp
         }
@@ -194,7 +197,9 @@ fn share(v: impl Iterator<Item = bool>) -> f64 {
 fn trend(r: &[f64], x: &[f64], v: &[f64]) -> (f64, f64, f64, f64) {
     let n = r.len();
     let mean = |a: &[f64]| a.iter().sum::<f64>() / n as f64;
-    let spread = |a: &[f64], m: f64| (a.iter().map(|y| (y - m).powi(2)).sum::<f64>() / n as f64).sqrt().max(f64::MIN_POSITIVE);
+    let spread = |a: &[f64], m: f64| {
+        (a.iter().map(|y| (y - m).powi(2)).sum::<f64>() / n as f64).sqrt().max(f64::MIN_POSITIVE)
+    };
     let (xm, vm) = (mean(x), mean(v));
     let (sx, sv) = (spread(x, xm), spread(v, vm));
     let design = DMatrix::from_fn(n, 3, |i, j| match j {
@@ -220,26 +225,44 @@ pub fn assess(b: &RunBands, area_m2: f64, gap_m: f64) -> AdequacyRow {
     let excitation = Excitation::of(&b.time, &x, &v);
     let r = residual_force(b, area_m2);
     // Samples where the record and the band are finite.
-    let ok: Vec<usize> = (0..r.len()).filter(|&k| r[k].is_finite() && b.predictive[0][k].is_finite() && b.predictive[1][k].is_finite()).collect();
+    let ok: Vec<usize> = (0..r.len())
+        .filter(|&k| {
+            r[k].is_finite() && b.predictive[0][k].is_finite() && b.predictive[1][k].is_finite()
+        })
+        .collect();
     let pick = |a: &[f64]| ok.iter().map(|&k| a[k]).collect::<Vec<f64>>();
     let (r, x, v) = (pick(&r), pick(&x), pick(&v));
     let time = pick(&b.time);
-    let inside: Vec<bool> = ok.iter().map(|&k| b.predictive[0][k] <= b.tau_obs[k] && b.tau_obs[k] <= b.predictive[1][k]).collect();
-    let at_reversal: Vec<bool> = v.iter().map(|v| v.abs() < REVERSAL_SPEED_SHARE * excitation.peak_velocity_m_s).collect();
+    let inside: Vec<bool> = ok
+        .iter()
+        .map(|&k| b.predictive[0][k] <= b.tau_obs[k] && b.tau_obs[k] <= b.predictive[1][k])
+        .collect();
+    let at_reversal: Vec<bool> =
+        v.iter().map(|v| v.abs() < REVERSAL_SPEED_SHARE * excitation.peak_velocity_m_s).collect();
 
     let acf = autocorrelation(&r, samples_per_cycle(&time, &excitation));
     let rho = acf.get(1).copied().unwrap_or(f64::NAN);
-    let dt = if time.len() > 1 { (time[time.len() - 1] - time[0]) / (time.len() - 1) as f64 } else { f64::NAN };
-    let decorrelation_s = acf.iter().position(|c| *c < (-1.0f64).exp()).map_or(f64::NAN, |lag| lag as f64 * dt);
+    let dt = if time.len() > 1 {
+        (time[time.len() - 1] - time[0]) / (time.len() - 1) as f64
+    } else {
+        f64::NAN
+    };
+    let decorrelation_s =
+        acf.iter().position(|c| *c < (-1.0f64).exp()).map_or(f64::NAN, |lag| lag as f64 * dt);
     let innovation_lag1 = b.discrepancy.as_ref().map_or(f64::NAN, |d| {
         let w: Vec<f64> = d[2].iter().copied().filter(|v| v.is_finite()).collect();
         autocorrelation(&w, 2).get(1).copied().unwrap_or(f64::NAN)
     });
     let rho_pos = if innovation_lag1.is_finite() { innovation_lag1 } else { rho }.clamp(0.0, 0.999);
-    let (a, k, c, r2) = if r.len() >= 4 { trend(&r, &x, &v) } else { (f64::NAN, f64::NAN, f64::NAN, f64::NAN) };
+    let (a, k, c, r2) =
+        if r.len() >= 4 { trend(&r, &x, &v) } else { (f64::NAN, f64::NAN, f64::NAN, f64::NAN) };
     let force: Vec<f64> = b.force.iter().map(|f| f.abs()).filter(|f| f.is_finite()).collect();
-    let part = |want: bool| rms(r.iter().zip(&at_reversal).filter(|(_, &rev)| rev == want).map(|(r, _)| *r));
-    let cover = |want: bool| share(inside.iter().zip(&at_reversal).filter(|(_, &rev)| rev == want).map(|(i, _)| *i));
+    let part = |want: bool| {
+        rms(r.iter().zip(&at_reversal).filter(|(_, &rev)| rev == want).map(|(r, _)| *r))
+    };
+    let cover = |want: bool| {
+        share(inside.iter().zip(&at_reversal).filter(|(_, &rev)| rev == want).map(|(i, _)| *i))
+    };
     AdequacyRow {
         run: b.run.clone(),
         current_a: b.current_a,
@@ -271,7 +294,12 @@ mod tests {
 
     /// A sinusoid of ±20 mm at 0.5 Hz sampled at 200 Hz for four cycles,
     /// with a model stress of zero and an observed stress built from `r`.
-    fn bands_with(residual_n: impl Fn(f64, f64, f64) -> f64, area: f64, gap: f64, half_band_n: f64) -> RunBands {
+    fn bands_with(
+        residual_n: impl Fn(f64, f64, f64) -> f64,
+        area: f64,
+        gap: f64,
+        half_band_n: f64,
+    ) -> RunBands {
         let n = 1600;
         let time: Vec<f64> = (0..n).map(|k| k as f64 / 200.0).collect();
         let x: Vec<f64> = time.iter().map(|t| 0.02 * (2.0 * PI * 0.5 * t).sin()).collect();
@@ -302,8 +330,16 @@ mod tests {
         let b = bands_with(|_, x, v| 12.0 + 2000.0 * x + 300.0 * v, 0.01, 1e-3, 1e3);
         let a = assess(&b, 0.01, 1e-3);
         assert!((a.trend_offset_n - 12.0).abs() < 0.05, "{}", a.trend_offset_n);
-        assert!((a.trend_stiffness_n_per_m / 2000.0 - 1.0).abs() < 1e-3, "{}", a.trend_stiffness_n_per_m);
-        assert!((a.trend_damping_n_s_per_m / 300.0 - 1.0).abs() < 1e-3, "{}", a.trend_damping_n_s_per_m);
+        assert!(
+            (a.trend_stiffness_n_per_m / 2000.0 - 1.0).abs() < 1e-3,
+            "{}",
+            a.trend_stiffness_n_per_m
+        );
+        assert!(
+            (a.trend_damping_n_s_per_m / 300.0 - 1.0).abs() < 1e-3,
+            "{}",
+            a.trend_damping_n_s_per_m
+        );
         assert!(a.trend_share > 0.999999);
     }
 
@@ -344,14 +380,23 @@ mod tests {
         // Decorrelation of an AR(1): ρ^lag = 1/e at lag −1/ln ρ ≈ 9.5 samples.
         assert!((c.decorrelation_s * 200.0 - 9.5).abs() < 4.0, "{}", c.decorrelation_s);
         // White noise of unit sd inside ±1.96: 95 % ± 4 sd of a binomial share.
-        assert!((w.inside_p95 - 0.95).abs() < 4.0 * (0.95f64 * 0.05 / 1600.0).sqrt(), "{}", w.inside_p95);
+        assert!(
+            (w.inside_p95 - 0.95).abs() < 4.0 * (0.95f64 * 0.05 / 1600.0).sqrt(),
+            "{}",
+            w.inside_p95
+        );
     }
 
     /// Spikes at the reversals only: the reversal RMS carries them, the
     /// mid-stroke RMS is zero, and the coverage splits the same way.
     #[test]
     fn reversal_spikes_are_located() {
-        let b = bands_with(|_, _, v| if v.abs() < 0.1 * 0.02 * PI { 50.0 } else { 0.0 }, 0.01, 1e-3, 10.0);
+        let b = bands_with(
+            |_, _, v| if v.abs() < 0.1 * 0.02 * PI { 50.0 } else { 0.0 },
+            0.01,
+            1e-3,
+            10.0,
+        );
         let a = assess(&b, 0.01, 1e-3);
         assert!(a.reversal_rms_n > 30.0, "{}", a.reversal_rms_n);
         assert_eq!(a.stroke_rms_n, 0.0);

@@ -102,14 +102,20 @@ pub fn bands(
     tick: &(dyn Fn() + Sync),
 ) -> Result<Bands> {
     let paths = model_paths(run, draws, &settings.integrator, tick);
-    let kept: Vec<(&Draw, &[f64])> = draws.iter().zip(&paths).filter_map(|(d, p)| p.as_deref().map(|p| (d, p))).collect();
+    let kept: Vec<(&Draw, &[f64])> =
+        draws.iter().zip(&paths).filter_map(|(d, p)| p.as_deref().map(|p| (d, p))).collect();
     bands_of(run, run_index, &kept, draws.len() - kept.len(), settings)
 }
 
 /// The model stress along `run` for each draw, [`LANES`] at a time in
 /// SIMD lanes and in parallel (following the run's current where it
 /// varies and the draws are a law's); `None` where the integration failed.
-pub fn model_paths(run: &RunData, draws: &[Draw], integrator: &Integrator, tick: &(dyn Fn() + Sync)) -> Vec<Option<Vec<f64>>> {
+pub fn model_paths(
+    run: &RunData,
+    draws: &[Draw],
+    integrator: &Integrator,
+    tick: &(dyn Fn() + Sync),
+) -> Vec<Option<Vec<f64>>> {
     let n = run.time.len();
     draws
         .par_chunks(LANES)
@@ -123,17 +129,28 @@ pub fn model_paths(run: &RunData, draws: &[Draw], integrator: &Integrator, tick:
             for _ in chunk {
                 tick();
             }
-            tau.into_iter().zip(outcome).map(|(p, o)| o.ok().filter(|_| p.iter().all(|v| v.is_finite())).map(|_| p))
+            tau.into_iter()
+                .zip(outcome)
+                .map(|(p, o)| o.ok().filter(|_| p.iter().all(|v| v.is_finite())).map(|_| p))
         })
         .collect()
 }
 
 /// The bands of `run` from draws and their model stress paths (`failed`
 /// more draws could not be integrated).
-pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], failed: usize, settings: &PredictSettings) -> Result<Bands> {
+pub fn bands_of(
+    run: &RunData,
+    run_index: usize,
+    kept: &[(&Draw, &[f64])],
+    failed: usize,
+    settings: &PredictSettings,
+) -> Result<Bands> {
     let n = run.time.len();
     if kept.is_empty() {
-        return Err(Error::Compute(format!("run {}: the integration failed for every posterior draw", run.id)));
+        return Err(Error::Compute(format!(
+            "run {}: the integration failed for every posterior draw",
+            run.id
+        )));
     }
     let reps = settings.replicates.max(1);
     let mut rng = rng::stream(settings.seed, &[0x0b5e, run_index as u64]);
@@ -145,7 +162,8 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
     let mut simulator = noise.simulator(run, &noise_of, reps);
     let mut model = [(); 5].map(|_| vec![0.0; n]);
     let mut predictive = [(); 2].map(|_| vec![0.0; n]);
-    let g_bound: Vec<f64> = kept.iter().map(|(d, _)| if stiff { d.g_bound(run) } else { 0.0 }).collect();
+    let g_bound: Vec<f64> =
+        kept.iter().map(|(d, _)| if stiff { d.g_bound(run) } else { 0.0 }).collect();
     let mut at_k = vec![0.0; kept.len()];
     let mut stiffness = vec![0.0; kept.len()];
     let mut noise_k = vec![0.0; kept.len() * reps];
@@ -158,7 +176,13 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
             at_k[i] = path[k] + run.terms_stress(k, d.spring_n_per_m, d.offset_n);
             // the law's tangent stiffness, where the noise model takes it
             let g = g_bound[i];
-            stiffness[i] = if !stiff { 0.0 } else if k > 0 { tangent_stiffness(path[k] - path[k - 1], dg, g) } else { g };
+            stiffness[i] = if !stiff {
+                0.0
+            } else if k > 0 {
+                tangent_stiffness(path[k] - path[k - 1], dg, g)
+            } else {
+                g
+            };
             log_p[i] = noise.marginal_ln_pdf(run, run.tau[k] - at_k[i], stiffness[i], &d.noise);
         }
         simulator.next(&stiffness, &mut rng, &mut noise_k);
@@ -173,7 +197,9 @@ pub fn bands_of(run: &RunData, run_index: usize, kept: &[(&Draw, &[f64])], faile
         for (band, q) in model.iter_mut().zip(selected_quantiles(&mut at_k, &MODEL_PROBS)) {
             band[k] = q;
         }
-        for (band, q) in predictive.iter_mut().zip(selected_quantiles(&mut pred_k, &PREDICTIVE_PROBS)) {
+        for (band, q) in
+            predictive.iter_mut().zip(selected_quantiles(&mut pred_k, &PREDICTIVE_PROBS))
+        {
             band[k] = q;
         }
     }
@@ -199,7 +225,11 @@ fn selected_quantiles<const N: usize>(v: &mut [f64], probs: &[f64; N]) -> [f64; 
         let lo = (h.floor() as usize).max(start);
         let (_, at, right) = v[start..].select_nth_unstable_by(lo - start, f64::total_cmp);
         let low = *at;
-        let high = if lo + 1 < n { right.iter().copied().min_by(f64::total_cmp).unwrap_or(low) } else { low };
+        let high = if lo + 1 < n {
+            right.iter().copied().min_by(f64::total_cmp).unwrap_or(low)
+        } else {
+            low
+        };
         *o = low + (h - lo as f64) * (high - low);
         start = lo;
     }
@@ -209,9 +239,15 @@ fn selected_quantiles<const N: usize>(v: &mut [f64], probs: &[f64; N]) -> [f64; 
 /// [`NoiseModel::explain`] at the median: the residuals about the median
 /// model stress `median`, the stiffness along it with the draws' median G,
 /// each noise value the draws' median.
-fn explain_median(run: &RunData, kept: &[(&Draw, &[f64])], median: &[f64], noise: &dyn NoiseModel) -> Option<Explained> {
+fn explain_median(
+    run: &RunData,
+    kept: &[(&Draw, &[f64])],
+    median: &[f64],
+    noise: &dyn NoiseModel,
+) -> Option<Explained> {
     let median_of = |v: Vec<f64>| crate::sampler::quantile(&v, 0.5);
-    let values: NoiseValues = std::array::from_fn(|p| median_of(kept.iter().map(|(d, _)| d.noise[p]).collect()));
+    let values: NoiseValues =
+        std::array::from_fn(|p| median_of(kept.iter().map(|(d, _)| d.noise[p]).collect()));
     let g = median_of(kept.iter().map(|(d, _)| d.params.g).collect());
     let stiffness = crate::noise::stiffness_path(run, median, g);
     let residuals: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - median[k]).collect();
@@ -269,7 +305,9 @@ impl RunBands {
             predictive: bands.predictive,
             displacement: run.record.displacement[..n].to_vec(),
             force: run.record.force[..n].to_vec(),
-            discrepancy: bands.explained.map(|e| [e.mean, e.sd, e.innovations].map(|v| std::iter::once(f64::NAN).chain(v).collect())),
+            discrepancy: bands.explained.map(|e| {
+                [e.mean, e.sd, e.innovations].map(|v| std::iter::once(f64::NAN).chain(v).collect())
+            }),
             coil_current_a: data.current.as_ref().map(|c| c[..n].to_vec()),
         }
     }
@@ -326,7 +364,9 @@ impl CoverageRow {
     /// the population's tails, outside over much of its record
     /// (docs/calibration.md, "Does a new test fall in its band?").
     pub fn pooled_inside_p95<'a>(rows: impl IntoIterator<Item = &'a CoverageRow>) -> Option<f64> {
-        let (inside, samples) = rows.into_iter().fold((0.0, 0usize), |(i, n), r| (i + r.inside_p95 * r.samples as f64, n + r.samples));
+        let (inside, samples) = rows
+            .into_iter()
+            .fold((0.0, 0usize), |(i, n), r| (i + r.inside_p95 * r.samples as f64, n + r.samples));
         (samples > 0).then(|| inside / samples as f64)
     }
 }
@@ -339,7 +379,8 @@ mod tests {
 
     #[test]
     fn pooled_share_weighs_each_run_by_its_samples() {
-        let row = |samples, inside_p95| CoverageRow { samples, inside_p95, ..CoverageRow::default() };
+        let row =
+            |samples, inside_p95| CoverageRow { samples, inside_p95, ..CoverageRow::default() };
         // 1000 samples all inside and 250 a fifth inside: (1000 + 50) / 1250
         let rows = [row(1000, 1.0), row(250, 0.2)];
         assert!((CoverageRow::pooled_inside_p95(&rows).unwrap() - 0.84).abs() < 1e-12);
@@ -349,12 +390,21 @@ mod tests {
 
     fn ramp_run() -> RunData {
         let time: Vec<f64> = (0..400).map(|k| k as f64 * 5e-4).collect();
-        let gamma: Vec<f64> = time.iter().map(|t| 0.5 * (1.0 - (2.0 * std::f64::consts::PI * 2.5 * t).cos())).collect();
+        let gamma: Vec<f64> = time
+            .iter()
+            .map(|t| 0.5 * (1.0 - (2.0 * std::f64::consts::PI * 2.5 * t).cos()))
+            .collect();
         RunData::new("r".into(), time, gamma, vec![0.0; 400], 0.0, 1.0, (0.05, 1e-3), (0.0, 1.0))
     }
 
-    fn settings(integrator: Integrator, noise: NoiseKind, replicates: usize, seed: u64) -> PredictSettings {
-        let noise = noise.model(&NoiseOptions { errors_in_variables: false, ..NoiseOptions::default() });
+    fn settings(
+        integrator: Integrator,
+        noise: NoiseKind,
+        replicates: usize,
+        seed: u64,
+    ) -> PredictSettings {
+        let noise =
+            noise.model(&NoiseOptions { errors_in_variables: false, ..NoiseOptions::default() });
         PredictSettings { integrator, noise, replicates, seed }
     }
 
@@ -365,7 +415,9 @@ mod tests {
         use crate::sampler::quantile_sorted;
         let mut rng = crate::rng::stream(5, &[]);
         for n in [1usize, 2, 3, 10, 400, 4001] {
-            let v: Vec<f64> = (0..n).map(|i| if i % 7 == 0 { 1.5 } else { rand::RngExt::random::<f64>(&mut rng) }).collect();
+            let v: Vec<f64> = (0..n)
+                .map(|i| if i % 7 == 0 { 1.5 } else { rand::RngExt::random::<f64>(&mut rng) })
+                .collect();
             let mut sorted = v.clone();
             sorted.sort_unstable_by(f64::total_cmp);
             let probs = [0.025, 0.25, 0.5, 0.75, 0.975];
@@ -401,7 +453,12 @@ mod tests {
         assert_eq!((b.draws, b.failed), (40, 0));
         // identical draws: the lppd is the Gaussian log-likelihood of the
         // record (zeros) about the trajectory, summed by hand
-        let by_hand: f64 = truth[1..].iter().map(|m| -0.5 * (2.0 * std::f64::consts::PI).ln() - sigma.ln() - 0.5 * (m / sigma).powi(2)).sum();
+        let by_hand: f64 = truth[1..]
+            .iter()
+            .map(|m| {
+                -0.5 * (2.0 * std::f64::consts::PI).ln() - sigma.ln() - 0.5 * (m / sigma).powi(2)
+            })
+            .sum();
         assert!((b.lppd - by_hand).abs() < 1e-9 * by_hand.abs(), "{} vs {by_hand}", b.lppd);
     }
 

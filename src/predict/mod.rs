@@ -12,7 +12,10 @@ use crate::data::{Run, RunData};
 use crate::error::Result;
 use crate::posterior::Draw;
 pub use adequacy::{AdequacyRow, Excitation};
-pub use bands::{bands, bands_of, model_paths, Bands, Coverage, CoverageRow, PredictSettings, RunBands, MODEL_PROBS, PREDICTIVE_PROBS};
+pub use bands::{
+    bands, bands_of, model_paths, Bands, Coverage, CoverageRow, PredictSettings, RunBands,
+    MODEL_PROBS, PREDICTIVE_PROBS,
+};
 
 /// How posterior draws are propagated into bands (`mrbp predict`, `run`,
 /// `report`).
@@ -33,7 +36,9 @@ impl PredictOptions {
     /// Refuses no draws or no replicates.
     pub fn check(&self) -> Result<()> {
         if self.draws == 0 || self.replicates == 0 {
-            return Err(crate::error::Error::Usage("--draws and --replicates must be at least 1".into()));
+            return Err(crate::error::Error::Usage(
+                "--draws and --replicates must be at least 1".into(),
+            ));
         }
         Ok(())
     }
@@ -95,4 +100,3 @@ pub fn predict_run(
     let coverage = CoverageRow::of(run, &b, &b.coverage(&data.tau), calibrated);
     Ok(RunPrediction { bands: RunBands::of(run, data, b), coverage })
 }
-

@@ -5,13 +5,13 @@
 use std::path::Path;
 
 use super::figures::loop_band;
-use super::html::{esc, num, Page};
 use super::figures::Figures;
-use crate::predict::adequacy::{self, AdequacyRow};
+use super::html::{esc, num, Page};
 use crate::data::Geometry;
 use crate::error::Result;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
 use crate::posterior::{Allowance, LikelihoodSettings};
+use crate::predict::adequacy::{self, AdequacyRow};
 use crate::predict::RunBands;
 
 /// Lag-1 autocorrelation above which the report says the noise model
@@ -31,7 +31,14 @@ const TREND_SHARE: f64 = 0.2;
 /// (`rows` the adequacy of `bands`, in their order).
 /// `likelihood` is the calibration's: whether its intervals already allow
 /// for the residuals' memory (the tempered or adjusted likelihood).
-pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[AdequacyRow], geometry: &Geometry, likelihood: &LikelihoodSettings) -> Result<()> {
+pub fn section(
+    page: &mut Page,
+    dir: &Path,
+    bands: &[RunBands],
+    rows: &[AdequacyRow],
+    geometry: &Geometry,
+    likelihood: &LikelihoodSettings,
+) -> Result<()> {
     page.section("adequacy", "Model adequacy");
     page.para(
         "Where the calibrated law misses the records, in force (F = τA). The residual is the measured force minus the posterior-median model; \
@@ -47,15 +54,29 @@ pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[Adequacy
                 esc(&a.run),
                 esc(&a.excitation.label()),
                 num(a.peak_force_n, 3),
-                format!("{} ({:.1} %)", num(a.residual_rms_n, 3), 100.0 * a.residual_rms_n / a.peak_force_n),
+                format!(
+                    "{} ({:.1} %)",
+                    num(a.residual_rms_n, 3),
+                    100.0 * a.residual_rms_n / a.peak_force_n
+                ),
                 match a.innovation_lag1.is_finite() {
                     true => format!("{:.2} ({:.2})", a.lag1_autocorrelation, a.innovation_lag1),
                     false => format!("{:.2}", a.lag1_autocorrelation),
                 },
                 format!("{:.1}", a.interval_inflation),
                 format!("{} / {}", num(a.reversal_rms_n, 3), num(a.stroke_rms_n, 3)),
-                format!("{:.0} / {:.0} / {:.0}", 100.0 * a.inside_p95, 100.0 * a.inside_p95_reversal, 100.0 * a.inside_p95_stroke),
-                format!("{} / {} / {}", num(a.trend_offset_n, 2), num(a.trend_stiffness_n_per_m, 2), num(a.trend_damping_n_s_per_m, 2)),
+                format!(
+                    "{:.0} / {:.0} / {:.0}",
+                    100.0 * a.inside_p95,
+                    100.0 * a.inside_p95_reversal,
+                    100.0 * a.inside_p95_stroke
+                ),
+                format!(
+                    "{} / {} / {}",
+                    num(a.trend_offset_n, 2),
+                    num(a.trend_stiffness_n_per_m, 2),
+                    num(a.trend_damping_n_s_per_m, 2)
+                ),
                 format!("{:.0}", 100.0 * a.trend_share),
             ]
         })
@@ -66,7 +87,11 @@ pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[Adequacy
             "excitation",
             "peak force (N)",
             "residual RMS (N)",
-            if rows.iter().any(|a| a.innovation_lag1.is_finite()) { "lag-1 ρ (of the innovations)" } else { "lag-1 ρ" },
+            if rows.iter().any(|a| a.innovation_lag1.is_finite()) {
+                "lag-1 ρ (of the innovations)"
+            } else {
+                "lag-1 ρ"
+            },
             "intervals too narrow by ×",
             "RMS reversal / stroke (N)",
             "inside 95 % predictive: all / reversal / stroke (%)",
@@ -85,7 +110,8 @@ pub fn section(page: &mut Page, dir: &Path, bands: &[RunBands], rows: &[Adequacy
 }
 
 fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
-    v.filter(|x| x.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| (lo.min(x), hi.max(x)))
+    v.filter(|x| x.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| (lo.min(x), hi.max(x)))
 }
 
 fn spread(lo: f64, hi: f64, digits: usize) -> String {
@@ -103,7 +129,10 @@ pub fn findings(rows: &[AdequacyRow], allowance: Option<Allowance>) -> Vec<Strin
     if rows.is_empty() {
         return Vec::new();
     }
-    [size(rows), memory(rows, allowance), reversals(rows), missing_force(rows), excitation(rows)].into_iter().flatten().collect()
+    [size(rows), memory(rows, allowance), reversals(rows), missing_force(rows), excitation(rows)]
+        .into_iter()
+        .flatten()
+        .collect()
 }
 
 /// The misfit's size and the band's coverage.
@@ -122,7 +151,8 @@ fn size(rows: &[AdequacyRow]) -> Option<String> {
 /// Whether the residuals remember their past, and what that does to the
 /// intervals.
 fn memory(rows: &[AdequacyRow], allowance: Option<Allowance>) -> Option<String> {
-    let worst = rows.iter().max_by(|a, b| a.lag1_autocorrelation.total_cmp(&b.lag1_autocorrelation))?;
+    let worst =
+        rows.iter().max_by(|a, b| a.lag1_autocorrelation.total_cmp(&b.lag1_autocorrelation))?;
     if rows.iter().all(|a| a.innovation_lag1.is_finite()) {
         return Some(left_memory(rows, worst));
     }
@@ -164,7 +194,8 @@ fn memory(rows: &[AdequacyRow], allowance: Option<Allowance>) -> Option<String> 
 /// Memory with a noise model that has a force of its own: what the
 /// residuals carry, and what its innovations leave.
 fn left_memory(rows: &[AdequacyRow], worst: &AdequacyRow) -> String {
-    let left = rows.iter().max_by(|a, b| a.innovation_lag1.total_cmp(&b.innovation_lag1)).unwrap_or(worst);
+    let left =
+        rows.iter().max_by(|a, b| a.innovation_lag1.total_cmp(&b.innovation_lag1)).unwrap_or(worst);
     let carried = format!(
         "Memory: the residuals about the median model are correlated in time (lag-1 autocorrelation up to {:.2} on {}), \
          and the noise model takes that as a force the law lacks (the discrepancy, drawn below with its band).",
@@ -191,13 +222,23 @@ fn left_memory(rows: &[AdequacyRow], worst: &AdequacyRow) -> String {
 
 /// Runs whose misfit concentrates at the reversals.
 fn reversals(rows: &[AdequacyRow]) -> Option<String> {
-    let at_reversal: Vec<&AdequacyRow> = rows.iter().filter(|a| a.reversal_rms_n > REVERSAL_RATIO * a.stroke_rms_n).collect();
+    let at_reversal: Vec<&AdequacyRow> =
+        rows.iter().filter(|a| a.reversal_rms_n > REVERSAL_RATIO * a.stroke_rms_n).collect();
     if at_reversal.is_empty() {
         return None;
     }
     let list: Vec<String> = at_reversal
         .iter()
-        .map(|a| format!("{} ({} N against {} N, band holds {:.0} % against {:.0} %)", esc(&a.run), num(a.reversal_rms_n, 3), num(a.stroke_rms_n, 3), 100.0 * a.inside_p95_reversal, 100.0 * a.inside_p95_stroke))
+        .map(|a| {
+            format!(
+                "{} ({} N against {} N, band holds {:.0} % against {:.0} %)",
+                esc(&a.run),
+                num(a.reversal_rms_n, 3),
+                num(a.stroke_rms_n, 3),
+                100.0 * a.inside_p95_reversal,
+                100.0 * a.inside_p95_stroke
+            )
+        })
         .collect();
     Some(format!(
         "Reversals: the misfit concentrates where the motion reverses and the fluid yields again — {}. \
@@ -235,7 +276,8 @@ fn missing_force(rows: &[AdequacyRow]) -> Option<String> {
 
 /// Which excitation the law fits worst and best.
 fn excitation(rows: &[AdequacyRow]) -> Option<String> {
-    let labels: std::collections::BTreeSet<String> = rows.iter().map(|a| a.excitation.label()).collect();
+    let labels: std::collections::BTreeSet<String> =
+        rows.iter().map(|a| a.excitation.label()).collect();
     if labels.len() <= 1 {
         return None;
     }
@@ -263,28 +305,68 @@ fn excitation(rows: &[AdequacyRow]) -> Option<String> {
 /// One figure per run: force against velocity with the 95 % predictive
 /// band (the loop a damper engineer reads), the residual against
 /// displacement and against velocity, and its autocorrelation over a cycle.
-fn figures(dir: &Path, bands: &[RunBands], rows: &[AdequacyRow], geometry: &Geometry, figs: &mut Figures) -> Result<()> {
+fn figures(
+    dir: &Path,
+    bands: &[RunBands],
+    rows: &[AdequacyRow],
+    geometry: &Geometry,
+    figs: &mut Figures,
+) -> Result<()> {
     let area = geometry.area_m2;
     for (b, a) in bands.iter().zip(rows) {
         let (x, v) = adequacy::kinematics(b, geometry.gap_m);
         let residual = adequacy::residual_force(b, area);
         let step = b.time.len().div_ceil(1500).max(1);
-        let pick = |s: &[f64], scale: f64| s.iter().step_by(step).map(|y| y * scale).collect::<Vec<f64>>();
+        let pick =
+            |s: &[f64], scale: f64| s.iter().step_by(step).map(|y| y * scale).collect::<Vec<f64>>();
         let newton = |s: &[f64]| s.iter().map(|t| t * area).collect::<Vec<f64>>();
         let v_mm: Vec<f64> = v.iter().map(|v| v * 1e3).collect();
 
-        let mut loop_fv = Chart::new(format!("{}: force against velocity", b.run), "velocity v (mm/s)", "force F (N)");
-        loop_fv.series.extend(loop_band("95 % predictive", PALETTE[5], &v_mm, &newton(&b.predictive[0]), &newton(&b.predictive[1]), 0.3));
-        loop_fv.series.push(Series::points(Some("measured".into()), plot::BLACK_, pick(&v, 1e3), pick(&b.tau_obs, area)).with_width(1));
-        loop_fv.series.push(Series::line(Some("posterior median".into()), PALETTE[1], v_mm.clone(), newton(&b.model[2])).with_width(1));
+        let mut loop_fv = Chart::new(
+            format!("{}: force against velocity", b.run),
+            "velocity v (mm/s)",
+            "force F (N)",
+        );
+        loop_fv.series.extend(loop_band(
+            "95 % predictive",
+            PALETTE[5],
+            &v_mm,
+            &newton(&b.predictive[0]),
+            &newton(&b.predictive[1]),
+            0.3,
+        ));
+        loop_fv.series.push(
+            Series::points(
+                Some("measured".into()),
+                plot::BLACK_,
+                pick(&v, 1e3),
+                pick(&b.tau_obs, area),
+            )
+            .with_width(1),
+        );
+        loop_fv.series.push(
+            Series::line(
+                Some("posterior median".into()),
+                PALETTE[1],
+                v_mm.clone(),
+                newton(&b.model[2]),
+            )
+            .with_width(1),
+        );
         loop_fv.legend_at = LegendAt::LowerRight;
 
         let against = |title: &str, label: &str, s: &[f64], scale: f64| {
-            let mut c = Chart::new(format!("{}: residual against {title}", b.run), label, "F_obs − F_median (N)");
+            let mut c = Chart::new(
+                format!("{}: residual against {title}", b.run),
+                label,
+                "F_obs − F_median (N)",
+            );
             let xs = pick(s, scale);
             let (lo, hi) = range(xs.iter().copied());
-            c.series.push(Series::points(None, plot::BLACK_, xs, pick(&residual, 1.0)).with_width(1));
-            c.series.push(Series::line(None, PALETTE[1], vec![lo, hi], vec![0.0, 0.0]).with_width(1));
+            c.series
+                .push(Series::points(None, plot::BLACK_, xs, pick(&residual, 1.0)).with_width(1));
+            c.series
+                .push(Series::line(None, PALETTE[1], vec![lo, hi], vec![0.0, 0.0]).with_width(1));
             c
         };
         let vs_x = against("displacement", "displacement x (mm)", &x, 1e3);
@@ -297,16 +379,29 @@ fn figures(dir: &Path, bands: &[RunBands], rows: &[AdequacyRow], geometry: &Geom
         let lag_s: Vec<f64> = (0..acf.len()).map(|k| k as f64 * dt).collect();
         let white = 1.96 / (finite.len().max(1) as f64).sqrt();
         let end = lag_s.last().copied().unwrap_or(1.0);
-        let mut acf_chart = Chart::new(format!("{}: residual autocorrelation", b.run), "lag (s)", "autocorrelation");
-        acf_chart.series.push(Series::line(Some("residual".into()), PALETTE[0], lag_s, acf).with_width(2));
-        acf_chart.series.push(Series::dashed(Some("independent noise (95 %)".into()), GREY, vec![0.0, end], vec![white, white]));
+        let mut acf_chart = Chart::new(
+            format!("{}: residual autocorrelation", b.run),
+            "lag (s)",
+            "autocorrelation",
+        );
+        acf_chart
+            .series
+            .push(Series::line(Some("residual".into()), PALETTE[0], lag_s, acf).with_width(2));
+        acf_chart.series.push(Series::dashed(
+            Some("independent noise (95 %)".into()),
+            GREY,
+            vec![0.0, end],
+            vec![white, white],
+        ));
         acf_chart.series.push(Series::dashed(None, GREY, vec![0.0, end], vec![-white, -white]));
         let mut panels = vec![loop_fv, vs_x, vs_v];
         if let Some([mean, sd, innovation]) = &b.discrepancy {
             let w: Vec<f64> = innovation.iter().copied().filter(|v| v.is_finite()).collect();
             let acf_w = adequacy::autocorrelation(&w, lags);
             let lag_w: Vec<f64> = (0..acf_w.len()).map(|k| k as f64 * dt).collect();
-            acf_chart.series.push(Series::line(Some("innovations".into()), PALETTE[3], lag_w, acf_w).with_width(2));
+            acf_chart.series.push(
+                Series::line(Some("innovations".into()), PALETTE[3], lag_w, acf_w).with_width(2),
+            );
             panels.push(discrepancy_panel(b, &residual, mean, sd, area));
         }
         acf_chart.legend_at = LegendAt::UpperRight;
@@ -339,16 +434,31 @@ fn figures(dir: &Path, bands: &[RunBands], rows: &[AdequacyRow], geometry: &Geom
 /// in it: its smoothed mean and a 90 % band (± 1.645 sd), in N.
 fn discrepancy_panel(b: &RunBands, residual: &[f64], mean: &[f64], sd: &[f64], area: f64) -> Chart {
     // from the second sample (the first is the fixed initial state)
-    let at: Vec<usize> = (1..b.time.len()).step_by(b.time.len().div_ceil(1500).max(1)).filter(|&k| mean[k].is_finite()).collect();
+    let at: Vec<usize> = (1..b.time.len())
+        .step_by(b.time.len().div_ceil(1500).max(1))
+        .filter(|&k| mean[k].is_finite())
+        .collect();
     let of = |f: &dyn Fn(usize) -> f64| -> Vec<f64> { at.iter().map(|&k| f(k)).collect() };
     let t = of(&|k| b.time[k]);
     let mut c = Chart::new(format!("{}: discrepancy over time", b.run), "time t (s)", "force (N)");
-    c.series.push(Series::points(Some("residual".into()), plot::BLACK_, t.clone(), of(&|k| residual[k])).with_width(1));
     c.series.push(
-        Series::band(Some("discrepancy, 90 %".into()), PALETTE[3], t.clone(), of(&|k| (mean[k] - 1.645 * sd[k]) * area), of(&|k| (mean[k] + 1.645 * sd[k]) * area))
-            .with_opacity(0.3),
+        Series::points(Some("residual".into()), plot::BLACK_, t.clone(), of(&|k| residual[k]))
+            .with_width(1),
     );
-    c.series.push(Series::line(Some("discrepancy".into()), PALETTE[3], t, of(&|k| mean[k] * area)).with_width(2));
+    c.series.push(
+        Series::band(
+            Some("discrepancy, 90 %".into()),
+            PALETTE[3],
+            t.clone(),
+            of(&|k| (mean[k] - 1.645 * sd[k]) * area),
+            of(&|k| (mean[k] + 1.645 * sd[k]) * area),
+        )
+        .with_opacity(0.3),
+    );
+    c.series.push(
+        Series::line(Some("discrepancy".into()), PALETTE[3], t, of(&|k| mean[k] * area))
+            .with_width(2),
+    );
     c.legend_at = LegendAt::UpperRight;
     c
 }

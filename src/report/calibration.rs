@@ -5,21 +5,21 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use super::html::{esc, num, Mark, Page};
-use super::figures::{self, Figures};
 use super::adequacy;
+use super::figures::{self, Figures};
+use super::html::{esc, num, Mark, Page};
 use crate::atomic;
+use crate::calibrate::Calibration;
+use crate::calibrate::CONFOUNDING_RATIO;
 use crate::data::{current_tag, Campaign};
 use crate::error::{Error, Result};
 use crate::model::PARAM_NAMES;
 use crate::posterior::map::step_shift_limit;
-use crate::calibrate::CONFOUNDING_RATIO;
 use crate::posterior::ParameterModel;
-use crate::calibrate::Calibration;
 use crate::predict::{CoverageRow, Prediction};
 use crate::sampler::diagnostics::MIN_TAU_MULTIPLE;
-use crate::validate::consistency::ParameterConsistency;
 use crate::validate::between_runs::{LeftOut, NewTestRow};
+use crate::validate::consistency::ParameterConsistency;
 use crate::validate::LeaveOneOut;
 
 /// The share of observations a 95 % predictive band should hold for the
@@ -77,13 +77,30 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
         disagreement_note(&mut page, parameters);
     }
     page.section("diagnostics", "Diagnostics");
-    let rows: Vec<Vec<String>> = checks.iter().map(|(what, mark, detail)| vec![esc(what), mark.html().into(), esc(detail)]).collect();
+    let rows: Vec<Vec<String>> = checks
+        .iter()
+        .map(|(what, mark, detail)| vec![esc(what), mark.html().into(), esc(detail)])
+        .collect();
     page.table(&["check", "", "measured"], &rows);
-    for w in r.cal.record.warnings.iter().chain(&r.cal.record.model_warnings).chain(&r.cal.record.confounding) {
+    for w in r
+        .cal
+        .record
+        .warnings
+        .iter()
+        .chain(&r.cal.record.model_warnings)
+        .chain(&r.cal.record.confounding)
+    {
         page.note(w);
     }
     coverage_section(&mut page, r);
-    adequacy::section(&mut page, dir, &r.prediction.bands, &r.prediction.adequacy, &r.campaign.geometry, &r.cal.settings.likelihood)?;
+    adequacy::section(
+        &mut page,
+        dir,
+        &r.prediction.bands,
+        &r.prediction.adequacy,
+        &r.campaign.geometry,
+        &r.cal.settings.likelihood,
+    )?;
     validation_section(&mut page, r, &loo_figs)?;
     consistency_section(&mut page, r)?;
     figures_section(&mut page, r.cal, &figs)?;
@@ -96,7 +113,11 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
 fn title(cal: &Calibration) -> String {
     let rec = &cal.record;
     if cal.is_current_law() {
-        let kind = if cal.sample.model.kind() == crate::posterior::ModelKind::CurrentCurves { "current curves" } else { "current law" };
+        let kind = if cal.sample.model.kind() == crate::posterior::ModelKind::CurrentCurves {
+            "current curves"
+        } else {
+            "current law"
+        };
         format!("mrbp report: {}, {kind} from {:?} A", rec.campaign, rec.currents)
     } else {
         format!("mrbp report: {} at {} A", rec.campaign, rec.current_a)
@@ -105,14 +126,16 @@ fn title(cal: &Calibration) -> String {
 
 fn calibrated_at(cal: &Calibration) -> String {
     match cal.sample.model {
-        ParameterModel::CurrentLaw { reference_a, .. } => format!("{:?} A as functions of the coil current (reference {reference_a} A)", cal.record.currents),
+        ParameterModel::CurrentLaw { reference_a, .. } => format!(
+            "{:?} A as functions of the coil current (reference {reference_a} A)",
+            cal.record.currents
+        ),
         ParameterModel::CurrentCurves { low_a, high_a, .. } => {
             format!("{:?} A, each parameter its own curve in the coil current through its values at {low_a} and {high_a} A", cal.record.currents)
         }
         ParameterModel::PerCurrent => format!("{} A", cal.record.current_a),
     }
 }
-
 
 /// The figures of the calibration and of its leave-one-out study.
 /// The corner plot shows every coordinate up to this many, else θ alone.
@@ -127,12 +150,31 @@ fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
     figures::residuals(dir, &r.prediction.bands, &mut figs)?;
     if cal.is_current_law() {
         // the table the folder holds; computed afresh for a folder made before it
-        let rows = match crate::store::against_current::read(dir, &rec.calibration_id, crate::store::folder::REBUILD)? {
+        let rows = match crate::store::against_current::read(
+            dir,
+            &rec.calibration_id,
+            crate::store::folder::REBUILD,
+        )? {
             Some(rows) => rows,
-            None => crate::compare::against_current(&cal.sample, &cal.draw_positions(crate::store::folder::CURRENT_DRAWS), &rec.currents),
+            None => crate::compare::against_current(
+                &cal.sample,
+                &cal.draw_positions(crate::store::folder::CURRENT_DRAWS),
+                &rec.currents,
+            ),
         };
-        let law = figures::LawCurves { label: "law", rows: &rows, calibrated_a: &rec.currents, color: None };
-        figures::against_current(dir, &[law], &[], " The values are in against_current.parquet.", &mut figs)?;
+        let law = figures::LawCurves {
+            label: "law",
+            rows: &rows,
+            calibrated_a: &rec.currents,
+            color: None,
+        };
+        figures::against_current(
+            dir,
+            &[law],
+            &[],
+            " The values are in against_current.parquet.",
+            &mut figs,
+        )?;
     }
     let positions = cal.draw_positions(PLOT_DRAWS);
     // θ and the noise scales, as long as the matrix stays readable
@@ -141,10 +183,21 @@ fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
     if layout.names.len() <= CORNER_MAX {
         shown = layout.names.clone();
     }
-    let named = |m: &BTreeMap<String, f64>| -> Vec<f64> { shown.iter().map(|n| m.get(n).copied().unwrap_or(f64::NAN)).collect() };
+    let named = |m: &BTreeMap<String, f64>| -> Vec<f64> {
+        shown.iter().map(|n| m.get(n).copied().unwrap_or(f64::NAN)).collect()
+    };
     // a current law's coordinates are not the identification's parameters
-    let identified = if cal.is_current_law() { vec![f64::NAN; shown.len()] } else { named(&rec.identification) };
-    figures::corner(dir, &cal.sample, &shown, &positions, &identified, &named(&rec.map), &mut figs)?;
+    let identified =
+        if cal.is_current_law() { vec![f64::NAN; shown.len()] } else { named(&rec.identification) };
+    figures::corner(
+        dir,
+        &cal.sample,
+        &shown,
+        &positions,
+        &identified,
+        &named(&rec.map),
+        &mut figs,
+    )?;
     let priors = cal.sample.model.priors(&cal.settings.priors());
     figures::marginals(dir, &cal.sample, &positions, &priors, &mut figs)?;
     figures::traces(dir, &cal.sample, cal.burn_in(), &mut figs)?;
@@ -178,21 +231,45 @@ fn campaign_section(page: &mut Page, r: &CalibrationReport) {
             ]
         })
         .collect();
-    page.table(&["run", "samples", "duration (s)", "current (A)", "peak force (N)", "loading branches"], &rows);
+    page.table(
+        &["run", "samples", "duration (s)", "current (A)", "peak force (N)", "loading branches"],
+        &rows,
+    );
     let geometry = r.campaign.geometry;
     let integ = &cal.settings.integrator;
     page.table(
         &["setting", "value"],
         &[
             vec!["manifest".into(), esc(&rec.manifest)],
-            vec!["geometry".into(), format!("A = {} m², h = {} m", geometry.area_m2, geometry.gap_m)],
-            vec!["noise model".into(), esc(&format!("{:?}{}", rec.noise, crate::report::text::memory_note(&cal.settings.likelihood)))],
+            vec![
+                "geometry".into(),
+                format!("A = {} m², h = {} m", geometry.area_m2, geometry.gap_m),
+            ],
+            vec![
+                "noise model".into(),
+                esc(&format!(
+                    "{:?}{}",
+                    rec.noise,
+                    crate::report::text::memory_note(&cal.settings.likelihood)
+                )),
+            ],
             vec!["samples in the likelihood".into(), esc(&format!("{:?}", rec.part))],
             vec![
                 "integrator".into(),
-                format!("{:?}, {} sub-step(s) per sample{}", integ.scheme, rec.substeps, if integ.extrapolate { ", Richardson-extrapolated" } else { "" }),
+                format!(
+                    "{:?}, {} sub-step(s) per sample{}",
+                    integ.scheme,
+                    rec.substeps,
+                    if integ.extrapolate { ", Richardson-extrapolated" } else { "" }
+                ),
             ],
-            vec!["sampler".into(), format!("{} ensembles × {} walkers, {} steps, burn-in {}", rec.ensembles, rec.walkers, rec.steps, rec.burn_in)],
+            vec![
+                "sampler".into(),
+                format!(
+                    "{} ensembles × {} walkers, {} steps, burn-in {}",
+                    rec.ensembles, rec.walkers, rec.steps, rec.burn_in
+                ),
+            ],
             vec!["seed".into(), rec.seed.to_string()],
         ],
     );
@@ -216,7 +293,10 @@ fn identification_section(page: &mut Page, cal: &Calibration) {
         })
         .collect();
     page.para("The paper's step-by-step identification, the posterior mode (MAP) and the posterior median with its 90 % credible interval, in SI units (Pa, 1/Pa, –).");
-    page.table(&["parameter", "identification", "MAP", "posterior median", "90 % credible interval"], &rows);
+    page.table(
+        &["parameter", "identification", "MAP", "posterior median", "90 % credible interval"],
+        &rows,
+    );
 }
 
 /// Below the posterior summary: the parameters on which the runs
@@ -230,7 +310,13 @@ fn disagreement_note(page: &mut Page, parameters: &[ParameterConsistency]) {
                 "-" | "" => String::new(),
                 u => format!(" {u}"),
             };
-            format!("{} {} – {}{unit} (χ²/ν = {:.1})", p.parameter, num(p.new_test.q05, 3), num(p.new_test.q95, 3), p.chi2_nu)
+            format!(
+                "{} {} – {}{unit} (χ²/ν = {:.1})",
+                p.parameter,
+                num(p.new_test.q05, 3),
+                num(p.new_test.q95, 3),
+                p.chi2_nu
+            )
         })
         .collect();
     if !disagree.is_empty() {
@@ -260,7 +346,10 @@ fn posterior_section(page: &mut Page, cal: &Calibration) {
                 num(s.q95, 4),
                 format!("{:.0}", s.ess_bulk),
                 format!("{:.0}", s.ess_tail),
-                cal.record.ess_bulk_per_second.get(&s.parameter).map_or("–".into(), |v| format!("{v:.0}")),
+                cal.record
+                    .ess_bulk_per_second
+                    .get(&s.parameter)
+                    .map_or("–".into(), |v| format!("{v:.0}")),
                 format!("{:.4}", s.r_hat),
                 format!("{:.1}", s.tau_int),
                 Mark::of(ok).html().into(),
@@ -268,7 +357,23 @@ fn posterior_section(page: &mut Page, cal: &Calibration) {
         })
         .collect();
     page.para("ESS/s: bulk effective sample size per second of the whole calibration (identification, MAP, step rule and sampling).");
-    page.table(&["parameter", "mean", "sd", "q05", "q50", "q95", "ESS bulk", "ESS tail", "ESS/s", "R̂", "τ (steps)", ""], &rows);
+    page.table(
+        &[
+            "parameter",
+            "mean",
+            "sd",
+            "q05",
+            "q50",
+            "q95",
+            "ESS bulk",
+            "ESS tail",
+            "ESS/s",
+            "R̂",
+            "τ (steps)",
+            "",
+        ],
+        &rows,
+    );
 }
 
 fn coverage_section(page: &mut Page, r: &CalibrationReport) {
@@ -328,7 +433,9 @@ fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
     let rows: Vec<Vec<String>> = parameters
         .iter()
         .map(|p| {
-            let interval = |e: &crate::validate::consistency::Estimate| format!("{} – {}", num(e.q05, 4), num(e.q95, 4));
+            let interval = |e: &crate::validate::consistency::Estimate| {
+                format!("{} – {}", num(e.q05, 4), num(e.q95, 4))
+            };
             vec![
                 esc(&p.parameter),
                 format!("{:.2}", p.chi2_nu),
@@ -340,7 +447,10 @@ fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
             ]
         })
         .collect();
-    page.table(&["parameter", "χ²/ν", "p", "", "joint 90 %", "new test 90 %", "spread between tests"], &rows);
+    page.table(
+        &["parameter", "χ²/ν", "p", "", "joint 90 %", "new test 90 %", "spread between tests"],
+        &rows,
+    );
     for p in parameters.iter().filter(|p| p.disagrees()) {
         page.note(&p.verdict());
     }
@@ -361,7 +471,9 @@ fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
 fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut>) {
     page.para("Each run predicted as a new test of this damper: the between-run layer fitted to every other run calibrated alone, at every current, draws the run's parameters and noise, which the integrator carries along its record. Beside it, where the leave-one-out study was run, the same run predicted by the joint calibration of the other runs at its current. Pooled over many tests, a right band for a new test holds about 95 % of the samples; one test is inside nearly everywhere or, if its parameters lie in the population's tails, outside over much of its record, since tests differ by more than the noise. So a run near 100 % is a typical test, a run far below is unlike the others, and the pooled share under the tables judges the band (docs/calibration.md); the log predictive density per sample scores sharpness and honesty together (higher is better).");
     let per_sample = |c: &CoverageRow| c.lppd / c.samples.max(1) as f64;
-    let joint = |run: &str| loo.and_then(|l| l.rows.iter().find(|r| r.coverage.run == run)).map(|r| &r.coverage);
+    let joint = |run: &str| {
+        loo.and_then(|l| l.rows.iter().find(|r| r.coverage.run == run)).map(|r| &r.coverage)
+    };
     let table: Vec<Vec<String>> = rows
         .iter()
         .filter(|r| r.left_out == LeftOut::Run)
@@ -381,7 +493,16 @@ fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut
         })
         .collect();
     page.table(
-        &["held out", "new test: inside 95 % (%)", "joint: inside 95 % (%)", "new test: RMS to median (Pa)", "joint: RMS to median (Pa)", "new test: lppd per sample", "joint: lppd per sample", ""],
+        &[
+            "held out",
+            "new test: inside 95 % (%)",
+            "joint: inside 95 % (%)",
+            "new test: RMS to median (Pa)",
+            "joint: RMS to median (Pa)",
+            "new test: lppd per sample",
+            "joint: lppd per sample",
+            "",
+        ],
         &table,
     );
     let by_current: Vec<Vec<String>> = rows
@@ -389,12 +510,29 @@ fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut
         .filter(|r| r.left_out == LeftOut::Current)
         .map(|r| {
             let c = &r.coverage;
-            vec![esc(&c.run), format!("{:.1}", 100.0 * c.inside_p95), format!("{:.1}", 100.0 * c.inside_q95), format!("{:.0}", c.rmse_q50_pa), format!("{:.3}", per_sample(c)), Mark::of(c.inside_p95 >= 0.85).html().into()]
+            vec![
+                esc(&c.run),
+                format!("{:.1}", 100.0 * c.inside_p95),
+                format!("{:.1}", 100.0 * c.inside_q95),
+                format!("{:.0}", c.rmse_q50_pa),
+                format!("{:.3}", per_sample(c)),
+                Mark::of(c.inside_p95 >= 0.85).html().into(),
+            ]
         })
         .collect();
     if !by_current.is_empty() {
         page.para("A current the layer never saw: every run at this current left out, the layer fitted to the runs at the other currents, its centre here read off its curve in the current (docs/calibration.md), and each run predicted as a new test there.");
-        page.table(&["held out with its current", "inside 95 % (%)", "inside model band (%)", "RMS to median (Pa)", "lppd per sample", ""], &by_current);
+        page.table(
+            &[
+                "held out with its current",
+                "inside 95 % (%)",
+                "inside model band (%)",
+                "RMS to median (Pa)",
+                "lppd per sample",
+                "",
+            ],
+            &by_current,
+        );
     }
     let pooled = super::text::new_test_pooled(rows);
     if !pooled.is_empty() {
@@ -409,10 +547,19 @@ fn figures_section(page: &mut Page, cal: &Calibration, figs: &Figures) -> Result
     }
     let tag = current_tag(cal.record.current_a);
     let ident = [
-        ("fig1_tau_gamma", "Identification, Fig. 1: the loading branches used by the identification."),
-        ("fig2_yield_rate", "Identification, Fig. 2: yield stress against inelastic strain rate (eq. 6)."),
+        (
+            "fig1_tau_gamma",
+            "Identification, Fig. 1: the loading branches used by the identification.",
+        ),
+        (
+            "fig2_yield_rate",
+            "Identification, Fig. 2: yield stress against inelastic strain rate (eq. 6).",
+        ),
         ("fig3_tau_gamma_i", "Identification, Fig. 3: stress against inelastic strain with eq. 7."),
-        ("fig4_euler", "Identification, Fig. 4: Euler solution of the identified model against the records."),
+        (
+            "fig4_euler",
+            "Identification, Fig. 4: Euler solution of the identified model against the records.",
+        ),
         ("fig5_psi", "Identification, Fig. 5: the hardening function ψ."),
     ];
     for (stem, caption) in ident {
@@ -447,7 +594,8 @@ fn reproduce_section(page: &mut Page, r: &CalibrationReport) {
         ],
     );
     page.para("The settings below (config.toml in the folder) repeat the calibration with `mrbp sample MANIFEST --config config.toml --out DIR`; the same seed gives the same chains bit for bit, on any number of threads.");
-    let config = std::fs::read_to_string(r.cal.dir.join(crate::store::folder::CONFIG)).unwrap_or_default();
+    let config =
+        std::fs::read_to_string(r.cal.dir.join(crate::store::folder::CONFIG)).unwrap_or_default();
     page.pre(&config);
 }
 
@@ -467,7 +615,11 @@ pub(super) fn coverage_table(page: &mut Page, rows: &[CoverageRow], leave_one_ou
         .iter()
         .map(|r| {
             vec![
-                if r.calibrated || leave_one_out { esc(&r.run) } else { format!("{} <b>(held out)</b>", esc(&r.run)) },
+                if r.calibrated || leave_one_out {
+                    esc(&r.run)
+                } else {
+                    format!("{} <b>(held out)</b>", esc(&r.run))
+                },
                 num(r.current_a, 2),
                 r.samples.to_string(),
                 format!("{:.1}", 100.0 * r.inside_p95),
@@ -479,7 +631,16 @@ pub(super) fn coverage_table(page: &mut Page, rows: &[CoverageRow], leave_one_ou
         })
         .collect();
     page.table(
-        &["run", "current (A)", "samples", "inside 95 % predictive (%)", "inside 95 % model (%)", "RMS residual to median (Pa)", "draws", ""],
+        &[
+            "run",
+            "current (A)",
+            "samples",
+            "inside 95 % predictive (%)",
+            "inside 95 % model (%)",
+            "RMS residual to median (Pa)",
+            "draws",
+            "",
+        ],
         &rows,
     );
 }
@@ -495,12 +656,29 @@ fn verdicts(cal: &Calibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, S
     let kept = (cal.record.steps + 1).saturating_sub(cal.record.burn_in) as f64;
     let min_ess = cal.settings.sampler.min_ess;
     let mut v = vec![
-        ("R̂ (rank-normalised split, across ensembles) < 1.01".to_string(), Mark::of(max_rhat < 1.01), format!("largest {max_rhat:.4}")),
-        (format!("bulk and tail ESS ≥ {min_ess:.0}"), Mark::of(min_bulk >= min_ess && min_tail >= min_ess), format!("smallest bulk {min_bulk:.0}, tail {min_tail:.0}")),
-        (format!("chains longer than {MIN_TAU_MULTIPLE} τ after burn-in"), Mark::of(kept >= MIN_TAU_MULTIPLE * tau), format!("{kept:.0} steps, τ_max {tau:.2} ({:.1} τ)", kept / tau)),
-        ("no sampler warnings (stuck walkers …)".to_string(), Mark::of(cal.record.warnings.is_empty()), format!("{} warning(s)", cal.record.warnings.len())),
         (
-            "residuals as independent as the noise model assumes (MAP lag-1 autocorrelation ≤ 0.5)".to_string(),
+            "R̂ (rank-normalised split, across ensembles) < 1.01".to_string(),
+            Mark::of(max_rhat < 1.01),
+            format!("largest {max_rhat:.4}"),
+        ),
+        (
+            format!("bulk and tail ESS ≥ {min_ess:.0}"),
+            Mark::of(min_bulk >= min_ess && min_tail >= min_ess),
+            format!("smallest bulk {min_bulk:.0}, tail {min_tail:.0}"),
+        ),
+        (
+            format!("chains longer than {MIN_TAU_MULTIPLE} τ after burn-in"),
+            Mark::of(kept >= MIN_TAU_MULTIPLE * tau),
+            format!("{kept:.0} steps, τ_max {tau:.2} ({:.1} τ)", kept / tau),
+        ),
+        (
+            "no sampler warnings (stuck walkers …)".to_string(),
+            Mark::of(cal.record.warnings.is_empty()),
+            format!("{} warning(s)", cal.record.warnings.len()),
+        ),
+        (
+            "residuals as independent as the noise model assumes (MAP lag-1 autocorrelation ≤ 0.5)"
+                .to_string(),
             Mark::of(cal.record.model_warnings.is_empty()),
             format!("{} run(s) with memory: see Model adequacy", cal.record.runs_with_memory()),
         ),
@@ -517,19 +695,31 @@ fn verdicts(cal: &Calibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, S
         v.push((
             "integrator step: halving it moves no MAP parameter by the limit".to_string(),
             Mark::of(last.largest_shift_sd < limit),
-            format!("{} sub-step(s): {:.3} sd ({}), limit {limit:.3}", last.substeps, last.largest_shift_sd, last.parameter),
+            format!(
+                "{} sub-step(s): {:.3} sd ({}), limit {limit:.3}",
+                last.substeps, last.largest_shift_sd, last.parameter
+            ),
         ));
     }
     for r in coverage.iter().filter(|r| !r.calibrated) {
         v.push((
-            format!("{} (held out): 95 % predictive band holds ≥ {:.0} % of the record", r.run, 100.0 * HELD_OUT_OK),
+            format!(
+                "{} (held out): 95 % predictive band holds ≥ {:.0} % of the record",
+                r.run,
+                100.0 * HELD_OUT_OK
+            ),
             Mark::of(coverage_ok(r, false) && r.failed_draws == 0),
             format!("{:.1} %, {} failed draw(s)", 100.0 * r.inside_p95, r.failed_draws),
         ));
     }
     for r in coverage.iter().filter(|r| r.calibrated) {
         v.push((
-            format!("{}: 95 % predictive band holds {:.0}–{:.0} % of the record", r.run, 100.0 * COVERAGE_OK.0, 100.0 * COVERAGE_OK.1),
+            format!(
+                "{}: 95 % predictive band holds {:.0}–{:.0} % of the record",
+                r.run,
+                100.0 * COVERAGE_OK.0,
+                100.0 * COVERAGE_OK.1
+            ),
             Mark::of(coverage_ok(r, false) && r.failed_draws == 0),
             format!("{:.1} %, {} failed draw(s)", 100.0 * r.inside_p95, r.failed_draws),
         ));

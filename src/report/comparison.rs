@@ -3,20 +3,20 @@
 
 use std::path::{Path, PathBuf};
 
-use super::html::{esc, num, Mark, Page};
 use super::figures::{AtCurrent, Figures, LawCurves};
-use crate::predict::adequacy::{AdequacyRow, Excitation};
+use super::html::{esc, num, Mark, Page};
 use crate::atomic;
+use crate::calibrate::Calibration;
 use crate::compare::{self, Comparison, CurrentRow};
 use crate::data::{loading_branches, REVERSAL_SHARE};
 use crate::error::Result;
 use crate::model::PARAM_NAMES;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 use crate::posterior::unit_of;
+use crate::predict::adequacy::{AdequacyRow, Excitation};
 use crate::predict::{Prediction, RunBands};
-use crate::calibrate::Calibration;
-use crate::validate::between_runs::TypicalRow;
 use crate::store::command_line;
+use crate::validate::between_runs::TypicalRow;
 
 /// One calibration in a comparison: its folder, the draws compared, and
 /// its bands and coverage where they were computed.
@@ -56,7 +56,13 @@ fn rpm_of(time: &[f64], displacement: &[f64]) -> f64 {
 /// bands are overlaid.
 /// `typical`: the between-run layer's typical test against the current,
 /// where the folders hold one (`--per-run`).
-pub fn write(out: &Path, entries: &[Entry], comparison: &Comparison, rpm: Option<f64>, typical: Option<&[TypicalRow]>) -> Result<PathBuf> {
+pub fn write(
+    out: &Path,
+    entries: &[Entry],
+    comparison: &Comparison,
+    rpm: Option<f64>,
+    typical: Option<&[TypicalRow]>,
+) -> Result<PathBuf> {
     atomic::remove(&out.join(super::html::REPORT))?;
     let mut figs = Figures::default();
     forest(out, entries, &mut figs)?;
@@ -95,17 +101,34 @@ fn calibrations_section(page: &mut Page, entries: &[Entry]) {
         .map(|e| {
             let (rhat, ess) = (e.cal.max_rhat(), e.cal.min_ess());
             // every warning of the calibration counts, not only R̂ and ESS
-            let warnings: Vec<&String> = e.cal.record.warnings.iter().chain(&e.cal.record.model_warnings).chain(&e.cal.record.confounding).collect();
-            let pass = rhat < 1.01 && ess >= e.cal.settings.sampler.min_ess && e.cal.record.warnings.is_empty();
+            let warnings: Vec<&String> = e
+                .cal
+                .record
+                .warnings
+                .iter()
+                .chain(&e.cal.record.model_warnings)
+                .chain(&e.cal.record.confounding)
+                .collect();
+            let pass = rhat < 1.01
+                && ess >= e.cal.settings.sampler.min_ess
+                && e.cal.record.warnings.is_empty();
             let verdict = if warnings.is_empty() {
                 Mark::of(pass).html().to_string()
             } else {
-                format!("{} {}", Mark::of(pass).html(), warnings.iter().map(|w| esc(w)).collect::<Vec<_>>().join("; "))
+                format!(
+                    "{} {}",
+                    Mark::of(pass).html(),
+                    warnings.iter().map(|w| esc(w)).collect::<Vec<_>>().join("; ")
+                )
             };
             vec![
                 esc(&e.label),
                 if e.is_law() { "current law".into() } else { "per current".into() },
-                if e.is_law() { format!("{:?}", e.cal.record.currents) } else { num(e.cal.record.current_a, 2) },
+                if e.is_law() {
+                    format!("{:?}", e.cal.record.currents)
+                } else {
+                    num(e.cal.record.current_a, 2)
+                },
                 esc(&e.cal.record.runs.join(", ")),
                 format!("{rhat:.4}"),
                 format!("{ess:.0}"),
@@ -113,7 +136,10 @@ fn calibrations_section(page: &mut Page, entries: &[Entry]) {
             ]
         })
         .collect();
-    page.table(&["calibration", "model", "current (A)", "runs", "max R̂", "min ESS", "converged; warnings"], &rows_html);
+    page.table(
+        &["calibration", "model", "current (A)", "runs", "max R̂", "min ESS", "converged; warnings"],
+        &rows_html,
+    );
 }
 
 fn parameters_section(page: &mut Page, entries: &[Entry]) {
@@ -160,27 +186,52 @@ fn differences_section(page: &mut Page, comparison: &Comparison) {
                 esc(&r.b),
                 esc(&r.parameter),
                 format!("{} [{}, {}]", num(d.diff_q50, 3), num(d.diff_q05, 3), num(d.diff_q95, 3)),
-                format!("{} [{}, {}]", num(d.ratio_q50, 3), num(d.ratio_q05, 3), num(d.ratio_q95, 3)),
+                format!(
+                    "{} [{}, {}]",
+                    num(d.ratio_q50, 3),
+                    num(d.ratio_q05, 3),
+                    num(d.ratio_q95, 3)
+                ),
                 if sure { format!("<b>{pg}</b>") } else { pg },
             ]
         })
         .collect();
-    page.table(&["a", "b", "parameter", "a − b: median [5 %, 95 %]", "a / b: median [5 %, 95 %]", "P(a > b)"], &table);
+    page.table(
+        &[
+            "a",
+            "b",
+            "parameter",
+            "a − b: median [5 %, 95 %]",
+            "a / b: median [5 %, 95 %]",
+            "P(a > b)",
+        ],
+        &table,
+    );
 }
 
 /// P(a > b) between currents by the joint calibrations beside the same by
 /// the between-run layer's centres, where the folders hold one fit.
 fn typical_test_section(page: &mut Page, comparison: &Comparison) {
-    let layer: Vec<&compare::DifferenceRow> = comparison.differences.iter().filter(|r| r.a.ends_with(compare::TYPICAL_TEST)).collect();
+    let layer: Vec<&compare::DifferenceRow> =
+        comparison.differences.iter().filter(|r| r.a.ends_with(compare::TYPICAL_TEST)).collect();
     if layer.is_empty() {
         return;
     }
     page.para("Between currents for a typical test: the between-run layer's centres (each current's typical test of this damper, `--per-run`), compared draw by draw within its one posterior, beside the joint calibrations' comparison. Where the tests of a current disagree, the joint calibrations' P(a > b) rests on intervals that describe these records only; the layer's says how sure one may be that the damper itself differs between the currents.");
-    let joint = |a: &str, b: &str, p: &str| comparison.differences.iter().find(|r| r.a == a && r.b == b && r.parameter == p).map(|r| r.difference.p_greater);
+    let joint = |a: &str, b: &str, p: &str| {
+        comparison
+            .differences
+            .iter()
+            .find(|r| r.a == a && r.b == b && r.parameter == p)
+            .map(|r| r.difference.p_greater)
+    };
     let table: Vec<Vec<String>> = layer
         .iter()
         .map(|r| {
-            let (a, b) = (r.a.trim_end_matches(compare::TYPICAL_TEST), r.b.trim_end_matches(compare::TYPICAL_TEST));
+            let (a, b) = (
+                r.a.trim_end_matches(compare::TYPICAL_TEST),
+                r.b.trim_end_matches(compare::TYPICAL_TEST),
+            );
             let d = &r.difference;
             vec![
                 esc(a),
@@ -188,19 +239,38 @@ fn typical_test_section(page: &mut Page, comparison: &Comparison) {
                 esc(&r.parameter),
                 joint(a, b, &r.parameter).map_or("–".into(), |p| format!("{p:.3}")),
                 format!("{:.3}", d.p_greater),
-                format!("{} [{}, {}]", num(d.ratio_q50, 3), num(d.ratio_q05, 3), num(d.ratio_q95, 3)),
+                format!(
+                    "{} [{}, {}]",
+                    num(d.ratio_q50, 3),
+                    num(d.ratio_q05, 3),
+                    num(d.ratio_q95, 3)
+                ),
             ]
         })
         .collect();
-    page.table(&["a", "b", "parameter", "P(a > b), joint", "P(a > b), typical test", "a / b, typical test: median [5 %, 95 %]"], &table);
+    page.table(
+        &[
+            "a",
+            "b",
+            "parameter",
+            "P(a > b), joint",
+            "P(a > b), typical test",
+            "a / b, typical test: median [5 %, 95 %]",
+        ],
+        &table,
+    );
 }
 
 fn reproduce_section(page: &mut Page, entries: &[Entry]) {
     page.section("reproduce", "Reproduce");
-    let mut rows_html = vec![vec!["command".to_string(), format!("<code>{}</code>", esc(&command_line()))]];
+    let mut rows_html =
+        vec![vec!["command".to_string(), format!("<code>{}</code>", esc(&command_line()))]];
     rows_html.push(vec!["mrbp version".into(), esc(env!("CARGO_PKG_VERSION"))]);
     for e in entries {
-        rows_html.push(vec![esc(&e.label), format!("<code>{}</code> (seed {})", esc(&e.cal.record.command), e.cal.record.seed)]);
+        rows_html.push(vec![
+            esc(&e.label),
+            format!("<code>{}</code> (seed {})", esc(&e.cal.record.command), e.cal.record.seed),
+        ]);
     }
     page.table(&["", ""], &rows_html);
 }
@@ -224,10 +294,12 @@ fn law_section(page: &mut Page, entries: &[Entry]) {
         ));
         let mut table = Vec::new();
         for r in cov {
-            let per_current = entries
-                .iter()
-                .filter(|e| !e.is_law())
-                .find_map(|e| e.prediction.as_ref().and_then(|p| p.coverage.iter().find(|x| x.run == r.run)).map(|x| (e.label.clone(), x.clone())));
+            let per_current = entries.iter().filter(|e| !e.is_law()).find_map(|e| {
+                e.prediction
+                    .as_ref()
+                    .and_then(|p| p.coverage.iter().find(|x| x.run == r.run))
+                    .map(|x| (e.label.clone(), x.clone()))
+            });
             let ok = r.inside_p95 >= 0.8;
             table.push(vec![
                 esc(&r.run),
@@ -235,13 +307,24 @@ fn law_section(page: &mut Page, entries: &[Entry]) {
                 if r.calibrated { "calibrated on".into() } else { "<b>held out</b>".into() },
                 format!("{:.1}", 100.0 * r.inside_p95),
                 num(r.rmse_q50_pa, 3),
-                per_current.as_ref().map_or("–".into(), |(l, x)| format!("{:.1} ({})", 100.0 * x.inside_p95, esc(l))),
+                per_current.as_ref().map_or("–".into(), |(l, x)| {
+                    format!("{:.1} ({})", 100.0 * x.inside_p95, esc(l))
+                }),
                 per_current.as_ref().map_or("–".into(), |(_, x)| num(x.rmse_q50_pa, 3)),
                 if r.calibrated { String::new() } else { Mark::of(ok).html().into() },
             ]);
         }
         page.table(
-            &["run", "current (A)", "law", "law: inside 95 % (%)", "law: RMS to median (Pa)", "per-current: inside 95 % (%)", "per-current: RMS (Pa)", "held out ≥ 80 %"],
+            &[
+                "run",
+                "current (A)",
+                "law",
+                "law: inside 95 % (%)",
+                "law: RMS to median (Pa)",
+                "per-current: inside 95 % (%)",
+                "per-current: RMS (Pa)",
+                "held out ≥ 80 %",
+            ],
             &table,
         );
     }
@@ -273,11 +356,17 @@ fn adequacy_section(page: &mut Page, entries: &[Entry]) {
     let mut groups: Vec<Excitation> = Vec::new();
     for (_, a) in &cells {
         let e = a.excitation;
-        if !groups.iter().any(|g| close(g.amplitude_m, e.amplitude_m) && (close(g.frequency_hz, e.frequency_hz) || !(g.frequency_hz.is_finite() || e.frequency_hz.is_finite()))) {
+        if !groups.iter().any(|g| {
+            close(g.amplitude_m, e.amplitude_m)
+                && (close(g.frequency_hz, e.frequency_hz)
+                    || !(g.frequency_hz.is_finite() || e.frequency_hz.is_finite()))
+        }) {
             groups.push(e);
         }
     }
-    groups.sort_by(|a, b| a.frequency_hz.total_cmp(&b.frequency_hz).then(b.amplitude_m.total_cmp(&a.amplitude_m)));
+    groups.sort_by(|a, b| {
+        a.frequency_hz.total_cmp(&b.frequency_hz).then(b.amplitude_m.total_cmp(&a.amplitude_m))
+    });
     let mut currents: Vec<f64> = cells.iter().map(|c| c.0).collect();
     currents.sort_by(f64::total_cmp);
     currents.dedup();
@@ -286,15 +375,27 @@ fn adequacy_section(page: &mut Page, entries: &[Entry]) {
         .map(|g| {
             let mut row = vec![esc(&g.label())];
             for &c in &currents {
-                let found = cells.iter().find(|(cur, a)| *cur == c && close(g.amplitude_m, a.excitation.amplitude_m) && (close(g.frequency_hz, a.excitation.frequency_hz) || !g.frequency_hz.is_finite()));
+                let found = cells.iter().find(|(cur, a)| {
+                    *cur == c
+                        && close(g.amplitude_m, a.excitation.amplitude_m)
+                        && (close(g.frequency_hz, a.excitation.frequency_hz)
+                            || !g.frequency_hz.is_finite())
+                });
                 row.push(found.map_or("–".into(), |(_, a)| {
-                    format!("{:.1} % · ρ {:.2} · {:.0} %", 100.0 * a.residual_rms_n / a.peak_force_n, a.lag1_autocorrelation, 100.0 * a.inside_p95)
+                    format!(
+                        "{:.1} % · ρ {:.2} · {:.0} %",
+                        100.0 * a.residual_rms_n / a.peak_force_n,
+                        a.lag1_autocorrelation,
+                        100.0 * a.inside_p95
+                    )
                 }));
             }
             row
         })
         .collect();
-    let header: Vec<String> = std::iter::once("excitation".to_string()).chain(currents.iter().map(|c| format!("{} A", num(*c, 2)))).collect();
+    let header: Vec<String> = std::iter::once("excitation".to_string())
+        .chain(currents.iter().map(|c| format!("{} A", num(*c, 2))))
+        .collect();
     let header: Vec<&str> = header.iter().map(String::as_str).collect();
     page.table(&header, &rows);
 }
@@ -311,7 +412,8 @@ fn forest(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
             if let Some(r) = e.cal.summary.iter().find(|r| r.parameter == name) {
                 let y = (entries.len() - k) as f64;
                 let color = PALETTE[k % 8];
-                c.series.push(Series::line(None, color, vec![r.q05, r.q95], vec![y, y]).with_width(3));
+                c.series
+                    .push(Series::line(None, color, vec![r.q05, r.q95], vec![y, y]).with_width(3));
                 c.series.push(Series::points(None, color, vec![r.q50], vec![y]).with_width(5));
                 (lo, hi) = (lo.min(r.q05), hi.max(r.q95));
             }
@@ -334,13 +436,26 @@ fn forest(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
 /// Each B-P parameter against the coil current: every law's band beside
 /// the per-current calibrations, and the between-run layer's typical test
 /// and new test where there is one.
-fn against_current(out: &Path, entries: &[Entry], typical: Option<&[TypicalRow]>, figs: &mut Figures) -> Result<()> {
+fn against_current(
+    out: &Path,
+    entries: &[Entry],
+    typical: Option<&[TypicalRow]>,
+    figs: &mut Figures,
+) -> Result<()> {
     let laws: Vec<(&Entry, Vec<CurrentRow>)> = entries
         .iter()
         .filter(|e| e.is_law())
         .map(|e| (e, compare::against_current(&e.cal.sample, &e.positions, &e.cal.record.currents)))
         .collect();
-    let mut curves: Vec<LawCurves> = laws.iter().map(|(e, rows)| LawCurves { label: &e.label, rows, calibrated_a: &e.cal.record.currents, color: None }).collect();
+    let mut curves: Vec<LawCurves> = laws
+        .iter()
+        .map(|(e, rows)| LawCurves {
+            label: &e.label,
+            rows,
+            calibrated_a: &e.cal.record.currents,
+            color: None,
+        })
+        .collect();
     // the layer's two bands, as a law's rows (quantiles only)
     let as_rows = |pick: fn(&TypicalRow) -> [f64; 3]| -> Vec<CurrentRow> {
         typical
@@ -348,22 +463,47 @@ fn against_current(out: &Path, entries: &[Entry], typical: Option<&[TypicalRow]>
             .iter()
             .map(|r| {
                 let [q05, q50, q95] = pick(r);
-                CurrentRow { parameter: r.parameter.clone(), current_a: r.current_a, kind: r.kind, mean: f64::NAN, sd: f64::NAN, q05, q50, q95 }
+                CurrentRow {
+                    parameter: r.parameter.clone(),
+                    current_a: r.current_a,
+                    kind: r.kind,
+                    mean: f64::NAN,
+                    sd: f64::NAN,
+                    q05,
+                    q50,
+                    q95,
+                }
             })
             .collect()
     };
     let (centre, new_test) = (as_rows(|r| r.centre), as_rows(|r| r.new_test));
-    let calibrated: Vec<f64> = centre.iter().filter(|r| r.kind == compare::CurrentKind::Calibrated && r.parameter == PARAM_NAMES[0]).map(|r| r.current_a).collect();
+    let calibrated: Vec<f64> = centre
+        .iter()
+        .filter(|r| r.kind == compare::CurrentKind::Calibrated && r.parameter == PARAM_NAMES[0])
+        .map(|r| r.current_a)
+        .collect();
     if typical.is_some() {
-        curves.push(LawCurves { label: "a new test (between-run layer)", rows: &new_test, calibrated_a: &calibrated, color: Some(PALETTE[3]) });
-        curves.push(LawCurves { label: "typical test (between-run layer)", rows: &centre, calibrated_a: &calibrated, color: Some(PALETTE[2]) });
+        curves.push(LawCurves {
+            label: "a new test (between-run layer)",
+            rows: &new_test,
+            calibrated_a: &calibrated,
+            color: Some(PALETTE[3]),
+        });
+        curves.push(LawCurves {
+            label: "typical test (between-run layer)",
+            rows: &centre,
+            calibrated_a: &calibrated,
+            color: Some(PALETTE[2]),
+        });
     }
     let per_current: Vec<AtCurrent> = entries
         .iter()
         .filter(|e| !e.is_law())
         .map(|e| AtCurrent {
             current_a: e.cal.record.current_a,
-            quantiles: PARAM_NAMES.map(|name| e.cal.summary.iter().find(|r| r.parameter == name).map(|r| [r.q05, r.q50, r.q95])),
+            quantiles: PARAM_NAMES.map(|name| {
+                e.cal.summary.iter().find(|r| r.parameter == name).map(|r| [r.q05, r.q50, r.q95])
+            }),
         })
         .collect();
     let mut more = String::new();
@@ -383,9 +523,17 @@ fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Figures) 
     let records: Vec<(&Entry, Vec<(&RunBands, f64)>)> = entries
         .iter()
         .filter(|e| !e.is_law())
-        .filter_map(|e| e.prediction.as_ref().map(|p| (e, p.bands.iter().map(|b| (b, rpm_of(&b.time, &b.displacement))).collect())))
+        .filter_map(|e| {
+            e.prediction.as_ref().map(|p| {
+                (e, p.bands.iter().map(|b| (b, rpm_of(&b.time, &b.displacement))).collect())
+            })
+        })
         .collect();
-    let mut speeds: Vec<f64> = records.iter().flat_map(|(_, r)| r.iter().map(|(_, v)| *v)).filter(|v| v.is_finite()).collect();
+    let mut speeds: Vec<f64> = records
+        .iter()
+        .flat_map(|(_, r)| r.iter().map(|(_, v)| *v))
+        .filter(|v| v.is_finite())
+        .collect();
     if speeds.is_empty() {
         return Ok(());
     }
@@ -394,20 +542,41 @@ fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Figures) 
     let chosen: Vec<(&Entry, &RunBands, f64)> = records
         .iter()
         .filter_map(|(e, r)| {
-            r.iter().min_by(|a, b| (a.1 - target).abs().total_cmp(&(b.1 - target).abs())).map(|&(b, v)| (*e, b, v))
+            r.iter()
+                .min_by(|a, b| (a.1 - target).abs().total_cmp(&(b.1 - target).abs()))
+                .map(|&(b, v)| (*e, b, v))
         })
         .collect();
-    let mut c = Chart::new(format!("stress at about {target:.0} rpm"), "shear strain γ (-)", "shear stress τ (kPa)");
+    let mut c = Chart::new(
+        format!("stress at about {target:.0} rpm"),
+        "shear strain γ (-)",
+        "shear stress τ (kPa)",
+    );
     for (k, (e, b, _)) in chosen.iter().enumerate() {
         let color = PALETTE[k % 8];
         let kpa = |v: &[f64]| v.iter().map(|x| x * 1e-3).collect::<Vec<f64>>();
-        c.series.extend(super::figures::loop_band(&format!("{} 95 % predictive", e.label), color, &b.gamma_model, &kpa(&b.predictive[0]), &kpa(&b.predictive[1]), 0.35));
-        c.series.push(Series::line(None, color, b.gamma_model.clone(), kpa(&b.model[2])).with_width(1));
+        c.series.extend(super::figures::loop_band(
+            &format!("{} 95 % predictive", e.label),
+            color,
+            &b.gamma_model,
+            &kpa(&b.predictive[0]),
+            &kpa(&b.predictive[1]),
+            0.35,
+        ));
+        c.series
+            .push(Series::line(None, color, b.gamma_model.clone(), kpa(&b.model[2])).with_width(1));
     }
     c.legend_at = LegendAt::Middle;
     plot::save(&Figure::single(c), &out.join("overlay"))?;
-    let which: Vec<String> = chosen.iter().map(|(e, b, r)| format!("{} {} ({r:.0} rpm)", e.label, b.run)).collect();
-    figs.push("overlay", &format!("Predictive bands of the calibrations over one another at about {target:.0} rpm: {}.", which.join(", ")));
+    let which: Vec<String> =
+        chosen.iter().map(|(e, b, r)| format!("{} {} ({r:.0} rpm)", e.label, b.run)).collect();
+    figs.push(
+        "overlay",
+        &format!(
+            "Predictive bands of the calibrations over one another at about {target:.0} rpm: {}.",
+            which.join(", ")
+        ),
+    );
     Ok(())
 }
 
@@ -415,7 +584,8 @@ fn overlay(out: &Path, entries: &[Entry], rpm: Option<f64>, figs: &mut Figures) 
 fn held_out_figures(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
     for law in entries.iter().filter(|e| e.is_law()) {
         let Some(Prediction { bands, coverage: cov, .. }) = &law.prediction else { continue };
-        let held: Vec<&RunBands> = bands.iter().filter(|b| cov.iter().any(|r| r.run == b.run && !r.calibrated)).collect();
+        let held: Vec<&RunBands> =
+            bands.iter().filter(|b| cov.iter().any(|r| r.run == b.run && !r.calibrated)).collect();
         if held.is_empty() {
             continue;
         }
@@ -424,10 +594,37 @@ fn held_out_figures(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result
             .map(|b| {
                 let kpa = |v: &[f64]| v.iter().map(|x| x * 1e-3).collect::<Vec<f64>>();
                 let step = b.time.len().div_ceil(1500).max(1);
-                let mut c = Chart::new(format!("{} (held out)", b.run), "shear strain γ (-)", "shear stress τ (kPa)");
-                c.series.extend(super::figures::loop_band("95 % predictive", PALETTE[5], &b.gamma_model, &kpa(&b.predictive[0]), &kpa(&b.predictive[1]), 0.4));
-                c.series.push(Series::points(Some("measured".into()), plot::BLACK_, b.gamma.iter().step_by(step).copied().collect(), b.tau_obs.iter().step_by(step).map(|v| v * 1e-3).collect()).with_width(1));
-                c.series.push(Series::line(Some("law median".into()), PALETTE[1], b.gamma_model.clone(), kpa(&b.model[2])).with_width(1));
+                let mut c = Chart::new(
+                    format!("{} (held out)", b.run),
+                    "shear strain γ (-)",
+                    "shear stress τ (kPa)",
+                );
+                c.series.extend(super::figures::loop_band(
+                    "95 % predictive",
+                    PALETTE[5],
+                    &b.gamma_model,
+                    &kpa(&b.predictive[0]),
+                    &kpa(&b.predictive[1]),
+                    0.4,
+                ));
+                c.series.push(
+                    Series::points(
+                        Some("measured".into()),
+                        plot::BLACK_,
+                        b.gamma.iter().step_by(step).copied().collect(),
+                        b.tau_obs.iter().step_by(step).map(|v| v * 1e-3).collect(),
+                    )
+                    .with_width(1),
+                );
+                c.series.push(
+                    Series::line(
+                        Some("law median".into()),
+                        PALETTE[1],
+                        b.gamma_model.clone(),
+                        kpa(&b.model[2]),
+                    )
+                    .with_width(1),
+                );
                 c.legend_at = LegendAt::Middle;
                 c
             })

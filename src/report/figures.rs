@@ -43,7 +43,14 @@ pub(crate) fn every(n: usize, max: usize) -> usize {
 /// Splits a band over a hysteresis loop into pieces along which `x` is
 /// monotone, so each piece is a simple polygon (a loop drawn as one polygon
 /// would fill its inside).
-pub(crate) fn loop_band(label: &str, color: plot::RGBColor, x: &[f64], lo: &[f64], hi: &[f64], opacity: f64) -> Vec<Series> {
+pub(crate) fn loop_band(
+    label: &str,
+    color: plot::RGBColor,
+    x: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    opacity: f64,
+) -> Vec<Series> {
     let mut out = Vec::new();
     let mut start = 0;
     let dir = |k: usize| (x[k + 1] - x[k]).signum();
@@ -75,33 +82,109 @@ pub(crate) fn loop_band(label: &str, color: plot::RGBColor, x: &[f64], lo: &[f64
 /// the record. Bottom, where the bands are wide enough to see: both bands
 /// about the median against time, and the stress against time over the
 /// first loading and around the first reversal.
-pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mut Figures) -> Result<()> {
+pub fn bands(
+    dir: &Path,
+    bands: &[RunBands],
+    area_m2: f64,
+    gap_m: f64,
+    figs: &mut Figures,
+) -> Result<()> {
     for b in bands {
         let step = every(b.time.len(), MAX_POINTS);
         let pick = |v: &[f64], s: f64| v.iter().step_by(step).map(|x| x * s).collect::<Vec<f64>>();
         let thin = every(b.time.len(), MAX_VERTICES);
-        let panel = |title: String, xl: &str, yl: &str, x: &[f64], xobs: &[f64], yscale: f64, legend_at: LegendAt| {
-            let scaled = |v: &[f64]| v.iter().step_by(thin).map(|y| y * yscale).collect::<Vec<f64>>();
+        let panel = |title: String,
+                     xl: &str,
+                     yl: &str,
+                     x: &[f64],
+                     xobs: &[f64],
+                     yscale: f64,
+                     legend_at: LegendAt| {
+            let scaled =
+                |v: &[f64]| v.iter().step_by(thin).map(|y| y * yscale).collect::<Vec<f64>>();
             let x = &x.iter().step_by(thin).copied().collect::<Vec<f64>>();
             let mut c = Chart::new(title, xl, yl);
-            c.series.extend(loop_band("95 % predictive", PALETTE[5], x, &scaled(&b.predictive[0]), &scaled(&b.predictive[1]), 0.25));
-            c.series.extend(loop_band("95 % model", PALETTE[0], x, &scaled(&b.model[0]), &scaled(&b.model[4]), 0.35));
-            c.series.extend(loop_band("50 % model", PALETTE[0], x, &scaled(&b.model[1]), &scaled(&b.model[3]), 0.6));
-            c.series.push(Series::points(Some("measured".into()), plot::BLACK_, pick(xobs, 1.0), pick(&b.tau_obs, yscale)).with_width(1));
-            c.series.push(Series::line(Some("posterior median".into()), PALETTE[1], x.clone(), scaled(&b.model[2])).with_width(1));
+            c.series.extend(loop_band(
+                "95 % predictive",
+                PALETTE[5],
+                x,
+                &scaled(&b.predictive[0]),
+                &scaled(&b.predictive[1]),
+                0.25,
+            ));
+            c.series.extend(loop_band(
+                "95 % model",
+                PALETTE[0],
+                x,
+                &scaled(&b.model[0]),
+                &scaled(&b.model[4]),
+                0.35,
+            ));
+            c.series.extend(loop_band(
+                "50 % model",
+                PALETTE[0],
+                x,
+                &scaled(&b.model[1]),
+                &scaled(&b.model[3]),
+                0.6,
+            ));
+            c.series.push(
+                Series::points(
+                    Some("measured".into()),
+                    plot::BLACK_,
+                    pick(xobs, 1.0),
+                    pick(&b.tau_obs, yscale),
+                )
+                .with_width(1),
+            );
+            c.series.push(
+                Series::line(
+                    Some("posterior median".into()),
+                    PALETTE[1],
+                    x.clone(),
+                    scaled(&b.model[2]),
+                )
+                .with_width(1),
+            );
             c.legend_at = legend_at;
             c
         };
         let (x_model, v_model) = crate::predict::adequacy::kinematics(b, gap_m);
         let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
         let x_obs = mm(&b.displacement);
-        let tau_gamma = panel(format!("{}: stress against strain", b.run), "shear strain γ (-)", "shear stress τ (kPa)", &b.gamma_model, &b.gamma, 1e-3, LegendAt::Middle);
-        let force_disp = panel(format!("{}: force against displacement", b.run), "displacement x (mm)", "force F = τA (N)", &mm(&x_model), &x_obs, area_m2, LegendAt::Middle);
+        let tau_gamma = panel(
+            format!("{}: stress against strain", b.run),
+            "shear strain γ (-)",
+            "shear stress τ (kPa)",
+            &b.gamma_model,
+            &b.gamma,
+            1e-3,
+            LegendAt::Middle,
+        );
+        let force_disp = panel(
+            format!("{}: force against displacement", b.run),
+            "displacement x (mm)",
+            "force F = τA (N)",
+            &mm(&x_model),
+            &x_obs,
+            area_m2,
+            LegendAt::Middle,
+        );
         // the measured velocity would be noise; the model's drives both
-        let force_vel = panel(format!("{}: force against velocity", b.run), "velocity v (mm/s)", "force F = τA (N)", &mm(&v_model), &mm(&v_model), area_m2, LegendAt::UpperLeft);
+        let force_vel = panel(
+            format!("{}: force against velocity", b.run),
+            "velocity v (mm/s)",
+            "force F = τA (N)",
+            &mm(&v_model),
+            &mm(&v_model),
+            area_m2,
+            LegendAt::UpperLeft,
+        );
         let around = band_about_median(b, &b.run);
-        let yield_zoom = zoom(b, first_loading(b), &format!("{}: first loading", b.run), LegendAt::LowerRight);
-        let reversal_zoom = zoom(b, first_reversal(b), &format!("{}: first reversal", b.run), LegendAt::UpperRight);
+        let yield_zoom =
+            zoom(b, first_loading(b), &format!("{}: first loading", b.run), LegendAt::LowerRight);
+        let reversal_zoom =
+            zoom(b, first_reversal(b), &format!("{}: first reversal", b.run), LegendAt::UpperRight);
         let stem = format!("bands_{}", b.run);
         let mut panels = vec![tau_gamma, force_disp, force_vel, around, yield_zoom, reversal_zoom];
         let mut caption = format!(
@@ -124,7 +207,15 @@ pub fn bands(dir: &Path, bands: &[RunBands], area_m2: f64, gap_m: f64, figs: &mu
 fn coil_current(b: &RunBands, current: &[f64]) -> Chart {
     let thin = every(b.time.len(), MAX_VERTICES);
     let mut c = Chart::new(format!("{}: coil current", b.run), "time t (s)", "coil current I (A)");
-    c.series.push(Series::line(Some("current".into()), PALETTE[2], b.time.iter().step_by(thin).copied().collect(), current.iter().step_by(thin).copied().collect()).with_width(1));
+    c.series.push(
+        Series::line(
+            Some("current".into()),
+            PALETTE[2],
+            b.time.iter().step_by(thin).copied().collect(),
+            current.iter().step_by(thin).copied().collect(),
+        )
+        .with_width(1),
+    );
     c.legend_at = LegendAt::UpperRight;
     c
 }
@@ -139,7 +230,9 @@ fn first_loading(b: &RunBands) -> std::ops::Range<usize> {
 /// The sample of the first reversal of the strain that drove the model,
 /// as the record's loading branches are cut (the last sample if none).
 fn first_reversal_at(b: &RunBands) -> usize {
-    crate::data::loading_branches(&b.gamma_model, crate::data::REVERSAL_SHARE).first().map_or(0, |r| r.end.saturating_sub(1))
+    crate::data::loading_branches(&b.gamma_model, crate::data::REVERSAL_SHARE)
+        .first()
+        .map_or(0, |r| r.end.saturating_sub(1))
 }
 
 /// The samples around the first reversal: from a third of the first
@@ -156,10 +249,34 @@ fn zoom(b: &RunBands, r: std::ops::Range<usize>, title: &str, legend_at: LegendA
     let t: Vec<f64> = b.time[r.clone()].to_vec();
     let kpa = |v: &[f64]| v[r.clone()].iter().map(|x| x * 1e-3).collect::<Vec<f64>>();
     let mut c = Chart::new(title, "time t (s)", "shear stress τ (kPa)");
-    c.series.push(Series::band(Some("95 % predictive".into()), PALETTE[5], t.clone(), kpa(&b.predictive[0]), kpa(&b.predictive[1])).with_opacity(0.25));
-    c.series.push(Series::band(Some("95 % model".into()), PALETTE[0], t.clone(), kpa(&b.model[0]), kpa(&b.model[4])).with_opacity(0.45));
-    c.series.push(Series::points(Some("measured".into()), plot::BLACK_, t.clone(), kpa(&b.tau_obs)).with_width(2));
-    c.series.push(Series::line(Some("posterior median".into()), PALETTE[1], t, kpa(&b.model[2])).with_width(1));
+    c.series.push(
+        Series::band(
+            Some("95 % predictive".into()),
+            PALETTE[5],
+            t.clone(),
+            kpa(&b.predictive[0]),
+            kpa(&b.predictive[1]),
+        )
+        .with_opacity(0.25),
+    );
+    c.series.push(
+        Series::band(
+            Some("95 % model".into()),
+            PALETTE[0],
+            t.clone(),
+            kpa(&b.model[0]),
+            kpa(&b.model[4]),
+        )
+        .with_opacity(0.45),
+    );
+    c.series.push(
+        Series::points(Some("measured".into()), plot::BLACK_, t.clone(), kpa(&b.tau_obs))
+            .with_width(2),
+    );
+    c.series.push(
+        Series::line(Some("posterior median".into()), PALETTE[1], t, kpa(&b.model[2]))
+            .with_width(1),
+    );
     c.legend_at = legend_at;
     c
 }
@@ -169,14 +286,45 @@ fn zoom(b: &RunBands, r: std::ops::Range<usize>, title: &str, legend_at: LegendA
 fn band_about_median(b: &RunBands, title: &str) -> Chart {
     let step = every(b.time.len(), MAX_POINTS);
     let thin = every(b.time.len(), MAX_VERTICES);
-    let rel_all = |v: &[f64]| v.iter().zip(&b.model[2]).map(|(y, m)| (y - m) * 1e-3).collect::<Vec<f64>>();
+    let rel_all =
+        |v: &[f64]| v.iter().zip(&b.model[2]).map(|(y, m)| (y - m) * 1e-3).collect::<Vec<f64>>();
     let rel = |v: &[f64]| rel_all(v).into_iter().step_by(thin).collect::<Vec<f64>>();
     let t = &b.time.iter().step_by(thin).copied().collect::<Vec<f64>>();
     let res = rel_all(&b.tau_obs);
-    let mut c = Chart::new(format!("{title}: about the median"), "time t (s)", "τ − posterior median (kPa)");
-    c.series.push(Series::band(Some("95 % predictive".into()), PALETTE[5], t.clone(), rel(&b.predictive[0]), rel(&b.predictive[1])).with_opacity(0.35));
-    c.series.push(Series::band(Some("95 % model".into()), PALETTE[0], t.clone(), rel(&b.model[0]), rel(&b.model[4])).with_opacity(0.6));
-    c.series.push(Series::points(Some("measured − median".into()), plot::BLACK_, b.time.iter().step_by(step).copied().collect(), res.iter().step_by(step).copied().collect()).with_width(1));
+    let mut c = Chart::new(
+        format!("{title}: about the median"),
+        "time t (s)",
+        "τ − posterior median (kPa)",
+    );
+    c.series.push(
+        Series::band(
+            Some("95 % predictive".into()),
+            PALETTE[5],
+            t.clone(),
+            rel(&b.predictive[0]),
+            rel(&b.predictive[1]),
+        )
+        .with_opacity(0.35),
+    );
+    c.series.push(
+        Series::band(
+            Some("95 % model".into()),
+            PALETTE[0],
+            t.clone(),
+            rel(&b.model[0]),
+            rel(&b.model[4]),
+        )
+        .with_opacity(0.6),
+    );
+    c.series.push(
+        Series::points(
+            Some("measured − median".into()),
+            plot::BLACK_,
+            b.time.iter().step_by(step).copied().collect(),
+            res.iter().step_by(step).copied().collect(),
+        )
+        .with_width(1),
+    );
     c.legend_at = LegendAt::UpperRight;
     c
 }
@@ -197,7 +345,13 @@ pub fn residuals(dir: &Path, bands: &[RunBands], figs: &mut Figures) -> Result<(
 /// B-P parameter a rank plot by ensemble (each ensemble's share of the
 /// pooled ranks in 20 bins: flat near 1 when the ensembles agree) and the
 /// walker-averaged autocorrelation with its integrated time τ.
-pub fn diagnostics(dir: &Path, sample: &PosteriorSample, burn_in: usize, tau: &[f64], figs: &mut Figures) -> Result<()> {
+pub fn diagnostics(
+    dir: &Path,
+    sample: &PosteriorSample,
+    burn_in: usize,
+    tau: &[f64],
+    figs: &mut Figures,
+) -> Result<()> {
     let chains = &sample.chains;
     let (n, steps) = (chains.chains(), chains.steps());
     if steps <= burn_in + 4 {
@@ -210,9 +364,12 @@ pub fn diagnostics(dir: &Path, sample: &PosteriorSample, burn_in: usize, tau: &[
         let trace: Vec<f64> = (0..steps).map(|s| chains.log_prob[s * n + ch]).collect();
         lp.series.push(Series::line(None, PALETTE[k % 7], xs.clone(), trace).with_width(1));
     }
-    lp.series.push(Series::vlines(Some("end of burn-in".into()), GREY, vec![burn_in as f64]).with_width(1));
+    lp.series.push(
+        Series::vlines(Some("end of burn-in".into()), GREY, vec![burn_in as f64]).with_width(1),
+    );
     // the burn-in's first steps can sit far below: show the kept range
-    let kept: Vec<f64> = (burn_in * n..steps * n).map(|i| chains.log_prob[i]).filter(|v| v.is_finite()).collect();
+    let kept: Vec<f64> =
+        (burn_in * n..steps * n).map(|i| chains.log_prob[i]).filter(|v| v.is_finite()).collect();
     if !kept.is_empty() {
         let (lo, hi) = (quantile(&kept, 0.001), quantile(&kept, 1.0));
         lp.y_range = Some((lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)));
@@ -225,7 +382,11 @@ pub fn diagnostics(dir: &Path, sample: &PosteriorSample, burn_in: usize, tau: &[
     for (i, name) in sample.layout.theta_names().iter().enumerate() {
         let traces = chains.traces(i, burn_in);
         // rank plot: pooled ranks, each ensemble's histogram over uniform
-        let mut all: Vec<(f64, usize)> = traces.iter().enumerate().flat_map(|(c, t)| t.iter().map(move |v| (*v, c / walkers.max(1)))).collect();
+        let mut all: Vec<(f64, usize)> = traces
+            .iter()
+            .enumerate()
+            .flat_map(|(c, t)| t.iter().map(move |v| (*v, c / walkers.max(1))))
+            .collect();
         all.sort_by(|a, b| a.0.total_cmp(&b.0));
         const BINS: usize = 20;
         let mut counts = vec![vec![0.0; BINS]; ensembles];
@@ -234,11 +395,26 @@ pub fn diagnostics(dir: &Path, sample: &PosteriorSample, burn_in: usize, tau: &[
         }
         let expected = all.len() as f64 / (BINS * ensembles) as f64;
         let centres: Vec<f64> = (0..BINS).map(|b| (b as f64 + 0.5) / BINS as f64).collect();
-        let mut rank = Chart::new(format!("{name}: ranks by ensemble"), "pooled rank (fraction)", "count / uniform");
+        let mut rank = Chart::new(
+            format!("{name}: ranks by ensemble"),
+            "pooled rank (fraction)",
+            "count / uniform",
+        );
         for (e, c) in counts.iter().enumerate() {
-            rank.series.push(Series::line(None, PALETTE[e % 7], centres.clone(), c.iter().map(|v| v / expected).collect()).with_width(1));
+            rank.series.push(
+                Series::line(
+                    None,
+                    PALETTE[e % 7],
+                    centres.clone(),
+                    c.iter().map(|v| v / expected).collect(),
+                )
+                .with_width(1),
+            );
         }
-        rank.series.push(Series::dashed(Some("uniform".into()), GREY, vec![0.0, 1.0], vec![1.0, 1.0]).with_width(1));
+        rank.series.push(
+            Series::dashed(Some("uniform".into()), GREY, vec![0.0, 1.0], vec![1.0, 1.0])
+                .with_width(1),
+        );
         rank.y_range = Some((0.0, 2.0));
         rank.legend_at = LegendAt::UpperRight;
         panels.push(rank);
@@ -252,8 +428,15 @@ pub fn diagnostics(dir: &Path, sample: &PosteriorSample, burn_in: usize, tau: &[
                 *a += r / n as f64;
             }
         }
-        let mut c = Chart::new(format!("{name}: autocorrelation, τ = {}", plot::tick(plot::significant(t, 2))), "lag (steps)", "autocorrelation");
-        c.series.push(Series::line(None, PALETTE[0], (0..lags).map(|l| l as f64).collect(), acf).with_width(2));
+        let mut c = Chart::new(
+            format!("{name}: autocorrelation, τ = {}", plot::tick(plot::significant(t, 2))),
+            "lag (steps)",
+            "autocorrelation",
+        );
+        c.series.push(
+            Series::line(None, PALETTE[0], (0..lags).map(|l| l as f64).collect(), acf)
+                .with_width(2),
+        );
         c.series.push(Series::vlines(Some("τ".into()), GREY, vec![t]).with_width(1));
         c.y_range = Some((-0.2, 1.05));
         c.legend_at = LegendAt::UpperRight;
@@ -273,7 +456,12 @@ pub fn diagnostics(dir: &Path, sample: &PosteriorSample, burn_in: usize, tau: &[
 
 /// Trace plots of every parameter: eight chains spread over the ensembles,
 /// and the end of the burn-in.
-pub fn traces(dir: &Path, sample: &PosteriorSample, burn_in: usize, figs: &mut Figures) -> Result<()> {
+pub fn traces(
+    dir: &Path,
+    sample: &PosteriorSample,
+    burn_in: usize,
+    figs: &mut Figures,
+) -> Result<()> {
     let chains = &sample.chains;
     let n = chains.chains();
     let shown: Vec<usize> = (0..8.min(n)).map(|i| i * n / 8.min(n)).collect();
@@ -284,12 +472,20 @@ pub fn traces(dir: &Path, sample: &PosteriorSample, burn_in: usize, figs: &mut F
         .iter()
         .enumerate()
         .map(|(i, name)| {
-            let mut c = Chart::new(name.clone(), "step", format!("{name} ({})", crate::posterior::unit_of(name)));
+            let mut c = Chart::new(
+                name.clone(),
+                "step",
+                format!("{name} ({})", crate::posterior::unit_of(name)),
+            );
             for (k, &ch) in shown.iter().enumerate() {
                 let trace = (0..chains.steps()).map(|s| chains.at(s, ch, i)).collect();
-                c.series.push(Series::line(None, PALETTE[k % 7], steps.clone(), trace).with_width(1));
+                c.series
+                    .push(Series::line(None, PALETTE[k % 7], steps.clone(), trace).with_width(1));
             }
-            c.series.push(Series::vlines(Some("end of burn-in".into()), GREY, vec![burn_in as f64]).with_width(1));
+            c.series.push(
+                Series::vlines(Some("end of burn-in".into()), GREY, vec![burn_in as f64])
+                    .with_width(1),
+            );
             c.legend_at = LegendAt::UpperRight;
             c
         })
@@ -302,7 +498,15 @@ pub fn traces(dir: &Path, sample: &PosteriorSample, burn_in: usize, figs: &mut F
 /// The corner plot of the θ parameters (the seven B-P ones or a current law's): marginal histograms on the
 /// diagonal, pairs below it; the identification and the MAP marked where
 /// they fall inside the plotted range.
-pub fn corner(dir: &Path, sample: &PosteriorSample, names: &[String], positions: &[(usize, usize)], identification: &[f64], map: &[f64], figs: &mut Figures) -> Result<()> {
+pub fn corner(
+    dir: &Path,
+    sample: &PosteriorSample,
+    names: &[String],
+    positions: &[(usize, usize)],
+    identification: &[f64],
+    map: &[f64],
+    figs: &mut Figures,
+) -> Result<()> {
     let k = names.len();
     if k == 0 {
         return Ok(());
@@ -345,15 +549,21 @@ pub fn corner(dir: &Path, sample: &PosteriorSample, names: &[String], positions:
                 c.y_range = Some(ranges[row]);
                 // the regions carry the density; a few hundred points show the outskirts
                 let thin = every(draws[col].len(), CORNER_POINTS);
-                let (xs, ys) = (draws[col].iter().step_by(thin).copied().collect(), draws[row].iter().step_by(thin).copied().collect());
+                let (xs, ys) = (
+                    draws[col].iter().step_by(thin).copied().collect(),
+                    draws[row].iter().step_by(thin).copied().collect(),
+                );
                 c.series.push(Series::points(None, PALETTE[0].mix_rgb(), xs, ys).with_width(1));
                 for (level, opacity) in [(0.9, 0.35), (0.5, 0.55)] {
-                    let (xs, ys, size) = credible_cells(&draws[col], &draws[row], ranges[col], ranges[row], level);
+                    let (xs, ys, size) =
+                        credible_cells(&draws[col], &draws[row], ranges[col], ranges[row], level);
                     c.series.push(Series::cells(None, PALETTE[0], xs, ys, size, opacity));
                 }
                 for (p, color) in [(identification, PALETTE[1]), (map, PALETTE[2])] {
                     if inside(p[col], ranges[col]) && inside(p[row], ranges[row]) {
-                        c.series.push(Series::points(None, color, vec![p[col]], vec![p[row]]).with_width(5));
+                        c.series.push(
+                            Series::points(None, color, vec![p[col]], vec![p[row]]).with_width(5),
+                        );
                     }
                 }
             }
@@ -377,7 +587,13 @@ pub fn corner(dir: &Path, sample: &PosteriorSample, names: &[String], positions:
 /// draws, densest first (a highest-density region of the counts smoothed
 /// over each cell's neighbours, so a few hundred draws give a smooth
 /// region): their lower-left corners and their size.
-fn credible_cells(x: &[f64], y: &[f64], rx: (f64, f64), ry: (f64, f64), level: f64) -> (Vec<f64>, Vec<f64>, (f64, f64)) {
+fn credible_cells(
+    x: &[f64],
+    y: &[f64],
+    rx: (f64, f64),
+    ry: (f64, f64),
+    level: f64,
+) -> (Vec<f64>, Vec<f64>, (f64, f64)) {
     const BINS: usize = 20;
     let (w, h) = ((rx.1 - rx.0) / BINS as f64, (ry.1 - ry.0) / BINS as f64);
     let mut counts = vec![0usize; BINS * BINS];
@@ -450,14 +666,21 @@ fn histogram(v: &[f64], range: (f64, f64), bins: usize) -> (Vec<f64>, Vec<f64>) 
 /// title gives how much the records narrowed the prior (posterior sd /
 /// prior sd of ln θ). Right, zoomed on the posterior: its histogram, its
 /// 90 % interval and median, and the prior's shape there.
-pub fn marginals(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usize)], priors: &[Prior], figs: &mut Figures) -> Result<()> {
+pub fn marginals(
+    dir: &Path,
+    sample: &PosteriorSample,
+    positions: &[(usize, usize)],
+    priors: &[Prior],
+    figs: &mut Figures,
+) -> Result<()> {
     let mut panels = Vec::new();
     for (k, name) in sample.layout.theta_names().iter().enumerate() {
         let Some(values) = sample.values(name, positions) else { continue };
         let logs: Vec<f64> = values.iter().map(|v| v.ln()).collect();
         let (q05, q50, q95) = (quantile(&logs, 0.05), quantile(&logs, 0.5), quantile(&logs, 0.95));
         let mean = logs.iter().sum::<f64>() / logs.len().max(1) as f64;
-        let sd = (logs.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / logs.len().max(2) as f64).sqrt();
+        let sd = (logs.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / logs.len().max(2) as f64)
+            .sqrt();
         let prior = priors[k];
         let (blo, bhi) = (prior.bounds().0.ln(), prior.bounds().1.ln());
         let (range, prior_sd) = match prior.centre() {
@@ -465,19 +688,44 @@ pub fn marginals(dir: &Path, sample: &PosteriorSample, positions: &[(usize, usiz
             None => ((blo, bhi), (bhi - blo) / 12f64.sqrt()),
         };
         let range = (range.0.min(q05 - 0.1), range.1.max(q95 + 0.1));
-        let xs: Vec<f64> = (0..=300).map(|j| range.0 + (range.1 - range.0) * j as f64 / 300.0).collect();
+        let xs: Vec<f64> =
+            (0..=300).map(|j| range.0 + (range.1 - range.0) * j as f64 / 300.0).collect();
         let dens: Vec<f64> = xs.iter().map(|x| prior.log_density(*x).exp()).collect();
         let peak = dens.iter().fold(0.0f64, |m, d| m.max(*d)).max(1e-300);
-        let mut c = Chart::new(format!("{name}: posterior sd / prior sd = {}", plot::tick(plot::significant(sd / prior_sd, 2))), format!("{name} (log axis)"), "scaled density");
+        let mut c = Chart::new(
+            format!(
+                "{name}: posterior sd / prior sd = {}",
+                plot::tick(plot::significant(sd / prior_sd, 2))
+            ),
+            format!("{name} (log axis)"),
+            "scaled density",
+        );
         c.log_x = true;
         c.y_range = Some((0.0, 1.15));
         c.hide_y_ticks = true;
         // narrower than a pixel column on this axis: say where to look
         let narrow = (q95 - q05) < 0.01 * (range.1 - range.0);
         let label = if narrow { "posterior 90 % (narrow: see zoom)" } else { "posterior 90 %" };
-        c.series.push(Series::line(Some("prior".into()), PALETTE[1], xs.iter().map(|x| x.exp()).collect(), dens.iter().map(|d| d / peak).collect()));
-        c.series.push(Series::band(Some(label.into()), PALETTE[0], vec![q05.exp(), q95.exp()], vec![0.0, 0.0], vec![1.0, 1.0]).with_opacity(0.5));
-        c.series.push(Series::vlines(Some("posterior median".into()), PALETTE[0], vec![q50.exp()]).with_width(2));
+        c.series.push(Series::line(
+            Some("prior".into()),
+            PALETTE[1],
+            xs.iter().map(|x| x.exp()).collect(),
+            dens.iter().map(|d| d / peak).collect(),
+        ));
+        c.series.push(
+            Series::band(
+                Some(label.into()),
+                PALETTE[0],
+                vec![q05.exp(), q95.exp()],
+                vec![0.0, 0.0],
+                vec![1.0, 1.0],
+            )
+            .with_opacity(0.5),
+        );
+        c.series.push(
+            Series::vlines(Some("posterior median".into()), PALETTE[0], vec![q50.exp()])
+                .with_width(2),
+        );
         c.legend_at = LegendAt::UpperRight;
         panels.push(c);
         panels.push(zoomed_marginal(name, &values, &prior));
@@ -500,20 +748,39 @@ fn zoomed_marginal(name: &str, values: &[f64], prior: &Prior) -> Chart {
     let range = (lo - pad, hi + pad);
     let (edges, heights) = histogram(values, range, 40);
     let top = heights.iter().fold(0.0f64, |m, h| m.max(*h)).max(1e-300);
-    let xs: Vec<f64> = (0..=100).map(|j| range.0 + (range.1 - range.0) * j as f64 / 100.0).collect();
+    let xs: Vec<f64> =
+        (0..=100).map(|j| range.0 + (range.1 - range.0) * j as f64 / 100.0).collect();
     // the prior's density in θ (its density in ln θ over θ)
-    let dens: Vec<f64> = xs.iter().map(|x| if *x > 0.0 { (prior.log_density(x.ln()) - x.ln()).exp() } else { 0.0 }).collect();
+    let dens: Vec<f64> = xs
+        .iter()
+        .map(|x| if *x > 0.0 { (prior.log_density(x.ln()) - x.ln()).exp() } else { 0.0 })
+        .collect();
     let dtop = dens.iter().fold(0.0f64, |m, d| m.max(*d));
-    let mut c = Chart::new(format!("{name}: posterior, zoomed"), format!("{name} ({})", crate::posterior::unit_of(name)), "density");
+    let mut c = Chart::new(
+        format!("{name}: posterior, zoomed"),
+        format!("{name} ({})", crate::posterior::unit_of(name)),
+        "density",
+    );
     c.hide_y_ticks = true;
     c.x_range = Some(range);
     c.y_range = Some((0.0, 1.2 * top));
     c.series.push(Series::bars(Some("posterior".into()), PALETTE[0], edges, heights));
     if dtop > 0.0 {
-        c.series.push(Series::dashed(Some("prior (rescaled)".into()), PALETTE[1], xs, dens.iter().map(|d| d / dtop * 0.5 * top).collect()));
+        c.series.push(Series::dashed(
+            Some("prior (rescaled)".into()),
+            PALETTE[1],
+            xs,
+            dens.iter().map(|d| d / dtop * 0.5 * top).collect(),
+        ));
     }
-    c.series.push(Series::vlines(Some("median, 90 %".into()), PALETTE[7], vec![quantile(values, 0.5)]).with_width(2));
-    c.series.push(Series::vlines(None, PALETTE[7], vec![quantile(values, 0.05), quantile(values, 0.95)]).with_width(1));
+    c.series.push(
+        Series::vlines(Some("median, 90 %".into()), PALETTE[7], vec![quantile(values, 0.5)])
+            .with_width(2),
+    );
+    c.series.push(
+        Series::vlines(None, PALETTE[7], vec![quantile(values, 0.05), quantile(values, 0.95)])
+            .with_width(1),
+    );
     c.legend_at = LegendAt::UpperRight;
     c
 }
@@ -521,7 +788,11 @@ fn zoomed_marginal(name: &str, values: &[f64], prior: &Prior) -> Chart {
 /// Consistency across runs: per B-P parameter, each run calibrated alone,
 /// the joint calibration and the between-run layer's new test, as medians
 /// with 90 % bars on a log axis.
-pub fn consistency(dir: &Path, parameters: &[ParameterConsistency], figs: &mut Figures) -> Result<()> {
+pub fn consistency(
+    dir: &Path,
+    parameters: &[ParameterConsistency],
+    figs: &mut Figures,
+) -> Result<()> {
     let Some(first) = parameters.first() else {
         return Ok(());
     };
@@ -530,7 +801,11 @@ pub fn consistency(dir: &Path, parameters: &[ParameterConsistency], figs: &mut F
     let rows = labels.len();
     let mut panels = Vec::new();
     for p in parameters {
-        let mut c = Chart::new(format!("{}  (χ²/ν {:.1})", p.parameter, p.chi2_nu), format!("{} ({})", p.parameter, crate::posterior::unit_of(&p.parameter)), "");
+        let mut c = Chart::new(
+            format!("{}  (χ²/ν {:.1})", p.parameter, p.chi2_nu),
+            format!("{} ({})", p.parameter, crate::posterior::unit_of(&p.parameter)),
+            "",
+        );
         let estimates = p.runs.iter().chain([&p.joint, &p.new_test]);
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for (k, e) in estimates.enumerate() {
@@ -576,8 +851,18 @@ pub struct AtCurrent {
 /// median over its grid (its calibrated currents marked), and the
 /// per-current estimates as medians with 90 % bars, into `dir/against_current`.
 /// `more`: a sentence added to the caption (the bands beside the laws').
-pub fn against_current(dir: &Path, laws: &[LawCurves], per_current: &[AtCurrent], more: &str, figs: &mut Figures) -> Result<()> {
-    let top = laws.iter().flat_map(|l| l.rows.iter().map(|r| r.current_a)).chain(per_current.iter().map(|p| p.current_a)).fold(0.0f64, f64::max);
+pub fn against_current(
+    dir: &Path,
+    laws: &[LawCurves],
+    per_current: &[AtCurrent],
+    more: &str,
+    figs: &mut Figures,
+) -> Result<()> {
+    let top = laws
+        .iter()
+        .flat_map(|l| l.rows.iter().map(|r| r.current_a))
+        .chain(per_current.iter().map(|p| p.current_a))
+        .fold(0.0f64, f64::max);
     if top <= 0.0 {
         return Ok(());
     }
@@ -589,30 +874,70 @@ pub fn against_current(dir: &Path, laws: &[LawCurves], per_current: &[AtCurrent]
             let x: Vec<f64> = rows.iter().map(|r| r.current_a).collect();
             let color = law.color.unwrap_or(PALETTE[(4 + j) % 8]);
             let label = format!("{} (90 %)", law.label);
-            c.series.push(Series::band(Some(label), color, x.clone(), rows.iter().map(|r| r.q05).collect(), rows.iter().map(|r| r.q95).collect()).with_opacity(0.3));
-            c.series.push(Series::line(None, color, x, rows.iter().map(|r| r.q50).collect()).with_width(2));
-            let seen: Vec<&&CurrentRow> = rows.iter().filter(|r| r.kind == CurrentKind::Calibrated).collect();
+            c.series.push(
+                Series::band(
+                    Some(label),
+                    color,
+                    x.clone(),
+                    rows.iter().map(|r| r.q05).collect(),
+                    rows.iter().map(|r| r.q95).collect(),
+                )
+                .with_opacity(0.3),
+            );
+            c.series.push(
+                Series::line(None, color, x, rows.iter().map(|r| r.q50).collect()).with_width(2),
+            );
+            let seen: Vec<&&CurrentRow> =
+                rows.iter().filter(|r| r.kind == CurrentKind::Calibrated).collect();
             let mark = (j == 0).then(|| "calibrated currents".to_string());
-            c.series.push(Series::points(mark, color, seen.iter().map(|r| r.current_a).collect(), seen.iter().map(|r| r.q50).collect()).with_width(4));
+            c.series.push(
+                Series::points(
+                    mark,
+                    color,
+                    seen.iter().map(|r| r.current_a).collect(),
+                    seen.iter().map(|r| r.q50).collect(),
+                )
+                .with_width(4),
+            );
             // the extrapolated part (below the lowest calibrated current and
             // above the highest) dashed over the band
-            let (lo, hi) = law.calibrated_a.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-            for part in [rows.iter().filter(|r| r.current_a <= lo).collect::<Vec<_>>(), rows.iter().filter(|r| r.current_a >= hi).collect()] {
+            let (lo, hi) = law
+                .calibrated_a
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+            for part in [
+                rows.iter().filter(|r| r.current_a <= lo).collect::<Vec<_>>(),
+                rows.iter().filter(|r| r.current_a >= hi).collect(),
+            ] {
                 if part.len() >= 2 {
-                    c.series.push(Series::dashed(None, GREY, part.iter().map(|r| r.current_a).collect(), part.iter().map(|r| r.q50).collect()).with_width(2));
+                    c.series.push(
+                        Series::dashed(
+                            None,
+                            GREY,
+                            part.iter().map(|r| r.current_a).collect(),
+                            part.iter().map(|r| r.q50).collect(),
+                        )
+                        .with_width(2),
+                    );
                 }
             }
         }
         let (mut x, mut y) = (vec![], vec![]);
         for p in per_current {
             if let Some([q05, q50, q95]) = p.quantiles[k] {
-                c.series.push(Series::line(None, PALETTE[0], vec![p.current_a; 2], vec![q05, q95]).with_width(2));
+                c.series.push(
+                    Series::line(None, PALETTE[0], vec![p.current_a; 2], vec![q05, q95])
+                        .with_width(2),
+                );
                 x.push(p.current_a);
                 y.push(q50);
             }
         }
         if !x.is_empty() {
-            c.series.push(Series::points(Some("per-current (median, 90 %)".into()), PALETTE[0], x, y).with_width(5));
+            c.series.push(
+                Series::points(Some("per-current (median, 90 %)".into()), PALETTE[0], x, y)
+                    .with_width(5),
+            );
         }
         c.x_range = Some((0.0, top));
         c.legend = panels.is_empty();
@@ -620,7 +945,11 @@ pub fn against_current(dir: &Path, laws: &[LawCurves], per_current: &[AtCurrent]
         panels.push(c);
     }
     plot::save(&Figure::grid(panels, 4), &dir.join("against_current"))?;
-    let per = if per_current.is_empty() { "" } else { "; per-current calibrations as medians with 90 % bars" };
+    let per = if per_current.is_empty() {
+        ""
+    } else {
+        "; per-current calibrations as medians with 90 % bars"
+    };
     figs.push(
         "against_current",
         &format!("Each B-P parameter against the coil current: median and 90 % credible band from the off-state (0 A) to 1.2× the highest calibrated current (dots: the currents calibrated on; grey dashes: extrapolated beyond them){per}.{more}"),

@@ -59,7 +59,12 @@ nav a{margin-right:1em}pre{background:#f6f6f6;padding:.8em;overflow-x:auto;font-
 
 impl Page {
     pub fn new(title: &str) -> Page {
-        Page { title: title.to_string(), nav: Vec::new(), body: String::new(), derived_from: Vec::new() }
+        Page {
+            title: title.to_string(),
+            nav: Vec::new(),
+            body: String::new(),
+            derived_from: Vec::new(),
+        }
     }
 
     /// Names a calibration the page was made from (a `mrbp-calibration-id`
@@ -112,7 +117,8 @@ impl Page {
 
     /// A PNG file inlined as a data URI, with its caption.
     pub fn figure(&mut self, png: &Path, caption: &str) -> Result<()> {
-        let bytes = std::fs::read(png).map_err(|e| Error::input(png, format!("cannot read figure: {e}")))?;
+        let bytes = std::fs::read(png)
+            .map_err(|e| Error::input(png, format!("cannot read figure: {e}")))?;
         let data = base64::engine::general_purpose::STANDARD.encode(bytes);
         let alt = png.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let _ = writeln!(
@@ -131,7 +137,10 @@ impl Page {
             "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
              <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">{}\
              <title>{}</title><style>{STYLE}</style></head><body>\n<h1>{}</h1>\n<nav>",
-            self.derived_from.iter().map(|id| format!("<meta name=\"{CALIBRATION_ID_META}\" content=\"{}\">", esc(id))).collect::<String>(),
+            self.derived_from
+                .iter()
+                .map(|id| format!("<meta name=\"{CALIBRATION_ID_META}\" content=\"{}\">", esc(id)))
+                .collect::<String>(),
             esc(&self.title),
             esc(&self.title)
         );
@@ -155,7 +164,11 @@ pub fn num(v: f64, digits: usize) -> String {
     if a != 0.0 && !(1e-3..1e5).contains(&a) {
         format!("{:.*e}", digits.saturating_sub(1), v)
     } else {
-        let decimals = if a == 0.0 { 0 } else { (digits as i32 - 1 - a.log10().floor() as i32).max(0) as usize };
+        let decimals = if a == 0.0 {
+            0
+        } else {
+            (digits as i32 - 1 - a.log10().floor() as i32).max(0) as usize
+        };
         format!("{v:.decimals$}")
     }
 }
@@ -179,6 +192,10 @@ mod tests {
         p.section("a", "Alpha");
         p.table(&["x", "y"], &[vec!["1".into(), Mark::Pass.html().into()]]);
         let html = p.finish();
-        assert!(html.contains("href=\"#a\"") && html.contains("<h2 id=\"a\">Alpha</h2>") && html.contains("✔ pass"));
+        assert!(
+            html.contains("href=\"#a\"")
+                && html.contains("<h2 id=\"a\">Alpha</h2>")
+                && html.contains("✔ pass")
+        );
     }
 }

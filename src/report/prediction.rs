@@ -4,15 +4,15 @@
 
 use std::path::{Path, PathBuf};
 
-use super::calibration::coverage_table;
-use super::html::{esc, Page};
-use super::figures::{self, Figures};
 use super::adequacy;
+use super::calibration::coverage_table;
+use super::figures::{self, Figures};
+use super::html::{esc, Page};
 use crate::atomic;
+use crate::calibrate::Calibration;
 use crate::data::Campaign;
 use crate::error::Result;
 use crate::predict::Prediction;
-use crate::calibrate::Calibration;
 
 /// What the report shows.
 pub struct PredictionReport<'a> {

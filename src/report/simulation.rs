@@ -17,7 +17,8 @@ pub const FIGURE: &str = "simulation";
 pub fn write(dir: &Path, s: &Simulation, calibration: &str) -> Result<()> {
     let r = &s.record;
     let thin = every(s.time.len(), MAX_VERTICES);
-    let pick = |v: &[f64], scale: f64| v.iter().step_by(thin).map(|y| y * scale).collect::<Vec<f64>>();
+    let pick =
+        |v: &[f64], scale: f64| v.iter().step_by(thin).map(|y| y * scale).collect::<Vec<f64>>();
     let force = |v: &[f64]| pick(v, r.area_m2);
     let panel = |title: &str, x_label: &str, x: Vec<f64>, looped: bool, legend_at: LegendAt| {
         let mut c = Chart::new(title, x_label, "force F = τA (N)");
@@ -25,24 +26,54 @@ pub fn write(dir: &Path, s: &Simulation, calibration: &str) -> Result<()> {
             if looped {
                 loop_band(label, color, &x, &force(lo), &force(hi), opacity)
             } else {
-                vec![Series::band(Some(label.to_string()), color, x.clone(), force(lo), force(hi)).with_opacity(opacity)]
+                vec![Series::band(Some(label.to_string()), color, x.clone(), force(lo), force(hi))
+                    .with_opacity(opacity)]
             }
         };
-        c.series.extend(band("95 % predictive", PALETTE[5], &s.predictive[0], &s.predictive[1], 0.25));
+        c.series.extend(band(
+            "95 % predictive",
+            PALETTE[5],
+            &s.predictive[0],
+            &s.predictive[1],
+            0.25,
+        ));
         c.series.extend(band("95 % model", PALETTE[0], &s.model[0], &s.model[4], 0.35));
         c.series.extend(band("50 % model", PALETTE[0], &s.model[1], &s.model[3], 0.6));
-        c.series.push(Series::line(Some("posterior median".into()), PALETTE[1], x.clone(), force(&s.model[2])).with_width(1));
+        c.series.push(
+            Series::line(
+                Some("posterior median".into()),
+                PALETTE[1],
+                x.clone(),
+                force(&s.model[2]),
+            )
+            .with_width(1),
+        );
         c.legend_at = legend_at;
         c
     };
     let extrapolated = if r.extrapolated { ", extrapolated" } else { "" };
     let title = if r.current_varies {
-        let (lo, hi) = s.current.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
+        let (lo, hi) = s
+            .current
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
         format!("{calibration}, current {lo}–{hi} A along the excitation{extrapolated}")
     } else {
         format!("{calibration} at {} A{extrapolated}", r.current_a)
     };
-    let in_time = panel(&format!("{title}: force against time"), "time t (s)", pick(&s.time, 1.0), false, LegendAt::UpperRight);
-    let in_x = panel(&format!("{title}: force against displacement"), "displacement x (mm)", pick(&s.displacement, 1e3), true, LegendAt::Middle);
+    let in_time = panel(
+        &format!("{title}: force against time"),
+        "time t (s)",
+        pick(&s.time, 1.0),
+        false,
+        LegendAt::UpperRight,
+    );
+    let in_x = panel(
+        &format!("{title}: force against displacement"),
+        "displacement x (mm)",
+        pick(&s.displacement, 1e3),
+        true,
+        LegendAt::Middle,
+    );
     plot::save(&Figure::grid(vec![in_time, in_x], 2), &dir.join(FIGURE))
 }

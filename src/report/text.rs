@@ -23,8 +23,23 @@ macro_rules! row {
 /// `mrbp check`: one line per run.
 pub fn campaign(campaign: &Campaign) -> String {
     let mut out = String::new();
-    row!(out, "campaign '{}' ({}): {} runs", campaign.name, campaign.manifest_path.display(), campaign.runs.len());
-    row!(out, "{:<16} {:>8} {:>11} {:>13} {:>10} {:>9}", "run", "samples", "duration_s", "peak_force_n", "current_a", "branches");
+    row!(
+        out,
+        "campaign '{}' ({}): {} runs",
+        campaign.name,
+        campaign.manifest_path.display(),
+        campaign.runs.len()
+    );
+    row!(
+        out,
+        "{:<16} {:>8} {:>11} {:>13} {:>10} {:>9}",
+        "run",
+        "samples",
+        "duration_s",
+        "peak_force_n",
+        "current_a",
+        "branches"
+    );
     for run in &campaign.runs {
         let rec = &run.record;
         let peak = rec.force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
@@ -52,7 +67,18 @@ pub fn identification(results: &[CurrentIdentification]) -> String {
         row!(
             out,
             "{:<w$} {:>9} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>9}",
-            "run", "G", "tau02", "rate02", "R0", "R1", "D1", "m1", "m2", "n", "", "rms_pa"
+            "run",
+            "G",
+            "tau02",
+            "rate02",
+            "R0",
+            "R1",
+            "D1",
+            "m1",
+            "m2",
+            "n",
+            "",
+            "rms_pa"
         );
         for (i, r) in res.runs.iter().enumerate() {
             if let Some(f) = &r.steady {
@@ -60,7 +86,17 @@ pub fn identification(results: &[CurrentIdentification]) -> String {
                 row!(
                     out,
                     "{:<w$} {:>9.3e} {:>9} {:>8} {:>9} {:>19} {:>9} {:>9} {:>9.3} {:>6} {:>9.1}",
-                    r.run, r.g, "", "", "", format!("R1+D1 {:.3e}", f.z), "", "", f.n, "steady", res.euler_rms[i]
+                    r.run,
+                    r.g,
+                    "",
+                    "",
+                    "",
+                    format!("R1+D1 {:.3e}", f.z),
+                    "",
+                    "",
+                    f.n,
+                    "steady",
+                    res.euler_rms[i]
                 );
                 continue;
             }
@@ -103,8 +139,12 @@ pub fn calibration(cal: &Calibration) -> String {
     let mut out = String::new();
     let rec = &cal.record;
     let at = match cal.sample.model {
-        ParameterModel::CurrentLaw { reference_a, .. } => format!("current law (reference {reference_a} A) from {:?} A", rec.currents),
-        ParameterModel::CurrentCurves { low_a, high_a, .. } => format!("current curves (anchors {low_a} and {high_a} A) from {:?} A", rec.currents),
+        ParameterModel::CurrentLaw { reference_a, .. } => {
+            format!("current law (reference {reference_a} A) from {:?} A", rec.currents)
+        }
+        ParameterModel::CurrentCurves { low_a, high_a, .. } => {
+            format!("current curves (anchors {low_a} and {high_a} A) from {:?} A", rec.currents)
+        }
         ParameterModel::PerCurrent => format!("posterior at {} A", rec.current_a),
     };
     let s = &cal.settings;
@@ -122,7 +162,17 @@ pub fn calibration(cal: &Calibration) -> String {
     row!(
         out,
         "{:<22} {:>11} {:>10} {:>11} {:>11} {:>11} {:>8} {:>8} {:>7} {:>7} {:>6}",
-        "parameter", "mean", "sd", "q05", "q50", "q95", "ess_bulk", "ess_tail", "ess/s", "r_hat", "tau"
+        "parameter",
+        "mean",
+        "sd",
+        "q05",
+        "q50",
+        "q95",
+        "ess_bulk",
+        "ess_tail",
+        "ess/s",
+        "r_hat",
+        "tau"
     );
     let seconds = cal.seconds();
     for p in &cal.summary {
@@ -160,7 +210,11 @@ pub fn calibration_alone(cal: &Calibration) -> String {
     if rec.runs_with_memory() > 0 {
         said.push("residual memory".to_string());
     }
-    let warnings = if said.is_empty() { String::new() } else { format!("; {} (calibration.toml, report.html)", said.join(", ")) };
+    let warnings = if said.is_empty() {
+        String::new()
+    } else {
+        format!("; {} (calibration.toml, report.html)", said.join(", "))
+    };
     format!(
         "{runs} alone: {} walkers × {} steps, largest R̂ {:.4}, smallest ESS {:.0}, {:.1} s{warnings}\n",
         cal.sample.chains.chains(),
@@ -184,7 +238,16 @@ pub fn prediction(record: &PredictionRecord) -> String {
         rows.len(),
         record.seconds
     );
-    row!(out, "{:<16} {:>8} {:>12} {:>12} {:>12} {:>10}", "run", "samples", "in_p95_%", "in_q95_%", "rmse_q50_pa", "");
+    row!(
+        out,
+        "{:<16} {:>8} {:>12} {:>12} {:>12} {:>10}",
+        "run",
+        "samples",
+        "in_p95_%",
+        "in_q95_%",
+        "rmse_q50_pa",
+        ""
+    );
     for r in rows {
         row!(
             out,
@@ -203,10 +266,27 @@ pub fn prediction(record: &PredictionRecord) -> String {
 pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
     let mut out = String::new();
     row!(out, "\nleave-one-out ({seconds:.1} s):");
-    row!(out, "{:<16} {:>12} {:>12} {:>10} {:>8} {:>10} {:>20} {:>8}", "held out", "in_p95_%", "rmse_q50_pa", "lppd/sample", "k̂", "k̂_laplace", "held-out posterior", "max_R̂");
+    row!(
+        out,
+        "{:<16} {:>12} {:>12} {:>10} {:>8} {:>10} {:>20} {:>8}",
+        "held out",
+        "in_p95_%",
+        "rmse_q50_pa",
+        "lppd/sample",
+        "k̂",
+        "k̂_laplace",
+        "held-out posterior",
+        "max_R̂"
+    );
     for r in rows {
         let c = &r.coverage;
-        let or_dash = |v: f64, digits: usize| if v.is_finite() { format!("{v:.digits$}") } else { "–".into() };
+        let or_dash = |v: f64, digits: usize| {
+            if v.is_finite() {
+                format!("{v:.digits$}")
+            } else {
+                "–".into()
+            }
+        };
         row!(
             out,
             "{:<16} {:>12.1} {:>12.1} {:>10.3} {:>8.2} {:>10} {:>20} {:>8}",
@@ -228,14 +308,34 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
 pub fn new_test_left_out(rows: &[NewTestRow], seconds: f64) -> String {
     let mut out = String::new();
     row!(out, "\nleave-one-out, each run as a new test of the between-run layer ({seconds:.1} s):");
-    row!(out, "{:<16} {:>12} {:>12} {:>12} {:>12} {:>10} {:>8}", "held out", "without", "in_p95_%", "in_q95_%", "rmse_q50_pa", "lppd/sample", "max_R̂");
+    row!(
+        out,
+        "{:<16} {:>12} {:>12} {:>12} {:>12} {:>10} {:>8}",
+        "held out",
+        "without",
+        "in_p95_%",
+        "in_q95_%",
+        "rmse_q50_pa",
+        "lppd/sample",
+        "max_R̂"
+    );
     for r in rows {
         let c = &r.coverage;
         let without = match r.left_out {
             LeftOut::Run => "the run",
             LeftOut::Current => "its current",
         };
-        row!(out, "{:<16} {:>12} {:>12.1} {:>12.1} {:>12.1} {:>10.3} {:>8.4}", c.run, without, 100.0 * c.inside_p95, 100.0 * c.inside_q95, c.rmse_q50_pa, c.lppd / c.samples.max(1) as f64, r.max_rhat);
+        row!(
+            out,
+            "{:<16} {:>12} {:>12.1} {:>12.1} {:>12.1} {:>10.3} {:>8.4}",
+            c.run,
+            without,
+            100.0 * c.inside_p95,
+            100.0 * c.inside_q95,
+            c.rmse_q50_pa,
+            c.lppd / c.samples.max(1) as f64,
+            r.max_rhat
+        );
     }
     let pooled = new_test_pooled(rows);
     if !pooled.is_empty() {
@@ -251,9 +351,15 @@ pub fn new_test_pooled(rows: &[NewTestRow]) -> Vec<String> {
     [(LeftOut::Run, "alone"), (LeftOut::Current, "with their current")]
         .into_iter()
         .filter_map(|(kind, without)| {
-            let these: Vec<_> = rows.iter().filter(|r| r.left_out == kind).map(|r| &r.coverage).collect();
+            let these: Vec<_> =
+                rows.iter().filter(|r| r.left_out == kind).map(|r| &r.coverage).collect();
             let share = CoverageRow::pooled_inside_p95(these.iter().copied())?;
-            Some(format!("{:.1} % of the samples of the {} run{} held out {without}", 100.0 * share, these.len(), if these.len() == 1 { "" } else { "s" }))
+            Some(format!(
+                "{:.1} % of the samples of the {} run{} held out {without}",
+                100.0 * share,
+                these.len(),
+                if these.len() == 1 { "" } else { "s" }
+            ))
         })
         .collect()
 }
@@ -278,7 +384,8 @@ pub fn consistency(parameters: &[ParameterConsistency]) -> String {
         for r in &p.runs {
             line.push_str(&format!(" {:>20}", format!("{:.3e}±{:.1}%", r.q50, 100.0 * r.sd_log)));
         }
-        let interval = |e: &crate::validate::consistency::Estimate| format!("{:.3e}–{:.3e}", e.q05, e.q95);
+        let interval =
+            |e: &crate::validate::consistency::Estimate| format!("{:.3e}–{:.3e}", e.q05, e.q95);
         line.push_str(&format!(" {:>22} {:>22}", interval(&p.joint), interval(&p.new_test)));
         row!(out, "{line}");
     }

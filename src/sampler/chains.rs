@@ -42,8 +42,10 @@ impl Chains {
     /// The same chains with every position mapped by `f` (to other
     /// coordinates, say), log-densities and acceptances kept.
     pub fn map_points(&self, f: impl Fn(&[f64]) -> Vec<f64>) -> Chains {
-        let positions: Vec<f64> = self.positions.chunks_exact(self.dim.max(1)).flat_map(&f).collect();
-        let dim = if self.log_prob.is_empty() { self.dim } else { positions.len() / self.log_prob.len() };
+        let positions: Vec<f64> =
+            self.positions.chunks_exact(self.dim.max(1)).flat_map(&f).collect();
+        let dim =
+            if self.log_prob.is_empty() { self.dim } else { positions.len() / self.log_prob.len() };
         Chains {
             dim,
             ensembles: self.ensembles,
@@ -79,7 +81,10 @@ impl Chains {
         let nc = self.chains();
         let steps = self.steps().saturating_sub(from).max(1);
         (0..nc)
-            .map(|c| (from..self.steps()).filter(|&s| self.accepted[s * nc + c]).count() as f64 / steps as f64)
+            .map(|c| {
+                (from..self.steps()).filter(|&s| self.accepted[s * nc + c]).count() as f64
+                    / steps as f64
+            })
             .collect()
     }
 

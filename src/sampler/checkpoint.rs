@@ -21,7 +21,8 @@ struct Checkpoint {
 
 /// Saves the settings and chains at `path`, atomically.
 pub fn save(path: &Path, settings: &SamplerSettings, chains: &Chains) -> Result<()> {
-    let cp = Checkpoint { format: FORMAT.into(), settings: settings.clone(), chains: chains.clone() };
+    let cp =
+        Checkpoint { format: FORMAT.into(), settings: settings.clone(), chains: chains.clone() };
     let bytes = postcard::to_allocvec(&cp).map_err(|e| Error::output(path, e))?;
     atomic::write(path, &bytes)
 }
@@ -30,7 +31,13 @@ pub fn save(path: &Path, settings: &SamplerSettings, chains: &Chains) -> Result<
 pub fn load(path: &Path, dim: usize) -> Result<(SamplerSettings, Chains)> {
     let (settings, chains) = read(path)?;
     if chains.dim != dim {
-        return Err(Error::input(path, format!("checkpoint of a target with {} coordinates, not {dim}: another calibration's?", chains.dim)));
+        return Err(Error::input(
+            path,
+            format!(
+                "checkpoint of a target with {} coordinates, not {dim}: another calibration's?",
+                chains.dim
+            ),
+        ));
     }
     Ok((settings, chains))
 }
@@ -38,10 +45,19 @@ pub fn load(path: &Path, dim: usize) -> Result<(SamplerSettings, Chains)> {
 /// Reads a checkpoint written by [`save`], whatever its target: to check
 /// it against the options before any work.
 pub fn read(path: &Path) -> Result<(SamplerSettings, Chains)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::input(path, format!("cannot read checkpoint: {e}")))?;
-    let cp: Checkpoint = postcard::from_bytes(&bytes).map_err(|_| Error::input(path, "not a sampler checkpoint (damaged, or another file): remove it to start afresh"))?;
+    let bytes = std::fs::read(path)
+        .map_err(|e| Error::input(path, format!("cannot read checkpoint: {e}")))?;
+    let cp: Checkpoint = postcard::from_bytes(&bytes).map_err(|_| {
+        Error::input(
+            path,
+            "not a sampler checkpoint (damaged, or another file): remove it to start afresh",
+        )
+    })?;
     if cp.format != FORMAT {
-        return Err(Error::input(path, format!("checkpoint format '{}', this mrbp reads '{FORMAT}'", cp.format)));
+        return Err(Error::input(
+            path,
+            format!("checkpoint format '{}', this mrbp reads '{FORMAT}'", cp.format),
+        ));
     }
     Ok((cp.settings, cp.chains))
 }

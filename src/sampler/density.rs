@@ -72,11 +72,18 @@ pub fn log_densities(target: &impl LogDensity, points: &[f64]) -> Vec<f64> {
 /// Log-densities of consecutive points, in parallel batches of [`BATCH`];
 /// NaN becomes −∞. With `memos` (one per point; empty: none made), each
 /// point's memo for [`LogDensity::block_log_density_batch`] too.
-pub fn log_densities_memo<T: LogDensity>(target: &T, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
+pub fn log_densities_memo<T: LogDensity>(
+    target: &T,
+    xs: &[f64],
+    out: &mut [f64],
+    memos: &mut [Vec<f64>],
+) {
     use rayon::prelude::*;
     let d = target.dim().max(1);
     if memos.is_empty() {
-        xs.par_chunks(BATCH * d).zip(out.par_chunks_mut(BATCH)).for_each(|(x, o)| target.log_density_batch(x, o));
+        xs.par_chunks(BATCH * d)
+            .zip(out.par_chunks_mut(BATCH))
+            .for_each(|(x, o)| target.log_density_batch(x, o));
     } else {
         xs.par_chunks(BATCH * d)
             .zip(out.par_chunks_mut(BATCH))
@@ -89,7 +96,12 @@ pub fn log_densities_memo<T: LogDensity>(target: &T, xs: &[f64], out: &mut [f64]
 /// Block `b`'s terms ([`LogDensity::block_log_density_batch`]) at the
 /// points `xs`, each with the memo of the point it differs from in block
 /// `b` alone, in parallel batches of [`BATCH`]; NaN becomes −∞.
-pub fn block_log_densities<T: LogDensity>(target: &T, b: usize, xs: &[f64], memos: &[&[f64]]) -> Vec<f64> {
+pub fn block_log_densities<T: LogDensity>(
+    target: &T,
+    b: usize,
+    xs: &[f64],
+    memos: &[&[f64]],
+) -> Vec<f64> {
     use rayon::prelude::*;
     let d = target.dim().max(1);
     let mut out = vec![0.0; xs.len() / d];

@@ -120,10 +120,7 @@ pub fn variance(x: &[f64]) -> f64 {
 /// Each chain cut in two halves (the middle draw dropped when odd).
 fn split(chains: &[Vec<f64>]) -> Vec<Vec<f64>> {
     let n = chains.iter().map(Vec::len).min().unwrap_or(0) / 2;
-    chains
-        .iter()
-        .flat_map(|c| [c[..n].to_vec(), c[c.len() - n..].to_vec()])
-        .collect()
+    chains.iter().flat_map(|c| [c[..n].to_vec(), c[c.len() - n..].to_vec()]).collect()
 }
 
 /// Classic potential scale reduction of equal-length chains.
@@ -207,7 +204,8 @@ pub fn ess(chains: &[Vec<f64>]) -> f64 {
     if !(var_plus > 0.0) {
         return f64::NAN;
     }
-    let rho = |t: usize| 1.0 - (mean_var - acov.iter().map(|a| a[t]).sum::<f64>() / m as f64) / var_plus;
+    let rho =
+        |t: usize| 1.0 - (mean_var - acov.iter().map(|a| a[t]).sum::<f64>() / m as f64) / var_plus;
     // Geyer's initial positive sequence: pairs (ρ_{t+1}, ρ_{t+2}) while
     // their sum stays positive
     let mut rho_hat = vec![0.0; n + 1];
@@ -274,7 +272,11 @@ pub fn ess_tail(chains: &[Vec<f64>]) -> f64 {
 /// The smaller of two ESS values, NaN (chains too short to tell) if either
 /// is: `f64::min` would drop the NaN and report the other.
 fn nan_min(a: f64, b: f64) -> f64 {
-    if a.is_nan() || b.is_nan() { f64::NAN } else { a.min(b) }
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.min(b)
+    }
 }
 
 fn pool(chains: &[Vec<f64>]) -> Vec<f64> {
@@ -363,7 +365,10 @@ impl ParameterDiagnostics {
             q95: quantile_sorted(&sorted, 0.95),
             ess_bulk: ess(&split(&z)),
             ess_tail: ess_tail(chains),
-            r_hat: rhat_of_normalized(&group_chains(&z, ensembles), &group_chains(&z_folded, ensembles)),
+            r_hat: rhat_of_normalized(
+                &group_chains(&z, ensembles),
+                &group_chains(&z_folded, ensembles),
+            ),
             tau_int: integrated_time(chains),
             mcse_mean: sd / ess(&split(chains)).sqrt(),
         }
@@ -443,7 +448,11 @@ impl Diagnostics {
 
     /// Builds the run's diagnostics from per-coordinate ones (a caller may
     /// compute those on transformed draws).
-    pub fn assemble(chains: &Chains, burn_in: usize, coordinates: Vec<ParameterDiagnostics>) -> Diagnostics {
+    pub fn assemble(
+        chains: &Chains,
+        burn_in: usize,
+        coordinates: Vec<ParameterDiagnostics>,
+    ) -> Diagnostics {
         let total = chains.steps();
         let kept = total.saturating_sub(burn_in);
         let tau_max = coordinates.iter().map(|c| c.tau_int).fold(0.0, f64::max);
@@ -461,7 +470,8 @@ impl Diagnostics {
         }
         let worst_rhat = max_rhat(&coordinates);
         if !(worst_rhat < RHAT_THRESHOLD) {
-            warnings.push(format!("largest R̂ is {worst_rhat:.3} ≥ {RHAT_THRESHOLD}: chains disagree"));
+            warnings
+                .push(format!("largest R̂ is {worst_rhat:.3} ≥ {RHAT_THRESHOLD}: chains disagree"));
         }
         if median < LOW_ACCEPTANCE {
             warnings.push(format!(
@@ -494,7 +504,10 @@ impl Diagnostics {
 
     /// The smallest bulk or tail ESS over coordinates.
     pub fn min_ess(&self) -> f64 {
-        self.coordinates.iter().map(|c| nan_min(c.ess_bulk, c.ess_tail)).fold(f64::INFINITY, nan_min)
+        self.coordinates
+            .iter()
+            .map(|c| nan_min(c.ess_bulk, c.ess_tail))
+            .fold(f64::INFINITY, nan_min)
     }
 
     /// Every R̂ below 1.01 and every bulk and tail ESS at least `min_ess`
@@ -509,7 +522,9 @@ impl Diagnostics {
     /// [`Self::converged`] with the chains at least `tau_multiple` τ_max
     /// long after burn-in.
     pub fn converged_for(&self, min_ess: f64, tau_multiple: f64) -> bool {
-        self.coordinates.iter().all(|c| c.r_hat < RHAT_THRESHOLD) && self.min_ess() >= min_ess && self.long_enough_for(tau_multiple)
+        self.coordinates.iter().all(|c| c.r_hat < RHAT_THRESHOLD)
+            && self.min_ess() >= min_ess
+            && self.long_enough_for(tau_multiple)
     }
 
     /// At least [`MIN_TAU_MULTIPLE`] τ_max after burn-in.
@@ -546,7 +561,8 @@ mod tests {
         let m = mean(&x);
         let acov = autocovariance(&x);
         for t in [0, 1, 5, 100, 256] {
-            let direct: f64 = (0..x.len() - t).map(|i| (x[i] - m) * (x[i + t] - m)).sum::<f64>() / x.len() as f64;
+            let direct: f64 =
+                (0..x.len() - t).map(|i| (x[i] - m) * (x[i + t] - m)).sum::<f64>() / x.len() as f64;
             assert!((acov[t] - direct).abs() < 1e-12, "{t}");
         }
     }
@@ -570,7 +586,9 @@ mod tests {
         // i.i.d.: ρ_t ≈ 0, so ESS ≈ N; Geyer's truncation after a few lags
         // leaves a relative sd of a few percent at N = 4000
         let chains: Vec<Vec<f64>> = (0..4).map(|c| ar1(0.0, 1000, 10 + c)).collect();
-        for (name, e) in [("bulk", ess_bulk(&chains)), ("tail", ess_tail(&chains)), ("raw", ess(&chains))] {
+        for (name, e) in
+            [("bulk", ess_bulk(&chains)), ("tail", ess_tail(&chains)), ("raw", ess(&chains))]
+        {
             assert!((e - 4000.0).abs() < 0.15 * 4000.0, "{name}: {e}");
         }
     }

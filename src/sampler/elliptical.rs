@@ -42,7 +42,10 @@ impl Moments {
     /// The weighted mean Σ w x / Σ w and covariance Σ w (x − m)(x − m)ᵀ / Σ w
     /// of the points (each `d` coordinates) with their weights (any
     /// positive scale: responsibilities, importance weights).
-    pub fn weighted<'a>(points: impl Iterator<Item = (&'a [f64], f64)> + Clone, d: usize) -> Moments {
+    pub fn weighted<'a>(
+        points: impl Iterator<Item = (&'a [f64], f64)> + Clone,
+        d: usize,
+    ) -> Moments {
         let total: f64 = points.clone().map(|(_, w)| w).sum();
         let mut mean = DVector::zeros(d);
         for (p, w) in points.clone() {
@@ -94,7 +97,11 @@ impl Elliptical {
     pub fn or_diagonal(moments: Moments, points: usize) -> Option<Elliptical> {
         let Moments { mean, cov } = moments;
         let diagonal = || DMatrix::from_diagonal(&cov.diagonal());
-        let chol = if points > mean.len() { cov.clone().cholesky().or_else(|| diagonal().cholesky()) } else { diagonal().cholesky() }?;
+        let chol = if points > mean.len() {
+            cov.clone().cholesky().or_else(|| diagonal().cholesky())
+        } else {
+            diagonal().cholesky()
+        }?;
         Some(Elliptical { mean, l: chol.l() })
     }
 
@@ -112,7 +119,12 @@ impl Elliptical {
     pub fn marginal(&self, indices: &[usize]) -> Option<Elliptical> {
         let cov = self.covariance();
         let mean = DVector::from_iterator(indices.len(), indices.iter().map(|&i| self.mean[i]));
-        Elliptical::new(Moments { mean, cov: DMatrix::from_fn(indices.len(), indices.len(), |a, b| cov[(indices[a], indices[b])]) })
+        Elliptical::new(Moments {
+            mean,
+            cov: DMatrix::from_fn(indices.len(), indices.len(), |a, b| {
+                cov[(indices[a], indices[b])]
+            }),
+        })
     }
 
     /// The lower Cholesky factor L.
@@ -155,7 +167,10 @@ impl Elliptical {
 
     /// (x − μ)ᵀ (spread² L Lᵀ)⁻¹ (x − μ).
     pub fn mahalanobis(&self, x: &[f64], spread: f64) -> f64 {
-        let r = DVector::from_iterator(x.len(), x.iter().zip(self.mean.iter()).map(|(a, m)| (a - m) / spread));
+        let r = DVector::from_iterator(
+            x.len(),
+            x.iter().zip(self.mean.iter()).map(|(a, m)| (a - m) / spread),
+        );
         self.l.solve_lower_triangular(&r).map_or(f64::INFINITY, |z| z.norm_squared())
     }
 
@@ -164,7 +179,9 @@ impl Elliptical {
     /// (where distributions of different shapes are mixed).
     pub fn log_density(&self, df: Option<f64>, x: &[f64], spread: f64) -> f64 {
         let d = x.len() as f64;
-        standard_log_density(df, d, self.mahalanobis(x, spread)) - self.half_log_det() - d * spread.ln()
+        standard_log_density(df, d, self.mahalanobis(x, spread))
+            - self.half_log_det()
+            - d * spread.ln()
     }
 
     /// ln of the density at `x` of the Student-t with `df` degrees of
@@ -184,7 +201,12 @@ impl Elliptical {
 pub fn standard_log_density(df: Option<f64>, k: f64, m: f64) -> f64 {
     use statrs::function::gamma::ln_gamma;
     match df {
-        Some(nu) => ln_gamma(0.5 * (nu + k)) - ln_gamma(0.5 * nu) - 0.5 * k * (nu * std::f64::consts::PI).ln() - 0.5 * (nu + k) * (m / nu).ln_1p(),
+        Some(nu) => {
+            ln_gamma(0.5 * (nu + k))
+                - ln_gamma(0.5 * nu)
+                - 0.5 * k * (nu * std::f64::consts::PI).ln()
+                - 0.5 * (nu + k) * (m / nu).ln_1p()
+        }
         None => -0.5 * k * (2.0 * std::f64::consts::PI).ln() - 0.5 * m,
     }
 }
@@ -194,7 +216,9 @@ pub fn standard_log_density(df: Option<f64>, k: f64, m: f64) -> f64 {
 /// random number drawn).
 pub fn t_factor(df: Option<f64>, rng: &mut impl rand::Rng) -> f64 {
     match df {
-        Some(nu) => (nu / rng.sample::<f64, _>(ChiSquared::new(nu).expect("df checked positive"))).sqrt(),
+        Some(nu) => {
+            (nu / rng.sample::<f64, _>(ChiSquared::new(nu).expect("df checked positive"))).sqrt()
+        }
         None => 1.0,
     }
 }
@@ -235,7 +259,9 @@ mod tests {
     /// of the sd, the variance's about 1 %; tolerances of 5 and 7 %.
     #[test]
     fn gaussian_draws_have_the_moments() {
-        let e = Elliptical::new(Moments::of(&[0.0, 0.0, 2.0, 1.0, 1.0, 3.0, -1.0, 1.0, 3.0, 3.0], 2)).unwrap();
+        let e =
+            Elliptical::new(Moments::of(&[0.0, 0.0, 2.0, 1.0, 1.0, 3.0, -1.0, 1.0, 3.0, 3.0], 2))
+                .unwrap();
         let mut rng = crate::rng::stream(4, &[]);
         let (n, spread) = (20_000, 1.5);
         let mut y = [0.0; 2];
@@ -252,7 +278,11 @@ mod tests {
             let mean = s[i] / n as f64;
             let var = ss[i] / n as f64 - mean * mean;
             let v = spread * spread * cov[(i, i)];
-            assert!((mean - e.mean[i]).abs() < 0.05 * v.sqrt(), "mean {i}: {mean} vs {}", e.mean[i]);
+            assert!(
+                (mean - e.mean[i]).abs() < 0.05 * v.sqrt(),
+                "mean {i}: {mean} vs {}",
+                e.mean[i]
+            );
             assert!((var / v - 1.0).abs() < 0.07, "variance {i}: {var} vs {v}");
         }
     }
@@ -262,7 +292,8 @@ mod tests {
     #[test]
     fn log_kernel_is_the_student_t_density() {
         use statrs::distribution::{Continuous, StudentsT};
-        let e = Elliptical::from_factor(DVector::from_vec(vec![0.7]), DMatrix::from_element(1, 1, 2.0));
+        let e =
+            Elliptical::from_factor(DVector::from_vec(vec![0.7]), DMatrix::from_element(1, 1, 2.0));
         let t = StudentsT::new(0.7, 3.0, 5.0).unwrap();
         let (a, b) = (-1.3, 4.2);
         let ours = e.log_kernel(Some(5.0), &[a], 1.5) - e.log_kernel(Some(5.0), &[b], 1.5);

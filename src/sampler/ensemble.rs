@@ -8,6 +8,7 @@ use rayon::prelude::*;
 
 use super::chains::Chains;
 use super::checkpoint;
+use super::density::{free_coordinates, log_densities_memo, LogDensity, BATCH};
 use super::diagnostics::Diagnostics;
 use super::elliptical::Elliptical;
 use super::moves::mixture::last_fit_step;
@@ -15,7 +16,6 @@ use super::moves::{Fit, Learned, Move};
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
 use super::stranded;
-use super::density::{free_coordinates, log_densities_memo, LogDensity, BATCH};
 use crate::error::{Error, Result};
 
 /// Index of the stream that picks the move of an ensemble's step.
@@ -166,12 +166,17 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         settings.check(d)?;
         let nc = settings.walkers * settings.ensembles;
         if initial.len() != nc {
-            return Err(Error::Usage(format!("{} initial positions for {nc} walkers", initial.len())));
+            return Err(Error::Usage(format!(
+                "{} initial positions for {nc} walkers",
+                initial.len()
+            )));
         }
         let mut positions = Vec::with_capacity(nc * d);
         for (c, x) in initial.iter().enumerate() {
             if x.len() != d || x.iter().any(|v| !v.is_finite()) {
-                return Err(Error::Compute(format!("walker {c} starts at a non-finite or wrong-sized position")));
+                return Err(Error::Compute(format!(
+                    "walker {c} starts at a non-finite or wrong-sized position"
+                )));
             }
             positions.extend_from_slice(x);
         }
@@ -200,7 +205,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 positions,
                 log_prob,
                 accepted: vec![false; nc],
-                },
+            },
             history: (0, vec![Learned::default(); settings.ensembles]),
             reference: None,
             settings,
@@ -224,7 +229,17 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             blocks = within_budget(blocks, memo[0].len(), chains.chains());
         }
         let free = free_coordinates(target.dim(), &blocks);
-        Ok(Sampler { target, settings, chains, history, reference: None, announced: false, blocks, memos: Vec::new(), free })
+        Ok(Sampler {
+            target,
+            settings,
+            chains,
+            history,
+            reference: None,
+            announced: false,
+            blocks,
+            memos: Vec::new(),
+            free,
+        })
     }
 
     /// The sampler with a fixed reference distribution for
@@ -239,7 +254,9 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     /// convergence is judged on the chains as they are.
     pub fn run(&mut self, control: &RunControl, observers: &mut [&mut dyn Observer]) -> Result<()> {
         let adaptive = self.adaptive();
-        self.run_until(control, observers, &|chains| Diagnostics::compute(chains, Diagnostics::burn_in_rule(chains, adaptive)))
+        self.run_until(control, observers, &|chains| {
+            Diagnostics::compute(chains, Diagnostics::burn_in_rule(chains, adaptive))
+        })
     }
 
     /// [`Sampler::run`], with convergence judged on `diagnose(chains)`: the
@@ -255,7 +272,8 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         self.announce(control, observers)?;
         // steps taken before this run (a probe of the start, a resumed
         // run's) are checked where an uninterrupted run would have checked
-        let mut converged = self.chains.steps() > 1 && self.converged_now(control, accepted, observers, diagnose);
+        let mut converged =
+            self.chains.steps() > 1 && self.converged_now(control, accepted, observers, diagnose);
         while !converged && self.chains.steps() < control.max_steps + 1 {
             accepted = self.step_observed(control, observers)?;
             converged = self.converged_now(control, accepted, observers, diagnose);
@@ -268,7 +286,13 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
 
     /// Whether the run has converged, where `control` checks at the current
     /// step (telling `observers` what the check found).
-    fn converged_now(&self, control: &RunControl, accepted: usize, observers: &mut [&mut dyn Observer], diagnose: &dyn Fn(&Chains) -> Diagnostics) -> bool {
+    fn converged_now(
+        &self,
+        control: &RunControl,
+        accepted: usize,
+        observers: &mut [&mut dyn Observer],
+        diagnose: &dyn Fn(&Chains) -> Diagnostics,
+    ) -> bool {
         let state = self.state(control, accepted);
         if !(control.until_converged && control.checks_at(state.step)) {
             return false;
@@ -283,7 +307,11 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     /// Tells `observers` that the run started, once: a run continued by
     /// [`Sampler::run_until`] after steps taken with [`Sampler::step_observed`]
     /// is the same run.
-    pub fn announce(&mut self, control: &RunControl, observers: &mut [&mut dyn Observer]) -> Result<()> {
+    pub fn announce(
+        &mut self,
+        control: &RunControl,
+        observers: &mut [&mut dyn Observer],
+    ) -> Result<()> {
         if !self.announced {
             let state = self.state(control, 0);
             for o in observers.iter_mut() {
@@ -296,7 +324,11 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
 
     /// One [`Sampler::step`], told to `observers` (which may stop the run:
     /// a checkpoint at Ctrl-C); the number of accepted proposals.
-    pub fn step_observed(&mut self, control: &RunControl, observers: &mut [&mut dyn Observer]) -> Result<usize> {
+    pub fn step_observed(
+        &mut self,
+        control: &RunControl,
+        observers: &mut [&mut dyn Observer],
+    ) -> Result<usize> {
         self.announce(control, observers)?;
         let accepted = self.step();
         let state = self.state(control, accepted);
@@ -347,13 +379,15 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         let history = &self.history.1;
         // the moves work in the free coordinates ([`Sampler::free`])
         let (free, df) = (&self.free, self.free.len());
-        let marginal = if df < d { self.reference.as_ref().and_then(|r| r.marginal(free)) } else { None };
+        let marginal =
+            if df < d { self.reference.as_ref().and_then(|r| r.marginal(free)) } else { None };
         let reference = if df < d { marginal.as_ref() } else { self.reference.as_ref() };
         let mut acc = vec![false; nc];
         let half = nw / 2;
         for h in 0..2 {
             // chain index of every walker that moves now
-            let movers: Vec<usize> = (0..ne).flat_map(|e| (0..half).map(move |w| e * nw + h * half + w)).collect();
+            let movers: Vec<usize> =
+                (0..ne).flat_map(|e| (0..half).map(move |w| e * nw + h * half + w)).collect();
             let snapshot = &pos;
             let free_snapshot = project(snapshot, d, free);
             let target = self.target;
@@ -361,7 +395,12 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             let fits: Vec<Fit> = (0..ne)
                 .map(|e| {
                     let other_start = e * nw + (1 - h) * half;
-                    moves[e].fit(&free_snapshot[other_start * df..(other_start + half) * df], df, &history[e], reference)
+                    moves[e].fit(
+                        &free_snapshot[other_start * df..(other_start + half) * df],
+                        df,
+                        &history[e],
+                        reference,
+                    )
                 })
                 .collect();
             let with_memos = !self.blocks.is_empty();
@@ -377,7 +416,13 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                         let other_start = e * nw + (1 - h) * half;
                         let others = &free_snapshot[other_start * df..(other_start + half) * df];
                         let mut rng = crate::rng::stream(seed, &[e as u64, step, w as u64]);
-                        factors[k] = moves[e].propose(&fits[e], &free_snapshot[c * df..(c + 1) * df], others, &mut rng, &mut y);
+                        factors[k] = moves[e].propose(
+                            &fits[e],
+                            &free_snapshot[c * df..(c + 1) * df],
+                            others,
+                            &mut rng,
+                            &mut y,
+                        );
                         let proposal = &mut proposals[k * d..(k + 1) * d];
                         proposal.copy_from_slice(&snapshot[c * d..(c + 1) * d]);
                         for (v, &i) in y.iter().zip(free) {
@@ -399,7 +444,9 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                     Proposed { positions: proposals, log_prob: new_lp, accept, memos }
                 })
                 .collect();
-            for (chunk, Proposed { positions: proposals, log_prob: new_lp, accept, mut memos }) in movers.chunks(BATCH).zip(results) {
+            for (chunk, Proposed { positions: proposals, log_prob: new_lp, accept, mut memos }) in
+                movers.chunks(BATCH).zip(results)
+            {
                 for (k, &c) in chunk.iter().enumerate() {
                     if accept[k] {
                         pos[c * d..(c + 1) * d].copy_from_slice(&proposals[k * d..(k + 1) * d]);
@@ -462,11 +509,13 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         if self.blocks.is_empty() {
             return;
         }
-        let (d, nw, ne, seed) = (self.chains.dim, self.settings.walkers, self.settings.ensembles, self.settings.seed);
+        let (d, nw, ne, seed) =
+            (self.chains.dim, self.settings.walkers, self.settings.ensembles, self.settings.seed);
         let half = nw / 2;
         let (target, blocks) = (self.target, &self.blocks);
         for h in 0..2 {
-            let movers: Vec<usize> = (0..ne).flat_map(|e| (0..half).map(move |w| e * nw + h * half + w)).collect();
+            let movers: Vec<usize> =
+                (0..ne).flat_map(|e| (0..half).map(move |w| e * nw + h * half + w)).collect();
             let snapshot = &*pos;
             let lp_now = &*lp;
             let memos = &self.memos;
@@ -474,13 +523,26 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 .par_chunks(BATCH)
                 .map(|chunk| {
                     let n = chunk.len();
-                    let mut x: Vec<f64> = chunk.iter().flat_map(|&c| snapshot[c * d..(c + 1) * d].iter().copied()).collect();
+                    let mut x: Vec<f64> = chunk
+                        .iter()
+                        .flat_map(|&c| snapshot[c * d..(c + 1) * d].iter().copied())
+                        .collect();
                     let mut l: Vec<f64> = chunk.iter().map(|&c| lp_now[c]).collect();
-                    let chunk_memos: Vec<&[f64]> = chunk.iter().map(|&c| memos[c].as_slice()).collect();
-                    let mut rngs: Vec<_> =
-                        chunk.iter().map(|&c| crate::rng::stream(seed, &[(c / nw) as u64, step, (c % nw) as u64, BLOCK_STREAM])).collect();
+                    let chunk_memos: Vec<&[f64]> =
+                        chunk.iter().map(|&c| memos[c].as_slice()).collect();
+                    let mut rngs: Vec<_> = chunk
+                        .iter()
+                        .map(|&c| {
+                            crate::rng::stream(
+                                seed,
+                                &[(c / nw) as u64, step, (c % nw) as u64, BLOCK_STREAM],
+                            )
+                        })
+                        .collect();
                     // each block's terms at the walker, as its memo holds them
-                    let mut current: Vec<Vec<f64>> = (0..blocks.len()).map(|b| chunk_memos.iter().map(|m| m[b]).collect()).collect();
+                    let mut current: Vec<Vec<f64>> = (0..blocks.len())
+                        .map(|b| chunk_memos.iter().map(|m| m[b]).collect())
+                        .collect();
                     let (mut y, mut proposed) = (x.clone(), vec![0.0; n]);
                     let (mut factor, mut log_u) = (vec![0.0; n], vec![0.0; n]);
                     for _ in 0..BLOCK_SWEEPS {
@@ -514,7 +576,9 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                     Moved { positions: x, log_prob: l, block_terms: current }
                 })
                 .collect();
-            for (chunk, Moved { positions: x, log_prob: l, block_terms: current }) in movers.chunks(BATCH).zip(results) {
+            for (chunk, Moved { positions: x, log_prob: l, block_terms: current }) in
+                movers.chunks(BATCH).zip(results)
+            {
                 for (k, &c) in chunk.iter().enumerate() {
                     pos[c * d..(c + 1) * d].copy_from_slice(&x[k * d..(k + 1) * d]);
                     lp[c] = l[k];
@@ -552,9 +616,19 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         self.history.1 = (0..self.settings.ensembles)
             .into_par_iter()
             .map(|e| {
-                let walkers: Vec<Vec<f64>> =
-                    (e * nw..(e + 1) * nw).map(|c| (at / 2..at).flat_map(|s| free.iter().map(move |&i| chains.at(s, c, i))).collect()).collect();
-                Learned::fit(moves, &walkers, free.len(), &mut crate::rng::stream(seed, &[e as u64, at as u64, FIT_STREAM]))
+                let walkers: Vec<Vec<f64>> = (e * nw..(e + 1) * nw)
+                    .map(|c| {
+                        (at / 2..at)
+                            .flat_map(|s| free.iter().map(move |&i| chains.at(s, c, i)))
+                            .collect()
+                    })
+                    .collect();
+                Learned::fit(
+                    moves,
+                    &walkers,
+                    free.len(),
+                    &mut crate::rng::stream(seed, &[e as u64, at as u64, FIT_STREAM]),
+                )
             })
             .collect();
         self.history.0 = at;
@@ -566,7 +640,9 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             return moves[0].0;
         }
         let total: f64 = moves.iter().map(|(_, w)| w).sum();
-        let mut u = crate::rng::stream(self.settings.seed, &[ensemble, step, MOVE_STREAM]).random::<f64>() * total;
+        let mut u = crate::rng::stream(self.settings.seed, &[ensemble, step, MOVE_STREAM])
+            .random::<f64>()
+            * total;
         for (m, w) in moves {
             if u < *w {
                 return *m;
@@ -583,7 +659,8 @@ mod tests {
 
     #[test]
     fn convergence_checks_thin_out_as_the_chain_grows() {
-        let control = RunControl { until_converged: true, check_every: 10, ..RunControl::fixed(5000) };
+        let control =
+            RunControl { until_converged: true, check_every: 10, ..RunControl::fixed(5000) };
         let checks: Vec<usize> = (1..=5000).filter(|s| control.checks_at(*s)).collect();
         // every 10 steps below 160, then every 20, 40, 80, 160, 320
         assert_eq!(&checks[..16], &(1..=16).map(|k| 10 * k).collect::<Vec<_>>()[..]);

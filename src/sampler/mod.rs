@@ -20,8 +20,8 @@
 //! equals an uninterrupted one.
 
 pub mod chains;
-pub mod density;
 pub mod checkpoint;
+pub mod density;
 pub mod diagnostics;
 pub mod elliptical;
 pub mod ensemble;

@@ -88,12 +88,16 @@ impl Observer for Progress {
     fn started(&mut self, state: &RunState) -> Result<()> {
         let bar = indicatif::ProgressBar::new(state.max_steps as u64);
         bar.set_style(
-            indicatif::ProgressStyle::with_template("sampling {bar:30} step {pos}/{len}  {msg}  ETA {eta}").expect("valid template"),
+            indicatif::ProgressStyle::with_template(
+                "sampling {bar:30} step {pos}/{len}  {msg}  ETA {eta}",
+            )
+            .expect("valid template"),
         );
         if state.min_ess.is_some() {
             // the length is an estimate until the first convergence check
             bar.set_style(
-                indicatif::ProgressStyle::with_template("sampling {bar:30} step {pos}  {msg}").expect("valid template"),
+                indicatif::ProgressStyle::with_template("sampling {bar:30} step {pos}  {msg}")
+                    .expect("valid template"),
             );
         }
         bar.set_position(state.step as u64);
@@ -127,7 +131,10 @@ impl Observer for Progress {
             // too few steps after burn-in to estimate an ESS yet
             return;
         }
-        self.status = format!(", smallest ESS {ess:.0}/{min_ess:.0}, largest R̂ {rhat:.4}/{}", super::diagnostics::RHAT_THRESHOLD);
+        self.status = format!(
+            ", smallest ESS {ess:.0}/{min_ess:.0}, largest R̂ {rhat:.4}/{}",
+            super::diagnostics::RHAT_THRESHOLD
+        );
         let line = format!("  step {}: smallest ESS {ess:.0} (target {min_ess:.0}), largest R̂ {rhat:.4}, τ_max {:.1}", state.step, diag.tau_max);
         match &self.bar {
             Some(bar) if !bar.is_hidden() => {
@@ -135,9 +142,14 @@ impl Observer for Progress {
                 // needed at this pace give the bar its length and its ETA
                 let kept = state.step.saturating_sub(diag.burn_in).max(1) as f64;
                 let needed = diag.burn_in as f64 + kept * (min_ess / ess.max(1.0)).max(1.0);
-                bar.set_length((needed.ceil() as u64).clamp(state.step as u64 + 1, state.max_steps as u64));
+                bar.set_length(
+                    (needed.ceil() as u64).clamp(state.step as u64 + 1, state.max_steps as u64),
+                );
                 bar.set_style(
-                    indicatif::ProgressStyle::with_template("sampling {bar:30} step {pos}/~{len}  {msg}  ETA {eta}").expect("valid template"),
+                    indicatif::ProgressStyle::with_template(
+                        "sampling {bar:30} step {pos}/~{len}  {msg}  ETA {eta}",
+                    )
+                    .expect("valid template"),
                 );
                 bar.println(line);
             }

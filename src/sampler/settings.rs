@@ -20,12 +20,7 @@ pub struct SamplerSettings {
 
 impl Default for SamplerSettings {
     fn default() -> Self {
-        SamplerSettings {
-            walkers: 32,
-            ensembles: 4,
-            moves: vec![(Move::default(), 1.0)],
-            seed: 1,
-        }
+        SamplerSettings { walkers: 32, ensembles: 4, moves: vec![(Move::default(), 1.0)], seed: 1 }
     }
 }
 

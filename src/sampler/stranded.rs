@@ -86,8 +86,13 @@ fn decide(chains: &Chains, step: usize) -> Vec<Redraw> {
     if chains.ensembles < 2 || step > chains.steps() {
         return Vec::new();
     }
-    let mass: Vec<f64> = (0..chains.ensembles).map(|e| fit(chains, step - 1, e).map_or(f64::NEG_INFINITY, |f| f.2)).collect();
-    let Some(best) = (0..mass.len()).filter(|&e| mass[e].is_finite()).max_by(|&a, &b| mass[a].total_cmp(&mass[b])) else {
+    let mass: Vec<f64> = (0..chains.ensembles)
+        .map(|e| fit(chains, step - 1, e).map_or(f64::NEG_INFINITY, |f| f.2))
+        .collect();
+    let Some(best) = (0..mass.len())
+        .filter(|&e| mass[e].is_finite())
+        .max_by(|&a, &b| mass[a].total_cmp(&mass[b]))
+    else {
         return Vec::new();
     };
     (0..chains.ensembles)
@@ -116,8 +121,14 @@ pub fn positions(chains: &Chains, redraw: &Redraw, seed: u64) -> Vec<f64> {
     };
     let mut out = Vec::with_capacity(chains.walkers * d);
     for w in 0..chains.walkers {
-        let mut rng = crate::rng::stream(seed, &[redraw.ensemble as u64, redraw.step as u64, w as u64, REDRAW_STREAM]);
-        let z = DVector::from_iterator(d, (0..d).map(|_| rand::RngExt::sample::<f64, _>(&mut rng, StandardNormal)));
+        let mut rng = crate::rng::stream(
+            seed,
+            &[redraw.ensemble as u64, redraw.step as u64, w as u64, REDRAW_STREAM],
+        );
+        let z = DVector::from_iterator(
+            d,
+            (0..d).map(|_| rand::RngExt::sample::<f64, _>(&mut rng, StandardNormal)),
+        );
         out.extend((&mean + &l * z).iter());
     }
     out
@@ -144,7 +155,9 @@ fn fit(chains: &Chains, step: usize, e: usize) -> Option<(DVector<f64>, DMatrix<
     let log_det = 2.0 * l.diagonal().iter().map(|v| v.ln()).sum::<f64>();
     // the mean (the Laplace estimate): walkers stuck far down count, and
     // redrawing their ensemble frees them
-    let mean_lp = (0..nw).map(|w| chains.log_prob[step * chains.chains() + e * nw + w]).sum::<f64>() / nw as f64;
+    let mean_lp =
+        (0..nw).map(|w| chains.log_prob[step * chains.chains() + e * nw + w]).sum::<f64>()
+            / nw as f64;
     Some((mean, l, mean_lp + 0.5 * log_det))
 }
 
@@ -172,7 +185,14 @@ mod tests {
             positions.extend_from_slice(&one);
             log_prob.extend_from_slice(&one_lp);
         }
-        Chains { dim: d, ensembles: centres.len(), walkers: nw, accepted: vec![true; log_prob.len()], positions, log_prob }
+        Chains {
+            dim: d,
+            ensembles: centres.len(),
+            walkers: nw,
+            accepted: vec![true; log_prob.len()],
+            positions,
+            log_prob,
+        }
     }
 
     #[test]

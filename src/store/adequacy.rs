@@ -5,8 +5,8 @@
 use std::path::Path;
 
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
-use crate::predict::adequacy::{AdequacyRow, Excitation};
 use crate::error::Result;
+use crate::predict::adequacy::{AdequacyRow, Excitation};
 
 /// Writes the adequacy of a prediction from calibration `id`.
 pub fn write(path: &Path, rows: &[AdequacyRow], id: &str) -> Result<()> {
@@ -48,17 +48,42 @@ pub fn read(path: &Path) -> Result<Vec<AdequacyRow>> {
     let df = read_parquet(path)?;
     let runs = str_column(&df, "run", path)?;
     let col = |n: &str| f64_column(&df, n, path);
-    let (current, amplitude, frequency, peak_velocity) = (col("current_a")?, col("amplitude_m")?, col("frequency_hz")?, col("peak_velocity_m_s")?);
-    let (peak, rms, lag1, decorrelation, inflation) = (col("peak_force_n")?, col("residual_rms_n")?, col("lag1_autocorrelation")?, col("decorrelation_s")?, col("interval_inflation")?);
-    let (offset, stiffness, damping, share) = (col("trend_offset_n")?, col("trend_stiffness_n_per_m")?, col("trend_damping_n_s_per_m")?, col("trend_share")?);
-    let innovation = if super::parquet::column_names(&df).iter().any(|c| c == "innovation_lag1") { col("innovation_lag1")? } else { vec![f64::NAN; runs.len()] };
-    let (reversal, stroke, inside, inside_reversal, inside_stroke) =
-        (col("reversal_rms_n")?, col("stroke_rms_n")?, col("inside_p95")?, col("inside_p95_reversal")?, col("inside_p95_stroke")?);
+    let (current, amplitude, frequency, peak_velocity) =
+        (col("current_a")?, col("amplitude_m")?, col("frequency_hz")?, col("peak_velocity_m_s")?);
+    let (peak, rms, lag1, decorrelation, inflation) = (
+        col("peak_force_n")?,
+        col("residual_rms_n")?,
+        col("lag1_autocorrelation")?,
+        col("decorrelation_s")?,
+        col("interval_inflation")?,
+    );
+    let (offset, stiffness, damping, share) = (
+        col("trend_offset_n")?,
+        col("trend_stiffness_n_per_m")?,
+        col("trend_damping_n_s_per_m")?,
+        col("trend_share")?,
+    );
+    let innovation = if super::parquet::column_names(&df).iter().any(|c| c == "innovation_lag1") {
+        col("innovation_lag1")?
+    } else {
+        vec![f64::NAN; runs.len()]
+    };
+    let (reversal, stroke, inside, inside_reversal, inside_stroke) = (
+        col("reversal_rms_n")?,
+        col("stroke_rms_n")?,
+        col("inside_p95")?,
+        col("inside_p95_reversal")?,
+        col("inside_p95_stroke")?,
+    );
     Ok((0..runs.len())
         .map(|i| AdequacyRow {
             run: runs[i].clone(),
             current_a: current[i],
-            excitation: Excitation { amplitude_m: amplitude[i], frequency_hz: frequency[i], peak_velocity_m_s: peak_velocity[i] },
+            excitation: Excitation {
+                amplitude_m: amplitude[i],
+                frequency_hz: frequency[i],
+                peak_velocity_m_s: peak_velocity[i],
+            },
             peak_force_n: peak[i],
             residual_rms_n: rms[i],
             lag1_autocorrelation: lag1[i],

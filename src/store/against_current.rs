@@ -40,11 +40,28 @@ pub fn read(dir: &Path, id: &str, rebuild: &str) -> Result<Option<Vec<CurrentRow
     let df = read_parquet(&path)?;
     let (parameter, kind) = (str_column(&df, "parameter", &path)?, str_column(&df, "kind", &path)?);
     let col = |n: &str| f64_column(&df, n, &path);
-    let (current, mean, sd, q05, q50, q95) = (col("current_a")?, col("mean")?, col("sd")?, col("q05")?, col("q50")?, col("q95")?);
+    let (current, mean, sd, q05, q50, q95) =
+        (col("current_a")?, col("mean")?, col("sd")?, col("q05")?, col("q50")?, col("q95")?);
     let mut rows = Vec::with_capacity(parameter.len());
     for i in 0..parameter.len() {
-        let kind = CurrentKind::parse(&kind[i]).ok_or_else(|| Error::input_at(&path, Some(i + 1), Some("kind"), format!("'{}' is not calibrated, between or outside", kind[i])))?;
-        rows.push(CurrentRow { parameter: parameter[i].clone(), current_a: current[i], kind, mean: mean[i], sd: sd[i], q05: q05[i], q50: q50[i], q95: q95[i] });
+        let kind = CurrentKind::parse(&kind[i]).ok_or_else(|| {
+            Error::input_at(
+                &path,
+                Some(i + 1),
+                Some("kind"),
+                format!("'{}' is not calibrated, between or outside", kind[i]),
+            )
+        })?;
+        rows.push(CurrentRow {
+            parameter: parameter[i].clone(),
+            current_a: current[i],
+            kind,
+            mean: mean[i],
+            sd: sd[i],
+            q05: q05[i],
+            q50: q50[i],
+            q95: q95[i],
+        });
     }
     Ok(Some(rows))
 }

@@ -14,9 +14,14 @@ pub fn write(path: &Path, runs: &[RunBands], id: &str) -> Result<()> {
 
 /// The table of `bands.parquet`.
 pub fn table(runs: &[RunBands], id: &str) -> Table {
-    let col = |f: &dyn Fn(&RunBands) -> &[f64]| runs.iter().flat_map(|b| f(b).iter().copied()).collect::<Vec<f64>>();
-    let per_sample = |f: &dyn Fn(&RunBands) -> f64| runs.iter().flat_map(|b| std::iter::repeat_n(f(b), b.time.len())).collect::<Vec<f64>>();
-    let names = runs.iter().flat_map(|b| std::iter::repeat_n(b.run.clone(), b.time.len())).collect();
+    let col = |f: &dyn Fn(&RunBands) -> &[f64]| {
+        runs.iter().flat_map(|b| f(b).iter().copied()).collect::<Vec<f64>>()
+    };
+    let per_sample = |f: &dyn Fn(&RunBands) -> f64| {
+        runs.iter().flat_map(|b| std::iter::repeat_n(f(b), b.time.len())).collect::<Vec<f64>>()
+    };
+    let names =
+        runs.iter().flat_map(|b| std::iter::repeat_n(b.run.clone(), b.time.len())).collect();
     let mut table = Table::new()
         .derived_from(id)
         .str("run", names)
@@ -35,11 +40,25 @@ pub fn table(runs: &[RunBands], id: &str) -> Table {
         .f64("displacement_m", col(&|b| &b.displacement))
         .f64("force_n", col(&|b| &b.force));
     if runs.iter().any(|b| b.discrepancy.is_some()) {
-        let part = |i: usize| runs.iter().flat_map(|b| b.discrepancy.as_ref().map_or_else(|| vec![f64::NAN; b.time.len()], |d| d[i].clone())).collect::<Vec<f64>>();
-        table = table.f64("discrepancy_pa", part(0)).f64("discrepancy_sd_pa", part(1)).f64("innovation", part(2));
+        let part = |i: usize| {
+            runs.iter()
+                .flat_map(|b| {
+                    b.discrepancy
+                        .as_ref()
+                        .map_or_else(|| vec![f64::NAN; b.time.len()], |d| d[i].clone())
+                })
+                .collect::<Vec<f64>>()
+        };
+        table = table
+            .f64("discrepancy_pa", part(0))
+            .f64("discrepancy_sd_pa", part(1))
+            .f64("innovation", part(2));
     }
     if runs.iter().any(|b| b.coil_current_a.is_some()) {
-        let current = runs.iter().flat_map(|b| b.coil_current_a.clone().unwrap_or_else(|| vec![f64::NAN; b.time.len()])).collect::<Vec<f64>>();
+        let current = runs
+            .iter()
+            .flat_map(|b| b.coil_current_a.clone().unwrap_or_else(|| vec![f64::NAN; b.time.len()]))
+            .collect::<Vec<f64>>();
         table = table.f64("coil_current_a", current);
     }
     table
@@ -50,7 +69,8 @@ pub fn read(path: &Path) -> Result<Vec<RunBands>> {
     let df = read_parquet(path)?;
     let run = str_column(&df, "run", path)?;
     let col = |n: &str| f64_column(&df, n, path);
-    let (cur, time, gamma, tau) = (col("current_a")?, col("time_s")?, col("gamma")?, col("tau_obs")?);
+    let (cur, time, gamma, tau) =
+        (col("current_a")?, col("time_s")?, col("gamma")?, col("tau_obs")?);
     let gamma_model = col("gamma_model")?;
     let q = [col("q025")?, col("q25")?, col("q50")?, col("q75")?, col("q975")?];
     let p = [col("p025")?, col("p975")?];
@@ -81,7 +101,10 @@ pub fn read(path: &Path) -> Result<Vec<RunBands>> {
                 force: force[r.clone()].to_vec(),
                 discrepancy: discrepancy.as_ref().map(|d| d.clone().map(|c| c[r.clone()].to_vec())),
                 // a run whose current does not vary has NaN there
-                coil_current_a: coil_current.as_ref().map(|c| c[r.clone()].to_vec()).filter(|c| c.iter().all(|v| v.is_finite())),
+                coil_current_a: coil_current
+                    .as_ref()
+                    .map(|c| c[r.clone()].to_vec())
+                    .filter(|c| c.iter().all(|v| v.is_finite())),
             });
             start = i;
         }

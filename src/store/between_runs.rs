@@ -22,11 +22,13 @@
 
 use std::path::{Component, Path, PathBuf};
 
-use super::parquet::{check_derived, f64_column, parquet_meta, read_parquet, str_column, write_parquet, Table};
+use super::parquet::{
+    check_derived, f64_column, parquet_meta, read_parquet, str_column, write_parquet, Table,
+};
+use crate::compare::CurrentKind;
 use crate::error::{Error, Result};
 use crate::model::PARAM_NAMES;
 use crate::predict::CoverageRow;
-use crate::compare::CurrentKind;
 use crate::validate::between_runs::{BetweenRuns, LeftOut, NewTestRow, TypicalRow};
 
 pub const FILE: &str = "between_runs.parquet";
@@ -44,7 +46,11 @@ const REBUILD: &str = "mrbp sample MANIFEST --out DIR --per-run --force (or mrbp
 /// The calibrations alone a layer was fitted to, as metadata: each folder
 /// relative to `dir`, `=` its calibration id.
 pub fn layer_runs(dir: &Path, folders: &[(&Path, &str)]) -> String {
-    folders.iter().map(|(folder, id)| format!("{}={id}", relative(dir, folder).display())).collect::<Vec<_>>().join(",")
+    folders
+        .iter()
+        .map(|(folder, id)| format!("{}={id}", relative(dir, folder).display()))
+        .collect::<Vec<_>>()
+        .join(",")
 }
 
 /// Writes the layer's draws at the current of the joint calibration `id`
@@ -54,19 +60,29 @@ pub fn write(dir: &Path, layer: &BetweenRuns, group: usize, id: &str, runs: &str
     let mut table = Table::new()
         .derived_from(id)
         .meta(LAYER_RUNS, runs)
-        .meta("mrbp.layer_currents_a", &layer.currents.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(","))
+        .meta(
+            "mrbp.layer_currents_a",
+            &layer.currents.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(","),
+        )
         .meta("mrbp.layer_max_r_hat", &layer.max_rhat.to_string())
         .meta("mrbp.layer_min_ess", &layer.min_ess.to_string())
         .i64("draw", picks.iter().map(|&i| i as i64).collect());
     let theta = |z: &[f64]| layer.theta(z).filter(|t| layer.in_support(t)).unwrap_or([f64::NAN; 7]);
     for (k, name) in PARAM_NAMES.iter().enumerate() {
-        table = table.f64(name, picks.iter().map(|&i| theta(&layer.draws[i].new_tests[group])[k]).collect());
+        table = table
+            .f64(name, picks.iter().map(|&i| theta(&layer.draws[i].new_tests[group])[k]).collect());
     }
     for (k, c) in layer.coordinates.iter().enumerate().skip(PARAM_NAMES.len()) {
-        table = table.f64(&c.name, picks.iter().map(|&i| c.scale.to_si(layer.draws[i].new_tests[group][k])).collect());
+        table = table.f64(
+            &c.name,
+            picks.iter().map(|&i| c.scale.to_si(layer.draws[i].new_tests[group][k])).collect(),
+        );
     }
     for (k, name) in PARAM_NAMES.iter().enumerate() {
-        table = table.f64(&format!("centre_{name}"), picks.iter().map(|&i| theta(&layer.draws[i].means[group])[k]).collect());
+        table = table.f64(
+            &format!("centre_{name}"),
+            picks.iter().map(|&i| theta(&layer.draws[i].means[group])[k]).collect(),
+        );
     }
     write_parquet(&dir.join(FILE), table)
 }
@@ -89,7 +105,11 @@ pub fn read(dir: &Path, id: &str) -> Result<LayerTable> {
     check(&path, dir, id)?;
     let df = read_parquet(&path)?;
     let col = |n: &str| f64_column(&df, n, &path);
-    let mut ids: Vec<String> = parquet_meta(&path, LAYER_RUNS)?.unwrap_or_default().split(',').filter_map(|p| p.rsplit_once('=').map(|(_, id)| id.to_string())).collect();
+    let mut ids: Vec<String> = parquet_meta(&path, LAYER_RUNS)?
+        .unwrap_or_default()
+        .split(',')
+        .filter_map(|p| p.rsplit_once('=').map(|(_, id)| id.to_string()))
+        .collect();
     ids.sort();
     Ok(LayerTable {
         draw: col("draw")?,
@@ -104,7 +124,11 @@ pub fn read(dir: &Path, id: &str) -> Result<LayerTable> {
 /// draw of the B-P parameters, terms and noise; draws outside the prior's
 /// support (NaN) left out. Also the layer's `mrbp.layer_runs`. Refused if
 /// missing or stale.
-pub fn new_tests(dir: &Path, id: &str, layout: &crate::posterior::Layout) -> Result<(Vec<crate::posterior::Draw>, String)> {
+pub fn new_tests(
+    dir: &Path,
+    id: &str,
+    layout: &crate::posterior::Layout,
+) -> Result<(Vec<crate::posterior::Draw>, String)> {
     let path = dir.join(FILE);
     if !path.exists() {
         return Err(Error::Usage(format!(
@@ -118,7 +142,8 @@ pub fn new_tests(dir: &Path, id: &str, layout: &crate::posterior::Layout) -> Res
     let theta: Vec<Vec<f64>> = PARAM_NAMES.iter().map(|n| col(n)).collect::<Result<_>>()?;
     let optional = |n: &str| if df.column(n).is_ok() { col(n).map(Some) } else { Ok(None) };
     let (spring, offset) = (optional("gas_spring_n_per_m")?, optional("force_offset_n")?);
-    let noise: Vec<Vec<f64>> = layout.noise_parameters.iter().map(|p| col(p.name)).collect::<Result<_>>()?;
+    let noise: Vec<Vec<f64>> =
+        layout.noise_parameters.iter().map(|p| col(p.name)).collect::<Result<_>>()?;
     let draws = (0..theta[0].len())
         .filter(|&i| theta.iter().all(|t| t[i].is_finite()))
         .map(|i| {
@@ -175,8 +200,21 @@ pub fn read_typical(dir: &Path, id: &str) -> Result<Option<Vec<TypicalRow>>> {
     let new_test = [col("new_test_q05")?, col("new_test_q50")?, col("new_test_q95")?];
     (0..parameter.len())
         .map(|i| {
-            let kind = CurrentKind::parse(&kind[i]).ok_or_else(|| Error::input_at(&path, Some(i + 1), Some("kind"), format!("'{}' is not calibrated, between or outside", kind[i])))?;
-            Ok(TypicalRow { parameter: parameter[i].clone(), current_a: current[i], kind, centre: centre.each_ref().map(|c| c[i]), new_test: new_test.each_ref().map(|c| c[i]) })
+            let kind = CurrentKind::parse(&kind[i]).ok_or_else(|| {
+                Error::input_at(
+                    &path,
+                    Some(i + 1),
+                    Some("kind"),
+                    format!("'{}' is not calibrated, between or outside", kind[i]),
+                )
+            })?;
+            Ok(TypicalRow {
+                parameter: parameter[i].clone(),
+                current_a: current[i],
+                kind,
+                centre: centre.each_ref().map(|c| c[i]),
+                new_test: new_test.each_ref().map(|c| c[i]),
+            })
         })
         .collect::<Result<Vec<_>>>()
         .map(Some)
@@ -263,8 +301,14 @@ mod tests {
 
     #[test]
     fn relative_paths_climb_and_descend() {
-        assert_eq!(relative(Path::new("/a/b/I1.0A"), Path::new("/a/b/I1.0A/runs/r1")), PathBuf::from("runs/r1"));
-        assert_eq!(relative(Path::new("/a/b/I1.0A"), Path::new("/a/b/I0.5A/runs/r2")), PathBuf::from("../I0.5A/runs/r2"));
+        assert_eq!(
+            relative(Path::new("/a/b/I1.0A"), Path::new("/a/b/I1.0A/runs/r1")),
+            PathBuf::from("runs/r1")
+        );
+        assert_eq!(
+            relative(Path::new("/a/b/I1.0A"), Path::new("/a/b/I0.5A/runs/r2")),
+            PathBuf::from("../I0.5A/runs/r2")
+        );
         assert_eq!(relative(Path::new("/a/b"), Path::new("/a/b")), PathBuf::from("."));
     }
 }

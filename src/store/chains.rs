@@ -31,9 +31,19 @@ pub fn columns(sample: &PosteriorSample) -> Columns {
         ("chain", order().map(|(_, c)| c as i64).collect()),
         ("draw", order().map(|(s, _)| s as i64).collect()),
     ];
-    let mut values: Vec<(String, Vec<f64>)> = sample.layout.names.iter().enumerate().map(|(i, name)| (name.clone(), order().map(|(s, c)| ch.at(s, c, i)).collect())).collect();
+    let mut values: Vec<(String, Vec<f64>)> = sample
+        .layout
+        .names
+        .iter()
+        .enumerate()
+        .map(|(i, name)| (name.clone(), order().map(|(s, c)| ch.at(s, c, i)).collect()))
+        .collect();
     values.push(("log_prob".into(), order().map(|(s, c)| ch.log_prob[s * nc + c]).collect()));
-    Columns { bookkeeping, values, accepted: order().map(|(s, c)| ch.accepted[s * nc + c]).collect() }
+    Columns {
+        bookkeeping,
+        values,
+        accepted: order().map(|(s, c)| ch.accepted[s * nc + c]).collect(),
+    }
 }
 
 /// Writes the chains of calibration `id`.
@@ -51,7 +61,12 @@ pub fn write(path: &Path, sample: &PosteriorSample, id: &str) -> Result<()> {
 
 /// Reads the chains back; their coordinates must be those of `layout`,
 /// their runs' currents `run_currents` (the record's; may be empty).
-pub fn read(path: &Path, layout: &Layout, model: ParameterModel, run_currents: &[f64]) -> Result<PosteriorSample> {
+pub fn read(
+    path: &Path,
+    layout: &Layout,
+    model: ParameterModel,
+    run_currents: &[f64],
+) -> Result<PosteriorSample> {
     let df = read_parquet(path)?;
     let chain = f64_column(&df, "chain", path)?;
     let draw = f64_column(&df, "draw", path)?;
@@ -66,18 +81,26 @@ pub fn read(path: &Path, layout: &Layout, model: ParameterModel, run_currents: &
         && steps * chains == rows
         && (0..rows).all(|r| chain[r] as usize == r / steps && draw[r] as usize == r % steps);
     if !ordered {
-        return Err(Error::input(path, "rows are not ordered by chain and draw as `mrbp sample` writes them"));
+        return Err(Error::input(
+            path,
+            "rows are not ordered by chain and draw as `mrbp sample` writes them",
+        ));
     }
-    let names: Vec<String> = column_names(&df).into_iter().filter(|n| !BOOKKEEPING.contains(&n.as_str())).collect();
+    let names: Vec<String> =
+        column_names(&df).into_iter().filter(|n| !BOOKKEEPING.contains(&n.as_str())).collect();
     if names != layout.names {
-        return Err(Error::input(path, format!("columns {names:?} are not the calibration's {:?}", layout.names)));
+        return Err(Error::input(
+            path,
+            format!("columns {names:?} are not the calibration's {:?}", layout.names),
+        ));
     }
     let ensembles = ensemble.iter().fold(0.0f64, |m, e| m.max(*e)) as usize + 1;
     let columns = names.iter().map(|n| f64_column(&df, n, path)).collect::<Result<Vec<_>>>()?;
     // file rows are chain-major, the sample is step-major
     let row = |s: usize, c: usize| c * steps + s;
     let order = || (0..steps).flat_map(move |s| (0..chains).map(move |c| (s, c)));
-    let positions = order().flat_map(|(s, c)| columns.iter().map(move |col| col[row(s, c)])).collect();
+    let positions =
+        order().flat_map(|(s, c)| columns.iter().map(move |col| col[row(s, c)])).collect();
     Ok(PosteriorSample {
         layout: layout.clone(),
         model,

@@ -35,7 +35,11 @@ pub struct Compared {
 impl Compared {
     /// A calibration in `folder`, as seen from the comparison in `out`.
     pub fn new(label: &str, folder: &Path, calibration_id: &str, out: &Path) -> Compared {
-        Compared { label: label.to_string(), folder: relative(folder, out).display().to_string(), calibration_id: calibration_id.to_string() }
+        Compared {
+            label: label.to_string(),
+            folder: relative(folder, out).display().to_string(),
+            calibration_id: calibration_id.to_string(),
+        }
     }
 
     /// Its folder, from the comparison's folder `out` (`out/../x` as `x`).
@@ -43,7 +47,9 @@ impl Compared {
         let mut path = PathBuf::new();
         for part in out.join(&self.folder).components() {
             match part {
-                Component::ParentDir if matches!(path.components().next_back(), Some(Component::Normal(_))) => {
+                Component::ParentDir
+                    if matches!(path.components().next_back(), Some(Component::Normal(_))) =>
+                {
                     path.pop();
                 }
                 other => path.push(other),
@@ -59,7 +65,8 @@ fn relative(target: &Path, base: &Path) -> PathBuf {
     let (Ok(t), Ok(b)) = (std::fs::canonicalize(target), std::fs::canonicalize(base)) else {
         return std::path::absolute(target).unwrap_or_else(|_| target.to_path_buf());
     };
-    let (t, b): (Vec<Component>, Vec<Component>) = (t.components().collect(), b.components().collect());
+    let (t, b): (Vec<Component>, Vec<Component>) =
+        (t.components().collect(), b.components().collect());
     let common = t.iter().zip(&b).take_while(|(x, y)| x == y).count();
     if common <= 1 {
         return t.iter().collect();
@@ -76,20 +83,31 @@ pub fn retire(dir: &Path) -> Result<()> {
 
 /// Writes the record, last: the comparison in `dir` is complete.
 pub fn write_record(dir: &Path, record: &ComparisonRecord) -> Result<()> {
-    let text = toml::to_string(record).map_err(|e| Error::Compute(format!("writing {RECORD}: {e}")))?;
-    crate::atomic::write(&dir.join(RECORD), format!("# What this comparison compared (mrbp compare).\n{text}").as_bytes())
+    let text =
+        toml::to_string(record).map_err(|e| Error::Compute(format!("writing {RECORD}: {e}")))?;
+    crate::atomic::write(
+        &dir.join(RECORD),
+        format!("# What this comparison compared (mrbp compare).\n{text}").as_bytes(),
+    )
 }
 
 /// The record of the comparison in `dir`.
 pub fn read_record(dir: &Path) -> Result<ComparisonRecord> {
     let path = dir.join(RECORD);
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
-    toml::from_str(&text).map_err(|e| Error::input(&path, format!("not a comparison record: {}", e.message())))
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
+    toml::from_str(&text)
+        .map_err(|e| Error::input(&path, format!("not a comparison record: {}", e.message())))
 }
 
 /// The calibrations of `record` as the tables' metadata names them.
 pub fn ids_text(record: &ComparisonRecord) -> String {
-    record.compared.iter().map(|c| format!("{}={}", c.label, c.calibration_id)).collect::<Vec<_>>().join(",")
+    record
+        .compared
+        .iter()
+        .map(|c| format!("{}={}", c.label, c.calibration_id))
+        .collect::<Vec<_>>()
+        .join(",")
 }
 
 /// The files of a comparison folder.
@@ -102,7 +120,9 @@ pub const CALIBRATION_IDS: &str = "mrbp.calibration_ids";
 /// id`, …) names the calibrations compared, in each file's metadata.
 pub fn write(dir: &Path, c: &Comparison, ids: &str) -> Result<()> {
     let rows = &c.rows;
-    let col = |f: &dyn Fn(&crate::compare::ComparisonRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
+    let col = |f: &dyn Fn(&crate::compare::ComparisonRow) -> f64| {
+        rows.iter().map(f).collect::<Vec<f64>>()
+    };
     write_parquet(
         &dir.join(SUMMARIES),
         Table::new()
@@ -117,7 +137,8 @@ pub fn write(dir: &Path, c: &Comparison, ids: &str) -> Result<()> {
             .f64("q95", col(&|r| r.q95)),
     )?;
     let d = &c.differences;
-    let col = |f: &dyn Fn(&Difference) -> f64| d.iter().map(|r| f(&r.difference)).collect::<Vec<f64>>();
+    let col =
+        |f: &dyn Fn(&Difference) -> f64| d.iter().map(|r| f(&r.difference)).collect::<Vec<f64>>();
     write_parquet(
         &dir.join(DIFFERENCES),
         Table::new()
@@ -138,24 +159,48 @@ pub fn write(dir: &Path, c: &Comparison, ids: &str) -> Result<()> {
 pub fn read(dir: &Path) -> Result<Comparison> {
     let path = dir.join(SUMMARIES);
     let df = read_parquet(&path)?;
-    let (cal, parameter) = (str_column(&df, "calibration", &path)?, str_column(&df, "parameter", &path)?);
+    let (cal, parameter) =
+        (str_column(&df, "calibration", &path)?, str_column(&df, "parameter", &path)?);
     let col = |n: &str| f64_column(&df, n, &path);
-    let (current, mean, sd, q05, q50, q95) = (col("current_a")?, col("mean")?, col("sd")?, col("q05")?, col("q50")?, col("q95")?);
+    let (current, mean, sd, q05, q50, q95) =
+        (col("current_a")?, col("mean")?, col("sd")?, col("q05")?, col("q50")?, col("q95")?);
     let rows = (0..cal.len())
-        .map(|i| ComparisonRow { calibration: cal[i].clone(), current_a: current[i], parameter: parameter[i].clone(), mean: mean[i], sd: sd[i], q05: q05[i], q50: q50[i], q95: q95[i] })
+        .map(|i| ComparisonRow {
+            calibration: cal[i].clone(),
+            current_a: current[i],
+            parameter: parameter[i].clone(),
+            mean: mean[i],
+            sd: sd[i],
+            q05: q05[i],
+            q50: q50[i],
+            q95: q95[i],
+        })
         .collect();
     let path = dir.join(DIFFERENCES);
     let df = read_parquet(&path)?;
-    let (a, b, parameter) = (str_column(&df, "calibration_a", &path)?, str_column(&df, "calibration_b", &path)?, str_column(&df, "parameter", &path)?);
+    let (a, b, parameter) = (
+        str_column(&df, "calibration_a", &path)?,
+        str_column(&df, "calibration_b", &path)?,
+        str_column(&df, "parameter", &path)?,
+    );
     let col = |n: &str| f64_column(&df, n, &path);
     let (d05, d50, d95) = (col("diff_q05")?, col("diff_q50")?, col("diff_q95")?);
-    let (r05, r50, r95, p) = (col("ratio_q05")?, col("ratio_q50")?, col("ratio_q95")?, col("p_greater")?);
+    let (r05, r50, r95, p) =
+        (col("ratio_q05")?, col("ratio_q50")?, col("ratio_q95")?, col("p_greater")?);
     let differences = (0..a.len())
         .map(|i| DifferenceRow {
             a: a[i].clone(),
             b: b[i].clone(),
             parameter: parameter[i].clone(),
-            difference: Difference { diff_q05: d05[i], diff_q50: d50[i], diff_q95: d95[i], ratio_q05: r05[i], ratio_q50: r50[i], ratio_q95: r95[i], p_greater: p[i] },
+            difference: Difference {
+                diff_q05: d05[i],
+                diff_q50: d50[i],
+                diff_q95: d95[i],
+                ratio_q05: r05[i],
+                ratio_q50: r50[i],
+                ratio_q95: r95[i],
+                p_greater: p[i],
+            },
         })
         .collect();
     Ok(Comparison { rows, differences })

@@ -19,13 +19,26 @@ const RUN: &str = "run";
 /// each calibrated alone (`alone`: run and calibration id), into its folder.
 /// `layer_runs` names the calibrations alone the between-run layer was
 /// fitted to ([`super::between_runs::layer_runs`]).
-pub fn write(dir: &Path, parameters: &[ParameterConsistency], id: &str, alone: &[(String, String)], layer_runs: &str) -> Result<()> {
+pub fn write(
+    dir: &Path,
+    parameters: &[ParameterConsistency],
+    id: &str,
+    alone: &[(String, String)],
+    layer_runs: &str,
+) -> Result<()> {
     let alone: Vec<String> = alone.iter().map(|(run, id)| format!("{run}={id}")).collect();
     let rows: Vec<(&ParameterConsistency, &str, &Estimate)> = parameters
         .iter()
-        .flat_map(|p| p.runs.iter().map(move |r| (p, RUN, r)).chain([(p, JOINT, &p.joint), (p, NEW_TEST, &p.new_test)]))
+        .flat_map(|p| {
+            p.runs
+                .iter()
+                .map(move |r| (p, RUN, r))
+                .chain([(p, JOINT, &p.joint), (p, NEW_TEST, &p.new_test)])
+        })
         .collect();
-    let f = |g: &dyn Fn(&(&ParameterConsistency, &str, &Estimate)) -> f64| rows.iter().map(g).collect::<Vec<f64>>();
+    let f = |g: &dyn Fn(&(&ParameterConsistency, &str, &Estimate)) -> f64| {
+        rows.iter().map(g).collect::<Vec<f64>>()
+    };
     write_parquet(
         &dir.join(FILE),
         Table::new()
@@ -82,11 +95,19 @@ pub fn read(dir: &Path, id: &str) -> Result<Vec<ParameterConsistency>> {
     let s = |n: &str| str_column(&df, n, &path);
     let f = |n: &str| f64_column(&df, n, &path);
     let (parameter, kind, label) = (s("parameter")?, s("kind")?, s("label")?);
-    let (mean_log, sd_log, q05, q50, q95) = (f("mean_log")?, f("sd_log")?, f("q05")?, f("q50")?, f("q95")?);
+    let (mean_log, sd_log, q05, q50, q95) =
+        (f("mean_log")?, f("sd_log")?, f("q05")?, f("q50")?, f("q95")?);
     let (chi2_nu, p_value, spread_log) = (f("chi2_nu")?, f("p_value")?, f("spread_log")?);
     let mut out: Vec<ParameterConsistency> = Vec::new();
     for i in 0..parameter.len() {
-        let estimate = Estimate { label: label[i].clone(), mean_log: mean_log[i], sd_log: sd_log[i], q05: q05[i], q50: q50[i], q95: q95[i] };
+        let estimate = Estimate {
+            label: label[i].clone(),
+            mean_log: mean_log[i],
+            sd_log: sd_log[i],
+            q05: q05[i],
+            q50: q50[i],
+            q95: q95[i],
+        };
         if out.last().is_none_or(|p| p.parameter != parameter[i]) {
             out.push(ParameterConsistency {
                 parameter: parameter[i].clone(),
@@ -103,7 +124,9 @@ pub fn read(dir: &Path, id: &str) -> Result<Vec<ParameterConsistency>> {
             RUN => p.runs.push(estimate),
             JOINT => p.joint = estimate,
             NEW_TEST => p.new_test = estimate,
-            other => return Err(Error::input(&path, format!("unknown kind {other:?} in column kind"))),
+            other => {
+                return Err(Error::input(&path, format!("unknown kind {other:?} in column kind")))
+            }
         }
     }
     Ok(out)

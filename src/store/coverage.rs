@@ -34,7 +34,10 @@ pub fn read_leave_one_out(dir: &Path, id: &str) -> Result<Option<LeaveOneOut>> {
     for file in [LOO, LOO_BANDS] {
         super::check_derived(&dir.join(file), id, REBUILD_LOO)?;
     }
-    Ok(Some(LeaveOneOut { rows: read_loo(&dir.join(LOO))?, bands: super::bands::read(&dir.join(LOO_BANDS))? }))
+    Ok(Some(LeaveOneOut {
+        rows: read_loo(&dir.join(LOO))?,
+        bands: super::bands::read(&dir.join(LOO_BANDS))?,
+    }))
 }
 
 /// Writes the coverage of a prediction from calibration `id`.
@@ -83,9 +86,20 @@ fn read_loo(path: &Path) -> Result<Vec<LooRow>> {
                 "reweighting" => HeldOutBy::Reweighting,
                 "laplace-importance" => HeldOutBy::LaplaceImportance,
                 "sampling" => HeldOutBy::Sampling,
-                other => return Err(Error::input(path, format!("row {}: unknown held_out_by '{other}'", i + 1))),
+                other => {
+                    return Err(Error::input(
+                        path,
+                        format!("row {}: unknown held_out_by '{other}'", i + 1),
+                    ))
+                }
             };
-            Ok(LooRow { coverage: c, pareto_k: k[i], pareto_k_laplace: k_laplace[i], by, max_rhat: rhat[i] })
+            Ok(LooRow {
+                coverage: c,
+                pareto_k: k[i],
+                pareto_k_laplace: k_laplace[i],
+                by,
+                max_rhat: rhat[i],
+            })
         })
         .collect()
 }
@@ -96,8 +110,15 @@ pub fn read(path: &Path) -> Result<Vec<CoverageRow>> {
     let col = |n: &str| f64_column(&df, n, path);
     let calibrated = f64_column(&df, "calibrated", path).unwrap_or_else(|_| vec![1.0; run.len()]);
     let lppd = f64_column(&df, "lppd", path).unwrap_or_else(|_| vec![f64::NAN; run.len()]);
-    let (cur, samples, p, q, rmse, draws, failed) =
-        (col("current_a")?, col("samples")?, col("inside_p95")?, col("inside_q95")?, col("rmse_q50_pa")?, col("draws")?, col("failed_draws")?);
+    let (cur, samples, p, q, rmse, draws, failed) = (
+        col("current_a")?,
+        col("samples")?,
+        col("inside_p95")?,
+        col("inside_q95")?,
+        col("rmse_q50_pa")?,
+        col("draws")?,
+        col("failed_draws")?,
+    );
     Ok((0..run.len())
         .map(|i| CoverageRow {
             run: run[i].clone(),

@@ -22,7 +22,8 @@ pub const CHECKPOINT: &str = "sampler.checkpoint";
 pub const CURRENT_DRAWS: usize = 4000;
 
 /// The command that rebuilds a calibration folder, for messages.
-pub const REBUILD: &str = "mrbp sample MANIFEST --out DIR --force (--resume continues from a checkpoint)";
+pub const REBUILD: &str =
+    "mrbp sample MANIFEST --out DIR --force (--resume continues from a checkpoint)";
 
 /// Reads the calibration in `dir`; every missing or malformed file is a
 /// clear input error, and so is a folder another process is writing, a
@@ -30,10 +31,14 @@ pub const REBUILD: &str = "mrbp sample MANIFEST --out DIR --force (--resume cont
 /// calibrations side by side.
 pub fn read(dir: &Path) -> Result<Calibration> {
     if !dir.is_dir() {
-        return Err(Error::input(dir, "not a folder (expected the output folder of `mrbp sample` or `mrbp run`)"));
+        return Err(Error::input(
+            dir,
+            "not a folder (expected the output folder of `mrbp sample` or `mrbp run`)",
+        ));
     }
     let _reading = crate::lock::read(dir)?;
-    if !dir.join(RECORD).exists() && [CHAINS, SUMMARY, CONFIG].iter().any(|f| dir.join(f).exists()) {
+    if !dir.join(RECORD).exists() && [CHAINS, SUMMARY, CONFIG].iter().any(|f| dir.join(f).exists())
+    {
         return Err(Error::input(
             dir.join(RECORD),
             format!("missing: the calibration in this folder is incomplete (stopped while its files were written); make it again with `{REBUILD}`"),
@@ -44,7 +49,10 @@ pub fn read(dir: &Path) -> Result<Calibration> {
         if p.exists() {
             Ok(p)
         } else {
-            Err(Error::input(&p, "missing: not a calibration folder (run `mrbp sample` into it first)"))
+            Err(Error::input(
+                &p,
+                "missing: not a calibration folder (run `mrbp sample` into it first)",
+            ))
         }
     };
     let settings = CalibrationSettings::read(&need(CONFIG)?)?;
@@ -54,7 +62,13 @@ pub fn read(dir: &Path) -> Result<Calibration> {
     }
     let summary = summary::read(&need(SUMMARY)?)?;
     let model = settings.parameter_model();
-    let layout = Layout::new(&model, &record.runs, settings.noise_model().as_ref(), settings.sampler.coordinates, &settings.terms);
+    let layout = Layout::new(
+        &model,
+        &record.runs,
+        settings.noise_model().as_ref(),
+        settings.sampler.coordinates,
+        &settings.terms,
+    );
     let sample = chains::read(&need(CHAINS)?, &layout, model, &record.run_currents)?;
     Ok(Calibration { dir: dir.to_path_buf(), settings, record, summary, sample })
 }
@@ -72,9 +86,20 @@ pub fn write(dir: &Path, cal: &mut Calibration) -> Result<()> {
     retire(dir)?;
     let id = &cal.record.calibration_id;
     chains::write(&dir.join(CHAINS), &cal.sample, id)?;
-    summary::write(&dir.join(SUMMARY), &cal.summary, cal.record.burn_in, cal.record.steps, cal.sample.chains.chains(), id)?;
+    summary::write(
+        &dir.join(SUMMARY),
+        &cal.summary,
+        cal.record.burn_in,
+        cal.record.steps,
+        cal.sample.chains.chains(),
+        id,
+    )?;
     if cal.is_current_law() {
-        let rows = crate::compare::against_current(&cal.sample, &cal.draw_positions(CURRENT_DRAWS), &cal.record.currents);
+        let rows = crate::compare::against_current(
+            &cal.sample,
+            &cal.draw_positions(CURRENT_DRAWS),
+            &cal.record.currents,
+        );
         against_current::write(dir, &rows, id)?;
     } else {
         crate::atomic::remove(&dir.join(against_current::FILE))?;

@@ -24,9 +24,19 @@ pub struct IdentificationRow {
 pub fn read(path: &Path) -> Result<Vec<IdentificationRow>> {
     let df = read_parquet(path)?;
     let (run, parameter) = (str_column(&df, "run", path)?, str_column(&df, "parameter", path)?);
-    let (current, value, raw) = (f64_column(&df, "current_a", path)?, f64_column(&df, "value", path)?, f64_column(&df, "raw_value", path)?);
+    let (current, value, raw) = (
+        f64_column(&df, "current_a", path)?,
+        f64_column(&df, "value", path)?,
+        f64_column(&df, "raw_value", path)?,
+    );
     Ok((0..run.len())
-        .map(|i| IdentificationRow { run: run[i].clone(), current_a: current[i], parameter: parameter[i].clone(), value: value[i], raw_value: raw[i] })
+        .map(|i| IdentificationRow {
+            run: run[i].clone(),
+            current_a: current[i],
+            parameter: parameter[i].clone(),
+            value: value[i],
+            raw_value: raw[i],
+        })
         .collect())
 }
 use crate::identify::CurrentIdentification;
@@ -36,7 +46,8 @@ use crate::model::PARAM_NAMES;
 /// the combined estimate (`run` = "all") per current; `id` names the
 /// calibration it started, if any.
 pub fn write(path: &Path, results: &[CurrentIdentification], id: Option<&str>) -> Result<()> {
-    let (mut run, mut current, mut parameter, mut value, mut raw) = (vec![], vec![], vec![], vec![], vec![]);
+    let (mut run, mut current, mut parameter, mut value, mut raw) =
+        (vec![], vec![], vec![], vec![], vec![]);
     let mut push = |r: &str, c: f64, p: &str, v: f64, rv: f64| {
         run.push(r.to_string());
         current.push(c);
@@ -55,13 +66,30 @@ pub fn write(path: &Path, results: &[CurrentIdentification], id: Option<&str>) -
             push(&r.run, c, "gamma_i_rate_at_tau02", rate02, rate02);
             push(&r.run, c, "elastic_samples", r.elastic_points as f64, r.elastic_points as f64);
             if let Some(f) = &r.curve {
-                for (name, v) in [("eq7_a", f.eq7.a), ("eq7_b", f.eq7.b), ("eq7_c", f.eq7.c), ("eq7_d", f.eq7.d), ("eq7_rms_pa", f.rms)] {
+                for (name, v) in [
+                    ("eq7_a", f.eq7.a),
+                    ("eq7_b", f.eq7.b),
+                    ("eq7_c", f.eq7.c),
+                    ("eq7_d", f.eq7.d),
+                    ("eq7_rms_pa", f.rms),
+                ] {
                     push(&r.run, c, name, v, v);
                 }
-                push(&r.run, c, "eq7_converged", f.converged as u8 as f64, f.converged as u8 as f64);
+                push(
+                    &r.run,
+                    c,
+                    "eq7_converged",
+                    f.converged as u8 as f64,
+                    f.converged as u8 as f64,
+                );
             }
             if let Some(f) = &r.steady {
-                for (name, v) in [("flow_curve_saturated_stress_pa", f.z), ("flow_curve_n", f.n), ("flow_curve_samples", f.flow_samples as f64), ("flow_curve_rms_log", f.rms_log)] {
+                for (name, v) in [
+                    ("flow_curve_saturated_stress_pa", f.z),
+                    ("flow_curve_n", f.n),
+                    ("flow_curve_samples", f.flow_samples as f64),
+                    ("flow_curve_rms_log", f.rms_log),
+                ] {
                     push(&r.run, c, name, v, v);
                 }
             }
@@ -86,4 +114,3 @@ pub fn write(path: &Path, results: &[CurrentIdentification], id: Option<&str>) -
             .f64("raw_value", raw),
     )
 }
-

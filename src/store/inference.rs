@@ -37,7 +37,8 @@ use crate::sampler::diagnostics::analysed_draws;
 pub const FILE: &str = "inference.zarr";
 
 /// Why ArviZ's R̂ of this store is not ours, and how to get ours.
-pub const RHAT_NOTE: &str = "Each chain is one walker of an affine-invariant ensemble. Walkers of an \
+pub const RHAT_NOTE: &str =
+    "Each chain is one walker of an affine-invariant ensemble. Walkers of an \
 ensemble move together and each is short compared with its autocorrelation, so R-hat over walkers \
 reads 1.01-1.03 on a converged run. mrbp's R-hat (summary.parquet) compares the independent \
 ensembles instead: each ensemble's draws, step by step, as one chain (coordinate `ensemble`). \
@@ -94,7 +95,11 @@ pub struct InferenceData {
 /// store is built beside it and renamed into place.
 pub fn write(path: &Path, data: &InferenceData) -> Result<()> {
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let tmp = tempfile::Builder::new().prefix(crate::atomic::TEMPORARY).suffix(".zarr.tmp").tempdir_in(parent).map_err(|e| Error::output(parent, e))?;
+    let tmp = tempfile::Builder::new()
+        .prefix(crate::atomic::TEMPORARY)
+        .suffix(".zarr.tmp")
+        .tempdir_in(parent)
+        .map_err(|e| Error::output(parent, e))?;
     build(tmp.path(), data).map_err(|e| Error::output(path, e))?;
     crate::atomic::replace_dir(&tmp.keep(), path)
 }
@@ -119,9 +124,15 @@ pub struct Stored {
 /// `calibration_id` attribute).
 pub fn calibration_id(path: &Path) -> Result<String> {
     let meta = path.join("zarr.json");
-    let text = std::fs::read_to_string(&meta).map_err(|e| Error::input(&meta, format!("cannot read: {e}")))?;
-    let json: Value = serde_json::from_str(&text).map_err(|e| Error::input(&meta, format!("not a Zarr group: {e}")))?;
-    Ok(json.pointer("/attributes/calibration_id").and_then(Value::as_str).unwrap_or_default().to_string())
+    let text = std::fs::read_to_string(&meta)
+        .map_err(|e| Error::input(&meta, format!("cannot read: {e}")))?;
+    let json: Value = serde_json::from_str(&text)
+        .map_err(|e| Error::input(&meta, format!("not a Zarr group: {e}")))?;
+    Ok(json
+        .pointer("/attributes/calibration_id")
+        .and_then(Value::as_str)
+        .unwrap_or_default()
+        .to_string())
 }
 
 /// Reads the store at `path` (written by [`write`]).
@@ -132,7 +143,12 @@ pub fn read(path: &Path) -> Result<Stored> {
 fn read_store(path: &Path) -> std::result::Result<Stored, Failure> {
     let store: ReadableWritableListableStorage = Arc::new(FilesystemStore::new(path)?);
     let root = Group::open(store.clone(), "/")?;
-    let calibration_id = root.attributes().get("calibration_id").and_then(Value::as_str).unwrap_or_default().to_string();
+    let calibration_id = root
+        .attributes()
+        .get("calibration_id")
+        .and_then(Value::as_str)
+        .unwrap_or_default()
+        .to_string();
     let all_f64 = |node: &str| -> std::result::Result<(Vec<u64>, Vec<f64>), Failure> {
         let a = Array::open(store.clone(), node)?;
         Ok((a.shape().to_vec(), a.retrieve_array_subset::<Vec<f64>>(&a.subset_all())?))
@@ -143,13 +159,24 @@ fn read_store(path: &Path) -> std::result::Result<Stored, Failure> {
     for node in Group::open(store.clone(), "/posterior")?.child_array_paths()? {
         let a = Array::open(store.clone(), node.as_str())?;
         if a.dimensionality() == 2 && a.data_type() == &data_type::float64() {
-            let name = a.attributes().get("long_name").and_then(Value::as_str).unwrap_or(node.as_str()).to_string();
+            let name = a
+                .attributes()
+                .get("long_name")
+                .and_then(Value::as_str)
+                .unwrap_or(node.as_str())
+                .to_string();
             posterior.push((name, a.retrieve_array_subset::<Vec<f64>>(&a.subset_all())?));
         }
     }
     let (shape, log_likelihood) = all_f64("/log_likelihood/tau")?;
     let dim = |i: usize| shape.get(i).copied().unwrap_or(0) as usize;
-    Ok(Stored { calibration_id, draws, posterior, log_likelihood, pointwise_shape: (dim(0), dim(1), dim(2)) })
+    Ok(Stored {
+        calibration_id,
+        draws,
+        posterior,
+        log_likelihood,
+        pointwise_shape: (dim(0), dim(1), dim(2)),
+    })
 }
 
 impl DataGroup {
@@ -157,14 +184,29 @@ impl DataGroup {
         DataGroup { name, attrs: attrs(pairs), nodes: Vec::new() }
     }
 
-    fn put(&mut self, name: &str, dims: &[(&'static str, usize)], values: Values, pairs: &[(&str, Value)]) {
-        self.nodes.push(Node { name: name.to_string(), dims: dims.to_vec(), values, attrs: attrs(pairs) });
+    fn put(
+        &mut self,
+        name: &str,
+        dims: &[(&'static str, usize)],
+        values: Values,
+        pairs: &[(&str, Value)],
+    ) {
+        self.nodes.push(Node {
+            name: name.to_string(),
+            dims: dims.to_vec(),
+            values,
+            attrs: attrs(pairs),
+        });
     }
 }
 
 /// The InferenceData of a calibration's `sample`, with the pointwise terms
 /// `pw` of a thinned set of its draws.
-pub fn inference_data(sample: &PosteriorSample, pw: PointwiseDraws, info: &StoreInfo) -> InferenceData {
+pub fn inference_data(
+    sample: &PosteriorSample,
+    pw: PointwiseDraws,
+    info: &StoreInfo,
+) -> InferenceData {
     let chains = sample.chains.chains();
     let walkers = chains / info.ensembles.max(1);
     // the draws the diagnostics use
@@ -175,7 +217,13 @@ pub fn inference_data(sample: &PosteriorSample, pw: PointwiseDraws, info: &Store
         ("mrbp_version", json!(env!("CARGO_PKG_VERSION"))),
         ("inference_library", json!("mrbp")),
         ("calibration_id", json!(info.calibration_id)),
-        ("sampler", json!(format!("affine-invariant ensemble: {} ensembles of {walkers} walkers", info.ensembles))),
+        (
+            "sampler",
+            json!(format!(
+                "affine-invariant ensemble: {} ensembles of {walkers} walkers",
+                info.ensembles
+            )),
+        ),
         ("r_hat_note", json!(RHAT_NOTE)),
     ]);
     let mut groups = Vec::new();
@@ -183,9 +231,14 @@ pub fn inference_data(sample: &PosteriorSample, pw: PointwiseDraws, info: &Store
     let draw_coord: Vec<i64> = (first..first + n).map(|s| s as i64).collect();
     let ensemble: Vec<i64> = (0..chains).map(|c| (c / walkers.max(1)) as i64).collect();
     let chain_coord: Vec<i64> = (0..chains as i64).collect();
-    let stats_attrs = [("burn_in", json!(info.burn_in)), ("first_draw", json!(first)), ("r_hat_note", json!(RHAT_NOTE))];
+    let stats_attrs = [
+        ("burn_in", json!(info.burn_in)),
+        ("first_draw", json!(first)),
+        ("r_hat_note", json!(RHAT_NOTE)),
+    ];
     // (step, chain) of every cell of a chain × draw array, chain-major
-    let cells: Vec<(usize, usize)> = (0..chains).flat_map(|c| (first..first + n).map(move |s| (s, c))).collect();
+    let cells: Vec<(usize, usize)> =
+        (0..chains).flat_map(|c| (first..first + n).map(move |s| (s, c))).collect();
     let by_draw = [("chain", chains), ("draw", n)];
     let on_ensemble = || [("coordinates", json!("ensemble"))];
     for name in ["posterior", "sample_stats"] {
@@ -195,14 +248,21 @@ pub fn inference_data(sample: &PosteriorSample, pw: PointwiseDraws, info: &Store
         g.put("ensemble", &[("chain", chains)], Values::I64(ensemble.clone()), &[]);
         if name == "posterior" {
             for (i, coordinate) in sample.layout.names.iter().enumerate() {
-                let values: Vec<f64> = cells.iter().map(|&(s, c)| sample.chains.at(s, c, i)).collect();
-                let pairs = [("units", json!(unit_of(coordinate))), ("coordinates", json!("ensemble")), ("long_name", json!(coordinate))];
+                let values: Vec<f64> =
+                    cells.iter().map(|&(s, c)| sample.chains.at(s, c, i)).collect();
+                let pairs = [
+                    ("units", json!(unit_of(coordinate))),
+                    ("coordinates", json!("ensemble")),
+                    ("long_name", json!(coordinate)),
+                ];
                 g.put(&node_name(coordinate), &by_draw, Values::F64(values), &pairs);
             }
         } else {
-            let lp: Vec<f64> = cells.iter().map(|&(s, c)| sample.chains.log_prob[s * chains + c]).collect();
+            let lp: Vec<f64> =
+                cells.iter().map(|&(s, c)| sample.chains.log_prob[s * chains + c]).collect();
             g.put("lp", &by_draw, Values::F64(lp), &on_ensemble());
-            let accepted: Vec<bool> = cells.iter().map(|&(s, c)| sample.chains.accepted[s * chains + c]).collect();
+            let accepted: Vec<bool> =
+                cells.iter().map(|&(s, c)| sample.chains.accepted[s * chains + c]).collect();
             g.put("accepted", &by_draw, Values::Bool(accepted), &on_ensemble());
         }
         groups.push(g);
@@ -222,7 +282,11 @@ pub fn inference_data(sample: &PosteriorSample, pw: PointwiseDraws, info: &Store
     ];
     let coords = json!("run time");
     let dims = [("chain", chains), ("draw", pw_steps.len()), ("obs", nobs)];
-    let shear = [("coordinates", coords.clone()), ("units", json!("Pa")), ("long_name", json!("shear stress"))];
+    let shear = [
+        ("coordinates", coords.clone()),
+        ("units", json!("Pa")),
+        ("long_name", json!("shear stress")),
+    ];
     // a group of the observations, with their coordinates (and the draws')
     let observations = |name: &'static str| {
         let mut g = DataGroup::new(name, if name == "observed_data" { &[] } else { &thinning });
@@ -236,7 +300,12 @@ pub fn inference_data(sample: &PosteriorSample, pw: PointwiseDraws, info: &Store
         g
     };
     let mut g = observations("log_likelihood");
-    g.put("tau", &dims, Values::F64(pw.log_likelihood), &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))]);
+    g.put(
+        "tau",
+        &dims,
+        Values::F64(pw.log_likelihood),
+        &[("coordinates", coords.clone()), ("units", json!("ln(1/Pa)"))],
+    );
     groups.push(g);
     let mut g = observations("posterior_predictive");
     g.put("tau", &dims, Values::F32(pw.replicate), &shear);
@@ -329,7 +398,13 @@ fn attrs(pairs: &[(&str, Value)]) -> Map<String, Value> {
 /// One array over the named dimensions of the given lengths: a single
 /// chunk, or one per chain for the pointwise (chain, draw, obs) arrays,
 /// which keeps the encoding's copies small.
-fn put<'a, T>(store: &ReadableWritableListableStorage, path: &str, dims: &[(&str, usize)], values: &'a [T], attributes: &Map<String, Value>) -> std::result::Result<(), Failure>
+fn put<'a, T>(
+    store: &ReadableWritableListableStorage,
+    path: &str,
+    dims: &[(&str, usize)],
+    values: &'a [T],
+    attributes: &Map<String, Value>,
+) -> std::result::Result<(), Failure>
 where
     &'a [T]: IntoArrayBytes<'a>,
     T: Element,

@@ -40,5 +40,8 @@ pub mod simulation;
 pub mod status;
 pub mod summary;
 
-pub use parquet::{check_derived, column_names, f64_column, parquet_meta, read_parquet, str_column, write_parquet, Table, CALIBRATION_ID};
 pub use crate::calibrate::command_line;
+pub use parquet::{
+    check_derived, column_names, f64_column, parquet_meta, read_parquet, str_column, write_parquet,
+    Table, CALIBRATION_ID,
+};

@@ -56,7 +56,8 @@ impl Table {
     }
 
     pub fn into_frame(self) -> Result<DataFrame> {
-        DataFrame::new_infer_height(self.columns).map_err(|e| Error::Compute(format!("building a table: {e}")))
+        DataFrame::new_infer_height(self.columns)
+            .map_err(|e| Error::Compute(format!("building a table: {e}")))
     }
 }
 
@@ -73,28 +74,41 @@ pub fn parquet_bytes(table: Table) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-fn encode(table: Table, sink: impl std::io::Write) -> std::result::Result<(), Box<dyn std::error::Error>> {
-    let metadata = (!table.metadata.is_empty()).then(|| KeyValueMetadata::from_static(table.metadata.clone()));
+fn encode(
+    table: Table,
+    sink: impl std::io::Write,
+) -> std::result::Result<(), Box<dyn std::error::Error>> {
+    let metadata =
+        (!table.metadata.is_empty()).then(|| KeyValueMetadata::from_static(table.metadata.clone()));
     let mut df = table.into_frame()?;
-    ParquetWriter::new(sink).with_compression(ParquetCompression::Zstd(None)).with_key_value_metadata(metadata).finish(&mut df)?;
+    ParquetWriter::new(sink)
+        .with_compression(ParquetCompression::Zstd(None))
+        .with_key_value_metadata(metadata)
+        .finish(&mut df)?;
     Ok(())
 }
 
 /// Reads a Parquet file back (for tests and for later stages).
 pub fn read_parquet(path: &Path) -> Result<DataFrame> {
-    let file = std::fs::File::open(path).map_err(|e| Error::input(path, format!("cannot open: {e}")))?;
+    let file =
+        std::fs::File::open(path).map_err(|e| Error::input(path, format!("cannot open: {e}")))?;
     crate::error::guard_foreign(|| ParquetReader::new(file).finish())
-        .ok_or_else(|| Error::input(path, "not a readable Parquet file (damaged: its decoder failed)"))?
+        .ok_or_else(|| {
+            Error::input(path, "not a readable Parquet file (damaged: its decoder failed)")
+        })?
         .map_err(|e| Error::input(path, format!("not a readable Parquet file: {e}")))
 }
 
 /// The value of `key` in the file-level metadata of the Parquet file at
 /// `path`, if it has one.
 pub fn parquet_meta(path: &Path, key: &str) -> Result<Option<String>> {
-    let file = std::fs::File::open(path).map_err(|e| Error::input(path, format!("cannot open: {e}")))?;
+    let file =
+        std::fs::File::open(path).map_err(|e| Error::input(path, format!("cannot open: {e}")))?;
     let mut reader = ParquetReader::new(file);
     let metadata = crate::error::guard_foreign(|| reader.get_metadata().cloned())
-        .ok_or_else(|| Error::input(path, "not a readable Parquet file (damaged: its decoder failed)"))?
+        .ok_or_else(|| {
+            Error::input(path, "not a readable Parquet file (damaged: its decoder failed)")
+        })?
         .map_err(|e| Error::input(path, format!("not a readable Parquet file: {e}")))?;
     let pairs = metadata.key_value_metadata.as_deref().unwrap_or_default();
     Ok(pairs.iter().find(|kv| kv.key == key).and_then(|kv| kv.value.clone()))
@@ -119,7 +133,9 @@ pub fn stale(found: &str, id: &str, rebuild: &str) -> String {
 /// A float column of a table read back, with a clear error naming `path`.
 pub fn f64_column(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<f64>> {
     let col = df.column(name).map_err(|_| Error::input(path, format!("no column '{name}'")))?;
-    let col = col.cast(&DataType::Float64).map_err(|e| Error::input(path, format!("column '{name}': {e}")))?;
+    let col = col
+        .cast(&DataType::Float64)
+        .map_err(|e| Error::input(path, format!("column '{name}': {e}")))?;
     let ca = col.f64().map_err(|e| Error::input(path, format!("column '{name}': {e}")))?;
     Ok((0..ca.len()).map(|i| ca.get(i).unwrap_or(f64::NAN)).collect())
 }

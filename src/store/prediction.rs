@@ -56,11 +56,14 @@ pub fn read(dir: &Path) -> Result<Option<Prediction>> {
 }
 
 pub fn write_record(path: &Path, rec: &PredictionRecord) -> Result<()> {
-    let text = toml::to_string(rec).map_err(|e| Error::Compute(format!("writing prediction.toml: {e}")))?;
+    let text = toml::to_string(rec)
+        .map_err(|e| Error::Compute(format!("writing prediction.toml: {e}")))?;
     atomic::write(path, format!("# How bands.parquet was made (mrbp predict).\n{text}").as_bytes())
 }
 
 pub fn read_record(path: &Path) -> Result<PredictionRecord> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
-    toml::from_str(&text).map_err(|e| Error::input(path, format!("not a prediction record: {}", e.message())))
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
+    toml::from_str(&text)
+        .map_err(|e| Error::input(path, format!("not a prediction record: {}", e.message())))
 }

@@ -72,7 +72,9 @@ pub fn columns(s: &Simulation) -> Vec<(String, Vec<f64>)> {
     ];
     let bands = || MODEL.iter().zip(&s.model).chain(PREDICTIVE.iter().zip(&s.predictive));
     columns.extend(bands().map(|(name, band)| (name.to_string(), band.clone())));
-    columns.extend(bands().map(|(name, band)| (format!("force_{name}_n"), band.iter().map(|t| t * r.area_m2).collect())));
+    columns.extend(bands().map(|(name, band)| {
+        (format!("force_{name}_n"), band.iter().map(|t| t * r.area_m2).collect())
+    }));
     columns
 }
 
@@ -86,7 +88,10 @@ pub fn write(dir: &Path, s: &Simulation) -> Result<()> {
     }
     write_parquet(&dir.join(FILE), t)?;
     let text = toml::to_string(r).map_err(|e| Error::Compute(format!("writing {RECORD}: {e}")))?;
-    crate::atomic::write(&dir.join(RECORD), format!("# How simulation.parquet was made (mrbp simulate).\n{text}").as_bytes())
+    crate::atomic::write(
+        &dir.join(RECORD),
+        format!("# How simulation.parquet was made (mrbp simulate).\n{text}").as_bytes(),
+    )
 }
 
 const MODEL: [&str; 5] = ["q025", "q25", "q50", "q75", "q975"];
@@ -95,15 +100,21 @@ const PREDICTIVE: [&str; 2] = ["p025", "p975"];
 /// The record of the simulation in `dir`.
 pub fn read_record(dir: &Path) -> Result<SimulationRecord> {
     let path = dir.join(RECORD);
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
-    toml::from_str(&text).map_err(|e| Error::input(&path, format!("not a simulation record: {}", e.message())))
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
+    toml::from_str(&text)
+        .map_err(|e| Error::input(&path, format!("not a simulation record: {}", e.message())))
 }
 
 /// Reads the simulation in `dir` back.
 pub fn read(dir: &Path) -> Result<Simulation> {
     let record = read_record(dir)?;
     let table = dir.join(FILE);
-    super::check_derived(&table, &record.calibration_id, "mrbp simulate CALIBRATION --input FILE --out DIR")?;
+    super::check_derived(
+        &table,
+        &record.calibration_id,
+        "mrbp simulate CALIBRATION --input FILE --out DIR",
+    )?;
     let df = read_parquet(&table)?;
     let col = |n: &str| f64_column(&df, n, &table);
     Ok(Simulation {

@@ -9,7 +9,10 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{comparison, consistency, coverage, folder, identification, parquet_meta, prediction, record, simulation, CALIBRATION_ID};
+use super::{
+    comparison, consistency, coverage, folder, identification, parquet_meta, prediction, record,
+    simulation, CALIBRATION_ID,
+};
 use crate::error::Result;
 
 /// The report of a folder (written by [`crate::report`]).
@@ -22,7 +25,9 @@ pub const CALIBRATION_ID_META: &str = "mrbp-calibration-id";
 /// reports named them).
 pub fn report_ids(html: &str) -> Vec<String> {
     let tag = format!("<meta name=\"{CALIBRATION_ID_META}\" content=\"");
-    html.match_indices(&tag).filter_map(|(at, _)| html[at + tag.len()..].split('"').next().map(str::to_string)).collect()
+    html.match_indices(&tag)
+        .filter_map(|(at, _)| html[at + tag.len()..].split('"').next().map(str::to_string))
+        .collect()
 }
 
 /// What a folder holds.
@@ -86,7 +91,11 @@ fn walk(dir: &Path, found: &mut Vec<FolderStatus>, depth: usize) {
         .flatten()
         .map(|e| e.path())
         .filter(|p| p.is_dir())
-        .filter(|p| p.file_name().is_some_and(|n| !n.to_string_lossy().starts_with('.') && !n.to_string_lossy().ends_with(".zarr")))
+        .filter(|p| {
+            p.file_name().is_some_and(|n| {
+                !n.to_string_lossy().starts_with('.') && !n.to_string_lossy().ends_with(".zarr")
+            })
+        })
         .collect();
     subs.sort();
     for sub in subs {
@@ -98,9 +107,15 @@ fn kind_of(dir: &Path) -> Option<Kind> {
     let has = |f: &str| dir.join(f).exists();
     if [folder::RECORD, folder::CHAINS, folder::SUMMARY, folder::CONFIG].iter().any(|f| has(f)) {
         Some(Kind::Calibration)
-    } else if [comparison::RECORD, comparison::SUMMARIES, comparison::DIFFERENCES].iter().any(|f| has(f)) {
+    } else if [comparison::RECORD, comparison::SUMMARIES, comparison::DIFFERENCES]
+        .iter()
+        .any(|f| has(f))
+    {
         Some(Kind::Comparison)
-    } else if [prediction::RECORD, prediction::BANDS, prediction::COVERAGE, prediction::ADEQUACY].iter().any(|f| has(f)) {
+    } else if [prediction::RECORD, prediction::BANDS, prediction::COVERAGE, prediction::ADEQUACY]
+        .iter()
+        .any(|f| has(f))
+    {
         Some(Kind::Prediction)
     } else if [simulation::RECORD, simulation::FILE].iter().any(|f| has(f)) {
         Some(Kind::Simulation)
@@ -115,7 +130,12 @@ fn check(dir: &Path, kind: Kind) -> Vec<String> {
     let mut problems = Vec::new();
     match kind {
         Kind::Calibration => check_calibration(dir, &mut problems),
-        Kind::Prediction => check_prediction(dir, enclosing(dir).as_deref(), "mrbp predict CALIBRATION --campaign MANIFEST --out DIR", &mut problems),
+        Kind::Prediction => check_prediction(
+            dir,
+            enclosing(dir).as_deref(),
+            "mrbp predict CALIBRATION --campaign MANIFEST --out DIR",
+            &mut problems,
+        ),
         Kind::Simulation => check_simulation(dir, &mut problems),
         Kind::Comparison => check_comparison(dir, &mut problems),
         Kind::Campaign => {
@@ -148,8 +168,13 @@ fn check_simulation(dir: &Path, problems: &mut Vec<String>) {
         problems.push(stale(&dir.join(simulation::FILE), &made_from, &id, rebuild));
     }
     // new tests of the damper: from the between-run layer now in the folder
-    if let (false, Some(parent)) = (layer_runs.is_empty(), dir.parent().filter(|_| enclosing(dir).is_some())) {
-        let now = parquet_meta(&parent.join(super::between_runs::FILE), super::between_runs::LAYER_RUNS).ok().flatten();
+    if let (false, Some(parent)) =
+        (layer_runs.is_empty(), dir.parent().filter(|_| enclosing(dir).is_some()))
+    {
+        let now =
+            parquet_meta(&parent.join(super::between_runs::FILE), super::between_runs::LAYER_RUNS)
+                .ok()
+                .flatten();
         if now.as_deref() != Some(layer_runs.as_str()) {
             problems.push(format!(
                 "{}: stale, its new tests came from a between-run layer since fitted again or removed; rebuild it with `mrbp simulate CALIBRATION --input FILE --new-test --out DIR`",
@@ -180,7 +205,8 @@ fn stale(path: &Path, found: &str, id: &str, rebuild: &str) -> String {
 }
 
 fn name(path: &Path) -> String {
-    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+    path.file_name()
+        .map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
 fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
@@ -198,14 +224,18 @@ fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
             problems.push(format!("{file}: missing; rebuild it with `{}`", folder::REBUILD));
         }
     }
-    for file in [folder::CHAINS, folder::SUMMARY, identification::FILE, super::against_current::FILE] {
+    for file in
+        [folder::CHAINS, folder::SUMMARY, identification::FILE, super::against_current::FILE]
+    {
         check_table(&dir.join(file), &id, folder::REBUILD, problems);
     }
     check_prediction(dir, Some(&id), "mrbp predict DIR", problems);
     let zarr = dir.join(super::inference::FILE);
     if zarr.exists() {
         match super::inference::calibration_id(&zarr) {
-            Ok(found) if found != id => problems.push(stale(&zarr, &found, &id, "mrbp predict DIR")),
+            Ok(found) if found != id => {
+                problems.push(stale(&zarr, &found, &id, "mrbp predict DIR"))
+            }
             Ok(_) => {}
             Err(e) => problems.push(e.to_string()),
         }
@@ -224,7 +254,8 @@ fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
             problems.push(e.to_string());
         }
     }
-    for file in [super::between_runs::FILE, super::between_runs::LOO, super::between_runs::TYPICAL] {
+    for file in [super::between_runs::FILE, super::between_runs::LOO, super::between_runs::TYPICAL]
+    {
         let path = dir.join(file);
         if path.exists() {
             if let Err(e) = super::between_runs::check(&path, dir, &id) {
@@ -235,7 +266,12 @@ fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
     check_report(dir, std::slice::from_ref(&id), "mrbp report DIR", problems);
 }
 
-fn check_prediction(dir: &Path, calibration: Option<&str>, rebuild: &str, problems: &mut Vec<String>) {
+fn check_prediction(
+    dir: &Path,
+    calibration: Option<&str>,
+    rebuild: &str,
+    problems: &mut Vec<String>,
+) {
     let files = [prediction::BANDS, prediction::COVERAGE, prediction::ADEQUACY];
     let record_path = dir.join(prediction::RECORD);
     if !record_path.exists() {
@@ -297,7 +333,9 @@ fn check_comparison(dir: &Path, problems: &mut Vec<String>) {
         let path = dir.join(file);
         match table_id(&path, comparison::CALIBRATION_IDS) {
             Err(e) => problems.push(e),
-            Ok(Some(found)) if found != ids => problems.push(format!("{file}: stale (compares {found}, the record {ids}); rebuild it with `{rebuild}`")),
+            Ok(Some(found)) if found != ids => problems.push(format!(
+                "{file}: stale (compares {found}, the record {ids}); rebuild it with `{rebuild}`"
+            )),
             Ok(_) => {}
         }
     }

@@ -10,13 +10,25 @@ use crate::sampler::ParameterDiagnostics;
 
 /// The rows of a calibration whose draws run from `burn_in` to `steps`, of
 /// `walkers` chains in all, of calibration `id`.
-pub fn write(path: &Path, rows: &[SummaryRow], burn_in: usize, steps: usize, walkers: usize, id: &str) -> Result<()> {
+pub fn write(
+    path: &Path,
+    rows: &[SummaryRow],
+    burn_in: usize,
+    steps: usize,
+    walkers: usize,
+    id: &str,
+) -> Result<()> {
     let n = rows.len();
-    let mut t = Table::new().derived_from(id).str("parameter", rows.iter().map(|r| r.parameter.clone()).collect());
+    let mut t = Table::new()
+        .derived_from(id)
+        .str("parameter", rows.iter().map(|r| r.parameter.clone()).collect());
     for (name, values) in statistics(rows) {
         t = t.f64(name, values);
     }
-    let t = t.i64("first_draw", vec![burn_in as i64; n]).i64("last_draw", vec![steps as i64; n]).i64("walkers", vec![walkers as i64; n]);
+    let t = t
+        .i64("first_draw", vec![burn_in as i64; n])
+        .i64("last_draw", vec![steps as i64; n])
+        .i64("walkers", vec![walkers as i64; n]);
     write_parquet(path, t)
 }
 
@@ -45,8 +57,10 @@ pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
     let df = read_parquet(path)?;
     let names = str_column(&df, "parameter", path)?;
     let col = |n: &str| f64_column(&df, n, path);
-    let (mean, sd, q05, q50, q95) = (col("mean")?, col("sd")?, col("q05")?, col("q50")?, col("q95")?);
-    let (eb, et, rh, tau, mcse) = (col("ess_bulk")?, col("ess_tail")?, col("r_hat")?, col("tau_int")?, col("mcse_mean")?);
+    let (mean, sd, q05, q50, q95) =
+        (col("mean")?, col("sd")?, col("q05")?, col("q50")?, col("q95")?);
+    let (eb, et, rh, tau, mcse) =
+        (col("ess_bulk")?, col("ess_tail")?, col("r_hat")?, col("tau_int")?, col("mcse_mean")?);
     Ok((0..names.len())
         .map(|i| SummaryRow {
             parameter: names[i].clone(),

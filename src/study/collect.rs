@@ -6,9 +6,9 @@
 
 use std::path::Path;
 
+use super::plan::{read_record, task_dir, task_ids};
 use super::statistics::{self, CoverageRow, Tally};
 use super::task::read_outcome;
-use super::plan::{read_record, task_dir, task_ids};
 use crate::error::{Error, Result};
 use crate::store::Table;
 
@@ -41,7 +41,8 @@ pub fn collect(dir: &Path) -> Result<Collected> {
         std::fs::remove_dir_all(&results).map_err(|e| Error::output(&results, e))?;
     }
     let mut table = TaskRows::default();
-    let mut found = Collected { tasks: ids.len(), ok: 0, failed: 0, missing: vec![], coverage: vec![] };
+    let mut found =
+        Collected { tasks: ids.len(), ok: 0, failed: 0, missing: vec![], coverage: vec![] };
     let mut tally = Tally::default();
     for id in &ids {
         let folder = task_dir(dir, id);
@@ -53,14 +54,27 @@ pub fn collect(dir: &Path) -> Result<Collected> {
             Some(o) => {
                 if o.status == "ok" {
                     let from = folder.join("result.parquet");
-                    let bytes = std::fs::read(&from).map_err(|e| Error::input(&from, format!("cannot read: {e}")))?;
-                    crate::atomic::write(&results.join(format!("task={id}")).join("part-0.parquet"), &bytes)?;
+                    let bytes = std::fs::read(&from)
+                        .map_err(|e| Error::input(&from, format!("cannot read: {e}")))?;
+                    crate::atomic::write(
+                        &results.join(format!("task={id}")).join("part-0.parquet"),
+                        &bytes,
+                    )?;
                     tally.add(&from)?;
                     found.ok += 1;
                 } else {
                     found.failed += 1;
                 }
-                table.push(id, &o.status, &o.message, o.seconds, o.steps, o.max_r_hat, o.min_ess, &o.warnings.join("; "));
+                table.push(
+                    id,
+                    &o.status,
+                    &o.message,
+                    o.seconds,
+                    o.steps,
+                    o.max_r_hat,
+                    o.min_ess,
+                    &o.warnings.join("; "),
+                );
             }
         }
     }
@@ -87,7 +101,17 @@ struct TaskRows {
 
 impl TaskRows {
     #[allow(clippy::too_many_arguments)]
-    fn push(&mut self, task: &str, status: &str, message: &str, seconds: f64, steps: usize, max_r_hat: f64, min_ess: f64, warnings: &str) {
+    fn push(
+        &mut self,
+        task: &str,
+        status: &str,
+        message: &str,
+        seconds: f64,
+        steps: usize,
+        max_r_hat: f64,
+        min_ess: f64,
+        warnings: &str,
+    ) {
         self.task.push(task.into());
         self.status.push(status.into());
         self.message.push(message.into());

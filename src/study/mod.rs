@@ -28,5 +28,8 @@ mod task;
 
 pub use collect::{collect, Collected};
 pub use local::run_local;
-pub use plan::{plan, read_record, read_task, task_dir, task_ids, Design, PlanOptions, Source, StudyRecord, TaskSpec};
+pub use plan::{
+    plan, read_record, read_task, task_dir, task_ids, Design, PlanOptions, Source, StudyRecord,
+    TaskSpec,
+};
 pub use task::{run_task, TaskOutcome};

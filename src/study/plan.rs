@@ -13,7 +13,6 @@ use crate::model::{Params, PARAM_NAMES};
 use crate::noise::{discrepancy::Discrepancy, NoiseKind, NoiseOptions};
 use crate::synth::{run_id, ExtraForce, StandLaw, SynthSettings};
 
-
 /// Where a task's records come from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
@@ -122,11 +121,17 @@ impl PlanOptions {
         let design = match (self.replicates, self.sbc) {
             (Some(n), _) => Design::Replicates { n, synth: synth()? },
             (_, Some(n)) => Design::Sbc { n, synth: synth()? },
-            _ => Design::Campaigns { manifests: self.campaigns.clone(), currents: self.current.into_iter().collect() },
+            _ => Design::Campaigns {
+                manifests: self.campaigns.clone(),
+                currents: self.current.into_iter().collect(),
+            },
         };
         let name = match &self.name {
             Some(n) => n.clone(),
-            None => dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "study".into()),
+            None => dir
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "study".into()),
         };
         let tasks = plan(dir, &name, &design, &settings)?;
         Ok((name, tasks))
@@ -140,19 +145,30 @@ pub fn task_dir(study: &Path, id: &str) -> PathBuf {
 
 /// Writes the study `name` of `design` into `dir` (which must not hold a
 /// study yet); the sampler seed of task k is the settings' seed + k.
-pub fn plan(dir: &Path, name: &str, design: &Design, settings: &CalibrationSettings) -> Result<Vec<TaskSpec>> {
+pub fn plan(
+    dir: &Path,
+    name: &str,
+    design: &Design,
+    settings: &CalibrationSettings,
+) -> Result<Vec<TaskSpec>> {
     if dir.join("study.toml").exists() {
-        return Err(Error::Usage(format!("{} already holds a study (study.toml): plan into a new folder", dir.display())));
+        return Err(Error::Usage(format!(
+            "{} already holds a study (study.toml): plan into a new folder",
+            dir.display()
+        )));
     }
     if name.is_empty() || name.contains(['/', '=', '\\']) {
-        return Err(Error::Usage(format!("study name {name:?}: use letters, digits, '-', '_' or '.'")));
+        return Err(Error::Usage(format!(
+            "study name {name:?}: use letters, digits, '-', '_' or '.'"
+        )));
     }
     let specs = tasks_of(name, design, settings)?;
     if specs.is_empty() {
         return Err(Error::Usage("the study has no task".into()));
     }
     for spec in &specs {
-        let text = toml::to_string(spec).map_err(|e| Error::Compute(format!("task {}: {e}", spec.id)))?;
+        let text =
+            toml::to_string(spec).map_err(|e| Error::Compute(format!("task {}: {e}", spec.id)))?;
         crate::atomic::write(&task_dir(dir, &spec.id).join("task.toml"), text.as_bytes())?;
     }
     let ids: String = specs.iter().map(|s| format!("{}\n", s.id)).collect();
@@ -162,7 +178,13 @@ pub fn plan(dir: &Path, name: &str, design: &Design, settings: &CalibrationSetti
         Design::Sbc { .. } => "sbc",
         Design::Campaigns { .. } => "campaigns",
     };
-    let record = StudyRecord { name: name.into(), kind: kind.into(), tasks: specs.len(), mrbp_version: env!("CARGO_PKG_VERSION").into(), command: crate::store::command_line() };
+    let record = StudyRecord {
+        name: name.into(),
+        kind: kind.into(),
+        tasks: specs.len(),
+        mrbp_version: env!("CARGO_PKG_VERSION").into(),
+        command: crate::store::command_line(),
+    };
     let text = toml::to_string(&record).map_err(|e| Error::Compute(format!("study.toml: {e}")))?;
     crate::atomic::write(&dir.join("study.toml"), text.as_bytes())?;
     Ok(specs)
@@ -175,33 +197,70 @@ fn tasks_of(name: &str, design: &Design, settings: &CalibrationSettings) -> Resu
         s.sampler.seed = settings.sampler.seed + k as u64;
         s
     };
-    let synthetic = |k: usize, n: usize, synth: SynthSettings, settings: CalibrationSettings| -> Result<TaskSpec> {
-        let current = *synth.currents_a.first().ok_or_else(|| Error::Usage("a virtual study needs one current (--currents)".into()))?;
+    let synthetic = |k: usize,
+                     n: usize,
+                     synth: SynthSettings,
+                     settings: CalibrationSettings|
+     -> Result<TaskSpec> {
+        let current = *synth
+            .currents_a
+            .first()
+            .ok_or_else(|| Error::Usage("a virtual study needs one current (--currents)".into()))?;
         if synth.currents_a.len() != 1 {
-            return Err(Error::Usage(format!("a virtual study calibrates one current; --currents gives {:?}", synth.currents_a)));
+            return Err(Error::Usage(format!(
+                "a virtual study calibrates one current; --currents gives {:?}",
+                synth.currents_a
+            )));
         }
-        Ok(TaskSpec { id: id(k, n), study: name.into(), truth: truth_of(&synth, current)?, source: Source::Synthetic { synth: Box::new(synth) }, current_a: Some(current), settings })
+        Ok(TaskSpec {
+            id: id(k, n),
+            study: name.into(),
+            truth: truth_of(&synth, current)?,
+            source: Source::Synthetic { synth: Box::new(synth) },
+            current_a: Some(current),
+            settings,
+        })
     };
     match design {
         Design::Replicates { n, synth } => (0..*n)
-            .map(|k| synthetic(k, *n, SynthSettings { seed: synth.seed + k as u64, ..synth.clone() }, seeded(k)))
+            .map(|k| {
+                synthetic(
+                    k,
+                    *n,
+                    SynthSettings { seed: synth.seed + k as u64, ..synth.clone() },
+                    seeded(k),
+                )
+            })
             .collect(),
         Design::Sbc { n, synth } => {
             let priors = settings.priors();
             let (s_lo, s_hi) = settings.sigma_bounds_pa;
             let discrepancy = (settings.likelihood.noise == NoiseKind::Discrepancy).then(|| {
-                Discrepancy::new(&NoiseOptions { sigma_bounds: settings.sigma_bounds_pa, discrepancy: settings.likelihood.discrepancy.clone(), ..NoiseOptions::default() })
+                Discrepancy::new(&NoiseOptions {
+                    sigma_bounds: settings.sigma_bounds_pa,
+                    discrepancy: settings.likelihood.discrepancy.clone(),
+                    ..NoiseOptions::default()
+                })
             });
             (0..*n)
                 .map(|k| {
                     // θ and σ from the prior the calibration uses, as SBC requires
                     let mut rng = crate::rng::stream(settings.sampler.seed, &[0x5bc, k as u64]);
                     let theta: [f64; 7] = std::array::from_fn(|i| priors[i].draw(&mut rng));
-                    let sigma = crate::posterior::Prior::LogUniform { lower: s_lo, upper: s_hi }.draw(&mut rng);
+                    let sigma = crate::posterior::Prior::LogUniform { lower: s_lo, upper: s_hi }
+                        .draw(&mut rng);
                     let current = synth.currents_a.first().copied().unwrap_or(1.0);
                     // the stand's law passes through θ at the task's current
-                    let law = StandLaw { at_1a: at_reference(&synth.law, Params::from_array(theta), current), ..synth.law };
-                    let mut s = SynthSettings { law, noise_force_n: sigma * synth.geometry.area_m2, seed: synth.seed + k as u64, ..synth.clone() };
+                    let law = StandLaw {
+                        at_1a: at_reference(&synth.law, Params::from_array(theta), current),
+                        ..synth.law
+                    };
+                    let mut s = SynthSettings {
+                        law,
+                        noise_force_n: sigma * synth.geometry.area_m2,
+                        seed: synth.seed + k as u64,
+                        ..synth.clone()
+                    };
                     if let Some(model) = &discrepancy {
                         // each run's discrepancy from its prior: a path of the
                         // model's own process, its scale and time scale drawn
@@ -211,12 +270,24 @@ fn tasks_of(name: &str, design: &Design, settings: &CalibrationSettings) -> Resu
                             .iter()
                             .map(|rpm| {
                                 let (lo, hi) = model.scale_bounds_at(0.0);
-                                let sd = crate::posterior::Prior::LogUniform { lower: lo, upper: hi }.draw(&mut rng);
-                                let (lo, hi) = model.time_bounds_at(1.0 / synth.rate_hz, 60.0 / rpm);
-                                (sd * area, crate::posterior::Prior::LogUniform { lower: lo, upper: hi }.draw(&mut rng))
+                                let sd =
+                                    crate::posterior::Prior::LogUniform { lower: lo, upper: hi }
+                                        .draw(&mut rng);
+                                let (lo, hi) =
+                                    model.time_bounds_at(1.0 / synth.rate_hz, 60.0 / rpm);
+                                (
+                                    sd * area,
+                                    crate::posterior::Prior::LogUniform { lower: lo, upper: hi }
+                                        .draw(&mut rng),
+                                )
                             })
                             .unzip();
-                        s.extra_force = ExtraForce { smooth_sd_n: sd, smooth_time_s: ell, kernel: settings.likelihood.discrepancy.kernel, viscous_n_s_per_m: 0.0 };
+                        s.extra_force = ExtraForce {
+                            smooth_sd_n: sd,
+                            smooth_time_s: ell,
+                            kernel: settings.likelihood.discrepancy.kernel,
+                            viscous_n_s_per_m: 0.0,
+                        };
                     }
                     synthetic(k, *n, s, seeded(k))
                 })
@@ -226,7 +297,11 @@ fn tasks_of(name: &str, design: &Design, settings: &CalibrationSettings) -> Resu
             let mut specs = Vec::new();
             for manifest in manifests {
                 let campaign = crate::data::Campaign::load(manifest)?;
-                let wanted: Vec<f64> = if currents.is_empty() { campaign.currents() } else { currents.iter().copied().filter(|c| campaign.has_current(*c)).collect() };
+                let wanted: Vec<f64> = if currents.is_empty() {
+                    campaign.currents()
+                } else {
+                    currents.iter().copied().filter(|c| campaign.has_current(*c)).collect()
+                };
                 let manifest = std::fs::canonicalize(manifest).unwrap_or_else(|_| manifest.clone());
                 for c in wanted {
                     specs.push((manifest.clone(), c));
@@ -236,7 +311,14 @@ fn tasks_of(name: &str, design: &Design, settings: &CalibrationSettings) -> Resu
             Ok(specs
                 .into_iter()
                 .enumerate()
-                .map(|(k, (manifest, c))| TaskSpec { id: id(k, n), study: name.into(), source: Source::Campaign { manifest }, current_a: Some(c), truth: BTreeMap::new(), settings: seeded(k) })
+                .map(|(k, (manifest, c))| TaskSpec {
+                    id: id(k, n),
+                    study: name.into(),
+                    source: Source::Campaign { manifest },
+                    current_a: Some(c),
+                    truth: BTreeMap::new(),
+                    settings: seeded(k),
+                })
                 .collect())
         }
     }
@@ -248,7 +330,13 @@ fn at_reference(law: &StandLaw, theta: Params, current: f64) -> Params {
     let at = law.law().params_at(current).to_array();
     let reference = law.at_1a.to_array();
     let t = theta.to_array();
-    Params::from_array(std::array::from_fn(|i| if at[i] != 0.0 { t[i] * reference[i] / at[i] } else { t[i] }))
+    Params::from_array(std::array::from_fn(|i| {
+        if at[i] != 0.0 {
+            t[i] * reference[i] / at[i]
+        } else {
+            t[i]
+        }
+    }))
 }
 
 /// The true coordinates of a virtual campaign at `current`: the B-P
@@ -257,12 +345,15 @@ fn at_reference(law: &StandLaw, theta: Params, current: f64) -> Params {
 /// run's discrepancy scale (Pa) and time scale (s).
 fn truth_of(synth: &SynthSettings, current: f64) -> Result<BTreeMap<String, f64>> {
     let params = synth.law.law().params_at(current).to_array();
-    let mut truth: BTreeMap<String, f64> = PARAM_NAMES.iter().zip(params).map(|(n, v)| (n.to_string(), v)).collect();
+    let mut truth: BTreeMap<String, f64> =
+        PARAM_NAMES.iter().zip(params).map(|(n, v)| (n.to_string(), v)).collect();
     let extra = &synth.extra_force;
     for (i, rpm) in synth.rpms.iter().enumerate() {
         let run = run_id(current, *rpm);
         truth.insert(format!("sigma_{run}"), synth.noise_force_n / synth.geometry.area_m2);
-        if let (Some((sd, ell)), 0.0) = (extra.smooth(i, synth.rpms.len())?, extra.viscous_n_s_per_m) {
+        if let (Some((sd, ell)), 0.0) =
+            (extra.smooth(i, synth.rpms.len())?, extra.viscous_n_s_per_m)
+        {
             truth.insert(format!("discrepancy_sd_{run}"), sd / synth.geometry.area_m2);
             truth.insert(format!("discrepancy_time_{run}"), ell);
         }
@@ -273,15 +364,26 @@ fn truth_of(synth: &SynthSettings, current: f64) -> Result<BTreeMap<String, f64>
 /// The task ids of the study in `dir`, in order.
 pub fn task_ids(dir: &Path) -> Result<Vec<String>> {
     let path = dir.join("tasks.csv");
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read ({e}): is {} a study folder (mrbp study plan)?", dir.display())))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        Error::input(
+            &path,
+            format!("cannot read ({e}): is {} a study folder (mrbp study plan)?", dir.display()),
+        )
+    })?;
     Ok(text.lines().skip(1).map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect())
 }
 
 /// The study's record.
 pub fn read_record(dir: &Path) -> Result<StudyRecord> {
     let path = dir.join("study.toml");
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read ({e}): is {} a study folder (mrbp study plan)?", dir.display())))?;
-    toml::from_str(&text).map_err(|e| Error::input(&path, format!("not a study record: {}", e.message())))
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        Error::input(
+            &path,
+            format!("cannot read ({e}): is {} a study folder (mrbp study plan)?", dir.display()),
+        )
+    })?;
+    toml::from_str(&text)
+        .map_err(|e| Error::input(&path, format!("not a study record: {}", e.message())))
 }
 
 /// Task `id` of the study in `dir`.
@@ -290,6 +392,14 @@ pub fn read_task(dir: &Path, id: &str) -> Result<TaskSpec> {
         return Err(Error::Usage(format!("task id {id:?} is not one of tasks.csv")));
     }
     let path = task_dir(dir, id).join("task.toml");
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read ({e}): no task {id} in {} (a folder of mrbp study plan)", dir.display())))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        Error::input(
+            &path,
+            format!(
+                "cannot read ({e}): no task {id} in {} (a folder of mrbp study plan)",
+                dir.display()
+            ),
+        )
+    })?;
     toml::from_str(&text).map_err(|e| Error::input(&path, format!("not a task: {}", e.message())))
 }

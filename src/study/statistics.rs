@@ -61,7 +61,8 @@ impl Tally {
             if !truth[k].is_finite() {
                 continue;
             }
-            let e = self.rows.entry(names[k].clone()).or_insert_with(|| (vec![], 0, 0, vec![0; BINS]));
+            let e =
+                self.rows.entry(names[k].clone()).or_insert_with(|| (vec![], 0, 0, vec![0; BINS]));
             e.0.push(z[k]);
             e.1 += (i50[k] != 0.0) as usize;
             e.2 += (i90[k] != 0.0) as usize;
@@ -78,9 +79,11 @@ impl Tally {
             .map(|(name, (z, i50, i90, counts))| {
                 let n = z.len() as f64;
                 let mean = z.iter().sum::<f64>() / n;
-                let sd = (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
+                let sd =
+                    (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
                 let expected = n / BINS as f64;
-                let stat: f64 = counts.iter().map(|c| (*c as f64 - expected).powi(2) / expected).sum();
+                let stat: f64 =
+                    counts.iter().map(|c| (*c as f64 - expected).powi(2) / expected).sum();
                 CoverageRow {
                     parameter: name.clone(),
                     tasks: z.len(),
@@ -118,8 +121,17 @@ pub fn write(out: &Path, rows: &[CoverageRow]) -> Result<()> {
             let n = r.tasks as f64;
             let expected = n / BINS as f64;
             let edges: Vec<f64> = (0..=BINS).map(|b| b as f64 / BINS as f64).collect();
-            let mut c = Chart::new(format!("{}: p = {:.2}", r.parameter, r.rank_p), "rank / (L + 1)", "tasks");
-            c.series.push(Series::bars(None, PALETTE[0], edges, r.rank_counts.iter().map(|c| *c as f64).collect()));
+            let mut c = Chart::new(
+                format!("{}: p = {:.2}", r.parameter, r.rank_p),
+                "rank / (L + 1)",
+                "tasks",
+            );
+            c.series.push(Series::bars(
+                None,
+                PALETTE[0],
+                edges,
+                r.rank_counts.iter().map(|c| *c as f64).collect(),
+            ));
             // where a uniform histogram's bins stay 99 % of the time (binomial)
             let sd = (n * (1.0 / BINS as f64) * (1.0 - 1.0 / BINS as f64)).sqrt();
             for level in [expected - 2.58 * sd, expected, expected + 2.58 * sd] {

@@ -14,11 +14,11 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::plan::{read_task, task_dir, Source, TaskSpec};
+use crate::calibrate::Calibration;
 use crate::error::{Error, Result};
 use crate::pipeline::{Pipeline, SampleRequest};
-use crate::sampler::quantile;
-use crate::calibrate::Calibration;
 use crate::posterior::Draws;
+use crate::sampler::quantile;
 use crate::store::Table;
 
 /// Posterior draws (thinned by τ) each truth is ranked among.
@@ -61,9 +61,19 @@ pub fn run_task(pipeline: &mut Pipeline, dir: &Path, id: &str) -> Result<(TaskOu
                 steps: cal.sample.chains.steps().saturating_sub(1),
                 max_r_hat: cal.max_rhat(),
                 min_ess: cal.min_ess(),
-                warnings: cal.record.warnings.iter().chain(&cal.record.model_warnings).chain(&cal.record.confounding).cloned().collect(),
+                warnings: cal
+                    .record
+                    .warnings
+                    .iter()
+                    .chain(&cal.record.model_warnings)
+                    .chain(&cal.record.confounding)
+                    .cloned()
+                    .collect(),
             };
-            crate::store::write_parquet(&folder.join("result.parquet"), result_table(&spec, &cal, &outcome))?;
+            crate::store::write_parquet(
+                &folder.join("result.parquet"),
+                result_table(&spec, &cal, &outcome),
+            )?;
             outcome
         }
         // bad input or a calculation that cannot succeed: the task's result
@@ -80,7 +90,8 @@ pub fn run_task(pipeline: &mut Pipeline, dir: &Path, id: &str) -> Result<(TaskOu
         // interrupted, or the disk: the task is not done, run it again
         Err(e) => return Err(e),
     };
-    let text = toml::to_string(&outcome).map_err(|e| Error::Compute(format!("status.toml: {e}")))?;
+    let text =
+        toml::to_string(&outcome).map_err(|e| Error::Compute(format!("status.toml: {e}")))?;
     crate::atomic::write(&folder.join("status.toml"), text.as_bytes())?;
     Ok((outcome, true))
 }
@@ -91,8 +102,11 @@ pub fn read_outcome(folder: &Path) -> Result<Option<TaskOutcome>> {
     if !path.exists() {
         return Ok(None);
     }
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
-    toml::from_str(&text).map(Some).map_err(|e| Error::input(&path, format!("not a task status: {}", e.message())))
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
+    toml::from_str(&text)
+        .map(Some)
+        .map_err(|e| Error::input(&path, format!("not a task status: {}", e.message())))
 }
 
 /// The task's calibration in `folder/calibration`, resumed from its
@@ -108,7 +122,14 @@ fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<
     };
     let out = folder.join("calibration");
     let resume = out.join(crate::store::folder::CHECKPOINT).exists();
-    let request = SampleRequest { settings: spec.settings.clone(), current: spec.current_a, hold_out_current: vec![], resume, force: true, per_run: false };
+    let request = SampleRequest {
+        settings: spec.settings.clone(),
+        current: spec.current_a,
+        hold_out_current: vec![],
+        resume,
+        force: true,
+        per_run: false,
+    };
     let mut folders = pipeline.sample(&campaign, &out, &request)?;
     folders.pop().ok_or_else(|| Error::Compute(format!("task {}: no calibration made", spec.id)))
 }
@@ -121,20 +142,24 @@ fn result_table(spec: &TaskSpec, cal: &Calibration, outcome: &TaskOutcome) -> Ta
     let all = Draws { burn_in: cal.burn_in(), thin: 1 }.positions(&cal.sample.chains, usize::MAX);
     let thinned = cal.draw_positions(RANK_DRAWS);
     let rows = &cal.summary;
-    let truth: Vec<f64> = rows.iter().map(|r| spec.truth.get(&r.parameter).copied().unwrap_or(f64::NAN)).collect();
+    let truth: Vec<f64> =
+        rows.iter().map(|r| spec.truth.get(&r.parameter).copied().unwrap_or(f64::NAN)).collect();
     let mut inside50 = Vec::new();
     let mut inside90 = Vec::new();
     let mut rank = Vec::new();
     for (r, t) in rows.iter().zip(&truth) {
         let draws = cal.sample.values(&r.parameter, &all).unwrap_or_default();
-        let within = |lo: f64, hi: f64| t.is_finite() && quantile(&draws, lo) <= *t && *t <= quantile(&draws, hi);
+        let within = |lo: f64, hi: f64| {
+            t.is_finite() && quantile(&draws, lo) <= *t && *t <= quantile(&draws, hi)
+        };
         inside50.push(within(0.25, 0.75));
         inside90.push(within(0.05, 0.95));
         let ranked = cal.sample.values(&r.parameter, &thinned).unwrap_or_default();
         rank.push(if t.is_finite() { ranked.iter().filter(|v| *v < t).count() as i64 } else { -1 });
     }
     let n = rows.len();
-    let col = |f: &dyn Fn(&crate::posterior::SummaryRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
+    let col =
+        |f: &dyn Fn(&crate::posterior::SummaryRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
     Table::new()
         .str("parameter", rows.iter().map(|r| r.parameter.clone()).collect())
         .f64("current_a", vec![spec.current_a.unwrap_or(cal.record.current_a); n])

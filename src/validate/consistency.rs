@@ -47,7 +47,12 @@ pub const NEW_TEST: &str = "new test";
 impl Estimate {
     /// Of `parameter` in `calibration` at its draws `positions`, labelled
     /// `label`.
-    fn of(calibration: &Calibration, positions: &[(usize, usize)], parameter: &str, label: &str) -> Option<Estimate> {
+    fn of(
+        calibration: &Calibration,
+        positions: &[(usize, usize)],
+        parameter: &str,
+        label: &str,
+    ) -> Option<Estimate> {
         let mut values = calibration.sample.values(parameter, positions)?;
         values.retain(|v| *v > 0.0 && v.is_finite());
         values.sort_by(f64::total_cmp);
@@ -109,7 +114,8 @@ impl ParameterConsistency {
     /// One line in plain words.
     pub fn verdict(&self) -> String {
         let p = &self.parameter;
-        let values: Vec<String> = self.runs.iter().map(|r| format!("{} {}", r.label, short(r.q50))).collect();
+        let values: Vec<String> =
+            self.runs.iter().map(|r| format!("{} {}", r.label, short(r.q50))).collect();
         let interval = |e: &Estimate| format!("[{}, {}]", short(e.q05), short(e.q95));
         if self.disagrees() {
             format!(
@@ -121,7 +127,11 @@ impl ParameterConsistency {
                 self.spread_log.exp()
             )
         } else {
-            format!("{p}: the runs agree (χ²/ν = {:.2}); joint 90 % interval {}", self.chi2_nu, interval(&self.joint))
+            format!(
+                "{p}: the runs agree (χ²/ν = {:.2}); joint 90 % interval {}",
+                self.chi2_nu,
+                interval(&self.joint)
+            )
         }
     }
 }
@@ -134,9 +144,14 @@ fn short(v: f64) -> String {
 /// The consistency of every B-P parameter of `joint` across the
 /// calibrations of its runs one by one (`runs`, labelled by run id), with
 /// the new test of `layer` at `joint`'s current.
-pub fn consistency(joint: &Calibration, runs: &[(String, Calibration)], layer: &BetweenRuns) -> Vec<ParameterConsistency> {
+pub fn consistency(
+    joint: &Calibration,
+    runs: &[(String, Calibration)],
+    layer: &BetweenRuns,
+) -> Vec<ParameterConsistency> {
     let joint_draws = joint.draw_positions(DRAWS);
-    let run_draws: Vec<Vec<(usize, usize)>> = runs.iter().map(|(_, c)| c.draw_positions(DRAWS)).collect();
+    let run_draws: Vec<Vec<(usize, usize)>> =
+        runs.iter().map(|(_, c)| c.draw_positions(DRAWS)).collect();
     let Some(group) = layer.group(joint.record.current_a) else {
         return Vec::new();
     };
@@ -145,12 +160,24 @@ pub fn consistency(joint: &Calibration, runs: &[(String, Calibration)], layer: &
         .enumerate()
         .filter_map(|(k, name)| {
             let joint = Estimate::of(joint, &joint_draws, name, JOINT)?;
-            let runs: Vec<Estimate> = runs.iter().zip(&run_draws).map(|((id, c), at)| Estimate::of(c, at, name, id)).collect::<Option<_>>()?;
+            let runs: Vec<Estimate> = runs
+                .iter()
+                .zip(&run_draws)
+                .map(|((id, c), at)| Estimate::of(c, at, name, id))
+                .collect::<Option<_>>()?;
             let new_test = Estimate::of_sorted(&layer.new_test_sorted(group, k), NEW_TEST)?;
             let y: Vec<f64> = runs.iter().map(|r| r.mean_log).collect();
             let s: Vec<f64> = runs.iter().map(|r| r.sd_log.max(1e-12)).collect();
             let (chi2_nu, p_value) = chi2_per_dof(&y, &s);
-            Some(ParameterConsistency { parameter: name.to_string(), runs, joint, chi2_nu, p_value, spread_log: layer.spread_of(group, k), new_test })
+            Some(ParameterConsistency {
+                parameter: name.to_string(),
+                runs,
+                joint,
+                chi2_nu,
+                p_value,
+                spread_log: layer.spread_of(group, k),
+                new_test,
+            })
         })
         .collect()
 }

@@ -30,7 +30,10 @@ use crate::data::{RecordPart, RunData};
 use crate::posterior::map;
 use crate::posterior::mode;
 use crate::posterior::{Draw, Draws, Posterior};
-use crate::predict::{bands_of, model_paths, predict_run, CoverageRow, PredictOptions, PredictSettings, RunBands, RunPrediction};
+use crate::predict::{
+    bands_of, model_paths, predict_run, CoverageRow, PredictOptions, PredictSettings, RunBands,
+    RunPrediction,
+};
 use crate::sampler::elliptical::t_factor;
 use crate::sampler::{Elliptical, LogDensity, Moments, Observer, RunControl, Sampler};
 
@@ -50,7 +53,13 @@ pub struct LooSettings {
 impl Default for LooSettings {
     fn default() -> Self {
         let bands = PredictOptions::default();
-        LooSettings { steps: 600, weighted_draws: 1000, draws: bands.draws, replicates: bands.replicates, seed: bands.seed }
+        LooSettings {
+            steps: 600,
+            weighted_draws: 1000,
+            draws: bands.draws,
+            replicates: bands.replicates,
+            seed: bands.seed,
+        }
     }
 }
 
@@ -122,12 +131,18 @@ struct Full<'a> {
 /// importance: each on random streams of its own, so the results do not
 /// depend on the threads); those that still need sampling are then sampled
 /// one after the other, each sampler using every thread.
-pub fn leave_one_out(cal: &Calibration, campaign: &Campaign, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<Vec<HeldOut>> {
+pub fn leave_one_out(
+    cal: &Calibration,
+    campaign: &Campaign,
+    loo: &LooSettings,
+    observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>,
+) -> Result<Vec<HeldOut>> {
     if campaign.runs.len() < 2 {
         return Err(Error::Usage("leave-one-out needs a calibration of at least two runs".into()));
     }
     let full = Full { cal, campaign };
-    let weighed: Vec<Result<Weighed>> = campaign.runs.par_iter().enumerate().map(|(j, run)| weigh(&full, j, run, loo)).collect();
+    let weighed: Vec<Result<Weighed>> =
+        campaign.runs.par_iter().enumerate().map(|(j, run)| weigh(&full, j, run, loo)).collect();
     weighed
         .into_iter()
         .map(|w| match w? {
@@ -166,8 +181,14 @@ impl Target<'_> {
             .zip(draws)
             .map(|(p, d)| match p {
                 Some(p) => {
-                    let model: Vec<f64> = (0..n).map(|k| p[k] + self.data.terms_stress(k, d.spring_n_per_m, d.offset_n)).collect();
-                    -self.weight * self.predict.noise.profile_log_likelihood(&self.data, &residuals(&self.data.tau[..n], &model))
+                    let model: Vec<f64> = (0..n)
+                        .map(|k| p[k] + self.data.terms_stress(k, d.spring_n_per_m, d.offset_n))
+                        .collect();
+                    -self.weight
+                        * self.predict.noise.profile_log_likelihood(
+                            &self.data,
+                            &residuals(&self.data.tau[..n], &model),
+                        )
                 }
                 None => f64::NEG_INFINITY,
             })
@@ -176,28 +197,47 @@ impl Target<'_> {
 
     /// Bands from weighted draws with their paths: `count` of them
     /// resampled by the weights.
-    fn weighted_bands(&self, draws: &[Draw], paths: &[Option<Vec<f64>>], weights: &[f64], count: usize) -> Result<RunPrediction> {
+    fn weighted_bands(
+        &self,
+        draws: &[Draw],
+        paths: &[Option<Vec<f64>>],
+        weights: &[f64],
+        count: usize,
+    ) -> Result<RunPrediction> {
         self.bands_of_picks(draws, paths, &systematic_resample(weights, count))
     }
 
     /// Bands from `count` of weighted draws resampled by the weights, whose
     /// paths are integrated for the picked draws only (a resample holds a
     /// fraction of them where the weights are uneven).
-    fn resampled_bands(&self, draws: &[Draw], weights: &[f64], count: usize) -> Result<RunPrediction> {
+    fn resampled_bands(
+        &self,
+        draws: &[Draw],
+        weights: &[f64],
+        count: usize,
+    ) -> Result<RunPrediction> {
         let picks = systematic_resample(weights, count);
         let mut unique = picks.clone();
         unique.dedup();
         let picked: Vec<Draw> = unique.iter().map(|&i| draws[i]).collect();
         let mut paths = vec![None; draws.len()];
-        for (i, path) in unique.iter().zip(model_paths(&self.data, &picked, &self.predict.integrator, &|| {})) {
+        for (i, path) in
+            unique.iter().zip(model_paths(&self.data, &picked, &self.predict.integrator, &|| {}))
+        {
             paths[*i] = path;
         }
         self.bands_of_picks(draws, &paths, &picks)
     }
 
     /// Bands from the draws at `picks` (with repeats) and their paths.
-    fn bands_of_picks(&self, draws: &[Draw], paths: &[Option<Vec<f64>>], picks: &[usize]) -> Result<RunPrediction> {
-        let kept: Vec<(&Draw, &[f64])> = picks.iter().filter_map(|&i| paths[i].as_deref().map(|p| (&draws[i], p))).collect();
+    fn bands_of_picks(
+        &self,
+        draws: &[Draw],
+        paths: &[Option<Vec<f64>>],
+        picks: &[usize],
+    ) -> Result<RunPrediction> {
+        let kept: Vec<(&Draw, &[f64])> =
+            picks.iter().filter_map(|&i| paths[i].as_deref().map(|p| (&draws[i], p))).collect();
         let bands = bands_of(&self.data, self.j, &kept, picks.len() - kept.len(), &self.predict)?;
         let coverage = CoverageRow::of(self.run, &bands, &bands.coverage(&self.data.tau), false);
         Ok(RunPrediction { bands: RunBands::of(self.run, &self.data, bands), coverage })
@@ -223,8 +263,14 @@ struct Pending<'a> {
 
 impl Pending<'_> {
     /// 3. the held-out posterior sampled afresh.
-    fn sample(mut self: Box<Self>, settings: &CalibrationSettings, loo: &LooSettings, observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>) -> Result<HeldOut> {
-        let (prediction, max_rhat) = sample_afresh(&self.target, &self.posterior, &self.laplace, settings, loo, observe)?;
+    fn sample(
+        mut self: Box<Self>,
+        settings: &CalibrationSettings,
+        loo: &LooSettings,
+        observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>,
+    ) -> Result<HeldOut> {
+        let (prediction, max_rhat) =
+            sample_afresh(&self.target, &self.posterior, &self.laplace, settings, loo, observe)?;
         (self.row.by, self.row.max_rhat) = (HeldOutBy::Sampling, max_rhat);
         self.row.coverage = prediction.coverage.clone();
         Ok(HeldOut { prediction, row: self.row })
@@ -252,24 +298,36 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
     // FIRST_SHARE first, all of them only where the weights may yet be
     // trusted
     let adjusted = lik.adjustment().is_some();
-    let all = Draws { burn_in: full.cal.burn_in(), thin: 1 }.positions(&sample.chains, loo.weighted_draws);
+    let all = Draws { burn_in: full.cal.burn_in(), thin: 1 }
+        .positions(&sample.chains, loo.weighted_draws);
     let weigh_run = |positions: Vec<(usize, usize)>| {
         // the run's own force offset (and the spring) in each draw
-        let own: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw(s, c, left_out.id(), current)).collect();
+        let own: Vec<Draw> =
+            positions.iter().map(|&(s, c)| sample.draw(s, c, left_out.id(), current)).collect();
         let paths = model_paths(&target.data, &own, &target.predict.integrator, &|| {});
         let reweighted = psis::smooth(&target.log_weights(&paths, &own));
         (positions, paths, reweighted)
     };
-    let (mut positions, mut paths, mut reweighted) = weigh_run(all.iter().step_by(FIRST_SHARE).copied().collect());
+    let (mut positions, mut paths, mut reweighted) =
+        weigh_run(all.iter().step_by(FIRST_SHARE).copied().collect());
     if reweighted.k_hat <= HOPELESS_K && !adjusted {
         (positions, paths, reweighted) = weigh_run(all);
     }
-    let mut row = LooRow { coverage: CoverageRow::default(), pareto_k: reweighted.k_hat, pareto_k_laplace: f64::NAN, by: HeldOutBy::Reweighting, max_rhat: f64::NAN };
+    let mut row = LooRow {
+        coverage: CoverageRow::default(),
+        pareto_k: reweighted.k_hat,
+        pareto_k_laplace: f64::NAN,
+        by: HeldOutBy::Reweighting,
+        max_rhat: f64::NAN,
+    };
     // an adjusted held-out posterior is centred on its own likelihood's peak
     // (below), which the full posterior's draws do not weigh: there these
     // weights only start the search for its mode
     let prediction = if reweighted.k_hat <= psis::K_THRESHOLD && !adjusted {
-        let draws: Vec<Draw> = positions.iter().map(|&(s, c)| sample.draw_without(s, c, left_out.id(), current)).collect();
+        let draws: Vec<Draw> = positions
+            .iter()
+            .map(|&(s, c)| sample.draw_without(s, c, left_out.id(), current))
+            .collect();
         target.weighted_bands(&draws, &paths, &reweighted.weights, loo.draws)?
     } else {
         // 2. and 3. need the held-out posterior and its Laplace
@@ -282,17 +340,24 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
             true => recentred(&posterior, &start).ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the mode of the independent likelihood was not found", left_out.id())))?,
             false => posterior,
         };
-        let map = map::basin(&posterior, &start)
-            .ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the MAP search failed", left_out.id())))?;
+        let map = map::basin(&posterior, &start).ok_or_else(|| {
+            Error::Compute(format!(
+                "leave-one-out without {}: the MAP search failed",
+                left_out.id()
+            ))
+        })?;
         let laplace = mode::laplace_from(&posterior, &map);
-        let (k_hat, by_laplace) = laplace_importance(&target, &posterior, &laplace, settings.sampler.seed, loo)?;
+        let (k_hat, by_laplace) =
+            laplace_importance(&target, &posterior, &laplace, settings.sampler.seed, loo)?;
         row.pareto_k_laplace = k_hat;
         match by_laplace {
             Some(prediction) => {
                 row.by = HeldOutBy::LaplaceImportance;
                 prediction
             }
-            None => return Ok(Weighed::ToSample(Box::new(Pending { target, posterior, laplace, row }))),
+            None => {
+                return Ok(Weighed::ToSample(Box::new(Pending { target, posterior, laplace, row })))
+            }
         }
     };
     row.coverage = prediction.coverage.clone();
@@ -332,17 +397,32 @@ fn recentred(post: &Posterior, start: &[f64]) -> Option<Posterior> {
 /// again, up to [`ADAPTATIONS`] times (adaptive importance sampling by
 /// moment matching). The last k̂, and the prediction if its weights can be
 /// trusted.
-fn laplace_importance(target: &Target, posterior: &Posterior, laplace: &Elliptical, seed: u64, loo: &LooSettings) -> Result<(f64, Option<RunPrediction>)> {
+fn laplace_importance(
+    target: &Target,
+    posterior: &Posterior,
+    laplace: &Elliptical,
+    seed: u64,
+    loo: &LooSettings,
+) -> Result<(f64, Option<RunPrediction>)> {
     let mut proposal = laplace.clone();
     let mut round = 0;
     loop {
         // the first round on the stream it always had
-        let mut rng = if round == 0 { crate::rng::stream(seed, &[0x1005, target.j as u64]) } else { crate::rng::stream(seed, &[0x1005, target.j as u64, round]) };
-        let (proposals, smoothed) = importance_draws(posterior, &proposal, &mut rng, loo.weighted_draws);
+        let mut rng = if round == 0 {
+            crate::rng::stream(seed, &[0x1005, target.j as u64])
+        } else {
+            crate::rng::stream(seed, &[0x1005, target.j as u64, round])
+        };
+        let (proposals, smoothed) =
+            importance_draws(posterior, &proposal, &mut rng, loo.weighted_draws);
         if smoothed.k_hat <= psis::K_THRESHOLD {
             let current = target.run.spec.current_a;
-            let draws: Vec<Draw> = proposals.iter().map(|x| unseen_draw(posterior, x, current)).collect();
-            return Ok((smoothed.k_hat, Some(target.resampled_bands(&draws, &smoothed.weights, loo.draws)?)));
+            let draws: Vec<Draw> =
+                proposals.iter().map(|x| unseen_draw(posterior, x, current)).collect();
+            return Ok((
+                smoothed.k_hat,
+                Some(target.resampled_bands(&draws, &smoothed.weights, loo.draws)?),
+            ));
         }
         round += 1;
         match weighted_moments(&proposals, &smoothed.weights) {
@@ -359,7 +439,12 @@ const ADAPTATIONS: u64 = 2;
 
 /// `count` draws from the Student-t about `proposal` and their
 /// Pareto-smoothed importance weights to the posterior.
-fn importance_draws(posterior: &impl LogDensity, proposal: &Elliptical, rng: &mut impl rand::Rng, count: usize) -> (Vec<Vec<f64>>, psis::Smoothed) {
+fn importance_draws(
+    posterior: &impl LogDensity,
+    proposal: &Elliptical,
+    rng: &mut impl rand::Rng,
+    count: usize,
+) -> (Vec<Vec<f64>>, psis::Smoothed) {
     let d = posterior.dim();
     let proposals: Vec<Vec<f64>> = (0..count)
         .map(|_| {
@@ -369,7 +454,11 @@ fn importance_draws(posterior: &impl LogDensity, proposal: &Elliptical, rng: &mu
         })
         .collect();
     let log_p = log_densities(posterior, &proposals);
-    let log_w: Vec<f64> = proposals.iter().zip(&log_p).map(|(x, lp)| lp - proposal.log_kernel(Some(LAPLACE_DF), x, LAPLACE_SPREAD)).collect();
+    let log_w: Vec<f64> = proposals
+        .iter()
+        .zip(&log_p)
+        .map(|(x, lp)| lp - proposal.log_kernel(Some(LAPLACE_DF), x, LAPLACE_SPREAD))
+        .collect();
     (proposals, psis::smooth(&log_w))
 }
 
@@ -382,7 +471,10 @@ fn weighted_moments(points: &[Vec<f64>], weights: &[f64]) -> Option<Elliptical> 
     if !(ess > d as f64 + 1.0) {
         return None;
     }
-    Elliptical::new(Moments::weighted(points.iter().map(Vec::as_slice).zip(weights.iter().copied()), d))
+    Elliptical::new(Moments::weighted(
+        points.iter().map(Vec::as_slice).zip(weights.iter().copied()),
+        d,
+    ))
 }
 
 /// The held-out posterior sampled afresh, from walkers around its mode, on
@@ -399,25 +491,39 @@ fn sample_afresh(
     let seed = s.seed ^ (0x100 + target.j as u64);
     let init = map::initial_walkers(posterior, laplace, s.walkers * s.ensembles, seed);
     let mut observers = observe(target.run.id());
-    let mut refs: Vec<&mut dyn Observer> = observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
-    let mut sampler = Sampler::new(posterior, s.sampler(s.walkers, seed), &init)?.with_reference(laplace.clone());
-    let control = RunControl { max_steps: loo.steps, until_converged: true, check_every: s.check_every, ..s.control() };
+    let mut refs: Vec<&mut dyn Observer> =
+        observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
+    let mut sampler =
+        Sampler::new(posterior, s.sampler(s.walkers, seed), &init)?.with_reference(laplace.clone());
+    let control = RunControl {
+        max_steps: loo.steps,
+        until_converged: true,
+        check_every: s.check_every,
+        ..s.control()
+    };
     let held = sampling::run(posterior, &mut sampler, &control, 0, &mut refs)?;
     let positions = held.draws().positions(&held.sample.chains, loo.draws);
     let draws = held.sample.draws(&positions, target.run.id(), target.run.spec.current_a);
-    let prediction = predict_run(target.run, &target.data, target.j, &draws, &target.predict, false, &|| {})?;
+    let prediction =
+        predict_run(target.run, &target.data, target.j, &draws, &target.predict, false, &|| {})?;
     Ok((prediction, held.diagnostics.max_rhat()))
 }
 
 /// The weighted mean of the full posterior's draws at `positions`, in the
 /// held-out posterior's θ coordinates: a start for its MAP search.
-fn weighted_mean_theta(full: &Full, posterior: &Posterior, positions: &[(usize, usize)], weights: &[f64]) -> Vec<f64> {
+fn weighted_mean_theta(
+    full: &Full,
+    posterior: &Posterior,
+    positions: &[(usize, usize)],
+    weights: &[f64],
+) -> Vec<f64> {
     let layout = &posterior.layout;
     let mut mean = vec![0.0; layout.fitted.len()];
     let sample = &full.cal.sample;
     for (&(step, chain), w) in positions.iter().zip(weights) {
         let point = sample.chains.point(step, chain);
-        let si: Vec<f64> = layout.names.iter().map(|n| sample.layout.index(n).map_or(1.0, |k| point[k])).collect();
+        let si: Vec<f64> =
+            layout.names.iter().map(|n| sample.layout.index(n).map_or(1.0, |k| point[k])).collect();
         for (m, v) in mean.iter_mut().zip(layout.from_si(&si)) {
             *m += w * v;
         }
@@ -493,7 +599,10 @@ mod tests {
     #[test]
     fn moment_matching_needs_enough_effective_points() {
         let points = vec![vec![0.0, 0.0], vec![2.0, 0.0], vec![0.0, 4.0]];
-        assert!(weighted_moments(&points, &[0.5, 0.25, 0.25]).is_none(), "2.67 effective points: too few");
+        assert!(
+            weighted_moments(&points, &[0.5, 0.25, 0.25]).is_none(),
+            "2.67 effective points: too few"
+        );
         let many: Vec<Vec<f64>> = points.iter().cycle().take(9).cloned().collect();
         let w: Vec<f64> = [0.5, 0.25, 0.25].iter().cycle().take(9).map(|v| v / 3.0).collect();
         let g = weighted_moments(&many, &w).expect("enough points");
@@ -510,21 +619,29 @@ mod tests {
         let d = 6;
         let target = Normal(d);
         let mut rng = crate::rng::stream(7, &[1]);
-        let mut proposal = Elliptical::new(Moments { mean: nalgebra::DVector::from_element(d, 0.5), cov: nalgebra::DMatrix::identity(d, d) * 0.16 }).expect("positive definite");
+        let mut proposal = Elliptical::new(Moments {
+            mean: nalgebra::DVector::from_element(d, 0.5),
+            cov: nalgebra::DMatrix::identity(d, d) * 0.16,
+        })
+        .expect("positive definite");
         let (mut points, mut smoothed) = importance_draws(&target, &proposal, &mut rng, 1000);
         assert!(smoothed.k_hat > psis::K_THRESHOLD, "the premise: k̂ {}", smoothed.k_hat);
         for _ in 0..ADAPTATIONS {
             if smoothed.k_hat <= psis::K_THRESHOLD {
                 break;
             }
-            proposal = weighted_moments(&points, &smoothed.weights).expect("enough effective points");
+            proposal =
+                weighted_moments(&points, &smoothed.weights).expect("enough effective points");
             (points, smoothed) = importance_draws(&target, &proposal, &mut rng, 1000);
         }
         assert!(smoothed.k_hat <= psis::K_THRESHOLD, "k̂ after moment matching {}", smoothed.k_hat);
         let ess = 1.0 / smoothed.weights.iter().map(|w| w * w).sum::<f64>();
         for i in 0..d {
             let mean: f64 = points.iter().zip(&smoothed.weights).map(|(x, w)| w * x[i]).sum();
-            assert!(mean.abs() < 5.0 / ess.sqrt(), "coordinate {i}: weighted mean {mean}, ess {ess}");
+            assert!(
+                mean.abs() < 5.0 / ess.sqrt(),
+                "coordinate {i}: weighted mean {mean}, ess {ess}"
+            );
         }
     }
 

@@ -28,7 +28,8 @@ pub fn smooth(log_weights: &[f64]) -> Smoothed {
         let cutoff = w[order[s - m - 1]];
         // exceedances over the cutoff; repeated draws (a walker that stayed
         // put) can tie with it and carry no information on the tail's shape
-        let tail: Vec<f64> = order[s - m..].iter().map(|&i| w[i] - cutoff).filter(|x| *x > 0.0).collect();
+        let tail: Vec<f64> =
+            order[s - m..].iter().map(|&i| w[i] - cutoff).filter(|x| *x > 0.0).collect();
         if tail.len() >= 5 {
             let (k, sigma) = fit_generalized_pareto(&tail);
             k_hat = k;
@@ -67,11 +68,18 @@ pub fn fit_generalized_pareto(x: &[f64]) -> (f64, f64) {
     let nf = n as f64;
     let m = 30 + (nf.sqrt() as usize);
     let quartile = x[((nf / 4.0 + 0.5) as usize).max(1) - 1];
-    let bs: Vec<f64> = (1..=m).map(|j| (1.0 - (m as f64 / (j as f64 - 0.5)).sqrt()) / (3.0 * quartile) + 1.0 / x[n - 1]).collect();
-    let ks: Vec<f64> = bs.iter().map(|b| x.iter().map(|v| (-b * v).ln_1p()).sum::<f64>() / nf).collect();
-    let profile: Vec<f64> = bs.iter().zip(&ks).map(|(b, k)| nf * ((-b / k).ln() - k - 1.0)).collect();
+    let bs: Vec<f64> = (1..=m)
+        .map(|j| (1.0 - (m as f64 / (j as f64 - 0.5)).sqrt()) / (3.0 * quartile) + 1.0 / x[n - 1])
+        .collect();
+    let ks: Vec<f64> =
+        bs.iter().map(|b| x.iter().map(|v| (-b * v).ln_1p()).sum::<f64>() / nf).collect();
+    let profile: Vec<f64> =
+        bs.iter().zip(&ks).map(|(b, k)| nf * ((-b / k).ln() - k - 1.0)).collect();
     // posterior weight of each b: 1 / Σ_j exp(L_j − L_i)
-    let weights: Vec<f64> = profile.iter().map(|li| 1.0 / profile.iter().map(|lj| (lj - li).exp()).sum::<f64>()).collect();
+    let weights: Vec<f64> = profile
+        .iter()
+        .map(|li| 1.0 / profile.iter().map(|lj| (lj - li).exp()).sum::<f64>())
+        .collect();
     let total: f64 = weights.iter().sum();
     let b: f64 = bs.iter().zip(&weights).map(|(b, w)| b * w).sum::<f64>() / total;
     let k = x.iter().map(|v| (-b * v).ln_1p()).sum::<f64>() / nf;
@@ -91,7 +99,8 @@ mod tests {
     fn pareto_fit_recovers_known_shape() {
         for (k, sigma) in [(0.3, 2.0), (0.8, 1.0), (-0.2, 0.5)] {
             let mut rng = crate::rng::stream(31, &[]);
-            let mut x: Vec<f64> = (0..2000).map(|_| pareto_quantile(rng.random::<f64>(), k, sigma)).collect();
+            let mut x: Vec<f64> =
+                (0..2000).map(|_| pareto_quantile(rng.random::<f64>(), k, sigma)).collect();
             x.sort_by(f64::total_cmp);
             let (kh, sh) = fit_generalized_pareto(&x);
             // the prior pulls k̂ towards 0.5 by 10/(n + 10): negligible here
@@ -107,9 +116,11 @@ mod tests {
     #[test]
     fn k_hat_tells_good_weights_from_bad() {
         let mut rng = crate::rng::stream(32, &[]);
-        let z: Vec<f64> = (0..4000).map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal)).collect();
+        let z: Vec<f64> =
+            (0..4000).map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal)).collect();
         // target N(0, s²), proposal N(0, 1): log w = −z²/(2s²) + z²/2 + const
-        let lw = |s: f64| z.iter().map(|v| -v * v / (2.0 * s * s) + v * v / 2.0).collect::<Vec<f64>>();
+        let lw =
+            |s: f64| z.iter().map(|v| -v * v / (2.0 * s * s) + v * v / 2.0).collect::<Vec<f64>>();
         let good = smooth(&lw(0.8));
         let bad = smooth(&lw(3.0));
         assert!(good.k_hat < 0.5, "{}", good.k_hat);

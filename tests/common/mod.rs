@@ -11,7 +11,10 @@ use std::process::Command;
 pub fn python_check(script: &str, args: &[&Path], imports: &str, required: &str) {
     let must = std::env::var(required).is_ok_and(|v| v == "1");
     let python = std::env::var("MRBP_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ready = Command::new(&python).args(["-c", &format!("import {imports}")]).output().is_ok_and(|o| o.status.success());
+    let ready = Command::new(&python)
+        .args(["-c", &format!("import {imports}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
     if !ready {
         assert!(!must, "{required}=1 but {python} cannot import {imports}");
         eprintln!("{script} skipped: {python} cannot import {imports}");
@@ -19,7 +22,8 @@ pub fn python_check(script: &str, args: &[&Path], imports: &str, required: &str)
     }
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts").join(script);
     let o = Command::new(&python).arg(&path).args(args).output().expect("run python");
-    let said = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    let said =
+        format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
     assert!(o.status.success(), "{script} failed:\n{said}");
     eprintln!("{said}");
 }

@@ -98,7 +98,9 @@ impl F64xN for Avx2 {
     }
     #[inline(always)]
     fn round(self) -> Self {
-        unsafe { both_imm!(_mm256_round_pd::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(self)) }
+        unsafe {
+            both_imm!(_mm256_round_pd::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(self))
+        }
     }
     #[inline(always)]
     fn gt(self, o: Self) -> Self {
@@ -148,7 +150,8 @@ impl F64xN for Avx2 {
         // bits; shifted into the exponent field it is the bits of 2ⁿ
         let magic = n + Self::splat(1023.0 + 4_503_599_627_370_496.0);
         unsafe {
-            let shift = |v: __m256d| _mm256_castsi256_pd(_mm256_slli_epi64::<52>(_mm256_castpd_si256(v)));
+            let shift =
+                |v: __m256d| _mm256_castsi256_pd(_mm256_slli_epi64::<52>(_mm256_castpd_si256(v)));
             Avx2(shift(magic.0), shift(magic.1))
         }
     }
@@ -162,9 +165,15 @@ impl F64xN for Avx2 {
                     _mm256_set1_epi64x(1023_i64 << 52),
                 );
                 // the exponent field as the low bits of 2⁵², then as a number
-                let field = _mm256_srli_epi64::<52>(_mm256_and_si256(bits, _mm256_set1_epi64x(0x7ff_i64 << 52)));
+                let field = _mm256_srli_epi64::<52>(_mm256_and_si256(
+                    bits,
+                    _mm256_set1_epi64x(0x7ff_i64 << 52),
+                ));
                 let two52 = _mm256_set1_pd(4_503_599_627_370_496.0);
-                let as_f64 = _mm256_sub_pd(_mm256_castsi256_pd(_mm256_or_si256(field, _mm256_castpd_si256(two52))), two52);
+                let as_f64 = _mm256_sub_pd(
+                    _mm256_castsi256_pd(_mm256_or_si256(field, _mm256_castpd_si256(two52))),
+                    two52,
+                );
                 (_mm256_castsi256_pd(mantissa), _mm256_sub_pd(as_f64, _mm256_set1_pd(1023.0)))
             };
             let (m0, e0) = half(self.0);
@@ -194,7 +203,16 @@ mod tests {
         }
         for k in 0..50_000 {
             let base = -700.0 + 1400.0 * k as f64 / 50_000.0;
-            let x = [base, base * 0.37 + 1e-3, (base / 100.0).exp(), if k % 2 == 0 { 0.0 } else { f64::NAN }, -base, 1.0 / base, f64::INFINITY, -1e-300];
+            let x = [
+                base,
+                base * 0.37 + 1e-3,
+                (base / 100.0).exp(),
+                if k % 2 == 0 { 0.0 } else { f64::NAN },
+                -base,
+                1.0 / base,
+                f64::INFINITY,
+                -1e-300,
+            ];
             // SAFETY: AVX2 detected above
             let (e, l) = unsafe { both(x) };
             let p = Portable(x);

@@ -44,7 +44,10 @@ const FAR: f64 = 2.0;
 /// the half lies far from the reference (then the independence move
 /// proposes).
 pub(super) fn proposal(others: &[f64], d: usize, reference: &Elliptical) -> Option<Mixture> {
-    Some(Mixture::equal(vec![super::independence::fitted(others, d)?, anchored_fit(others, d, reference)?]))
+    Some(Mixture::equal(vec![
+        super::independence::fitted(others, d)?,
+        anchored_fit(others, d, reference)?,
+    ]))
 }
 
 /// The half's mean, and its covariance in the whitened coordinates of
@@ -78,18 +81,22 @@ pub(super) fn anchored_fit(others: &[f64], d: usize, reference: &Elliptical) -> 
     let mut signal = 0.0;
     for i in 0..d {
         for j in 0..i {
-            let var: f64 = centred.iter().map(|c| (c[i] * c[j] - s[(i, j)]).powi(2)).sum::<f64>() / (nf * nf);
+            let var: f64 =
+                centred.iter().map(|c| (c[i] * c[j] - s[(i, j)]).powi(2)).sum::<f64>() / (nf * nf);
             noise += var;
             signal += s[(i, j)].powi(2);
         }
     }
     let shrink = if signal > 0.0 { (noise / signal).clamp(0.0, 1.0) } else { 1.0 };
     let unbiased = nf / (nf - 1.0);
-    let cov = DMatrix::from_fn(d, d, |i, j| s[(i, j)] * unbiased * if i == j { 1.0 } else { 1.0 - shrink });
+    let cov = DMatrix::from_fn(d, d, |i, j| {
+        s[(i, j)] * unbiased * if i == j { 1.0 } else { 1.0 - shrink }
+    });
     if (0..d).any(|i| !(cov[(i, i)] > 0.0)) {
         return None;
     }
-    let lz = cov.clone().cholesky().or_else(|| DMatrix::from_diagonal(&cov.diagonal()).cholesky())?.l();
+    let lz =
+        cov.clone().cholesky().or_else(|| DMatrix::from_diagonal(&cov.diagonal()).cholesky())?.l();
     let mean = &reference.mean + l * mean_z;
     Some(Elliptical::from_factor(mean, l * lz))
 }
@@ -117,13 +124,21 @@ mod tests {
     fn a_good_reference_recovers_the_covariance() {
         let mut rng = crate::rng::stream(21, &[]);
         let cov = DMatrix::from_row_slice(3, 3, &[4.0, 1.9, 0.5, 1.9, 1.0, 0.2, 0.5, 0.2, 0.25]);
-        let truth = Elliptical::new(Moments { mean: DVector::from_vec(vec![1.0, -2.0, 0.5]), cov: cov.clone() }).unwrap();
+        let truth = Elliptical::new(Moments {
+            mean: DVector::from_vec(vec![1.0, -2.0, 0.5]),
+            cov: cov.clone(),
+        })
+        .unwrap();
         let pts = points(&mut rng, &truth, 200);
         let fit = anchored_fit(&pts, 3, &truth).unwrap();
         let m = Moments::of(&pts, 3);
         for i in 0..3 {
             assert!((fit.mean[i] - m.mean[i]).abs() < 1e-12);
-            assert!((fit.covariance()[(i, i)] / cov[(i, i)] - 1.0).abs() < 0.4, "{}", fit.covariance());
+            assert!(
+                (fit.covariance()[(i, i)] / cov[(i, i)] - 1.0).abs() < 0.4,
+                "{}",
+                fit.covariance()
+            );
         }
         // the correlation of coordinates 0 and 1 (0.95) survives the shrinkage
         let c = fit.covariance();
@@ -138,16 +153,34 @@ mod tests {
     fn without_a_reference_or_far_from_it_it_is_the_independence_move() {
         use crate::sampler::moves::Move;
         let mut rng = crate::rng::stream(3, &[]);
-        let far = Elliptical::new(Moments { mean: DVector::from_vec(vec![10.0, 0.0]), cov: DMatrix::identity(2, 2) }).unwrap();
-        let near = Elliptical::new(Moments { mean: DVector::zeros(2), cov: DMatrix::identity(2, 2) }).unwrap();
+        let far = Elliptical::new(Moments {
+            mean: DVector::from_vec(vec![10.0, 0.0]),
+            cov: DMatrix::identity(2, 2),
+        })
+        .unwrap();
+        let near =
+            Elliptical::new(Moments { mean: DVector::zeros(2), cov: DMatrix::identity(2, 2) })
+                .unwrap();
         let others = points(&mut rng, &near, 8);
         let x = [0.3, -0.2];
         let independence = Move::Independence { df: Some(5.0), scale: 1.0 };
         let anchored = Move::Anchored { df: Some(5.0) };
         for reference in [None, Some(&far)] {
             let (mut y1, mut y2) = ([0.0; 2], [0.0; 2]);
-            let f1 = anchored.propose(&anchored.fit(&others, 2, &Learned::default(), reference), &x, &others, &mut crate::rng::stream(5, &[]), &mut y1);
-            let f2 = independence.propose(&independence.fit(&others, 2, &Learned::default(), None), &x, &others, &mut crate::rng::stream(5, &[]), &mut y2);
+            let f1 = anchored.propose(
+                &anchored.fit(&others, 2, &Learned::default(), reference),
+                &x,
+                &others,
+                &mut crate::rng::stream(5, &[]),
+                &mut y1,
+            );
+            let f2 = independence.propose(
+                &independence.fit(&others, 2, &Learned::default(), None),
+                &x,
+                &others,
+                &mut crate::rng::stream(5, &[]),
+                &mut y2,
+            );
             assert_eq!((f1, y1), (f2, y2));
         }
         assert!(proposal(&others, 2, &near).is_some() && proposal(&others, 2, &far).is_none());
@@ -158,14 +191,24 @@ mod tests {
     #[test]
     fn factor_is_the_ratio_of_the_mixture_densities() {
         let mut rng = crate::rng::stream(9, &[]);
-        let reference = Elliptical::new(Moments { mean: DVector::from_vec(vec![0.5, 0.5]), cov: DMatrix::from_row_slice(2, 2, &[2.0, 0.6, 0.6, 1.0]) }).unwrap();
+        let reference = Elliptical::new(Moments {
+            mean: DVector::from_vec(vec![0.5, 0.5]),
+            cov: DMatrix::from_row_slice(2, 2, &[2.0, 0.6, 0.6, 1.0]),
+        })
+        .unwrap();
         let others = points(&mut rng, &reference, 6);
         let x = [0.3, -0.2];
         let mut y = [0.0; 2];
         let f = proposal(&others, 2, &reference).unwrap().propose(Some(5.0), &x, &mut rng, &mut y);
-        let parts = [super::super::independence::fitted(&others, 2).unwrap(), anchored_fit(&others, 2, &reference).unwrap()];
+        let parts = [
+            super::super::independence::fitted(&others, 2).unwrap(),
+            anchored_fit(&others, 2, &reference).unwrap(),
+        ];
         let ln_q = |v: &[f64]| {
-            let a: Vec<f64> = parts.iter().map(|p| 0.5f64.ln() - p.half_log_det() + p.log_kernel(Some(5.0), v, 1.0)).collect();
+            let a: Vec<f64> = parts
+                .iter()
+                .map(|p| 0.5f64.ln() - p.half_log_det() + p.log_kernel(Some(5.0), v, 1.0))
+                .collect();
             let m = a[0].max(a[1]);
             m + a.iter().map(|t| (t - m).exp()).sum::<f64>().ln()
         };

@@ -148,7 +148,10 @@ impl Tube {
         }
         let frame = super::independence::fitted(others, d)?;
         let l = frame.factor();
-        let z: Vec<DVector<f64>> = others.chunks_exact(d).map(|p| l.solve_lower_triangular(&(DVector::from_column_slice(p) - &frame.mean))).collect::<Option<_>>()?;
+        let z: Vec<DVector<f64>> = others
+            .chunks_exact(d)
+            .map(|p| l.solve_lower_triangular(&(DVector::from_column_slice(p) - &frame.mean)))
+            .collect::<Option<_>>()?;
         let along = bending_direction(&z, l)?;
         let across = complement(&along);
         let ts: Vec<f64> = z.iter().map(|v| v.dot(&along)).collect();
@@ -157,16 +160,27 @@ impl Tube {
         let basis = powers(degree);
         let across_z = DMatrix::from_fn(n, d - 1, |i, j| across.column(j).dot(&z[i]));
         let centre = basis.tr_mul(&basis).try_inverse()? * basis.tr_mul(&across_z);
-        let residuals: Vec<DVector<f64>> = (0..n).map(|i| (across_z.row(i) - basis.row(i) * &centre).transpose()).collect();
-        let mut cov = residuals.iter().fold(DMatrix::zeros(d - 1, d - 1), |acc, r| acc + r * r.transpose()) / (n - degree - 1) as f64;
+        let residuals: Vec<DVector<f64>> =
+            (0..n).map(|i| (across_z.row(i) - basis.row(i) * &centre).transpose()).collect();
+        let mut cov =
+            residuals.iter().fold(DMatrix::zeros(d - 1, d - 1), |acc, r| acc + r * r.transpose())
+                / (n - degree - 1) as f64;
         for i in 0..d - 1 {
             cov[(i, i)] *= 1.0 + RIDGE;
         }
         let spread = cov.cholesky()?.l();
         // the width along the ridge: each residual's squared norm per coordinate
-        let norms: Vec<f64> = residuals.iter().map(|r| spread.solve_lower_triangular(r).map_or(f64::NAN, |s| s.norm_squared() / (d - 1) as f64)).collect();
+        let norms: Vec<f64> = residuals
+            .iter()
+            .map(|r| {
+                spread
+                    .solve_lower_triangular(r)
+                    .map_or(f64::NAN, |s| s.norm_squared() / (d - 1) as f64)
+            })
+            .collect();
         let quadratic = powers(2);
-        let width = quadratic.tr_mul(&quadratic).try_inverse()? * quadratic.tr_mul(&DVector::from_vec(norms));
+        let width = quadratic.tr_mul(&quadratic).try_inverse()?
+            * quadratic.tr_mul(&DVector::from_vec(norms));
         if !width.iter().all(|v| v.is_finite()) {
             return None;
         }
@@ -177,13 +191,28 @@ impl Tube {
         let scott = (ts.len() as f64).powf(-1.0 / (d as f64 + 4.0)) * SPREAD;
         let local = match local {
             true => Some(Local {
-                residuals: residuals.iter().step_by(every).map(|r| spread.solve_lower_triangular(r)).collect::<Option<_>>()?,
+                residuals: residuals
+                    .iter()
+                    .step_by(every)
+                    .map(|r| spread.solve_lower_triangular(r))
+                    .collect::<Option<_>>()?,
                 bandwidth_t: scott * variance(&ts).sqrt(),
                 kappa: scott,
             }),
             false => None,
         };
-        (bandwidth > 0.0 && spread_t.0.is_finite()).then_some(Tube { frame, along, across, centre, spread, width, ts, bandwidth, spread_t, local })
+        (bandwidth > 0.0 && spread_t.0.is_finite()).then_some(Tube {
+            frame,
+            along,
+            across,
+            centre,
+            spread,
+            width,
+            ts,
+            bandwidth,
+            spread_t,
+            local,
+        })
     }
 
     /// The tube of an ensemble's history: its walkers' positions (per
@@ -191,13 +220,17 @@ impl Tube {
     /// position (a rejected proposal) counted once, evenly thinned to
     /// [`MAX_HISTORY_POINTS`].
     pub fn of_history(walkers: &[Vec<f64>], d: usize) -> Option<Tube> {
-        let points = thinned(walkers.iter().flat_map(|w| distinct(w, d)).collect(), MAX_HISTORY_POINTS);
+        let points =
+            thinned(walkers.iter().flat_map(|w| distinct(w, d)).collect(), MAX_HISTORY_POINTS);
         let flat: Vec<f64> = points.iter().flat_map(|p| p.iter().copied()).collect();
         Tube::fit_curve(&flat, d, HISTORY_DEGREE, true)
     }
 
     fn width_at(&self, t: f64) -> f64 {
-        (self.width[0] + self.width[1] * t + self.width[2] * t * t).clamp(WIDTH_RANGE.0, WIDTH_RANGE.1) * SPREAD * SPREAD
+        (self.width[0] + self.width[1] * t + self.width[2] * t * t)
+            .clamp(WIDTH_RANGE.0, WIDTH_RANGE.1)
+            * SPREAD
+            * SPREAD
     }
 
     fn centre_at(&self, t: f64) -> DVector<f64> {
@@ -209,16 +242,25 @@ impl Independent for Tube {
     /// Normalised, with Student-t (`df`) or Gaussian cross-sections (and a
     /// history tube's local kernels, [`LOCAL`]).
     fn log_q(&self, df: Option<f64>, x: &[f64]) -> f64 {
-        let Some(z) = self.frame.factor().solve_lower_triangular(&(DVector::from_column_slice(x) - &self.frame.mean)) else {
+        let Some(z) = self
+            .frame
+            .factor()
+            .solve_lower_triangular(&(DVector::from_column_slice(x) - &self.frame.mean))
+        else {
             return f64::NEG_INFINITY;
         };
         let t = z.dot(&self.along);
-        let Some(r) = self.spread.solve_lower_triangular(&(self.across.tr_mul(&z) - self.centre_at(t))) else {
+        let Some(r) =
+            self.spread.solve_lower_triangular(&(self.across.tr_mul(&z) - self.centre_at(t)))
+        else {
             return f64::NEG_INFINITY;
         };
         let h = self.bandwidth;
         let kernels: Vec<f64> = self.ts.iter().map(|c| -0.5 * ((t - c) / h).powi(2)).collect();
-        let log_kde = log_sum_exp(&kernels) - (self.ts.len() as f64).ln() - h.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln();
+        let log_kde = log_sum_exp(&kernels)
+            - (self.ts.len() as f64).ln()
+            - h.ln()
+            - 0.5 * (2.0 * std::f64::consts::PI).ln();
         let (c, s) = self.spread_t;
         let log_reach = standard_log_density(Some(REACH_DF), 1.0, ((t - c) / s).powi(2)) - s.ln();
         let v = self.width_at(t);
@@ -228,16 +270,27 @@ impl Independent for Tube {
         // the heavy-tailed share of t keeps its weight; the kernel density's
         // is split with the local kernels where there are any
         let local_share = if self.local.is_some() { LOCAL } else { 0.0 };
-        let mut parts = vec![REACH.ln() + log_reach + cross, ((1.0 - REACH) * (1.0 - local_share)).ln() + log_kde + cross];
+        let mut parts = vec![
+            REACH.ln() + log_reach + cross,
+            ((1.0 - REACH) * (1.0 - local_share)).ln() + log_kde + cross,
+        ];
         if let Some(local) = &self.local {
             let (ht, kappa) = (local.bandwidth_t, local.kappa);
             let terms: Vec<f64> = self
                 .ts
                 .iter()
                 .zip(&local.residuals)
-                .map(|(ti, ri)| -0.5 * (((t - ti) / ht).powi(2) + r.iter().zip(ri.iter()).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / (kappa * kappa)))
+                .map(|(ti, ri)| {
+                    -0.5 * (((t - ti) / ht).powi(2)
+                        + r.iter().zip(ri.iter()).map(|(a, b)| (a - b) * (a - b)).sum::<f64>()
+                            / (kappa * kappa))
+                })
                 .collect();
-            let log_local = log_sum_exp(&terms) - (self.ts.len() as f64).ln() - 0.5 * (k + 1.0) * (2.0 * std::f64::consts::PI).ln() - ht.ln() - k * kappa.ln();
+            let log_local = log_sum_exp(&terms)
+                - (self.ts.len() as f64).ln()
+                - 0.5 * (k + 1.0) * (2.0 * std::f64::consts::PI).ln()
+                - ht.ln()
+                - k * kappa.ln();
             parts.push(((1.0 - REACH) * local_share).ln() + log_local);
         }
         log_sum_exp(&parts) - log_s - self.frame.half_log_det()
@@ -248,7 +301,10 @@ impl Independent for Tube {
     fn draw(&self, df: Option<f64>, rng: &mut impl rand::Rng, y: &mut [f64]) {
         let z: f64 = rng.sample(rand_distr::StandardNormal);
         let k = self.across.ncols();
-        let e = DVector::from_iterator(k, (0..k).map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal)));
+        let e = DVector::from_iterator(
+            k,
+            (0..k).map(|_| rng.sample::<f64, _>(rand_distr::StandardNormal)),
+        );
         let reach = rng.random::<f64>() < REACH;
         let (t, w) = match self.local.as_ref().filter(|_| !reach && rng.random::<f64>() < LOCAL) {
             Some(local) => {
@@ -262,7 +318,11 @@ impl Independent for Tube {
                 } else {
                     self.ts[rng.random_range(0..self.ts.len())] + self.bandwidth * z
                 };
-                (t, self.centre_at(t) + &self.spread * e * (self.width_at(t).sqrt() * t_factor(df, rng)))
+                (
+                    t,
+                    self.centre_at(t)
+                        + &self.spread * e * (self.width_at(t).sqrt() * t_factor(df, rng)),
+                )
             }
         };
         let z = &self.along * t + &self.across * w;
@@ -297,7 +357,8 @@ fn bending_direction(z: &[DVector<f64>], l: &DMatrix<f64>) -> Option<DVector<f64
         if !(qq > 0.0) {
             continue;
         }
-        let cov = z.iter().zip(&q).fold(DVector::zeros(d), |acc, (v, qv)| acc + (v - &mean_z) * *qv);
+        let cov =
+            z.iter().zip(&q).fold(DVector::zeros(d), |acc, (v, qv)| acc + (v - &mean_z) * *qv);
         let gain = cov.norm_squared() / qq;
         if best.as_ref().is_none_or(|(g, _)| gain > *g) {
             best = Some((gain, u));
@@ -384,7 +445,11 @@ mod tests {
     /// every part of the tube) that covers it: E_g[q/g], and its Monte
     /// Carlo standard error, from 200 000 draws.
     fn integral(tube: &Tube, seed: u64) -> (f64, f64) {
-        let g = Elliptical::new(Moments { mean: DVector::from_vec(vec![0.0, 1.0, 0.0]), cov: DMatrix::from_diagonal(&DVector::from_vec(vec![9.0, 16.0, 9.0])) }).unwrap();
+        let g = Elliptical::new(Moments {
+            mean: DVector::from_vec(vec![0.0, 1.0, 0.0]),
+            cov: DMatrix::from_diagonal(&DVector::from_vec(vec![9.0, 16.0, 9.0])),
+        })
+        .unwrap();
         let mut rng = crate::rng::stream(seed, &[]);
         let mut y = [0.0; 3];
         let ratios: Vec<f64> = (0..200_000)
@@ -412,7 +477,9 @@ mod tests {
     #[test]
     fn the_history_tube_density_is_normalised() {
         let pts = banana(400, 9);
-        let walkers: Vec<Vec<f64>> = (0..8).map(|w| pts.chunks(3).skip(w).step_by(8).flat_map(|p| [p, p].concat()).collect()).collect();
+        let walkers: Vec<Vec<f64>> = (0..8)
+            .map(|w| pts.chunks(3).skip(w).step_by(8).flat_map(|p| [p, p].concat()).collect())
+            .collect();
         let tube = Tube::of_history(&walkers, 3).unwrap();
         assert_eq!((tube.centre.nrows(), tube.ts.len()), (HISTORY_DEGREE + 1, 200));
         let (m, se) = integral(&tube, 10);
@@ -442,7 +509,10 @@ mod tests {
         x2.sort_by(f64::total_cmp);
         let q = |p: f64| x2[(p * n as f64) as usize];
         let (q1, q2, q3) = (q(0.25), q(0.5), q(0.75));
-        assert!((q1 - 0.135).abs() < 0.05 && (q2 - 0.60).abs() < 0.1 && (q3 - 1.75).abs() < 0.3, "x2 quartiles {q1} {q2} {q3}");
+        assert!(
+            (q1 - 0.135).abs() < 0.05 && (q2 - 0.60).abs() < 0.1 && (q3 - 1.75).abs() < 0.3,
+            "x2 quartiles {q1} {q2} {q3}"
+        );
         // most draws lie on the curve (an ellipsoid puts about a third there)
         assert!(inside as f64 / n as f64 > 0.8, "{inside} of {n} within 3 widths of the curve");
     }

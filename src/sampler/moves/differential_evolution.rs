@@ -7,7 +7,14 @@ use super::{distinct_pair, point};
 
 /// y = x + γ (x_j − x_k), γ = γ₀ (1 + σ ε), γ₀ = 2.38/√(2d) unless given;
 /// symmetric, factor 1.
-pub fn propose(gamma0: Option<f64>, sigma: f64, x: &[f64], others: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+pub fn propose(
+    gamma0: Option<f64>,
+    sigma: f64,
+    x: &[f64],
+    others: &[f64],
+    rng: &mut impl rand::Rng,
+    y: &mut [f64],
+) -> f64 {
     let d = x.len();
     let (j, k) = distinct_pair(rng, others.len() / d);
     let g0 = gamma0.unwrap_or(2.38 / (2.0 * d as f64).sqrt());

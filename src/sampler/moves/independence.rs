@@ -26,7 +26,14 @@ pub(super) fn fitted(others: &[f64], d: usize) -> Option<Elliptical> {
 /// complementary half by [`fitted`], its covariance scaled by `scale`²; the
 /// factor q(x)/q(y). Without a fit (a degenerate half: every walker at one
 /// point) the walker stays.
-pub fn propose(df: Option<f64>, scale: f64, fit: Option<&Elliptical>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+pub fn propose(
+    df: Option<f64>,
+    scale: f64,
+    fit: Option<&Elliptical>,
+    x: &[f64],
+    rng: &mut impl rand::Rng,
+    y: &mut [f64],
+) -> f64 {
     let Some(fit) = fit else {
         y.copy_from_slice(x);
         return 0.0;

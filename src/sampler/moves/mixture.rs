@@ -113,7 +113,8 @@ impl Mixture {
                 break;
             }
             let Some((_, m)) = em(&train, k, rng) else { break };
-            let score = test.iter().map(|p| m.log_q(None, p.as_slice())).sum::<f64>() / test.len() as f64;
+            let score =
+                test.iter().map(|p| m.log_q(None, p.as_slice())).sum::<f64>() / test.len() as f64;
             if score > score_best + if k == 1 { 0.0 } else { MIN_GAIN } {
                 (k_best, score_best) = (k, score);
             } else {
@@ -141,7 +142,9 @@ impl Mixture {
     /// The equal-weight mixture of `parts`.
     pub(super) fn equal(parts: Vec<Elliptical>) -> Mixture {
         let log_weight = -(parts.len() as f64).ln();
-        Mixture { components: parts.into_iter().map(|shape| Component { log_weight, shape }).collect() }
+        Mixture {
+            components: parts.into_iter().map(|shape| Component { log_weight, shape }).collect(),
+        }
     }
 
     /// One component: the mean and covariance of `points` (each of `d`
@@ -174,7 +177,11 @@ impl Independent for Mixture {
     /// Up to a constant shared by every mixture of Student-t components
     /// with `df` (or Gaussian ones) in the same dimension.
     fn log_q(&self, df: Option<f64>, v: &[f64]) -> f64 {
-        let terms: Vec<f64> = self.components.iter().map(|c| c.log_weight - c.shape.half_log_det() + c.shape.log_kernel(df, v, 1.0)).collect();
+        let terms: Vec<f64> = self
+            .components
+            .iter()
+            .map(|c| c.log_weight - c.shape.half_log_det() + c.shape.log_kernel(df, v, 1.0))
+            .collect();
         log_sum_exp(&terms)
     }
 }
@@ -189,7 +196,14 @@ pub const HISTORY_SHARE: f64 = 0.7;
 /// history's fit (share [`HISTORY_SHARE`]: the history move's mixture, the
 /// curved move's tube) or from `current`, the move's fit to the
 /// complementary half; factor q(x)/q(y) of the two together.
-pub fn propose(history: &impl Independent, current: Option<&impl Independent>, df: Option<f64>, x: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+pub fn propose(
+    history: &impl Independent,
+    current: Option<&impl Independent>,
+    df: Option<f64>,
+    x: &[f64],
+    rng: &mut impl rand::Rng,
+    y: &mut [f64],
+) -> f64 {
     let Some(current) = current else {
         return history.propose(df, x, rng, y);
     };
@@ -198,7 +212,12 @@ pub fn propose(history: &impl Independent, current: Option<&impl Independent>, d
     } else {
         current.draw(df, rng, y);
     }
-    let q = |v: &[f64]| log_sum_exp(&[HISTORY_SHARE.ln() + history.log_q(df, v), (1.0 - HISTORY_SHARE).ln() + current.log_q(df, v)]);
+    let q = |v: &[f64]| {
+        log_sum_exp(&[
+            HISTORY_SHARE.ln() + history.log_q(df, v),
+            (1.0 - HISTORY_SHARE).ln() + current.log_q(df, v),
+        ])
+    };
     q(x) - q(y)
 }
 
@@ -222,7 +241,10 @@ fn em(x: &[DVector<f64>], k: usize, rng: &mut impl rand::Rng) -> Option<(f64, Mi
     // k-means++ seeds
     let mut centres = vec![x[rng.random_range(0..n)].clone()];
     while centres.len() < k {
-        let dist: Vec<f64> = x.iter().map(|p| centres.iter().map(|c| (p - c).norm_squared()).fold(f64::INFINITY, f64::min)).collect();
+        let dist: Vec<f64> = x
+            .iter()
+            .map(|p| centres.iter().map(|c| (p - c).norm_squared()).fold(f64::INFINITY, f64::min))
+            .collect();
         let total: f64 = dist.iter().sum();
         let mut u = rng.random::<f64>() * total;
         let mut pick = n - 1;
@@ -238,7 +260,11 @@ fn em(x: &[DVector<f64>], k: usize, rng: &mut impl rand::Rng) -> Option<(f64, Mi
     // hard assignment to the nearest seed, then EM
     let mut resp = vec![vec![0.0; k]; n];
     for (i, p) in x.iter().enumerate() {
-        let j = (0..k).min_by(|&a, &b| (p - &centres[a]).norm_squared().total_cmp(&(p - &centres[b]).norm_squared())).unwrap_or(0);
+        let j = (0..k)
+            .min_by(|&a, &b| {
+                (p - &centres[a]).norm_squared().total_cmp(&(p - &centres[b]).norm_squared())
+            })
+            .unwrap_or(0);
         resp[i][j] = 1.0;
     }
     let mut ll = f64::NEG_INFINITY;
@@ -251,16 +277,23 @@ fn em(x: &[DVector<f64>], k: usize, rng: &mut impl rand::Rng) -> Option<(f64, Mi
             if nj < (d + 2) as f64 {
                 return None;
             }
-            let moments = Moments::weighted(x.iter().zip(&resp).map(|(p, r)| (p.as_slice(), r[j])), d);
+            let moments =
+                Moments::weighted(x.iter().zip(&resp).map(|(p, r)| (p.as_slice(), r[j])), d);
             comps.push(component(nj / n as f64, moments)?);
         }
         let m = Mixture { components: comps };
         // E step
         let mut new_ll = 0.0;
         // ln w − ln |Σ|^{1/2} of each component, once per step
-        let base: Vec<f64> = m.components.iter().map(|c| c.log_weight - c.shape.half_log_det()).collect();
+        let base: Vec<f64> =
+            m.components.iter().map(|c| c.log_weight - c.shape.half_log_det()).collect();
         for (p, r) in x.iter().zip(resp.iter_mut()) {
-            let t: Vec<f64> = m.components.iter().zip(&base).map(|(c, b)| b + c.shape.log_kernel(None, p.as_slice(), 1.0)).collect();
+            let t: Vec<f64> = m
+                .components
+                .iter()
+                .zip(&base)
+                .map(|(c, b)| b + c.shape.log_kernel(None, p.as_slice(), 1.0))
+                .collect();
             let total = log_sum_exp(&t);
             new_ll += total;
             for (rj, tj) in r.iter_mut().zip(&t) {
@@ -285,7 +318,9 @@ mod tests {
     /// `points` split among 8 walkers, as the sampler hands them over.
     fn walkers(points: &[f64], d: usize) -> Vec<Vec<f64>> {
         let n = points.len() / d;
-        (0..8).map(|w| (w..n).step_by(8).flat_map(|i| points[i * d..(i + 1) * d].to_vec()).collect()).collect()
+        (0..8)
+            .map(|w| (w..n).step_by(8).flat_map(|i| points[i * d..(i + 1) * d].to_vec()).collect())
+            .collect()
     }
 
     fn two_blobs(n: usize) -> Vec<f64> {
@@ -331,7 +366,11 @@ mod tests {
         };
         let (a, b) = (0.3, 5.1);
         let ours = m.log_q(Some(7.0), &[a]) - m.log_q(Some(7.0), &[b]);
-        assert!((ours - (direct(a) - direct(b))).abs() < 1e-10, "{ours} vs {}", direct(a) - direct(b));
+        assert!(
+            (ours - (direct(a) - direct(b))).abs() < 1e-10,
+            "{ours} vs {}",
+            direct(a) - direct(b)
+        );
     }
 
     /// One Gaussian, its walkers' points repeated (rejections): one
@@ -339,20 +378,31 @@ mod tests {
     #[test]
     fn a_gaussian_with_repeated_points_is_one_component() {
         let mut rng = crate::rng::stream(6, &[]);
-        let pts: Vec<f64> = (0..3000).flat_map(|i| {
-            let z: [f64; 3] = std::array::from_fn(|_| rng.sample(StandardNormal));
-            // every point three times in a row, as a walker that stays
-            let _ = i;
-            [z, z, z].concat()
-        }).collect();
+        let pts: Vec<f64> = (0..3000)
+            .flat_map(|i| {
+                let z: [f64; 3] = std::array::from_fn(|_| rng.sample(StandardNormal));
+                // every point three times in a row, as a walker that stays
+                let _ = i;
+                [z, z, z].concat()
+            })
+            .collect();
         let m = Mixture::fit(&walkers(&pts, 3), 3, &mut crate::rng::stream(7, &[])).unwrap();
         assert_eq!(m.components.len(), 1);
     }
 
     #[test]
     fn the_schedule_doubles() {
-        assert_eq!((last_fit_step(4), last_fit_step(7), last_fit_step(8), last_fit_step(12)), (0, 0, 8, 8));
-        assert_eq!((last_fit_step(16), last_fit_step(31), last_fit_step(32), last_fit_step(1024)), (16, 16, 32, 1024));
-        assert_eq!((last_fit_step(2047), last_fit_step(2048), last_fit_step(5000)), (1024, 1024, 1024));
+        assert_eq!(
+            (last_fit_step(4), last_fit_step(7), last_fit_step(8), last_fit_step(12)),
+            (0, 0, 8, 8)
+        );
+        assert_eq!(
+            (last_fit_step(16), last_fit_step(31), last_fit_step(32), last_fit_step(1024)),
+            (16, 16, 32, 1024)
+        );
+        assert_eq!(
+            (last_fit_step(2047), last_fit_step(2048), last_fit_step(5000)),
+            (1024, 1024, 1024)
+        );
     }
 }

@@ -98,18 +98,37 @@ impl Move {
     pub fn min_complement(&self) -> usize {
         match self {
             Move::Stretch { .. } => 1,
-            Move::DifferentialEvolution { .. } | Move::Independence { .. } | Move::History { .. } | Move::Anchored { .. } | Move::Curved { .. } => 2,
+            Move::DifferentialEvolution { .. }
+            | Move::Independence { .. }
+            | Move::History { .. }
+            | Move::Anchored { .. }
+            | Move::Curved { .. } => 2,
             Move::Snooker { .. } => 3,
         }
     }
 
     pub fn check(&self) -> Result<(), String> {
         match *self {
-            Move::Stretch { a } if !(a > 1.0) => Err(format!("stretch scale a = {a} must exceed 1")),
-            Move::DifferentialEvolution { gamma0: Some(g), .. } if !(g > 0.0) => Err(format!("DE gamma0 = {g} must be positive")),
-            Move::DifferentialEvolution { sigma, .. } if !(sigma >= 0.0) => Err(format!("DE sigma = {sigma} must be non-negative")),
-            Move::Snooker { gamma } if !(gamma > 0.0) => Err(format!("snooker gamma = {gamma} must be positive")),
-            Move::Independence { df: Some(df), .. } | Move::History { df: Some(df) } | Move::Anchored { df: Some(df) } | Move::Curved { df: Some(df) } if !(df > 0.0) => Err(format!("independence df = {df} must be positive")),
+            Move::Stretch { a } if !(a > 1.0) => {
+                Err(format!("stretch scale a = {a} must exceed 1"))
+            }
+            Move::DifferentialEvolution { gamma0: Some(g), .. } if !(g > 0.0) => {
+                Err(format!("DE gamma0 = {g} must be positive"))
+            }
+            Move::DifferentialEvolution { sigma, .. } if !(sigma >= 0.0) => {
+                Err(format!("DE sigma = {sigma} must be non-negative"))
+            }
+            Move::Snooker { gamma } if !(gamma > 0.0) => {
+                Err(format!("snooker gamma = {gamma} must be positive"))
+            }
+            Move::Independence { df: Some(df), .. }
+            | Move::History { df: Some(df) }
+            | Move::Anchored { df: Some(df) }
+            | Move::Curved { df: Some(df) }
+                if !(df > 0.0) =>
+            {
+                Err(format!("independence df = {df} must be positive"))
+            }
             Move::Independence { scale, .. } if !(scale > 0.0 && scale.is_finite()) => {
                 Err(format!("independence scale = {scale} must be positive"))
             }
@@ -126,7 +145,10 @@ impl Move {
     /// (`None`: Gaussian, or a move that has none).
     fn df(&self) -> Option<f64> {
         match *self {
-            Move::Independence { df, .. } | Move::History { df } | Move::Anchored { df } | Move::Curved { df } => df,
+            Move::Independence { df, .. }
+            | Move::History { df }
+            | Move::Anchored { df }
+            | Move::Curved { df } => df,
             _ => None,
         }
     }
@@ -145,36 +167,74 @@ impl Move {
     /// fits to the ensemble's history (none before the first fit), and the
     /// sampler's fixed reference distribution, if it has one: done once
     /// per ensemble and half-step, before its walkers propose.
-    pub fn fit<'h>(&self, others: &[f64], d: usize, history: &'h Learned, reference: Option<&Elliptical>) -> Fit<'h> {
+    pub fn fit<'h>(
+        &self,
+        others: &[f64],
+        d: usize,
+        history: &'h Learned,
+        reference: Option<&Elliptical>,
+    ) -> Fit<'h> {
         let own = || Fit::Single(independence::fitted(others, d));
         match *self {
-            Move::Stretch { .. } | Move::DifferentialEvolution { .. } | Move::Snooker { .. } => Fit::Points,
+            Move::Stretch { .. } | Move::DifferentialEvolution { .. } | Move::Snooker { .. } => {
+                Fit::Points
+            }
             Move::Independence { .. } => own(),
-            Move::Anchored { .. } => reference.and_then(|r| anchored::proposal(others, d, r)).map_or_else(own, Fit::Anchored),
-            Move::History { .. } => history.mixture.as_ref().map_or_else(own, |h| Fit::History(h, Mixture::of_points(others, d))),
-            Move::Curved { .. } => Fit::Curved(curved::Proposal::fit(others, d, reference).map(Box::new), history.tube.as_ref()),
+            Move::Anchored { .. } => reference
+                .and_then(|r| anchored::proposal(others, d, r))
+                .map_or_else(own, Fit::Anchored),
+            Move::History { .. } => history
+                .mixture
+                .as_ref()
+                .map_or_else(own, |h| Fit::History(h, Mixture::of_points(others, d))),
+            Move::Curved { .. } => Fit::Curved(
+                curved::Proposal::fit(others, d, reference).map(Box::new),
+                history.tube.as_ref(),
+            ),
         }
     }
 
     /// Writes the proposal for walker position `x` into `y`, with the other
     /// half of the ensemble `others` and what the move fitted to it
     /// ([`Move::fit`]); returns ln of the proposal's correction factor.
-    pub fn propose(&self, fit: &Fit, x: &[f64], others: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+    pub fn propose(
+        &self,
+        fit: &Fit,
+        x: &[f64],
+        others: &[f64],
+        rng: &mut impl rand::Rng,
+        y: &mut [f64],
+    ) -> f64 {
         match (*self, fit) {
             (Move::Stretch { a }, _) => stretch::propose(a, x, others, rng, y),
-            (Move::DifferentialEvolution { gamma0, sigma }, _) => differential_evolution::propose(gamma0, sigma, x, others, rng, y),
+            (Move::DifferentialEvolution { gamma0, sigma }, _) => {
+                differential_evolution::propose(gamma0, sigma, x, others, rng, y)
+            }
             (Move::Snooker { gamma }, _) => snooker::propose(gamma, x, others, rng, y),
-            (_, Fit::Single(f)) => independence::propose(self.df(), self.scale(), f.as_ref(), x, rng, y),
+            (_, Fit::Single(f)) => {
+                independence::propose(self.df(), self.scale(), f.as_ref(), x, rng, y)
+            }
             (_, Fit::Anchored(q)) => q.propose(self.df(), x, rng, y),
-            (_, Fit::History(h, current)) => mixture::propose(*h, current.as_ref(), self.df(), x, rng, y),
-            (_, Fit::Curved(q, Some(tube))) => mixture::propose(*tube, q.as_deref(), self.df(), x, rng, y),
+            (_, Fit::History(h, current)) => {
+                mixture::propose(*h, current.as_ref(), self.df(), x, rng, y)
+            }
+            (_, Fit::Curved(q, Some(tube))) => {
+                mixture::propose(*tube, q.as_deref(), self.df(), x, rng, y)
+            }
             (_, Fit::Curved(Some(q), None)) => q.propose(self.df(), x, rng, y),
             (_, Fit::Curved(None, None)) => {
                 y.copy_from_slice(x);
                 0.0
             }
             // an independence move given no fit fits the half itself
-            (_, Fit::Points) => independence::propose(self.df(), self.scale(), independence::fitted(others, x.len()).as_ref(), x, rng, y),
+            (_, Fit::Points) => independence::propose(
+                self.df(),
+                self.scale(),
+                independence::fitted(others, x.len()).as_ref(),
+                x,
+                rng,
+                y,
+            ),
         }
     }
 }
@@ -227,11 +287,24 @@ impl Learned {
     /// The fits that `moves` use, to the walkers' positions `walkers` (per
     /// walker, points of `d` coordinates in time order); the mixture's EM
     /// starts drawn from `rng`.
-    pub fn fit(moves: &[(Move, f64)], walkers: &[Vec<f64>], d: usize, rng: &mut impl rand::Rng) -> Learned {
+    pub fn fit(
+        moves: &[(Move, f64)],
+        walkers: &[Vec<f64>],
+        d: usize,
+        rng: &mut impl rand::Rng,
+    ) -> Learned {
         let uses = |f: fn(&Move) -> bool| moves.iter().any(|(m, _)| f(m));
         Learned {
-            mixture: if uses(|m| matches!(m, Move::History { .. })) { Mixture::fit(walkers, d, rng) } else { None },
-            tube: if uses(|m| matches!(m, Move::Curved { .. })) { curved::Tube::of_history(walkers, d) } else { None },
+            mixture: if uses(|m| matches!(m, Move::History { .. })) {
+                Mixture::fit(walkers, d, rng)
+            } else {
+                None
+            },
+            tube: if uses(|m| matches!(m, Move::Curved { .. })) {
+                curved::Tube::of_history(walkers, d)
+            } else {
+                None
+            },
         }
     }
 }

@@ -6,7 +6,13 @@ use super::{distinct_pair, point};
 
 /// A jump along the line through x and a third walker z, by γ times the
 /// projection of x_k − x_l on it; factor (|y − z| / |x − z|)^(d−1).
-pub fn propose(gamma: f64, x: &[f64], others: &[f64], rng: &mut impl rand::Rng, y: &mut [f64]) -> f64 {
+pub fn propose(
+    gamma: f64,
+    x: &[f64],
+    others: &[f64],
+    rng: &mut impl rand::Rng,
+    y: &mut [f64],
+) -> f64 {
     let d = x.len();
     let (j, k, l) = distinct_triple(rng, others.len() / d);
     let (z, z1, z2) = (point(others, d, j), point(others, d, k), point(others, d, l));

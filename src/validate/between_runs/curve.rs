@@ -52,7 +52,8 @@ impl CurrentCurve {
         let flat = (CURVE_FLAT * scale).powi(2);
         DMatrix::from_fn(xs.len(), ys.len(), |i, j| {
             let (u, v) = (xs[i] - centre, ys[j] - centre);
-            eta * eta * (-(u - v).powi(2) / (2.0 * CURVE_LENGTH * CURVE_LENGTH)).exp() + flat * (1.0 + u * v)
+            eta * eta * (-(u - v).powi(2) / (2.0 * CURVE_LENGTH * CURVE_LENGTH)).exp()
+                + flat * (1.0 + u * v)
         })
     }
 
@@ -63,8 +64,10 @@ impl CurrentCurve {
         let (groups, d) = (self.x.len(), eta.len());
         let mut p = DMatrix::zeros(groups * d, groups * d);
         for k in 0..d {
-            let kk = self.covariance(&self.x, &self.x, eta[k], scales[k]) + DMatrix::identity(groups, groups) * (1e-10 * scales[k] * scales[k]);
-            let inverse = Cholesky::new(kk).map_or_else(|| DMatrix::zeros(groups, groups), |c| c.inverse());
+            let kk = self.covariance(&self.x, &self.x, eta[k], scales[k])
+                + DMatrix::identity(groups, groups) * (1e-10 * scales[k] * scales[k]);
+            let inverse =
+                Cholesky::new(kk).map_or_else(|| DMatrix::zeros(groups, groups), |c| c.inverse());
             for g in 0..groups {
                 for q in 0..groups {
                     p[(g * d + k, q * d + k)] = inverse[(g, q)];
@@ -77,24 +80,36 @@ impl CurrentCurve {
     /// ln p(μ_k at the calibrated currents | η) + ln p(η) + ln η, at u = ln η.
     pub(super) fn log_amplitude_density(&self, u: f64, mu: &DVector<f64>, scale: f64) -> f64 {
         let eta = u.exp();
-        let k = self.covariance(&self.x, &self.x, eta, scale) + DMatrix::identity(self.x.len(), self.x.len()) * (1e-10 * scale * scale);
+        let k = self.covariance(&self.x, &self.x, eta, scale)
+            + DMatrix::identity(self.x.len(), self.x.len()) * (1e-10 * scale * scale);
         let Some(chol) = Cholesky::new(k) else { return f64::NEG_INFINITY };
         let log_det: f64 = chol.l().diagonal().iter().map(|v| 2.0 * v.ln()).sum();
-        -0.5 * log_det - 0.5 * mu.dot(&chol.solve(mu)) - 0.5 * (eta / (CURVE_AMPLITUDE * scale)).powi(2) + u
+        -0.5 * log_det
+            - 0.5 * mu.dot(&chol.solve(mu))
+            - 0.5 * (eta / (CURVE_AMPLITUDE * scale)).powi(2)
+            + u
     }
 }
 
 /// The centres at the curve's predicted currents given those at the
 /// calibrated ones: for each coordinate, the Gaussian process's
 /// conditional (the level and slope integrated over their flat prior).
-pub(super) fn predict_centres(curve: &CurrentCurve, means: &[DVector<f64>], eta: &[f64], scales: &[f64], rng: &mut impl Rng) -> Vec<DVector<f64>> {
+pub(super) fn predict_centres(
+    curve: &CurrentCurve,
+    means: &[DVector<f64>],
+    eta: &[f64],
+    scales: &[f64],
+    rng: &mut impl Rng,
+) -> Vec<DVector<f64>> {
     let (c, p, d) = (curve.x.len(), curve.predict.len(), eta.len());
     let mut out = vec![DVector::<f64>::zeros(d); p];
     for k in 0..d {
         let jitter = 1e-10 * scales[k] * scales[k];
-        let kxx = curve.covariance(&curve.x, &curve.x, eta[k], scales[k]) + DMatrix::identity(c, c) * jitter;
+        let kxx = curve.covariance(&curve.x, &curve.x, eta[k], scales[k])
+            + DMatrix::identity(c, c) * jitter;
         let kxs = curve.covariance(&curve.x, &curve.predict, eta[k], scales[k]);
-        let kss = curve.covariance(&curve.predict, &curve.predict, eta[k], scales[k]) + DMatrix::identity(p, p) * jitter;
+        let kss = curve.covariance(&curve.predict, &curve.predict, eta[k], scales[k])
+            + DMatrix::identity(p, p) * jitter;
         let Some(chol) = Cholesky::new(kxx) else { continue };
         let mu = DVector::from_iterator(c, means.iter().map(|m| m[k]));
         let mean = kxs.transpose() * chol.solve(&mu);
@@ -107,4 +122,3 @@ pub(super) fn predict_centres(curve: &CurrentCurve, means: &[DVector<f64>], eta:
     }
     out
 }
-

@@ -67,7 +67,9 @@ impl LayerDraw {
     /// `e`: centre + L e.
     pub(super) fn new_test_about(&self, centre: &[f64], e: &[f64]) -> Vec<f64> {
         let d = e.len();
-        (0..d).map(|k| centre[k] + (0..=k).map(|j| self.factor[j * d + k] * e[j]).sum::<f64>()).collect()
+        (0..d)
+            .map(|k| centre[k] + (0..=k).map(|j| self.factor[j * d + k] * e[j]).sum::<f64>())
+            .collect()
     }
 }
 
@@ -77,7 +79,15 @@ impl LayerDraw {
 /// `curve` in the current, which also gives the centres (and new tests) at
 /// the currents it predicts, after the calibrated ones in each draw. The
 /// kept iterations of one chain.
-pub fn gibbs(runs: &[RunLikelihood], group: &[usize], scales: &[f64], nu: f64, curve: Option<&CurrentCurve>, settings: GibbsSettings, rng: &mut impl Rng) -> Vec<LayerDraw> {
+pub fn gibbs(
+    runs: &[RunLikelihood],
+    group: &[usize],
+    scales: &[f64],
+    nu: f64,
+    curve: Option<&CurrentCurve>,
+    settings: GibbsSettings,
+    rng: &mut impl Rng,
+) -> Vec<LayerDraw> {
     let Some(mut chain) = Chain::new(runs, group, scales, nu, curve) else {
         return Vec::new();
     };
@@ -116,18 +126,47 @@ fn normals(rng: &mut impl Rng, n: usize) -> DVector<f64> {
 impl<'a> Chain<'a> {
     /// At the start: each run at its likelihood's mode, Σ at its prior
     /// scales; `None` for fewer than two runs or mismatched sizes.
-    pub(super) fn new(runs: &'a [RunLikelihood], group: &'a [usize], scales: &'a [f64], nu: f64, curve: Option<&'a CurrentCurve>) -> Option<Chain<'a>> {
+    pub(super) fn new(
+        runs: &'a [RunLikelihood],
+        group: &'a [usize],
+        scales: &'a [f64],
+        nu: f64,
+        curve: Option<&'a CurrentCurve>,
+    ) -> Option<Chain<'a>> {
         let (m, d) = (runs.len(), scales.len());
         let groups = group.iter().max().map_or(0, |g| g + 1);
-        if m < 2 || group.len() != m || runs.iter().any(|r| r.shift.len() != d) || curve.is_some_and(|c| c.x.len() != groups) {
+        if m < 2
+            || group.len() != m
+            || runs.iter().any(|r| r.shift.len() != d)
+            || curve.is_some_and(|c| c.x.len() != groups)
+        {
             return None;
         }
-        let members: Vec<Vec<usize>> = (0..groups).map(|g| (0..m).filter(|&i| group[i] == g).collect()).collect();
-        let z: Vec<DVector<f64>> = runs.iter().map(|r| Cholesky::new(r.precision.clone()).map_or_else(|| r.shift.clone(), |c| c.solve(&r.shift))).collect();
+        let members: Vec<Vec<usize>> =
+            (0..groups).map(|g| (0..m).filter(|&i| group[i] == g).collect()).collect();
+        let z: Vec<DVector<f64>> = runs
+            .iter()
+            .map(|r| {
+                Cholesky::new(r.precision.clone())
+                    .map_or_else(|| r.shift.clone(), |c| c.solve(&r.shift))
+            })
+            .collect();
         let a: Vec<f64> = scales.iter().map(|s| s * s).collect();
         let sigma = DMatrix::from_diagonal(&DVector::from_iterator(d, a.iter().copied()));
         let eta = scales.iter().map(|s| CURVE_AMPLITUDE * s).collect();
-        Some(Chain { runs, group, members, scales, nu, curve, z, means: vec![DVector::zeros(d); groups], sigma, a, eta })
+        Some(Chain {
+            runs,
+            group,
+            members,
+            scales,
+            nu,
+            curve,
+            z,
+            means: vec![DVector::zeros(d); groups],
+            sigma,
+            a,
+            eta,
+        })
     }
 
     /// One sweep: the centres (and η), Σ, a, each z_i, then the moves
@@ -135,14 +174,23 @@ impl<'a> Chain<'a> {
     pub(super) fn step(&mut self, rng: &mut impl Rng) {
         let (m, d, nu, scales) = (self.runs.len(), self.scales.len(), self.nu, self.scales);
         let groups = self.members.len();
-        let precision = Cholesky::new(self.sigma.clone()).map_or_else(|| DMatrix::identity(d, d), |c| c.inverse());
-        let zbar: Vec<DVector<f64>> = self.members.iter().map(|g| g.iter().map(|&i| self.z[i].clone()).fold(DVector::zeros(d), |acc, z| acc + z) / g.len() as f64).collect();
+        let precision = Cholesky::new(self.sigma.clone())
+            .map_or_else(|| DMatrix::identity(d, d), |c| c.inverse());
+        let zbar: Vec<DVector<f64>> = self
+            .members
+            .iter()
+            .map(|g| {
+                g.iter().map(|&i| self.z[i].clone()).fold(DVector::zeros(d), |acc, z| acc + z)
+                    / g.len() as f64
+            })
+            .collect();
         match self.curve {
             // μ_c | Σ, z ~ N(z̄_c, Σ/m_c)
             None => {
                 let factor = cholesky(&self.sigma);
                 for (g, mean) in self.means.iter_mut().enumerate() {
-                    *mean = &zbar[g] + &factor * normals(rng, d) / (self.members[g].len() as f64).sqrt();
+                    *mean = &zbar[g]
+                        + &factor * normals(rng, d) / (self.members[g].len() as f64).sqrt();
                 }
             }
             // every centre at once: the runs' normal terms and each
@@ -158,39 +206,68 @@ impl<'a> Chain<'a> {
                 }
                 p += curve.precision(&self.eta, scales);
                 if let Some(chol) = Cholesky::new(p) {
-                    let draw = chol.solve(&h) + chol.l().transpose().solve_upper_triangular(&normals(rng, n)).expect("a triangular factor with a positive diagonal");
+                    let draw = chol.solve(&h)
+                        + chol
+                            .l()
+                            .transpose()
+                            .solve_upper_triangular(&normals(rng, n))
+                            .expect("a triangular factor with a positive diagonal");
                     for (g, mean) in self.means.iter_mut().enumerate() {
                         *mean = draw.rows(g * d, d).into_owned();
                     }
                 }
                 for k in 0..d {
                     let mu = DVector::from_iterator(groups, self.means.iter().map(|m| m[k]));
-                    self.eta[k] = slice(self.eta[k].ln(), |u| curve.log_amplitude_density(u, &mu, scales[k]), rng).exp();
+                    self.eta[k] = slice(
+                        self.eta[k].ln(),
+                        |u| curve.log_amplitude_density(u, &mu, scales[k]),
+                        rng,
+                    )
+                    .exp();
                 }
             }
         }
         // Σ | μ, z, a ~ IW(ν + d − 1 + m, 2ν diag(1/a) + Σ_i (z_i − μ_c(i))(z_i − μ_c(i))ᵀ)
-        let mut psi = DMatrix::from_diagonal(&DVector::from_iterator(d, self.a.iter().map(|a| 2.0 * nu / a)));
+        let mut psi =
+            DMatrix::from_diagonal(&DVector::from_iterator(d, self.a.iter().map(|a| 2.0 * nu / a)));
         for i in 0..m {
             let r = &self.z[i] - &self.means[self.group[i]];
             psi += &r * r.transpose();
         }
         self.sigma = inverse_wishart(&psi, nu + (d - 1 + m) as f64, rng);
-        let mut precision = Cholesky::new(self.sigma.clone()).map_or_else(|| DMatrix::identity(d, d), |c| c.inverse());
+        let mut precision = Cholesky::new(self.sigma.clone())
+            .map_or_else(|| DMatrix::identity(d, d), |c| c.inverse());
         // a_k | Σ ~ IG((ν + d)/2, ν (Σ⁻¹)_kk + 1/A_k²)
         for k in 0..d {
             let rate = nu * precision[(k, k)] + 1.0 / (scales[k] * scales[k]);
-            let g: f64 = rng.sample(Gamma::new(0.5 * (nu + d as f64), 1.0 / rate).expect("positive shape and scale"));
+            let g: f64 = rng.sample(
+                Gamma::new(0.5 * (nu + d as f64), 1.0 / rate).expect("positive shape and scale"),
+            );
             self.a[k] = 1.0 / g;
         }
         // each z_i given (μ, Σ): the normal of its likelihood and N(μ, Σ)
         for (i, run) in self.runs.iter().enumerate() {
             if let Some(chol) = Cholesky::new(&precision + &run.precision) {
                 let mean = chol.solve(&(&precision * &self.means[self.group[i]] + &run.shift));
-                self.z[i] = mean + chol.l().transpose().solve_upper_triangular(&normals(rng, d)).expect("a triangular factor with a positive diagonal");
+                self.z[i] = mean
+                    + chol
+                        .l()
+                        .transpose()
+                        .solve_upper_triangular(&normals(rng, d))
+                        .expect("a triangular factor with a positive diagonal");
             }
         }
-        scale_moves(self.runs, self.group, &self.means, &self.a, nu, &mut self.sigma, &mut precision, &mut self.z, rng);
+        scale_moves(
+            self.runs,
+            self.group,
+            &self.means,
+            &self.a,
+            nu,
+            &mut self.sigma,
+            &mut precision,
+            &mut self.z,
+            rng,
+        );
         let prior = self.curve.map(|c| c.precision(&self.eta, scales));
         translate(self.runs, &self.members, prior.as_ref(), &mut self.means, &mut self.z, rng);
     }
@@ -204,9 +281,15 @@ impl<'a> Chain<'a> {
             all.extend(predict_centres(curve, &self.means, &self.eta, self.scales, rng));
         }
         let factor = cholesky(&self.sigma);
-        let new_tests = all.iter().map(|mean| (mean + &factor * normals(rng, d)).as_slice().to_vec()).collect();
+        let new_tests =
+            all.iter().map(|mean| (mean + &factor * normals(rng, d)).as_slice().to_vec()).collect();
         let eta = if self.curve.is_some() { self.eta.clone() } else { Vec::new() };
-        LayerDraw { means: all.iter().map(|m| m.as_slice().to_vec()).collect(), factor: factor.as_slice().to_vec(), new_tests, eta }
+        LayerDraw {
+            means: all.iter().map(|m| m.as_slice().to_vec()).collect(),
+            factor: factor.as_slice().to_vec(),
+            new_tests,
+            eta,
+        }
     }
 }
 
@@ -219,9 +302,21 @@ impl<'a> Chain<'a> {
 /// what remains is the prior of Σ (inverse Wishart given a), the runs'
 /// likelihoods and the Jacobian of Σ's entries, s^(d+1).
 #[allow(clippy::too_many_arguments)]
-fn scale_moves(runs: &[RunLikelihood], group: &[usize], means: &[DVector<f64>], a: &[f64], nu: f64, sigma: &mut DMatrix<f64>, precision: &mut DMatrix<f64>, z: &mut [DVector<f64>], rng: &mut impl Rng) {
+fn scale_moves(
+    runs: &[RunLikelihood],
+    group: &[usize],
+    means: &[DVector<f64>],
+    a: &[f64],
+    nu: f64,
+    sigma: &mut DMatrix<f64>,
+    precision: &mut DMatrix<f64>,
+    z: &mut [DVector<f64>],
+    rng: &mut impl Rng,
+) {
     let d = sigma.nrows();
-    let log_likelihood = |run: &RunLikelihood, z: &DVector<f64>| -0.5 * z.dot(&(&run.precision * z)) + run.shift.dot(z);
+    let log_likelihood = |run: &RunLikelihood, z: &DVector<f64>| {
+        -0.5 * z.dot(&(&run.precision * z)) + run.shift.dot(z)
+    };
     for k in 0..d {
         for _ in 0..4 {
             let log_s = rng.sample::<f64, _>(StandardNormal);
@@ -236,8 +331,14 @@ fn scale_moves(runs: &[RunLikelihood], group: &[usize], means: &[DVector<f64>], 
                     m
                 })
                 .collect();
-            let likelihood: f64 = runs.iter().zip(z.iter()).zip(&moved).map(|((r, old), new)| log_likelihood(r, new) - log_likelihood(r, old)).sum();
-            let prior = -(nu + 2.0 * d as f64) * log_s - (nu / a[k]) * precision[(k, k)] * (1.0 / (s * s) - 1.0);
+            let likelihood: f64 = runs
+                .iter()
+                .zip(z.iter())
+                .zip(&moved)
+                .map(|((r, old), new)| log_likelihood(r, new) - log_likelihood(r, old))
+                .sum();
+            let prior = -(nu + 2.0 * d as f64) * log_s
+                - (nu / a[k]) * precision[(k, k)] * (1.0 / (s * s) - 1.0);
             let log_ratio = prior + likelihood + (d as f64 + 1.0) * log_s;
             if rng.random::<f64>().ln() < log_ratio {
                 z.clone_from_slice(&moved);
@@ -264,7 +365,14 @@ fn scale_moves(runs: &[RunLikelihood], group: &[usize], means: &[DVector<f64>], 
 /// precision `prior` where a curve ties them; Liu & Sabatti 2000). Where
 /// the tests agree, the centres would otherwise follow the runs only by
 /// steps as small as the between-test spread.
-fn translate(runs: &[RunLikelihood], members: &[Vec<usize>], prior: Option<&DMatrix<f64>>, means: &mut [DVector<f64>], z: &mut [DVector<f64>], rng: &mut impl Rng) {
+fn translate(
+    runs: &[RunLikelihood],
+    members: &[Vec<usize>],
+    prior: Option<&DMatrix<f64>>,
+    means: &mut [DVector<f64>],
+    z: &mut [DVector<f64>],
+    rng: &mut impl Rng,
+) {
     let (groups, d) = (means.len(), means.first().map_or(0, |m| m.len()));
     let n = groups * d;
     let mut a = prior.cloned().unwrap_or_else(|| DMatrix::zeros(n, n));
@@ -282,7 +390,12 @@ fn translate(runs: &[RunLikelihood], members: &[Vec<usize>], prior: Option<&DMat
     }
     let Some(chol) = Cholesky::new(a) else { return };
     let e = DVector::from_iterator(n, (0..n).map(|_| rng.sample::<f64, _>(StandardNormal)));
-    let delta = chol.solve(&r) + chol.l().transpose().solve_upper_triangular(&e).expect("a triangular factor with a positive diagonal");
+    let delta = chol.solve(&r)
+        + chol
+            .l()
+            .transpose()
+            .solve_upper_triangular(&e)
+            .expect("a triangular factor with a positive diagonal");
     for (g, mean) in means.iter_mut().enumerate() {
         let shift = delta.rows(g * d, d).into_owned();
         *mean += &shift;
@@ -340,25 +453,29 @@ pub(super) fn cholesky(sigma: &DMatrix<f64>) -> DMatrix<f64> {
 /// decomposition, Σ = W⁻¹.
 fn inverse_wishart(psi: &DMatrix<f64>, dof: f64, rng: &mut impl Rng) -> DMatrix<f64> {
     let d = psi.nrows();
-    let psi_inverse = Cholesky::new(psi.clone()).map_or_else(|| DMatrix::identity(d, d), |c| c.inverse());
+    let psi_inverse =
+        Cholesky::new(psi.clone()).map_or_else(|| DMatrix::identity(d, d), |c| c.inverse());
     let l = cholesky(&psi_inverse);
     let mut b = DMatrix::<f64>::zeros(d, d);
     for i in 0..d {
-        b[(i, i)] = rng.sample::<f64, _>(ChiSquared::new(dof - i as f64).expect("positive degrees of freedom")).sqrt();
+        b[(i, i)] = rng
+            .sample::<f64, _>(ChiSquared::new(dof - i as f64).expect("positive degrees of freedom"))
+            .sqrt();
         for j in 0..i {
             b[(i, j)] = rng.sample(StandardNormal);
         }
     }
     let lb = l * b;
     let w = &lb * lb.transpose();
-    Cholesky::new(w.clone()).map_or_else(|| DMatrix::from_diagonal(&w.diagonal().map(|v| 1.0 / v)), |c| c.inverse())
+    Cholesky::new(w.clone())
+        .map_or_else(|| DMatrix::from_diagonal(&w.diagonal().map(|v| 1.0 / v)), |c| c.inverse())
 }
 
 #[cfg(test)]
 mod tests {
+    use super::super::curve::current_coordinate;
     use super::*;
     use crate::sampler::quantile_sorted;
-    use super::super::curve::current_coordinate;
     use statrs::distribution::{ContinuousCDF, Normal};
 
     /// ln of the half-t(ν, A) density of τ, up to a constant.
@@ -371,8 +488,17 @@ mod tests {
     /// groups (`y`, `s`, `group`), each run's posterior N(y_i, s_i²) under
     /// a flat prior, z_i ~ N(μ_g, τ²), μ_g flat and integrated exactly,
     /// τ ~ half-t(ν, A).
-    fn grid_cdf(y: &[f64], s: &[f64], group: &[usize], target: usize, nu: f64, scale: f64, x: f64) -> f64 {
-        let spread = y.iter().cloned().fold(f64::MIN, f64::max) - y.iter().cloned().fold(f64::MAX, f64::min);
+    fn grid_cdf(
+        y: &[f64],
+        s: &[f64],
+        group: &[usize],
+        target: usize,
+        nu: f64,
+        scale: f64,
+        x: f64,
+    ) -> f64 {
+        let spread =
+            y.iter().cloned().fold(f64::MIN, f64::max) - y.iter().cloned().fold(f64::MAX, f64::min);
         let top = 30.0 * (spread + s.iter().cloned().fold(0.0, f64::max) + scale);
         let groups = group.iter().max().unwrap() + 1;
         let n = 30_001;
@@ -383,10 +509,18 @@ mod tests {
             let mut predictive = (0.0, 0.0);
             for g in 0..groups {
                 let members: Vec<usize> = (0..y.len()).filter(|&i| group[i] == g).collect();
-                let w: Vec<f64> = members.iter().map(|&i| 1.0 / (s[i] * s[i] + tau * tau)).collect();
+                let w: Vec<f64> =
+                    members.iter().map(|&i| 1.0 / (s[i] * s[i] + tau * tau)).collect();
                 let sw: f64 = w.iter().sum();
                 let mu = members.iter().zip(&w).map(|(&i, w)| y[i] * w).sum::<f64>() / sw;
-                log_marginal += 0.5 * w.iter().map(|w| w.ln()).sum::<f64>() - 0.5 * sw.ln() - 0.5 * members.iter().zip(&w).map(|(&i, w)| (y[i] - mu).powi(2) * w).sum::<f64>();
+                log_marginal += 0.5 * w.iter().map(|w| w.ln()).sum::<f64>()
+                    - 0.5 * sw.ln()
+                    - 0.5
+                        * members
+                            .iter()
+                            .zip(&w)
+                            .map(|(&i, w)| (y[i] - mu).powi(2) * w)
+                            .sum::<f64>();
                 if g == target {
                     predictive = (mu, (1.0 / sw + tau * tau).sqrt());
                 }
@@ -421,7 +555,10 @@ mod tests {
     /// A run whose likelihood is N(mean, sd²) in each coordinate.
     fn normal_likelihood(mean: &[f64], sd: f64) -> RunLikelihood {
         let d = mean.len();
-        RunLikelihood { precision: DMatrix::identity(d, d) / (sd * sd), shift: DVector::from_column_slice(mean) / (sd * sd) }
+        RunLikelihood {
+            precision: DMatrix::identity(d, d) / (sd * sd),
+            shift: DVector::from_column_slice(mean) / (sd * sd),
+        }
     }
 
     /// Precise runs in two groups, one coordinate: a new test's 90 %
@@ -442,7 +579,10 @@ mod tests {
             let got = quantiles(&draws, target, 0);
             for (g, p) in got.iter().zip([0.05, 0.5, 0.95]) {
                 let want = grid_quantile(&y, &[0.001; 5], &group, target, PRIOR_DF, p);
-                assert!((g - want).abs() < 0.05, "current {target}, quantile {p}: {g} against {want}");
+                assert!(
+                    (g - want).abs() < 0.05,
+                    "current {target}, quantile {p}: {g} against {want}"
+                );
             }
         }
     }
@@ -464,7 +604,10 @@ mod tests {
         let group = [0, 0, 0, 1, 1, 1];
         let currents = [0.25, 1.0];
         let at = [0.5, 0.1];
-        let curve = CurrentCurve { x: currents.iter().map(|c| current_coordinate(*c)).collect(), predict: at.iter().map(|c| current_coordinate(*c)).collect() };
+        let curve = CurrentCurve {
+            x: currents.iter().map(|c| current_coordinate(*c)).collect(),
+            predict: at.iter().map(|c| current_coordinate(*c)).collect(),
+        };
         let mut rng = crate::rng::stream(15, &[1]);
         let runs: Vec<RunLikelihood> = y.iter().map(|&m| normal_likelihood(&[m], 0.001)).collect();
         let settings = GibbsSettings { iterations: 100_000, burn_in: 1000 };
@@ -474,7 +617,8 @@ mod tests {
         let mut samples = Vec::new();
         for _ in 0..200_000 {
             let a = 1.0 / rng.sample::<f64, _>(Gamma::new(0.5, 1.0).unwrap());
-            let tau2 = 1.0 / rng.sample::<f64, _>(Gamma::new(0.5 * PRIOR_DF, a / PRIOR_DF).unwrap());
+            let tau2 =
+                1.0 / rng.sample::<f64, _>(Gamma::new(0.5 * PRIOR_DF, a / PRIOR_DF).unwrap());
             let eta = CURVE_AMPLITUDE * rng.sample::<f64, _>(StandardNormal).abs();
             let kz = curve.covariance(&xs, &xs, eta, 1.0) + DMatrix::identity(6, 6) * tau2;
             let chol = Cholesky::new(kz).unwrap();
@@ -497,7 +641,14 @@ mod tests {
         let weights: Vec<f64> = samples.iter().map(|s| (s.0 - top).exp()).collect();
         let total: f64 = weights.iter().sum();
         for (j, current) in at.iter().enumerate() {
-            let cdf = |v: f64| samples.iter().zip(&weights).map(|(s, w)| w * Normal::new(s.1[j].0, s.1[j].1).unwrap().cdf(v)).sum::<f64>() / total;
+            let cdf = |v: f64| {
+                samples
+                    .iter()
+                    .zip(&weights)
+                    .map(|(s, w)| w * Normal::new(s.1[j].0, s.1[j].1).unwrap().cdf(v))
+                    .sum::<f64>()
+                    / total
+            };
             let got = quantiles(&draws, 2 + j, 0);
             for (g, p) in got.iter().zip([0.05, 0.5, 0.95]) {
                 let (mut lo, mut hi) = (-30.0, 30.0);
@@ -534,12 +685,27 @@ mod tests {
             .zip(&s)
             .map(|(&y, &s)| {
                 let v: f64 = 1.0 / (1.0 / (s * s) + 4.0);
-                let points: Vec<Vec<f64>> = (0..4000).map(|_| vec![v * y / (s * s) + v.sqrt() * rng.sample::<f64, _>(StandardNormal)]).collect();
-                let run = RunLikelihood::from_draws(&points, &|z: &[f64]| -2.0 * z[0] * z[0], &[1e-3]).expect("enough draws");
+                let points: Vec<Vec<f64>> = (0..4000)
+                    .map(|_| {
+                        vec![v * y / (s * s) + v.sqrt() * rng.sample::<f64, _>(StandardNormal)]
+                    })
+                    .collect();
+                let run =
+                    RunLikelihood::from_draws(&points, &|z: &[f64]| -2.0 * z[0] * z[0], &[1e-3])
+                        .expect("enough draws");
                 // p₀ divided out: the likelihood's precision and shift, 1/s² and
                 // y/s², up to the Monte Carlo error of 4000 draws' moments (2 %)
-                assert!((run.precision[(0, 0)] * s * s - 1.0).abs() < 0.05, "precision {} against {}", run.precision[(0, 0)], 1.0 / (s * s));
-                assert!((run.shift[0] / run.precision[(0, 0)] - y).abs() < 0.03 * (1.0 + y.abs()), "mode {} against {y}", run.shift[0] / run.precision[(0, 0)]);
+                assert!(
+                    (run.precision[(0, 0)] * s * s - 1.0).abs() < 0.05,
+                    "precision {} against {}",
+                    run.precision[(0, 0)],
+                    1.0 / (s * s)
+                );
+                assert!(
+                    (run.shift[0] / run.precision[(0, 0)] - y).abs() < 0.03 * (1.0 + y.abs()),
+                    "mode {} against {y}",
+                    run.shift[0] / run.precision[(0, 0)]
+                );
                 run
             })
             .collect();
@@ -553,8 +719,15 @@ mod tests {
         // without dividing p₀ out, the layer would take the posteriors under
         // p₀ for the runs' likelihoods, closer to 0 and to each other: the
         // premise of the test is that this differs by more than the tolerance
-        let (naive_y, naive_s): (Vec<f64>, Vec<f64>) = y.iter().zip(&s).map(|(&y, &s)| (y / (s * s) / (1.0 / (s * s) + 4.0), (1.0 / (1.0 / (s * s) + 4.0)).sqrt())).unzip();
-        let gap = grid_quantile(&naive_y, &naive_s, &[0, 0, 0], 0, PRIOR_DF, 0.95) - grid_quantile(&y, &s, &[0, 0, 0], 0, PRIOR_DF, 0.95);
+        let (naive_y, naive_s): (Vec<f64>, Vec<f64>) = y
+            .iter()
+            .zip(&s)
+            .map(|(&y, &s)| {
+                (y / (s * s) / (1.0 / (s * s) + 4.0), (1.0 / (1.0 / (s * s) + 4.0)).sqrt())
+            })
+            .unzip();
+        let gap = grid_quantile(&naive_y, &naive_s, &[0, 0, 0], 0, PRIOR_DF, 0.95)
+            - grid_quantile(&y, &s, &[0, 0, 0], 0, PRIOR_DF, 0.95);
         assert!(gap.abs() > 0.15, "the premise: {gap}");
     }
 
@@ -575,22 +748,34 @@ mod tests {
         let draws = gibbs(&runs, &[0, 0, 0, 0], &[1.0, 1.0], PRIOR_DF, None, settings, &mut rng);
         let moments = |v: &[[f64; 2]], w: &[f64]| {
             let total: f64 = w.iter().sum();
-            let mean: [f64; 2] = std::array::from_fn(|k| v.iter().zip(w).map(|(x, w)| w * x[k]).sum::<f64>() / total);
-            let cov = |a: usize, b: usize| v.iter().zip(w).map(|(x, w)| w * (x[a] - mean[a]) * (x[b] - mean[b])).sum::<f64>() / total;
+            let mean: [f64; 2] = std::array::from_fn(|k| {
+                v.iter().zip(w).map(|(x, w)| w * x[k]).sum::<f64>() / total
+            });
+            let cov = |a: usize, b: usize| {
+                v.iter().zip(w).map(|(x, w)| w * (x[a] - mean[a]) * (x[b] - mean[b])).sum::<f64>()
+                    / total
+            };
             (cov(0, 0).sqrt(), cov(1, 1).sqrt(), cov(0, 1) / (cov(0, 0) * cov(1, 1)).sqrt())
         };
-        let tests: Vec<[f64; 2]> = draws.iter().map(|d| [d.new_tests[0][0], d.new_tests[0][1]]).collect();
+        let tests: Vec<[f64; 2]> =
+            draws.iter().map(|d| [d.new_tests[0][0], d.new_tests[0][1]]).collect();
         let (s1, s2, r) = moments(&tests, &vec![1.0; tests.len()]);
         // the reference: prior draws weighted by the marginal likelihood
         let m = y.len() as f64;
         let centre: [f64; 2] = std::array::from_fn(|k| y.iter().map(|v| v[k]).sum::<f64>() / m);
-        let scatter = DMatrix::from_fn(2, 2, |a, b| y.iter().map(|v| (v[a] - centre[a]) * (v[b] - centre[b])).sum::<f64>());
+        let scatter = DMatrix::from_fn(2, 2, |a, b| {
+            y.iter().map(|v| (v[a] - centre[a]) * (v[b] - centre[b])).sum::<f64>()
+        });
         let (mut w_sum, mut cov) = (0.0, DMatrix::<f64>::zeros(2, 2));
         let mut weights = Vec::new();
         let mut sigmas = Vec::new();
         for _ in 0..400_000 {
-            let a: Vec<f64> = (0..2).map(|_| 1.0 / rng.sample::<f64, _>(Gamma::new(0.5, 1.0).unwrap())).collect();
-            let psi = DMatrix::from_diagonal(&DVector::from_iterator(2, a.iter().map(|a| 2.0 * PRIOR_DF / a)));
+            let a: Vec<f64> =
+                (0..2).map(|_| 1.0 / rng.sample::<f64, _>(Gamma::new(0.5, 1.0).unwrap())).collect();
+            let psi = DMatrix::from_diagonal(&DVector::from_iterator(
+                2,
+                a.iter().map(|a| 2.0 * PRIOR_DF / a),
+            ));
             let sigma = inverse_wishart(&psi, PRIOR_DF + 1.0, &mut rng);
             let chol = Cholesky::new(sigma.clone()).unwrap();
             let log_det: f64 = chol.l().diagonal().iter().map(|v| 2.0 * v.ln()).sum();
@@ -605,11 +790,18 @@ mod tests {
             cov += sigma * (w * (1.0 + 1.0 / m));
         }
         let cov = cov / w_sum;
-        let want = (cov[(0, 0)].sqrt(), cov[(1, 1)].sqrt(), cov[(0, 1)] / (cov[(0, 0)] * cov[(1, 1)]).sqrt());
+        let want = (
+            cov[(0, 0)].sqrt(),
+            cov[(1, 1)].sqrt(),
+            cov[(0, 1)] / (cov[(0, 0)] * cov[(1, 1)]).sqrt(),
+        );
         // the premise: the runs lie on a line (correlation 0.99); the prior, with
         // four runs, tempers that, but not away
         assert!(want.2 > 0.5, "the premise: a strong correlation, {}", want.2);
         assert!((r - want.2).abs() < 0.03, "correlation {r} against {}", want.2);
-        assert!((s1 / want.0 - 1.0).abs() < 0.05 && (s2 / want.1 - 1.0).abs() < 0.05, "sds {s1} {s2} against {want:?}");
+        assert!(
+            (s1 / want.0 - 1.0).abs() < 0.05 && (s2 / want.1 - 1.0).abs() < 0.05,
+            "sds {s1} {s2} against {want:?}"
+        );
     }
 }

@@ -48,7 +48,15 @@ pub struct NewTestRow {
 /// or every run at its current (needs runs at two other currents: the
 /// centre there comes from the curve in the current). Runs that cannot be
 /// so predicted are left out of the answer.
-pub fn leave_out(joint: &Calibration, campaign: &Campaign, alone: &[LayerRun], left_out: LeftOut, draws: usize, replicates: usize, seed: u64) -> Result<Vec<NewTestRow>> {
+pub fn leave_out(
+    joint: &Calibration,
+    campaign: &Campaign,
+    alone: &[LayerRun],
+    left_out: LeftOut,
+    draws: usize,
+    replicates: usize,
+    seed: u64,
+) -> Result<Vec<NewTestRow>> {
     let settings = joint.predict_settings(replicates, seed);
     let smooth = joint.settings.likelihood.smooth_strain_ms;
     let current = joint.record.current_a;
@@ -64,7 +72,11 @@ pub fn leave_out(joint: &Calibration, campaign: &Campaign, alone: &[LayerRun], l
             let own = alone.iter().find(|r| r.id == run.id())?;
             let others: Vec<&LayerRun> = alone.iter().filter(|r| without(run, r)).collect();
             let here = others.iter().filter(|r| same_current(r.current_a, current)).count();
-            let mut elsewhere: Vec<f64> = others.iter().filter(|r| !same_current(r.current_a, current)).map(|r| r.current_a).collect();
+            let mut elsewhere: Vec<f64> = others
+                .iter()
+                .filter(|r| !same_current(r.current_a, current))
+                .map(|r| r.current_a)
+                .collect();
             elsewhere.dedup_by(|a, b| same_current(*a, *b));
             let possible = match left_out {
                 LeftOut::Run => here >= 1,
@@ -87,18 +99,24 @@ pub fn leave_out(joint: &Calibration, campaign: &Campaign, alone: &[LayerRun], l
             let layer = match &shared {
                 Some(layer) => layer,
                 None => {
-                    let others: Vec<LayerRun> = alone.iter().filter(|r| without(run, r)).copied().collect();
-                    fitted = BetweenRuns::fit(&others, &[current], GibbsSettings::default(), seed ^ (0x1_0000 + j as u64))?;
+                    let others: Vec<LayerRun> =
+                        alone.iter().filter(|r| without(run, r)).copied().collect();
+                    fitted = BetweenRuns::fit(
+                        &others,
+                        &[current],
+                        GibbsSettings::default(),
+                        seed ^ (0x1_0000 + j as u64),
+                    )?;
                     &fitted
                 }
             };
             let group = layer.group(current).expect("a current the layer was asked for");
             let data = RunData::from_run(run, RecordPart::WholeRecord, smooth);
-            let (new, outside) = layer.new_tests(group, own.cal, &data, draws, seed ^ (0x2_0000 + j as u64));
+            let (new, outside) =
+                layer.new_tests(group, own.cal, &data, draws, seed ^ (0x2_0000 + j as u64));
             let mut prediction = predict_run(run, &data, j, &new, &settings, false, &|| {})?;
             prediction.coverage.failed_draws += outside;
             Ok(NewTestRow { coverage: prediction.coverage, left_out, max_rhat: layer.max_rhat })
         })
         .collect()
 }
-

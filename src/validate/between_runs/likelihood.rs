@@ -24,7 +24,11 @@ impl RunLikelihood {
     /// P₀ at their mean m divided out (Λ = C⁻¹ − P₀ with its eigenvalues
     /// kept positive, b = Λ m − g). `None` with fewer draws than two per
     /// coordinate.
-    pub fn from_draws(points: &[Vec<f64>], log_prior: &dyn Fn(&[f64]) -> f64, steps: &[f64]) -> Option<RunLikelihood> {
+    pub fn from_draws(
+        points: &[Vec<f64>],
+        log_prior: &dyn Fn(&[f64]) -> f64,
+        steps: &[f64],
+    ) -> Option<RunLikelihood> {
         let d = steps.len();
         if points.len() < 2 * d + 2 {
             return None;
@@ -56,7 +60,9 @@ impl RunLikelihood {
                         z[j] += b * steps[j];
                         f(&z)
                     };
-                    let v = (corner(1.0, 1.0) - corner(1.0, -1.0) - corner(-1.0, 1.0) + corner(-1.0, -1.0)) / (4.0 * steps[k] * steps[j]);
+                    let v = (corner(1.0, 1.0) - corner(1.0, -1.0) - corner(-1.0, 1.0)
+                        + corner(-1.0, -1.0))
+                        / (4.0 * steps[k] * steps[j]);
                     if v.is_finite() {
                         curvature[(k, j)] = -v;
                         curvature[(j, k)] = -v;
@@ -67,9 +73,9 @@ impl RunLikelihood {
         let eigen = nalgebra::SymmetricEigen::new(&posterior - &curvature);
         let floor = FLAT * nalgebra::SymmetricEigen::new(posterior.clone()).eigenvalues.max();
         let values = eigen.eigenvalues.map(|v| v.max(floor));
-        let precision = &eigen.eigenvectors * DMatrix::from_diagonal(&values) * eigen.eigenvectors.transpose();
+        let precision =
+            &eigen.eigenvectors * DMatrix::from_diagonal(&values) * eigen.eigenvectors.transpose();
         let shift = &precision * &m - gradient;
         Some(RunLikelihood { precision, shift })
     }
 }
-

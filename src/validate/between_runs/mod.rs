@@ -56,16 +56,18 @@ use crate::error::{Error, Result};
 use crate::model::{Params, PARAM_NAMES};
 use crate::noise::{NoiseModel, NoiseValues, Transform, MAX_PARAMETERS};
 use crate::posterior::layout::Hardening;
-use crate::posterior::{evenly_spaced, Coordinates, Draw, Layout, ModelTerms, ParameterModel, Prior};
+use crate::posterior::{
+    evenly_spaced, Coordinates, Draw, Layout, ModelTerms, ParameterModel, Prior,
+};
 use crate::sampler::{quantile_sorted, Chains, Diagnostics};
 use rand::RngExt;
 use rand_distr::StandardNormal;
 
 pub use curve::{current_coordinate, CurrentCurve, CURRENT_SCALE_A};
+use gibbs::Chain;
 pub use gibbs::{gibbs, GibbsSettings, LayerDraw, CHAINS, MAX_BLOCKS, PRIOR_DF};
 pub use leave_out::{leave_out, LeftOut, NewTestRow};
 pub use likelihood::RunLikelihood;
-use gibbs::Chain;
 
 /// Draws of each run's calibration the layer proposes from.
 const RUN_DRAWS: usize = 4000;
@@ -174,12 +176,20 @@ impl BetweenRuns {
     /// the current, which needs runs at two currents or more). At least one
     /// current must have two runs or more (else nothing says how tests
     /// differ).
-    pub fn fit(runs: &[LayerRun], at: &[f64], settings: GibbsSettings, seed: u64) -> Result<BetweenRuns> {
+    pub fn fit(
+        runs: &[LayerRun],
+        at: &[f64],
+        settings: GibbsSettings,
+        seed: u64,
+    ) -> Result<BetweenRuns> {
         let Some(first) = runs.first() else {
             return Err(Error::Usage("the between-run layer needs runs calibrated alone".into()));
         };
         if first.cal.settings.parameter_model() != ParameterModel::PerCurrent {
-            return Err(Error::Usage("the between-run layer takes runs calibrated alone with one parameter set each".into()));
+            return Err(Error::Usage(
+                "the between-run layer takes runs calibrated alone with one parameter set each"
+                    .into(),
+            ));
         }
         let mut currents: Vec<f64> = Vec::new();
         for r in runs {
@@ -188,14 +198,21 @@ impl BetweenRuns {
             }
         }
         currents.sort_by(f64::total_cmp);
-        let group: Vec<usize> = runs.iter().map(|r| currents.iter().position(|c| same_current(*c, r.current_a)).expect("listed")).collect();
+        let group: Vec<usize> = runs
+            .iter()
+            .map(|r| currents.iter().position(|c| same_current(*c, r.current_a)).expect("listed"))
+            .collect();
         if !(0..currents.len()).any(|g| group.iter().filter(|&&h| h == g).count() >= 2) {
-            return Err(Error::Usage("the between-run layer needs two runs or more at one current at least".into()));
+            return Err(Error::Usage(
+                "the between-run layer needs two runs or more at one current at least".into(),
+            ));
         }
         let mut predicted: Vec<f64> = Vec::new();
         for &c in at {
             if !(c >= 0.0 && c.is_finite()) {
-                return Err(Error::Usage(format!("the between-run layer predicts at currents of 0 A or more, not {c}")));
+                return Err(Error::Usage(format!(
+                    "the between-run layer predicts at currents of 0 A or more, not {c}"
+                )));
             }
             if !currents.iter().chain(&predicted).any(|k| same_current(*k, c)) {
                 predicted.push(c);
@@ -207,7 +224,10 @@ impl BetweenRuns {
                 return Err(Error::Usage(format!("the between-run layer predicts a current it has no runs at ({predicted:?} A) only from runs at two currents or more")));
             }
             1 => None,
-            _ => Some(CurrentCurve { x: currents.iter().map(|c| current_coordinate(*c)).collect(), predict: predicted.iter().map(|c| current_coordinate(*c)).collect() }),
+            _ => Some(CurrentCurve {
+                x: currents.iter().map(|c| current_coordinate(*c)).collect(),
+                predict: predicted.iter().map(|c| current_coordinate(*c)).collect(),
+            }),
         };
         let datas: Vec<&RunData> = runs.iter().map(|r| r.data).collect();
         let layout = theta_layout(first.cal, &datas);
@@ -222,14 +242,21 @@ impl BetweenRuns {
             {
                 return Err(Error::Usage(format!("{} was calibrated alone with other priors, model terms, coordinates or noise model than the others", run.id)));
             }
-            let likelihood = run_likelihood(run, &layout, &places, &coordinates, noise.as_ref(), &priors)
-                .ok_or_else(|| Error::Compute(format!("{}: too few draws of its calibration alone inside its prior to describe it", run.id)))?;
+            let likelihood =
+                run_likelihood(run, &layout, &places, &coordinates, noise.as_ref(), &priors)
+                    .ok_or_else(|| {
+                        Error::Compute(format!(
+                    "{}: too few draws of its calibration alone inside its prior to describe it",
+                    run.id
+                ))
+                    })?;
             all.push(likelihood);
         }
         let scales: Vec<f64> = coordinates.iter().map(|c| c.spread_prior).collect();
         let mut chains: Vec<(Chain, rand_chacha::ChaCha8Rng, Vec<LayerDraw>)> = (0..CHAINS)
             .map(|c| {
-                let chain = Chain::new(&all, &group, &scales, PRIOR_DF, curve.as_ref()).expect("checked above");
+                let chain = Chain::new(&all, &group, &scales, PRIOR_DF, curve.as_ref())
+                    .expect("checked above");
                 (chain, crate::rng::stream(seed, &[0xB7, runs.len() as u64, c as u64]), Vec::new())
             })
             .collect();
@@ -258,7 +285,20 @@ impl BetweenRuns {
         let draws: Vec<LayerDraw> = chains.into_iter().flatten().collect();
         let calibrated = currents.len();
         currents.extend(predicted);
-        Ok(BetweenRuns { coordinates, places, layout, currents, calibrated, runs: runs.iter().map(|r| r.id.to_string()).collect(), priors, curve, scales, draws, max_rhat, min_ess })
+        Ok(BetweenRuns {
+            coordinates,
+            places,
+            layout,
+            currents,
+            calibrated,
+            runs: runs.iter().map(|r| r.id.to_string()).collect(),
+            priors,
+            curve,
+            scales,
+            draws,
+            max_rhat,
+            min_ess,
+        })
     }
 
     /// The position of current `current_a` among the layer's currents.
@@ -284,7 +324,13 @@ impl BetweenRuns {
     /// draw (SI), sorted; draws without a θ in the prior's support left
     /// out (a new test is a physical damper).
     pub fn new_test_sorted(&self, group: usize, k: usize) -> Vec<f64> {
-        let mut v: Vec<f64> = self.draws.iter().filter_map(|d| self.theta(&d.new_tests[group])).filter(|t| self.in_support(t)).map(|t| t[k]).collect();
+        let mut v: Vec<f64> = self
+            .draws
+            .iter()
+            .filter_map(|d| self.theta(&d.new_tests[group]))
+            .filter(|t| self.in_support(t))
+            .map(|t| t[k])
+            .collect();
         v.sort_by(f64::total_cmp);
         v
     }
@@ -305,7 +351,13 @@ impl BetweenRuns {
         let mut d: Vec<f64> = self
             .draws
             .iter()
-            .filter_map(|d| Some((self.theta(&d.new_tests[group])?[k].ln() - self.theta(&d.means[group])?[k].ln()).abs()))
+            .filter_map(|d| {
+                Some(
+                    (self.theta(&d.new_tests[group])?[k].ln()
+                        - self.theta(&d.means[group])?[k].ln())
+                    .abs(),
+                )
+            })
             .collect();
         d.sort_by(f64::total_cmp);
         quantile_sorted(&d, 0.5) / 0.674_489_750_196_081_7
@@ -325,8 +377,15 @@ impl BetweenRuns {
         let d = self.coordinates.len();
         let picks = evenly_spaced(self.draws.len(), count);
         // each picked draw's calibrated centres, as the curve reads them
-        let means: Vec<Vec<nalgebra::DVector<f64>>> =
-            picks.iter().map(|&pick| self.draws[pick].means[..self.calibrated].iter().map(|m| nalgebra::DVector::from_column_slice(m)).collect()).collect();
+        let means: Vec<Vec<nalgebra::DVector<f64>>> = picks
+            .iter()
+            .map(|&pick| {
+                self.draws[pick].means[..self.calibrated]
+                    .iter()
+                    .map(|m| nalgebra::DVector::from_column_slice(m))
+                    .collect()
+            })
+            .collect();
         let mut rows = Vec::new();
         for (g, &current_a) in grid.iter().enumerate() {
             let at = calibrated.iter().position(|c| same_current(*c, current_a));
@@ -335,7 +394,8 @@ impl BetweenRuns {
                 None if current_a > lo && current_a < hi => CurrentKind::Between,
                 None => CurrentKind::Outside,
             };
-            let here = CurrentCurve { x: curve.x.clone(), predict: vec![current_coordinate(current_a)] };
+            let here =
+                CurrentCurve { x: curve.x.clone(), predict: vec![current_coordinate(current_a)] };
             let mut centres: Vec<[f64; 7]> = Vec::new();
             let mut tests: Vec<[f64; 7]> = Vec::new();
             for (i, &pick) in picks.iter().enumerate() {
@@ -343,7 +403,12 @@ impl BetweenRuns {
                 let mut rng = crate::rng::stream(seed, &[0xB9, g as u64, i as u64]);
                 let centre: Vec<f64> = match at {
                     Some(c) => draw.means[c].clone(),
-                    None => curve::predict_centres(&here, &means[i], &draw.eta, &self.scales, &mut rng).remove(0).as_slice().to_vec(),
+                    None => {
+                        curve::predict_centres(&here, &means[i], &draw.eta, &self.scales, &mut rng)
+                            .remove(0)
+                            .as_slice()
+                            .to_vec()
+                    }
                 };
                 let e: Vec<f64> = (0..d).map(|_| rng.sample::<f64, _>(StandardNormal)).collect();
                 let test = draw.new_test_about(&centre, &e);
@@ -356,7 +421,13 @@ impl BetweenRuns {
                     x.sort_by(f64::total_cmp);
                     [0.05, 0.5, 0.95].map(|p| quantile_sorted(&x, p))
                 };
-                rows.push(TypicalRow { parameter: parameter.to_string(), current_a, kind, centre: q(&centres), new_test: q(&tests) });
+                rows.push(TypicalRow {
+                    parameter: parameter.to_string(),
+                    current_a,
+                    kind,
+                    centre: q(&centres),
+                    new_test: q(&tests),
+                });
             }
         }
         Some(rows)
@@ -369,7 +440,14 @@ impl BetweenRuns {
     /// the same iteration's centre and covariance) up to a few times where
     /// it falls outside. Iterations whose every try falls outside are left
     /// out: their count is the second value.
-    pub fn new_tests(&self, group: usize, cal: &Calibration, data: &RunData, count: usize, seed: u64) -> (Vec<Draw>, usize) {
+    pub fn new_tests(
+        &self,
+        group: usize,
+        cal: &Calibration,
+        data: &RunData,
+        count: usize,
+        seed: u64,
+    ) -> (Vec<Draw>, usize) {
         let noise = cal.settings.noise_model();
         let d = self.coordinates.len();
         let mut out = Vec::with_capacity(count);
@@ -380,11 +458,15 @@ impl BetweenRuns {
             let found = (0..TRIES).find_map(|t| {
                 let z = match t {
                     0 => draw.new_tests[group].clone(),
-                    _ => draw.new_test(group, &(0..d).map(|_| rng.sample::<f64, _>(StandardNormal)).collect::<Vec<f64>>()),
+                    _ => draw.new_test(
+                        group,
+                        &(0..d).map(|_| rng.sample::<f64, _>(StandardNormal)).collect::<Vec<f64>>(),
+                    ),
                 };
                 let theta = self.theta(&z)?;
                 let coords = self.noise_coordinates(&z);
-                (self.in_support(&theta) && noise.log_prior(data, &coords) > f64::NEG_INFINITY).then(|| self.draw_at(theta, &z))
+                (self.in_support(&theta) && noise.log_prior(data, &coords) > f64::NEG_INFINITY)
+                    .then(|| self.draw_at(theta, &z))
             });
             match found {
                 Some(draw) => out.push(draw),
@@ -437,7 +519,14 @@ fn convergence(chains: &[Vec<LayerDraw>], calibrated: usize) -> (f64, f64) {
         }
     }
     let n = steps * chains.len();
-    let trace = Chains { dim, ensembles: chains.len(), walkers: 1, positions, log_prob: vec![0.0; n], accepted: vec![true; n] };
+    let trace = Chains {
+        dim,
+        ensembles: chains.len(),
+        walkers: 1,
+        positions,
+        log_prob: vec![0.0; n],
+        accepted: vec![true; n],
+    };
     let diagnostics = Diagnostics::compute(&trace, 0);
     (diagnostics.max_rhat(), diagnostics.min_ess())
 }
@@ -461,7 +550,10 @@ const TRIES: usize = 20;
 /// the B-P parameters walked as `layout` walks them.
 fn coordinates_of(cal: &Calibration, layout: &Layout) -> (Vec<Coordinate>, Places) {
     let names = layout.coordinate_names();
-    let mut coordinates: Vec<Coordinate> = names[..PARAM_NAMES.len()].iter().map(|n| Coordinate { name: n.clone(), scale: Scale::Linear, spread_prior: 1.0 }).collect();
+    let mut coordinates: Vec<Coordinate> = names[..PARAM_NAMES.len()]
+        .iter()
+        .map(|n| Coordinate { name: n.clone(), scale: Scale::Linear, spread_prior: 1.0 })
+        .collect();
     let terms = &cal.settings.terms;
     let place = |c: &mut Vec<Coordinate>, on: bool, name: &str, sd: f64| {
         on.then(|| {
@@ -469,11 +561,21 @@ fn coordinates_of(cal: &Calibration, layout: &Layout) -> (Vec<Coordinate>, Place
             c.len() - 1
         })
     };
-    let spring = place(&mut coordinates, terms.gas_spring, "gas_spring_n_per_m", terms.gas_spring_sd_n_per_m);
-    let offset = place(&mut coordinates, terms.force_offset, "force_offset_n", terms.force_offset_sd_n);
+    let spring = place(
+        &mut coordinates,
+        terms.gas_spring,
+        "gas_spring_n_per_m",
+        terms.gas_spring_sd_n_per_m,
+    );
+    let offset =
+        place(&mut coordinates, terms.force_offset, "force_offset_n", terms.force_offset_sd_n);
     let start = coordinates.len();
     for p in cal.sample.layout.noise_parameters {
-        coordinates.push(Coordinate { name: p.name.to_string(), scale: Scale::of(p.transform), spread_prior: 1.0 });
+        coordinates.push(Coordinate {
+            name: p.name.to_string(),
+            scale: Scale::of(p.transform),
+            spread_prior: 1.0,
+        });
     }
     let noise = start..coordinates.len();
     (coordinates, Places { spring, offset, noise })
@@ -485,7 +587,13 @@ fn theta_layout(cal: &Calibration, runs: &[&RunData]) -> Layout {
     let ids: Vec<String> = runs.iter().map(|r| r.id.clone()).collect();
     let settings = &cal.settings;
     let model = ParameterModel::PerCurrent;
-    let mut layout = Layout::new(&model, &ids, settings.noise_model().as_ref(), settings.sampler.coordinates, &ModelTerms::default());
+    let mut layout = Layout::new(
+        &model,
+        &ids,
+        settings.noise_model().as_ref(),
+        settings.sampler.coordinates,
+        &ModelTerms::default(),
+    );
     if settings.sampler.coordinates == Coordinates::Hardening {
         let owned: Vec<RunData> = runs.iter().map(|r| (*r).clone()).collect();
         layout.harden(&model, Hardening::reference_work(&owned));
@@ -497,7 +605,14 @@ fn theta_layout(cal: &Calibration, runs: &[&RunData]) -> Layout {
 /// draws of its calibration alone and its prior p₀ there (the priors of
 /// ln θ with the Jacobian of θ's coordinates in `layout`, the terms' and
 /// the noise's).
-fn run_likelihood(run: &LayerRun, layout: &Layout, places: &Places, coordinates: &[Coordinate], noise: &dyn NoiseModel, priors: &[Prior; 7]) -> Option<RunLikelihood> {
+fn run_likelihood(
+    run: &LayerRun,
+    layout: &Layout,
+    places: &Places,
+    coordinates: &[Coordinate],
+    noise: &dyn NoiseModel,
+    priors: &[Prior; 7],
+) -> Option<RunLikelihood> {
     let cal = run.cal;
     let sample = &cal.sample;
     let terms = &cal.settings.terms;
@@ -524,7 +639,12 @@ fn run_likelihood(run: &LayerRun, layout: &Layout, places: &Places, coordinates:
     let mut points = Vec::new();
     for (s, c) in cal.draw_positions(RUN_DRAWS) {
         let point = sample.chains.point(s, c);
-        let log_theta: Vec<f64> = sample.params_at(s, c, cal.record.current_a).to_array().iter().map(|v| v.ln()).collect();
+        let log_theta: Vec<f64> = sample
+            .params_at(s, c, cal.record.current_a)
+            .to_array()
+            .iter()
+            .map(|v| v.ln())
+            .collect();
         let mut z = layout.theta_coordinates(&log_theta);
         let (spring, offset) = sample.layout.terms(point, 0);
         if places.spring.is_some() {
@@ -544,4 +664,3 @@ fn run_likelihood(run: &LayerRun, layout: &Layout, places: &Places, coordinates:
     let steps: Vec<f64> = coordinates.iter().map(|c| 1e-3 * c.spread_prior).collect();
     RunLikelihood::from_draws(&points, &log_prior, &steps)
 }
-
