@@ -4,9 +4,14 @@
 demo:
     cargo run --release
 
-# the test suite (release mode: one build profile for everything)
+# the test suite's fast tier (release mode: one build profile for everything)
 test:
     cargo test --release
+
+# both tiers, as CI runs them (the browser, Python and Dask checks run where
+# their tools are; .ci/run makes them mandatory)
+test-all:
+    cargo test --release -- --include-ignored
 
 # benchmarks of the hot loops; figures go into docs/performance.md
 bench:

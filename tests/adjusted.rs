@@ -3,39 +3,24 @@
 //! coordinates, its curvature at the independent posterior's mode set to
 //! H V⁻¹ H, V the covariance of its score given the residuals' memory.
 
+mod common;
+
+use common::{ok, one_revolution, virtual_campaign, with_smooth_force};
 use mrbp::calibrate::{start, CalibrationSettings};
 use mrbp::data::Campaign;
 use mrbp::model::{Integrator, Params, LANES};
 use mrbp::posterior::{run_log_likelihood, LaneParams, Memory, MemoryAdjustment};
 use mrbp::sampler::LogDensity;
-use mrbp::synth::{write_campaign, ExtraForce, SynthSettings};
+use mrbp::synth::SynthSettings;
 
 /// One crank revolution per crank speed at 2 kHz, 1 A, with a smooth
 /// random force of `smooth_n` (N, 20 ms time scale) the law does not have;
 /// the displacement exact where there is none (the smoothed strain's noise
 /// is correlated over the smoothing window).
 fn campaign(seed: u64, smooth_n: f64) -> (tempfile::TempDir, Campaign) {
-    let dir = tempfile::tempdir().unwrap();
-    let settings = SynthSettings {
-        currents_a: vec![1.0],
-        cycles: 1.0,
-        rate_hz: 2000.0,
-        seed,
-        noise_displacement_m: if smooth_n == 0.0 {
-            0.0
-        } else {
-            SynthSettings::default().noise_displacement_m
-        },
-        extra_force: ExtraForce {
-            smooth_sd_n: vec![smooth_n],
-            smooth_time_s: vec![0.02],
-            ..ExtraForce::default()
-        },
-        ..SynthSettings::default()
-    };
-    write_campaign(&settings, dir.path()).unwrap();
-    let c = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
-    (dir, c)
+    let exact = SynthSettings { seed, ..one_revolution() };
+    let noise_displacement_m = if smooth_n == 0.0 { 0.0 } else { exact.noise_displacement_m };
+    virtual_campaign(&with_smooth_force(SynthSettings { noise_displacement_m, ..exact }, smooth_n))
 }
 
 fn adjusted() -> CalibrationSettings {
@@ -159,6 +144,7 @@ fn only_residuals_with_memory_are_adjusted() {
 /// are heavy-tailed in ln θ (a few replicates far out set the scatter;
 /// adjusted / scatter 0.54 and 0.74, independent 0.10 and 0.25).
 #[test]
+#[ignore = "slow tier: a replicate study of the adjusted likelihood"]
 fn the_adjusted_sds_are_the_scatter_of_the_estimate() {
     use mrbp::posterior::{map, mode, Posterior};
     use mrbp::sampler::Elliptical;
@@ -274,30 +260,22 @@ fn a_malformed_adjustment_is_refused() {
 /// run left out, its pull amplified by C⁻¹: 35–65 % inside on measured
 /// records.
 #[test]
+#[ignore = "slow tier: leave-one-out with the adjusted likelihood"]
 fn held_out_runs_fall_inside_their_bands() {
     use mrbp::store::{f64_column, read_parquet, str_column};
     let (dir, _c) = campaign(21, 80.0);
     let manifest = dir.path().join("campaign.toml");
     let held_out = |memory: &str| {
         let out = tempfile::tempdir().unwrap();
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_mrbp"))
-            .args([
-                "run",
-                manifest.to_str().unwrap(),
-                "--out",
-                out.path().to_str().unwrap(),
-                "--memory",
-                memory,
-                "--leave-one-out",
-            ])
-            .output()
-            .expect("run mrbp");
-        assert!(
-            o.status.success(),
-            "{}\n{}",
-            String::from_utf8_lossy(&o.stdout),
-            String::from_utf8_lossy(&o.stderr)
-        );
+        ok(&[
+            "run",
+            manifest.to_str().unwrap(),
+            "--out",
+            out.path().to_str().unwrap(),
+            "--memory",
+            memory,
+            "--leave-one-out",
+        ]);
         let path = out.path().join("I1.0A").join("loo.parquet");
         let loo = read_parquet(&path).unwrap();
         let inside = f64_column(&loo, "inside_p95", &path).unwrap();

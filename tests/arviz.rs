@@ -5,8 +5,7 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use common::{arg, ok, one_revolution, write_virtual};
 
 use mrbp::calibrate::CalibrationSettings;
 use mrbp::data::Campaign;
@@ -15,18 +14,6 @@ use mrbp::noise::NoiseKind;
 use mrbp::pointwise::pointwise_draws;
 use mrbp::posterior::{LikelihoodSettings, PosteriorSample};
 use mrbp::sampler::{Chains, LogDensity};
-use mrbp::synth::{write_campaign, SynthSettings};
-
-fn campaign(dir: &Path) -> PathBuf {
-    let settings = SynthSettings {
-        currents_a: vec![1.0],
-        cycles: 1.0,
-        rate_hz: 2000.0,
-        ..SynthSettings::default()
-    };
-    write_campaign(&settings, dir).unwrap();
-    dir.join("campaign.toml")
-}
 
 /// For every noise model, the pointwise terms of a draw (a separate
 /// implementation: a path per run, then the terms sample by sample) sum to
@@ -35,7 +22,7 @@ fn campaign(dir: &Path) -> PathBuf {
 #[test]
 fn pointwise_terms_sum_to_the_samplers_likelihood() {
     let data = tempfile::tempdir().unwrap();
-    let campaign = Campaign::load(&campaign(data.path())).unwrap();
+    let campaign = Campaign::load(&write_virtual(&one_revolution(), data.path())).unwrap();
     let cases = [
         LikelihoodSettings::default(),
         LikelihoodSettings { errors_in_variables: false, ..LikelihoodSettings::default() },
@@ -97,24 +84,12 @@ fn pointwise_terms_sum_to_the_samplers_likelihood() {
 /// with ArviZ, which makes a missing one a failure; elsewhere the check runs
 /// where `python3` has ArviZ, xarray and zarr.
 #[test]
+#[ignore = "slow tier: ArviZ opens inference.zarr"]
 fn arviz_opens_the_store_and_agrees_with_the_summary() {
     let data = tempfile::tempdir().unwrap();
-    let manifest = campaign(data.path());
+    let manifest = write_virtual(&one_revolution(), data.path());
     let out = tempfile::tempdir().unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args([
-            "run",
-            manifest.to_str().unwrap(),
-            "--out",
-            out.path().to_str().unwrap(),
-            "--substeps",
-            "2",
-            "--draws",
-            "100",
-        ])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    ok(&["run", arg(&manifest), "--out", arg(out.path()), "--substeps", "2", "--draws", "100"]);
     let dir = out.path().join("I1.0A");
     let store = dir.join("inference.zarr");
     for group in

@@ -4,13 +4,12 @@
 //! the one-line message it expects. Refusals are exit 2 and name the file,
 //! row, column or option; nothing is left half-written.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-fn mrbp(dir: &Path, args: &[String]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mrbp")).current_dir(dir).args(args).output().expect("run mrbp")
-}
+use common::{mrbp_in, said};
 
 /// A record of `n` samples at 1 kHz: two cycles of ±5 mm and a force that
 /// follows the velocity's sign, as a damper's does.
@@ -97,14 +96,14 @@ fn calibration() -> &'static (PathBuf, PathBuf) {
     CAL.get_or_init(|| {
         let root = tempfile::tempdir().unwrap().keep();
         let data = root.join("data");
-        let o = mrbp(
+        let o = mrbp_in(
             &root,
-            &s(&["synth", "--out", "data", "--currents", "1.0", "--rate", "2000", "--cycles", "1"]),
+            &["synth", "--out", "data", "--currents", "1.0", "--rate", "2000", "--cycles", "1"],
         );
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(o.status.success(), "{}", said(&o));
         let out = root.join("cal");
-        let o = mrbp(&root, &s(&["sample", "data/campaign.toml", "--out", "cal", "--steps", "30"]));
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let o = mrbp_in(&root, &["sample", "data/campaign.toml", "--out", "cal", "--steps", "30"]);
+        assert!(o.status.success(), "{}", said(&o));
         (data.join("campaign.toml"), out)
     })
 }
@@ -807,9 +806,9 @@ fn cases() -> Vec<Case> {
         Case {
             name: "predict another current with a per-current calibration",
             make: |r| {
-                let o = mrbp(
+                let o = mrbp_in(
                     r,
-                    &s(&[
+                    &[
                         "synth",
                         "--out",
                         "half",
@@ -819,7 +818,7 @@ fn cases() -> Vec<Case> {
                         "2000",
                         "--cycles",
                         "1",
-                    ]),
+                    ],
                 );
                 assert!(o.status.success());
                 s(&[
@@ -893,9 +892,9 @@ fn every_bad_input_is_refused_clearly() {
     for case in &cases {
         let root = tempfile::tempdir().unwrap();
         let args = (case.make)(root.path());
-        let o = mrbp(root.path(), &args);
+        let o = mrbp_in(root.path(), &args.iter().map(String::as_str).collect::<Vec<_>>());
         let err = String::from_utf8_lossy(&o.stderr).to_string();
-        let all = format!("{}{}", String::from_utf8_lossy(&o.stdout), err);
+        let all = said(&o);
         let code = o.status.code();
         if code != Some(case.code) {
             failures.push(format!(

@@ -1,6 +1,9 @@
 //! Bayesian calibration end to end on small virtual campaigns with known
 //! parameters: recovery, the output tables, and reproducibility.
 
+mod common;
+
+use common::{arg, mrbp, ok, one_revolution, virtual_campaign};
 use mrbp::calibrate::calibrate;
 use mrbp::calibrate::CalibrationSettings;
 use mrbp::data::Campaign;
@@ -8,21 +11,14 @@ use mrbp::model::Params;
 use mrbp::store::read_parquet;
 use mrbp::synth::{write_campaign, SynthSettings};
 
-/// One crank revolution per run at 2 kHz, 1 A: small enough for a test.
-/// Force noise as in the bundled records (15 N); `displacement_noise` in m.
+/// One crank revolution per crank speed at 2 kHz, 1 A; `displacement_noise`
+/// in m.
 fn campaign_with(seed: u64, displacement_noise: f64) -> (tempfile::TempDir, Campaign) {
-    let dir = tempfile::tempdir().unwrap();
-    let settings = SynthSettings {
-        currents_a: vec![1.0],
-        cycles: 1.0,
-        rate_hz: 2000.0,
+    virtual_campaign(&SynthSettings {
         noise_displacement_m: displacement_noise,
         seed,
-        ..SynthSettings::default()
-    };
-    write_campaign(&settings, dir.path()).unwrap();
-    let c = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
-    (dir, c)
+        ..one_revolution()
+    })
 }
 
 fn small_campaign(seed: u64) -> (tempfile::TempDir, Campaign) {
@@ -80,24 +76,20 @@ fn same_seed_same_chains_whatever_the_thread_count() {
 fn sample_command_writes_the_contract_tables() {
     let (dir, _) = small_campaign(5);
     let out = tempfile::tempdir().unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args([
-            "sample",
-            dir.path().join("campaign.toml").to_str().unwrap(),
-            "--out",
-            out.path().to_str().unwrap(),
-            "--steps",
-            "40",
-            "--substeps",
-            "1",
-            "--walkers",
-            "20",
-            "--ensembles",
-            "2",
-        ])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = ok(&[
+        "sample",
+        arg(&dir.path().join("campaign.toml")),
+        "--out",
+        arg(out.path()),
+        "--steps",
+        "40",
+        "--substeps",
+        "1",
+        "--walkers",
+        "20",
+        "--ensembles",
+        "2",
+    ]);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("wall time"), "{stdout}");
 
@@ -159,17 +151,14 @@ fn bad_settings_file_is_a_clear_error() {
     let (dir, _) = small_campaign(5);
     let cfg = dir.path().join("bad.toml");
     std::fs::write(&cfg, "[prior.G]\nkind = \"log-normal\"\nmedian = -1.0\nsd_log = 1.0\nlower = 1.0\nupper = 10.0\n").unwrap();
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args([
-            "sample",
-            dir.path().join("campaign.toml").to_str().unwrap(),
-            "--out",
-            "/nonexistent/x",
-            "--config",
-            cfg.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+    let o = mrbp(&[
+        "sample",
+        arg(&dir.path().join("campaign.toml")),
+        "--out",
+        "/nonexistent/x",
+        "--config",
+        arg(&cfg),
+    ]);
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.toml") && err.contains("prior of G"), "{err}");
@@ -182,6 +171,7 @@ fn bad_settings_file_is_a_clear_error() {
 /// every sd within 5 of its own standard errors (sd/√(2 ESS) each). A
 /// correct pair fails one of the 20 checks with probability ~1e-5.
 #[test]
+#[ignore = "slow tier: a long differential-evolution run"]
 fn default_sampler_agrees_with_a_long_differential_evolution_run() {
     use mrbp::sampler::Move;
     let (_dir, campaign) = small_campaign(17);

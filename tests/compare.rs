@@ -2,40 +2,19 @@
 //! `mrbp compare` over per-current calibrations, and the current law
 //! predicting a current it never saw.
 
+mod common;
+
 use std::path::Path;
-use std::process::{Command, Output};
+
+use common::{arg, mrbp, ok, one_revolution, said, write_virtual};
 
 use mrbp::store::{column_names, f64_column, read_parquet, str_column};
-use mrbp::synth::{write_campaign, SynthSettings};
-
-fn mrbp(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).output().expect("run mrbp")
-}
-
-fn ok(o: Output) {
-    assert!(
-        o.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
+use mrbp::synth::SynthSettings;
 
 /// One revolution at 2 kHz per run, the bundled noise levels.
 fn campaign(dir: &Path, currents: Vec<f64>, rpms: Vec<f64>) -> String {
-    let s = SynthSettings {
-        currents_a: currents,
-        rpms,
-        cycles: 1.0,
-        rate_hz: 2000.0,
-        ..SynthSettings::default()
-    };
-    write_campaign(&s, dir).unwrap();
-    dir.join("campaign.toml").to_str().unwrap().to_string()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    let settings = SynthSettings { currents_a: currents, rpms, ..one_revolution() };
+    arg(&write_virtual(&settings, dir)).to_string()
 }
 
 /// R0, R1 and D1 at 1.0 A are 1/0.60 times those at 0.5 A on the virtual
@@ -49,13 +28,13 @@ fn compare_tells_current_levels_apart() {
     let data = tempfile::tempdir().unwrap();
     let manifest = campaign(data.path(), vec![0.5, 1.0], vec![100.0, 400.0]);
     let out = tempfile::tempdir().unwrap();
-    ok(mrbp(&["sample", &manifest, "--out", s(out.path()), "--substeps", "2"]));
+    ok(&["sample", &manifest, "--out", arg(out.path()), "--substeps", "2"]);
     let (lo, hi) = (out.path().join("I0.5A"), out.path().join("I1.0A"));
     for d in [&lo, &hi] {
-        ok(mrbp(&["predict", s(d), "--draws", "100"]));
+        ok(&["predict", arg(d), "--draws", "100"]);
     }
     let cmp = out.path().join("cmp");
-    ok(mrbp(&["compare", s(&hi), s(&lo), "--out", s(&cmp)]));
+    ok(&["compare", arg(&hi), arg(&lo), "--out", arg(&cmp)]);
 
     let path = cmp.join("comparison.parquet");
     let t = read_parquet(&path).unwrap();
@@ -119,19 +98,19 @@ fn current_law_predicts_a_held_out_current() {
     let manifest = campaign(data.path(), vec![0.5, 1.0, 1.5], vec![200.0]);
     let out = tempfile::tempdir().unwrap();
     let law = out.path().join("law");
-    ok(mrbp(&[
+    ok(&[
         "sample",
         &manifest,
         "--out",
-        s(&law),
+        arg(&law),
         "--model",
         "current-law",
         "--hold-out-current",
         "1.0",
         "--substeps",
         "2",
-    ]));
-    ok(mrbp(&["predict", s(&law), "--draws", "200"]));
+    ]);
+    ok(&["predict", arg(&law), "--draws", "200"]);
     // the record keeps each run's current: an unseen run's noise is
     // interpolated between the calibrated currents from it
     let record = std::fs::read_to_string(law.join("calibration.toml")).unwrap();
@@ -148,10 +127,10 @@ fn current_law_predicts_a_held_out_current() {
 
     // the law's folder compares with a per-current one, and the report says what was held out
     let per = out.path().join("per");
-    ok(mrbp(&["sample", &manifest, "--out", s(&per), "--current", "1.0", "--substeps", "2"]));
-    ok(mrbp(&["predict", s(&per), "--draws", "100"]));
+    ok(&["sample", &manifest, "--out", arg(&per), "--current", "1.0", "--substeps", "2"]);
+    ok(&["predict", arg(&per), "--draws", "100"]);
     let cmp = out.path().join("cmp");
-    ok(mrbp(&["compare", s(&per), s(&law), "--out", s(&cmp)]));
+    ok(&["compare", arg(&per), arg(&law), "--out", arg(&cmp)]);
     let html = std::fs::read_to_string(cmp.join("report.html")).unwrap();
     assert!(
         html.contains("<b>held out</b>") && html.contains("held_out_law"),
@@ -239,7 +218,7 @@ fn current_law_predicts_a_held_out_current() {
         q95[k],
         stand.r0
     );
-    ok(mrbp(&["report", s(&law)]));
+    ok(&["report", arg(&law)]);
     let report = std::fs::read_to_string(law.join("report.html")).unwrap();
     assert!(
         report.contains("alt=\"against_current\"") && law.join("against_current.png").exists(),
@@ -247,20 +226,20 @@ fn current_law_predicts_a_held_out_current() {
     );
 
     // bad use is a usage error, not a crash
-    let o = mrbp(&["sample", &manifest, "--out", s(&per), "--hold-out-current", "1.0"]);
+    let o = mrbp(&["sample", &manifest, "--out", arg(&per), "--hold-out-current", "1.0"]);
     assert_eq!(o.status.code(), Some(2));
     let o = mrbp(&[
         "sample",
         &manifest,
         "--out",
-        s(&law),
+        arg(&law),
         "--model",
         "current-law",
         "--hold-out-current",
         "0.7",
     ]);
     assert_eq!(o.status.code(), Some(2));
-    let o = mrbp(&["compare", s(&per)]);
+    let o = mrbp(&["compare", arg(&per)]);
     assert_eq!(o.status.code(), Some(2));
 }
 
@@ -275,6 +254,7 @@ fn current_law_predicts_a_held_out_current() {
 /// 5·10⁻⁴ per coordinate: one of the 22 fails by chance with probability
 /// about 1 %). Measured: |z| ≤ 1.70 (R0_high); the lag 11.98 ± 0.03 ms.
 #[test]
+#[ignore = "slow tier: the current curves with a coil lag"]
 fn current_curves_and_coil_lag_recover_their_truth() {
     use mrbp::model::{CurrentCurves, Params};
     use mrbp::synth::SwitchedRun;
@@ -292,9 +272,7 @@ fn current_curves_and_coil_lag_recover_their_truth() {
     let mut settings = SynthSettings {
         currents_a: vec![0.25, 0.5, 1.0],
         rpms: vec![100.0, 400.0],
-        cycles: 1.0,
-        rate_hz: 2000.0,
-        ..SynthSettings::default()
+        ..one_revolution()
     };
     settings.law.curves = Some(truth);
     settings.law.coil_lag_s = lag;
@@ -302,11 +280,10 @@ fn current_curves_and_coil_lag_recover_their_truth() {
         SwitchedRun { rpm: 200.0, levels_a: vec![0.25, 1.0, 0.5], holds_s: vec![0.08] },
         SwitchedRun { rpm: 400.0, levels_a: vec![0.0, 1.0], holds_s: vec![0.006, 0.014] },
     ];
-    write_campaign(&settings, data.path()).unwrap();
-    let manifest = data.path().join("campaign.toml");
+    let manifest = write_virtual(&settings, data.path());
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("curves");
-    ok(mrbp(&["sample", s(&manifest), "--out", s(&dir), "--model", "current-curves"]));
+    ok(&["sample", arg(&manifest), "--out", arg(&dir), "--model", "current-curves"]);
     let path = dir.join("summary.parquet");
     let t = read_parquet(&path).unwrap();
     let names = str_column(&t, "parameter", &path).unwrap();
@@ -341,7 +318,7 @@ fn current_curves_and_coil_lag_recover_their_truth() {
     // the switched runs are predicted along their current: their 95 %
     // predictive band holds about 95 % of each (at least 90 %: a model
     // that missed the switching would leave whole stretches outside)
-    ok(mrbp(&["predict", s(&dir), "--draws", "60", "--replicates", "4"]));
+    ok(&["predict", arg(&dir), "--draws", "60", "--replicates", "4"]);
     let path = dir.join("coverage.parquet");
     let cov = read_parquet(&path).unwrap();
     let (runs, inside) =
@@ -371,16 +348,16 @@ fn current_curves_and_coil_lag_recover_their_truth() {
     }
     let held = rows.iter().find(|r| !r.starts_with('S')).expect("a run at one current").clone();
     assert!(of(&held).iter().all(|c| c.is_nan()), "{held} has no current history");
-    ok(mrbp(&["report", s(&dir)]));
+    ok(&["report", arg(&dir)]);
     let figure = std::fs::read_to_string(dir.join("bands_S1_200rpm.svg"))
         .expect("the switched run's bands figure");
     assert!(figure.contains("S1_200rpm: coil current"), "the figure has the current's panel");
     // one parameter set per current cannot calibrate a switched run: it is
     // left out, and said so
     let per = out.path().join("per");
-    let o = mrbp(&["sample", s(&manifest), "--out", s(&per), "--current", "1.0", "--steps", "5"]);
-    let said =
-        format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    let o =
+        mrbp(&["sample", arg(&manifest), "--out", arg(&per), "--current", "1.0", "--steps", "5"]);
+    let said = said(&o);
     assert!(
         o.status.success()
             && said.contains("S1_200rpm, S2_400rpm: the current changes within the record"),

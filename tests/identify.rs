@@ -1,11 +1,14 @@
 //! The deterministic identification end to end: recovery on noise-free
 //! virtual records with known parameters, and the bundled campaign.
 
+mod common;
+
+use common::{ok, write_virtual};
 use mrbp::data::Campaign;
 use mrbp::identify::{identify_campaign, identify_current, IdentifySettings};
 use mrbp::model::{Params, PHYSICAL_RANGE};
 use mrbp::store::read_parquet;
-use mrbp::synth::{write_campaign, SynthSettings};
+use mrbp::synth::SynthSettings;
 
 #[test]
 fn noise_free_10khz_recovers_g_r0_and_n() {
@@ -17,8 +20,7 @@ fn noise_free_10khz_recovers_g_r0_and_n() {
         noise_displacement_m: 0.0,
         ..SynthSettings::default()
     };
-    write_campaign(&settings, dir.path()).unwrap();
-    let campaign = Campaign::load(&dir.path().join("campaign.toml")).unwrap();
+    let campaign = Campaign::load(&write_virtual(&settings, dir.path())).unwrap();
     let id = identify_current(&campaign, 1.0, &IdentifySettings::default());
     let truth = Params::reference_1a();
     let rel = |e: f64, t: f64| (e - t).abs() / t;
@@ -54,16 +56,12 @@ fn bundled_campaign_identifies_every_current_inside_the_physical_range() {
 fn identify_command_writes_table_and_figures() {
     let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = tempfile::tempdir().unwrap();
-    let status = std::process::Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args([
-            "identify",
-            repo.join("data/campaign.toml").to_str().unwrap(),
-            "--out",
-            out.path().to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    ok(&[
+        "identify",
+        repo.join("data/campaign.toml").to_str().unwrap(),
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
     let df = read_parquet(&out.path().join("identification.parquet")).unwrap();
     let names: Vec<String> = df.get_column_names().iter().map(|s| s.to_string()).collect();
     for c in ["run", "parameter", "value"] {

@@ -4,29 +4,25 @@
 //! of an uninterrupted run. A re-calibration into a folder with --force
 //! removes the files derived from the old chains.
 
+mod common;
+
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use common::{mrbp_in, said};
 use mrbp::store::read_parquet;
 
-fn mrbp(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mrbp")).current_dir(dir).args(args).output().expect("run mrbp")
-}
-
-fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
-
 #[test]
+#[ignore = "slow tier: Ctrl-C during sampling, then resumed"]
 fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     let root = tempfile::tempdir().unwrap();
     let dir = root.path();
-    let o = mrbp(
+    let o = mrbp_in(
         dir,
         &["synth", "--out", "data", "--currents", "1.0", "--rate", "2000", "--cycles", "1"],
     );
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
 
     // a run far longer than the test waits, interrupted while it samples
     let child = Command::new(env!("CARGO_BIN_EXE_mrbp"))
@@ -55,13 +51,13 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
     assert!(status.success());
     let out = child.wait_with_output().unwrap();
-    assert_eq!(out.status.code(), Some(130), "{}", text(&out));
-    assert!(text(&out).contains("--resume"), "{}", text(&out));
+    assert_eq!(out.status.code(), Some(130), "{}", said(&out));
+    assert!(said(&out).contains("--resume"), "{}", said(&out));
     assert!(dir.join("cal/sampler.checkpoint").exists());
     assert!(!dir.join("cal/chains.parquet").exists(), "no results from a half run");
 
     // options that do not match the checkpoint are refused at once
-    let o = mrbp(
+    let o = mrbp_in(
         dir,
         &[
             "sample",
@@ -77,9 +73,9 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
             "7",
         ],
     );
-    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    assert!(text(&o).contains("--seed"), "{}", text(&o));
-    let o = mrbp(
+    assert_eq!(o.status.code(), Some(2), "{}", said(&o));
+    assert!(said(&o).contains("--seed"), "{}", said(&o));
+    let o = mrbp_in(
         dir,
         &[
             "sample",
@@ -93,13 +89,13 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
             "--resume",
         ],
     );
-    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    assert!(text(&o).contains("fewer than"), "{}", text(&o));
+    assert_eq!(o.status.code(), Some(2), "{}", said(&o));
+    assert!(said(&o).contains("fewer than"), "{}", said(&o));
 
     // resumed to a fixed length, the chains are those of a run never stopped
     let done = read_steps(&dir.join("cal/sampler.checkpoint"));
     let steps = (done + 5).to_string();
-    let o = mrbp(
+    let o = mrbp_in(
         dir,
         &[
             "sample",
@@ -113,27 +109,27 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
             "--resume",
         ],
     );
-    assert!(o.status.success(), "{}", text(&o));
-    let o = mrbp(
+    assert!(o.status.success(), "{}", said(&o));
+    let o = mrbp_in(
         dir,
         &["sample", "data/campaign.toml", "--out", "whole", "--steps", &steps, "--substeps", "1"],
     );
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     let resumed = read_parquet(&dir.join("cal/chains.parquet")).unwrap();
     let whole = read_parquet(&dir.join("whole/chains.parquet")).unwrap();
     assert!(resumed.equals(&whole), "resumed chains differ from an uninterrupted run");
 
     // a new calibration into the folder: refused without --force; with it,
     // the bands of the old one are gone
-    let o = mrbp(dir, &["predict", "whole", "--draws", "50"]);
-    assert!(o.status.success(), "{}", text(&o));
+    let o = mrbp_in(dir, &["predict", "whole", "--draws", "50"]);
+    assert!(o.status.success(), "{}", said(&o));
     assert!(dir.join("whole/bands.parquet").exists());
-    let o = mrbp(
+    let o = mrbp_in(
         dir,
         &["sample", "data/campaign.toml", "--out", "whole", "--steps", "20", "--substeps", "1"],
     );
-    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    let o = mrbp(
+    assert_eq!(o.status.code(), Some(2), "{}", said(&o));
+    let o = mrbp_in(
         dir,
         &[
             "sample",
@@ -147,7 +143,7 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
             "--force",
         ],
     );
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     for stale in ["bands.parquet", "coverage.parquet", "prediction.toml", "adequacy.parquet"] {
         assert!(!dir.join("whole").join(stale).exists(), "{stale} of the old chains survived");
     }

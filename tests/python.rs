@@ -4,39 +4,28 @@
 //! makes a missing package a failure; elsewhere the suite runs where that
 //! Python can import `mrbp` and `pytest`, and is skipped with a line if not.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
 
-/// `MRBP_PYTHON` (or `python3`) if it imports `modules`; `None` (with a
-/// line saying so) where it does not and the package check is not
-/// mandatory.
-fn python_with(modules: &str, what: &str) -> Option<String> {
-    let must = std::env::var("MRBP_PYTHON_PACKAGE_CHECK").is_ok_and(|v| v == "1");
-    let python = std::env::var("MRBP_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ready = Command::new(&python)
-        .args(["-c", &format!("import {modules}")])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ready {
-        assert!(!must, "MRBP_PYTHON_PACKAGE_CHECK=1 but {python} cannot import {modules} (pip install ./python; scripts/requirements-checks.txt)");
-        eprintln!("{what} skipped: {python} cannot import {modules}");
-        return None;
-    }
-    Some(python)
-}
+use common::{python_with, said};
+
+const REQUIRED: &str = "MRBP_PYTHON_PACKAGE_CHECK";
 
 /// Runs `command` to success, showing what it said.
 fn succeeds(command: &mut Command, what: &str) {
     let o = command.output().unwrap_or_else(|e| panic!("{what}: {e}"));
-    let said =
-        format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    assert!(o.status.success(), "{what} failed:\n{said}");
-    eprintln!("{said}");
+    assert!(o.status.success(), "{what} failed:\n{}", said(&o));
+    eprintln!("{}", said(&o));
 }
 
 #[test]
+#[ignore = "slow tier: the Python package's pytest suite"]
 fn python_package_agrees_with_the_command_line() {
-    let Some(python) = python_with("mrbp, pytest, pandas, pyarrow", "python package tests") else {
+    let Some(python) =
+        python_with("mrbp, pytest, pandas, pyarrow", "python package tests", REQUIRED)
+    else {
         return;
     };
     let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("python").join("tests");
@@ -53,10 +42,12 @@ fn python_package_agrees_with_the_command_line() {
 /// summary and trace, the bands, a simulated excitation; its last cell
 /// asserts convergence and coverage. Mandatory where the package check is.
 #[test]
+#[ignore = "slow tier: the example notebook in a Jupyter kernel"]
 fn example_notebook_runs_end_to_end() {
     let Some(python) = python_with(
         "mrbp, nbclient, nbformat, ipykernel, arviz, matplotlib",
         "the example notebook",
+        REQUIRED,
     ) else {
         return;
     };

@@ -3,8 +3,11 @@
 //! at every current, and a short calibration with the model terms ends in a
 //! report that says where the B-P law misses the damper.
 
+mod common;
+
 use std::path::PathBuf;
-use std::process::Command;
+
+use common::ok;
 
 use mrbp::data::Campaign;
 use mrbp::identify::{identify_campaign, IdentifySettings};
@@ -82,16 +85,13 @@ fn identification_gives_a_usable_start_at_every_current() {
 /// calibration.toml and the report (with the noise model that takes it),
 /// and adequacy.parquet says so per run.
 #[test]
+#[ignore = "slow tier: a calibration of the measured records"]
 fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("cal");
     let config = out.path().join("terms.toml");
     std::fs::write(&config, "[terms]\nforce_offset = true\ngas_spring = true\n").unwrap();
-    let run = |args: &[&str]| {
-        let o = Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).output().unwrap();
-        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8_lossy(&o.stdout).to_string()
-    };
+    let run = |args: &[&str]| String::from_utf8_lossy(&ok(args).stdout).to_string();
     let (m, d, c) =
         (manifest(), dir.to_str().unwrap().to_string(), config.to_str().unwrap().to_string());
     let printed =
@@ -186,20 +186,16 @@ fn a_local_map_is_left_for_higher_ground_and_a_ridge_is_named() {
     .unwrap();
     let dir = out.path().join("cal");
     let config = data.join("mrbp.toml");
-    let o = Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args([
-            "sample",
-            one.to_str().unwrap(),
-            "--config",
-            config.to_str().unwrap(),
-            "--out",
-            dir.to_str().unwrap(),
-            "--steps",
-            "10",
-        ])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    ok(&[
+        "sample",
+        one.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+        "--steps",
+        "10",
+    ]);
     let record: toml::Table =
         std::fs::read_to_string(dir.join("calibration.toml")).unwrap().parse().unwrap();
     let map = record["map_log_density"].as_float().unwrap();
@@ -228,15 +224,12 @@ fn a_local_map_is_left_for_higher_ground_and_a_ridge_is_named() {
 /// of its value, against 0.8 % with independent residuals (above 2 %
 /// asserted).
 #[test]
+#[ignore = "slow tier: two calibrations of the measured records"]
 fn the_tempered_likelihood_widens_the_measured_intervals() {
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("cal");
     let d = dir.to_str().unwrap().to_string();
-    let run = |args: &[&str]| {
-        let o = Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).output().unwrap();
-        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8_lossy(&o.stdout).to_string()
-    };
+    let run = |args: &[&str]| String::from_utf8_lossy(&ok(args).stdout).to_string();
     let printed = run(&[
         "sample",
         manifest().to_str().unwrap(),
@@ -285,6 +278,7 @@ fn the_tempered_likelihood_widens_the_measured_intervals() {
 /// the start long before. On virtual records whose force is of the model's
 /// own kind the check stays silent (tests/calibration.rs).
 #[test]
+#[ignore = "slow tier: the discrepancy model on the measured records"]
 fn a_discrepancy_that_takes_over_the_laws_force_is_named() {
     use mrbp::calibrate::{calibrate, start, CalibrationSettings};
     use mrbp::noise::NoiseKind;

@@ -2,33 +2,15 @@
 //! with leave-one-out, then what it wrote (bands, coverage, the report) and
 //! the report in a real browser.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+use common::{mrbp, one_revolution, said, skipped, slow_tier, with_smooth_force, write_virtual};
 
 use mrbp::store::{column_names, f64_column, read_parquet, str_column};
-use mrbp::synth::{write_campaign, SynthSettings};
-
-fn mrbp(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).output().expect("run mrbp")
-}
-
-fn text(o: &Output) -> String {
-    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
-
-/// The three bundled crank speeds at 1 A, one revolution at 2 kHz, with the
-/// bundled noise levels (15 N force, 2 µm displacement): records from known
-/// parameters.
-fn virtual_campaign(dir: &Path) -> PathBuf {
-    let settings = SynthSettings {
-        currents_a: vec![1.0],
-        cycles: 1.0,
-        rate_hz: 2000.0,
-        ..SynthSettings::default()
-    };
-    write_campaign(&settings, dir).unwrap();
-    dir.join("campaign.toml")
-}
+use mrbp::synth::SynthSettings;
 
 const SECTIONS: [&str; 9] = [
     "campaign",
@@ -45,7 +27,7 @@ const SECTIONS: [&str; 9] = [
 #[test]
 fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     let data = tempfile::tempdir().unwrap();
-    let manifest = virtual_campaign(data.path());
+    let manifest = write_virtual(&one_revolution(), data.path());
     let out = tempfile::tempdir().unwrap();
     let o = mrbp(&[
         "run",
@@ -60,7 +42,7 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
         "--draws",
         "200",
     ]);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     let dir = out.path().join("I1.0A");
 
     // bands.parquet: the contract's columns, ordered quantiles, one row per sample
@@ -134,7 +116,7 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
         "--threads",
         "1",
     ]);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     let again = read_parquet(&copy.path().join("bands.parquet")).unwrap();
     let first = read_parquet(&dir.join("bands.parquet")).unwrap();
     assert!(again.equals(&first), "same seed, one thread: same bands");
@@ -143,7 +125,7 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     // the same table and bands, bit for bit
     let alone = tempfile::tempdir().unwrap();
     let o = Command::new("cp").arg("-a").arg(&dir).arg(alone.path()).output().unwrap();
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     let again_dir = alone.path().join("I1.0A");
     let o = mrbp(&[
         "--threads",
@@ -156,7 +138,7 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
         "--draws",
         "200",
     ]);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     for file in ["loo.parquet", "loo_bands.parquet"] {
         let one = read_parquet(&again_dir.join(file)).unwrap();
         let all = read_parquet(&dir.join(file)).unwrap();
@@ -176,15 +158,7 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
     // a later test of the same damper (a new noise realisation): every run
     // is new to the calibration, and its band holds 90–99 % of each
     let later = tempfile::tempdir().unwrap();
-    let settings = SynthSettings {
-        currents_a: vec![1.0],
-        cycles: 1.0,
-        rate_hz: 2000.0,
-        seed: 99,
-        ..SynthSettings::default()
-    };
-    write_campaign(&settings, later.path()).unwrap();
-    let other = later.path().join("campaign.toml");
+    let other = write_virtual(&SynthSettings { seed: 99, ..one_revolution() }, later.path());
     let o = mrbp(&[
         "predict",
         dir.to_str().unwrap(),
@@ -193,7 +167,7 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
         "--draws",
         "200",
     ]);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     let on = dir.join("on-rd1005-3-virtual");
     let path = on.join("coverage.parquet");
     let cov = read_parquet(&path).unwrap();
@@ -207,29 +181,26 @@ fn run_writes_bands_coverage_and_a_report_that_a_browser_opens() {
 
     // a per-current calibration does not predict another current
     let half = tempfile::tempdir().unwrap();
-    let settings = SynthSettings {
-        currents_a: vec![0.5],
-        cycles: 1.0,
-        rate_hz: 2000.0,
-        ..SynthSettings::default()
-    };
-    write_campaign(&settings, half.path()).unwrap();
-    let other = half.path().join("campaign.toml");
+    let settings = SynthSettings { currents_a: vec![0.5], ..one_revolution() };
+    let other = write_virtual(&settings, half.path());
     let o = mrbp(&["predict", dir.to_str().unwrap(), "--campaign", other.to_str().unwrap()]);
-    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    assert!(text(&o).contains("no run at 1 A"), "{}", text(&o));
+    assert_eq!(o.status.code(), Some(2), "{}", said(&o));
+    assert!(said(&o).contains("no run at 1 A"), "{}", said(&o));
 }
 
 /// Opens the report in headless Chromium (scripts/browser_check.mjs). CI
 /// installs Chromium and sets MRBP_BROWSER_CHECK=1, which makes a missing
 /// browser a failure; elsewhere the check runs where Chromium and Node are.
 fn browser_check(report: &Path) {
+    if !slow_tier("the report in headless Chromium") {
+        return;
+    }
     let required = std::env::var("MRBP_BROWSER_CHECK").is_ok_and(|v| v == "1");
     let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
     let node = Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
     if !(Path::new(&chromium).exists() && node) {
         assert!(!required, "MRBP_BROWSER_CHECK=1 but no {chromium} or no node");
-        eprintln!("browser check skipped: no Chromium or Node on this machine");
+        skipped("the report in headless Chromium", "no Chromium or Node on this machine");
         return;
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/browser_check.mjs");
@@ -240,7 +211,7 @@ fn browser_check(report: &Path) {
         .args(SECTIONS)
         .output()
         .expect("run node");
-    assert!(o.status.success(), "browser check failed:\n{}", text(&o));
+    assert!(o.status.success(), "browser check failed:\n{}", said(&o));
 }
 
 /// Leave-one-out on eight short runs of one current (one revolution each
@@ -251,18 +222,16 @@ fn browser_check(report: &Path) {
 /// first (every k̂ here is below 1.5, so all draws are weighed). Each
 /// held-out run's 95 % band holds 90–99 % of it (measured 92.0–97.3 %).
 #[test]
+#[ignore = "slow tier: leave-one-out of eight runs"]
 fn leave_one_out_reweights_where_the_weights_can_be_trusted() {
     let data = tempfile::tempdir().unwrap();
     let settings = SynthSettings {
-        currents_a: vec![1.0],
         rpms: vec![100.0, 125.0, 150.0, 200.0, 250.0, 300.0, 350.0, 400.0],
-        cycles: 1.0,
         rate_hz: 1000.0,
         seed: 5,
-        ..SynthSettings::default()
+        ..one_revolution()
     };
-    write_campaign(&settings, data.path()).unwrap();
-    let manifest = data.path().join("campaign.toml");
+    let manifest = write_virtual(&settings, data.path());
     let out = tempfile::tempdir().unwrap();
     let o = mrbp(&[
         "run",
@@ -271,7 +240,7 @@ fn leave_one_out_reweights_where_the_weights_can_be_trusted() {
         out.path().to_str().unwrap(),
         "--leave-one-out",
     ]);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     let path = out.path().join("I1.0A").join("loo.parquet");
     let loo = read_parquet(&path).unwrap();
     let by = str_column(&loo, "held_out_by", &path).unwrap();
@@ -312,7 +281,7 @@ fn later_stages_reject_a_folder_that_is_not_a_calibration() {
 #[test]
 fn a_report_of_very_short_chains_is_written() {
     let data = tempfile::tempdir().unwrap();
-    let manifest = virtual_campaign(data.path());
+    let manifest = write_virtual(&one_revolution(), data.path());
     let out = tempfile::tempdir().unwrap();
     let o = mrbp(&[
         "run",
@@ -326,9 +295,9 @@ fn a_report_of_very_short_chains_is_written() {
         "--draws",
         "20",
     ]);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     assert!(out.path().join("I1.0A/report.html").is_file());
-    assert!(text(&o).contains("run longer"), "{}", text(&o));
+    assert!(said(&o).contains("run longer"), "{}", said(&o));
 }
 
 /// With the discrepancy model on a record that carries a known smooth force
@@ -343,18 +312,10 @@ fn a_report_of_very_short_chains_is_written() {
 #[test]
 fn the_report_draws_the_discrepancy_it_finds() {
     let data = tempfile::tempdir().unwrap();
-    let plain = SynthSettings {
-        currents_a: vec![1.0],
-        rpms: vec![200.0],
-        cycles: 3.0,
-        rate_hz: 2000.0,
-        ..SynthSettings::default()
-    };
-    let mut extra = plain.clone();
-    extra.extra_force.smooth_sd_n = vec![80.0];
-    extra.extra_force.smooth_time_s = vec![0.02];
-    write_campaign(&plain, &data.path().join("plain")).unwrap();
-    write_campaign(&extra, &data.path().join("extra")).unwrap();
+    let plain = SynthSettings { rpms: vec![200.0], cycles: 3.0, ..one_revolution() };
+    let extra = with_smooth_force(plain.clone(), 80.0);
+    write_virtual(&plain, &data.path().join("plain"));
+    write_virtual(&extra, &data.path().join("extra"));
     let out = tempfile::tempdir().unwrap();
     let o = mrbp(&[
         "run",
@@ -364,7 +325,7 @@ fn the_report_draws_the_discrepancy_it_finds() {
         "--out",
         out.path().to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", said(&o));
     let dir = out.path().join("I1.0A");
 
     // the sensor noise is the same draw in both records: their difference is the added force

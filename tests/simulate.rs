@@ -4,45 +4,19 @@
 //! here; a current law simulates currents between and near its own; what
 //! cannot be simulated is refused before anything is written.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
+use common::{mrbp, ok, said, synth_small};
 use mrbp::store::simulation;
-
-fn mrbp(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mrbp")).args(args).output().expect("run mrbp")
-}
-
-fn said(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
-
-fn ok(args: &[&str]) -> Output {
-    let o = mrbp(args);
-    assert!(o.status.success(), "{args:?}: {}", said(&o));
-    o
-}
 
 /// A small calibration at each of `currents` (one run each, 30 steps), or
 /// a current law over them.
 fn calibrate(dir: &Path, currents: &str, law: bool) -> PathBuf {
-    let data = dir.join("data");
-    ok(&[
-        "synth",
-        "--out",
-        data.to_str().unwrap(),
-        "--currents",
-        currents,
-        "--rpm",
-        "200",
-        "--cycles",
-        "1",
-        "--rate",
-        "400",
-    ]);
+    let manifest = synth_small(dir, currents);
     let out = dir.join("cal");
     let walkers = if law { "24" } else { "18" };
-    let manifest = data.join("campaign.toml");
     let mut args = vec![
         "sample",
         manifest.to_str().unwrap(),

@@ -2,11 +2,14 @@
 //! a whole `mrbp run` on two currents, then each store module's reader
 //! agrees with what the run said and with the other files.
 
+mod common;
+
 use std::path::Path;
-use std::process::Command;
+
+use common::{arg, ok, write_virtual};
 
 use mrbp::store;
-use mrbp::synth::{write_campaign, SynthSettings};
+use mrbp::synth::SynthSettings;
 
 #[test]
 fn every_file_reads_back_and_agrees_with_the_others() {
@@ -18,24 +21,20 @@ fn every_file_reads_back_and_agrees_with_the_others() {
         rate_hz: 1000.0,
         ..SynthSettings::default()
     };
-    write_campaign(&settings, data.path()).unwrap();
+    let manifest = write_virtual(&settings, data.path());
     let out = tempfile::tempdir().unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_mrbp"))
-        .args([
-            "run",
-            data.path().join("campaign.toml").to_str().unwrap(),
-            "--out",
-            out.path().to_str().unwrap(),
-            "--substeps",
-            "2",
-            "--steps",
-            "40",
-            "--draws",
-            "50",
-        ])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    ok(&[
+        "run",
+        arg(&manifest),
+        "--out",
+        arg(out.path()),
+        "--substeps",
+        "2",
+        "--steps",
+        "40",
+        "--draws",
+        "50",
+    ]);
 
     for current in ["I0.5A", "I1.0A"] {
         let dir = out.path().join(current);
