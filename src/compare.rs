@@ -324,8 +324,8 @@ pub fn against_current(
 /// The posterior of a − b and a / b where `a[i]` and `b[i]` come from the
 /// same draw (two functions of one posterior, not two posteriors).
 pub fn paired_difference(a: &[f64], b: &[f64]) -> Difference {
-    let mut diffs: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
-    let mut ratios: Vec<f64> = a.iter().zip(b).map(|(x, y)| x / y).collect();
+    let diffs: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    let ratios: Vec<f64> = a.iter().zip(b).map(|(x, y)| x / y).collect();
     let greater: f64 = diffs
         .iter()
         .map(|d| {
@@ -338,17 +338,8 @@ pub fn paired_difference(a: &[f64], b: &[f64]) -> Difference {
             }
         })
         .sum();
-    diffs.sort_by(f64::total_cmp);
-    ratios.sort_by(f64::total_cmp);
-    Difference {
-        diff_q05: quantile_sorted(&diffs, 0.05),
-        diff_q50: quantile_sorted(&diffs, 0.5),
-        diff_q95: quantile_sorted(&diffs, 0.95),
-        ratio_q05: quantile_sorted(&ratios, 0.05),
-        ratio_q50: quantile_sorted(&ratios, 0.5),
-        ratio_q95: quantile_sorted(&ratios, 0.95),
-        p_greater: greater / diffs.len().max(1) as f64,
-    }
+    let p_greater = greater / diffs.len().max(1) as f64;
+    Difference::of(diffs, ratios, p_greater)
 }
 
 /// The posterior of a − b and a / b for one parameter.
@@ -362,6 +353,24 @@ pub struct Difference {
     pub ratio_q95: f64,
     /// P(a > b), over every pair of draws.
     pub p_greater: f64,
+}
+
+impl Difference {
+    /// The quantiles of the draws of a − b (`diffs`) and a / b (`ratios`),
+    /// beside P(a > b).
+    fn of(mut diffs: Vec<f64>, mut ratios: Vec<f64>, p_greater: f64) -> Difference {
+        diffs.sort_by(f64::total_cmp);
+        ratios.sort_by(f64::total_cmp);
+        Difference {
+            diff_q05: quantile_sorted(&diffs, 0.05),
+            diff_q50: quantile_sorted(&diffs, 0.5),
+            diff_q95: quantile_sorted(&diffs, 0.95),
+            ratio_q05: quantile_sorted(&ratios, 0.05),
+            ratio_q50: quantile_sorted(&ratios, 0.5),
+            ratio_q95: quantile_sorted(&ratios, 0.95),
+            p_greater,
+        }
+    }
 }
 
 /// Pairings of draws used for the quantiles of a − b and a / b: each draw
@@ -392,17 +401,7 @@ pub fn difference(a: &[f64], b: &[f64]) -> Difference {
             ratios.push(x / y);
         }
     }
-    diffs.sort_by(f64::total_cmp);
-    ratios.sort_by(f64::total_cmp);
-    Difference {
-        diff_q05: quantile_sorted(&diffs, 0.05),
-        diff_q50: quantile_sorted(&diffs, 0.5),
-        diff_q95: quantile_sorted(&diffs, 0.95),
-        ratio_q05: quantile_sorted(&ratios, 0.05),
-        ratio_q50: quantile_sorted(&ratios, 0.5),
-        ratio_q95: quantile_sorted(&ratios, 0.95),
-        p_greater,
-    }
+    Difference::of(diffs, ratios, p_greater)
 }
 
 #[cfg(test)]

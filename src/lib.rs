@@ -4,10 +4,11 @@
 //! The modules, from the ground floor up (each uses only those before it in
 //! this list; docs/architecture.md says more):
 //!
-//! * [`model`], [`fit`], [`interrupt`], [`rng`], [`error`], [`atomic`],
-//!   [`lock`], [`plot`]: the B-P law (paper eqs. 3–4), its current law and
-//!   its Euler integrators; least squares, Ctrl-C, random streams, errors
-//!   and exit codes, atomic file writing, one writer per folder, figures;
+//! * [`model`], [`fit`], [`numeric`], [`interrupt`], [`rng`], [`error`],
+//!   [`atomic`], [`lock`], [`plot`]: the B-P law (paper eqs. 3–4), its
+//!   current law and its Euler integrators; least squares, a covariance's
+//!   factor and log-sum-exp, Ctrl-C, random streams, errors and exit codes,
+//!   atomic file writing, one writer per folder, figures;
 //! * [`data`]: test campaigns, records, shear quantities (eqs. 1–2), a run
 //!   as the model sees it;
 //! * [`sampler`]: the ensemble MCMC sampler, generic over a log-density, and
@@ -39,7 +40,9 @@ pub mod identify;
 pub mod interrupt;
 pub mod lock;
 pub mod model;
+pub mod newton;
 pub mod noise;
+pub mod numeric;
 pub mod pipeline;
 pub mod plot;
 pub mod pointwise;

@@ -493,11 +493,7 @@ fn sensed(
     if let Some((sd, ell)) = smooth {
         let mut rng = crate::rng::stream(settings.seed, &[stream, EXTRA_FORCE_STREAM]);
         let path = crate::noise::discrepancy::sample_path(
-            settings.extra_force.kernel,
-            sd,
-            ell,
-            &time,
-            &mut rng,
+            settings.extra_force.kernel, sd, ell, &time, &mut rng,
         );
         force.iter_mut().zip(path).for_each(|(f, d)| *f += d);
     }
@@ -595,9 +591,7 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     }
     if !settings.switched.is_empty() {
         let mut chart = Chart::new(
-            "switched-current records",
-            "piston displacement x (mm)",
-            "damper force F (kN)",
+            "switched-current records", "piston displacement x (mm)", "damper force F (kN)",
         );
         chart.legend_at = LegendAt::Middle;
         for (k, run) in settings.switched.iter().enumerate() {

@@ -146,7 +146,7 @@ fn only_residuals_with_memory_are_adjusted() {
 #[test]
 #[ignore = "slow tier: a replicate study of the adjusted likelihood"]
 fn the_adjusted_sds_are_the_scatter_of_the_estimate() {
-    use mrbp::posterior::{map, mode, Posterior};
+    use mrbp::posterior::{laplace, map, Posterior};
     use mrbp::sampler::Elliptical;
     use rand_distr::{Distribution, StandardNormal};
     // the sd of each ln θ under a Gaussian approximation, from its draws
@@ -166,10 +166,10 @@ fn the_adjusted_sds_are_the_scatter_of_the_estimate() {
         let s = start(&c, &adjusted(), &mut |_| {}).unwrap();
         let a = s.settings.likelihood.memory_adjustment.clone().expect("measured");
         centres.push(s.posterior.layout.log_theta(&a.centre));
-        adjusted_sds.push(sds(&mode::laplace_from(&s.posterior, &s.map), &s.posterior, seed));
+        adjusted_sds.push(sds(&laplace::at_mode(&s.posterior, &s.map), &s.posterior, seed));
         let independent = CalibrationSettings::default().posterior(&c, s.posterior.integrator);
         let at = map::refine(&independent, &s.map.x[..independent.layout.fitted.len()]).unwrap();
-        independent_sds.push(sds(&mode::laplace_from(&independent, &at), &independent, seed));
+        independent_sds.push(sds(&laplace::at_mode(&independent, &at), &independent, seed));
     }
     let rms = |v: &[Vec<f64>], i: usize| {
         (v.iter().map(|s| s[i] * s[i]).sum::<f64>() / v.len() as f64).sqrt()

@@ -809,15 +809,8 @@ fn cases() -> Vec<Case> {
                 let o = mrbp_in(
                     r,
                     &[
-                        "synth",
-                        "--out",
-                        "half",
-                        "--currents",
-                        "0.5",
-                        "--rate",
-                        "2000",
-                        "--cycles",
-                        "1",
+                        "synth", "--out", "half", "--currents", "0.5", "--rate", "2000",
+                        "--cycles", "1",
                     ],
                 );
                 assert!(o.status.success());
@@ -892,6 +885,8 @@ fn every_bad_input_is_refused_clearly() {
     for case in &cases {
         let root = tempfile::tempdir().unwrap();
         let args = (case.make)(root.path());
+        let results = ["out", "pred", "cmp"];
+        let existed = results.map(|d| root.path().join(d).exists());
         let o = mrbp_in(root.path(), &args.iter().map(String::as_str).collect::<Vec<_>>());
         let err = String::from_utf8_lossy(&o.stderr).to_string();
         let all = said(&o);
@@ -930,10 +925,17 @@ fn every_bad_input_is_refused_clearly() {
             }
         }
         // a refused command writes no results (the lock file of a folder it
-        // held is no result: docs/contract.md)
+        // held is no result: docs/contract.md) and leaves no folder it made
         if case.code == 2 {
-            for dir in ["out", "pred", "cmp"] {
+            for (dir, existed) in results.iter().zip(existed) {
                 let d = root.path().join(dir);
+                // nor a folder it created and then wrote nothing into
+                let only_lock = std::fs::read_dir(&d)
+                    .map(|it| it.flatten().all(|e| e.file_name() == mrbp::lock::FILE))
+                    .unwrap_or(false);
+                if !existed && only_lock {
+                    failures.push(format!("{}: left the empty folder {dir}/", case.name));
+                }
                 let written: Vec<String> = std::fs::read_dir(&d)
                     .map(|it| {
                         it.filter_map(|e| e.ok())

@@ -48,16 +48,8 @@ fn compare_tells_current_levels_apart() {
     let path = cmp.join("differences.parquet");
     let d = read_parquet(&path).unwrap();
     let cols = [
-        "calibration_a",
-        "calibration_b",
-        "parameter",
-        "diff_q05",
-        "diff_q50",
-        "diff_q95",
-        "ratio_q05",
-        "ratio_q50",
-        "ratio_q95",
-        "p_greater",
+        "calibration_a", "calibration_b", "parameter", "diff_q05", "diff_q50", "diff_q95",
+        "ratio_q05", "ratio_q50", "ratio_q95", "p_greater",
     ];
     assert_eq!(column_names(&d), cols);
     let params = str_column(&d, "parameter", &path).unwrap();

@@ -65,17 +65,8 @@ fn per_run_calibrations_find_the_run_with_another_g() {
     assert_eq!(
         column_names(&table),
         [
-            "parameter",
-            "kind",
-            "label",
-            "mean_log",
-            "sd_log",
-            "q05",
-            "q50",
-            "q95",
-            "chi2_nu",
-            "p_value",
-            "spread_log"
+            "parameter", "kind", "label", "mean_log", "sd_log", "q05", "q50", "q95", "chi2_nu",
+            "p_value", "spread_log"
         ]
     );
     // 7 parameters × (3 runs + joint + new test)
@@ -196,18 +187,8 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
     assert_eq!(
         column_names(&table),
         [
-            "run",
-            "current_a",
-            "samples",
-            "inside_p95",
-            "inside_q95",
-            "rmse_q50_pa",
-            "draws",
-            "failed_draws",
-            "calibrated",
-            "lppd",
-            "left_out",
-            "max_r_hat"
+            "run", "current_a", "samples", "inside_p95", "inside_q95", "rmse_q50_pa", "draws",
+            "failed_draws", "calibrated", "lppd", "left_out", "max_r_hat"
         ]
     );
     let joint = mrbp::store::record::read(&folder.join("calibration.toml")).unwrap();

@@ -106,10 +106,7 @@ fn check_interrupted(w: &Path, before: &Path, reference: &Path, when: &str) {
                 panic!("{when}: {current}'s chains are neither the old nor the new ones")
             });
             for file in [
-                "summary.parquet",
-                "bands.parquet",
-                "coverage.parquet",
-                "adequacy.parquet",
+                "summary.parquet", "bands.parquet", "coverage.parquet", "adequacy.parquet",
                 "identification.parquet",
             ] {
                 if dir.join(file).exists() {
@@ -344,16 +341,7 @@ fn a_folder_being_written_is_refused() {
     };
     busy(
         &mrbp(&[
-            "sample",
-            m,
-            "--out",
-            c,
-            "--current",
-            "1.0",
-            "--force",
-            "--steps",
-            "30",
-            "--walkers",
+            "sample", m, "--out", c, "--current", "1.0", "--force", "--steps", "30", "--walkers",
             "18",
         ]),
         "sample",
@@ -391,18 +379,8 @@ fn two_writers_at_once() {
     let (m, o_) = (manifest.to_str().unwrap(), out.to_str().unwrap());
     let mut first = Command::new(env!("CARGO_BIN_EXE_mrbp"))
         .args([
-            "sample",
-            m,
-            "--out",
-            o_,
-            "--current",
-            "1.0",
-            "--steps",
-            "3000",
-            "--walkers",
-            "18",
-            "--seed",
-            "1",
+            "sample", m, "--out", o_, "--current", "1.0", "--steps", "3000", "--walkers", "18",
+            "--seed", "1",
         ])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
@@ -417,19 +395,8 @@ fn two_writers_at_once() {
         std::thread::sleep(Duration::from_millis(20));
     }
     let second = mrbp(&[
-        "sample",
-        m,
-        "--out",
-        o_,
-        "--current",
-        "1.0",
-        "--steps",
-        "30",
-        "--walkers",
-        "18",
-        "--seed",
-        "2",
-        "--force",
+        "sample", m, "--out", o_, "--current", "1.0", "--steps", "30", "--walkers", "18", "--seed",
+        "2", "--force",
     ]);
     let _ = first.kill();
     let _ = first.wait();

@@ -28,14 +28,7 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     let child = Command::new(env!("CARGO_BIN_EXE_mrbp"))
         .current_dir(dir)
         .args([
-            "sample",
-            "data/campaign.toml",
-            "--out",
-            "cal",
-            "--steps",
-            "100000",
-            "--substeps",
-            "1",
+            "sample", "data/campaign.toml", "--out", "cal", "--steps", "100000", "--substeps", "1",
         ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -60,17 +53,8 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     let o = mrbp_in(
         dir,
         &[
-            "sample",
-            "data/campaign.toml",
-            "--out",
-            "cal",
-            "--steps",
-            "100000",
-            "--substeps",
-            "1",
-            "--resume",
-            "--seed",
-            "7",
+            "sample", "data/campaign.toml", "--out", "cal", "--steps", "100000", "--substeps", "1",
+            "--resume", "--seed", "7",
         ],
     );
     assert_eq!(o.status.code(), Some(2), "{}", said(&o));
@@ -78,14 +62,7 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     let o = mrbp_in(
         dir,
         &[
-            "sample",
-            "data/campaign.toml",
-            "--out",
-            "cal",
-            "--steps",
-            "1",
-            "--substeps",
-            "1",
+            "sample", "data/campaign.toml", "--out", "cal", "--steps", "1", "--substeps", "1",
             "--resume",
         ],
     );
@@ -98,14 +75,7 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     let o = mrbp_in(
         dir,
         &[
-            "sample",
-            "data/campaign.toml",
-            "--out",
-            "cal",
-            "--steps",
-            &steps,
-            "--substeps",
-            "1",
+            "sample", "data/campaign.toml", "--out", "cal", "--steps", &steps, "--substeps", "1",
             "--resume",
         ],
     );
@@ -132,14 +102,7 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     let o = mrbp_in(
         dir,
         &[
-            "sample",
-            "data/campaign.toml",
-            "--out",
-            "whole",
-            "--steps",
-            "20",
-            "--substeps",
-            "1",
+            "sample", "data/campaign.toml", "--out", "whole", "--steps", "20", "--substeps", "1",
             "--force",
         ],
     );

@@ -115,9 +115,7 @@ fn measured_records_calibrate_and_the_report_says_where_the_law_misses() {
     assert!(spread < 3.0, "ln p/q spread {spread} over the initial walkers (measured 0.92)");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     for needle in [
-        "Model adequacy",
-        "Memory: the residuals are correlated",
-        "force–velocity loop",
+        "Model adequacy", "Memory: the residuals are correlated", "force–velocity loop",
         "Reversals:",
     ] {
         assert!(html.contains(needle), "report lacks '{needle}'");

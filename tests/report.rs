@@ -13,15 +13,8 @@ use mrbp::store::{column_names, f64_column, read_parquet, str_column};
 use mrbp::synth::SynthSettings;
 
 const SECTIONS: [&str; 9] = [
-    "campaign",
-    "identification",
-    "posterior",
-    "diagnostics",
-    "coverage",
-    "adequacy",
-    "validation",
-    "figures",
-    "reproduce",
+    "campaign", "identification", "posterior", "diagnostics", "coverage", "adequacy", "validation",
+    "figures", "reproduce",
 ];
 
 #[test]

@@ -160,21 +160,8 @@ fn mutate(rng: &mut ChaCha8Rng, bytes: &[u8]) -> Vec<u8> {
             // a text edit where the file is text: a token replaced by a nasty one
             if let Ok(text) = String::from_utf8(b.clone()) {
                 let nasty = [
-                    "abc",
-                    "1e300",
-                    "-1e999",
-                    "NaN",
-                    "inf",
-                    "",
-                    ",",
-                    "\"",
-                    "[[run]]",
-                    "0",
-                    "-0.0",
-                    "1e-320",
-                    "\n",
-                    "ÿ",
-                    "current_a = 2.5",
+                    "abc", "1e300", "-1e999", "NaN", "inf", "", ",", "\"", "[[run]]", "0", "-0.0",
+                    "1e-320", "\n", "ÿ", "current_a = 2.5",
                 ];
                 let tokens: Vec<&str> = text.split_inclusive([',', '\n', '=']).collect();
                 let k = rng.random_range(0..tokens.len());

@@ -58,19 +58,8 @@ fn a_study_runs_here_once_per_task_and_collects_one_dataset() {
         let df = read_parquet(&part).unwrap();
         let names = column_names(&df);
         for c in [
-            "parameter",
-            "mean",
-            "sd",
-            "truth",
-            "z",
-            "inside_50",
-            "inside_90",
-            "rank",
-            "rank_draws",
-            "seed",
-            "seconds",
-            "steps",
-            "warnings",
+            "parameter", "mean", "sd", "truth", "z", "inside_50", "inside_90", "rank",
+            "rank_draws", "seed", "seconds", "steps", "warnings",
         ] {
             assert!(names.contains(&c.to_string()), "{c} missing: {names:?}");
         }

@@ -137,13 +137,8 @@ impl Calibration {
         let saved = py
             .detach(move || {
                 let mut quiet = |_: mrbp::pipeline::Event<'_>| {};
-                mrbp::pipeline::Pipeline::new(&mut quiet, false).save(
-                    &campaign,
-                    &folder,
-                    cal,
-                    &identification,
-                    force,
-                )
+                mrbp::pipeline::Pipeline::new(&mut quiet, false)
+                    .save(&campaign, &folder, cal, &identification, force)
             })
             .map_err(raise)?;
         self.inner = saved;

@@ -8,7 +8,7 @@
 //! for bit.
 
 use crate::error::Result;
-use crate::posterior::{map, mode, Posterior};
+use crate::posterior::{laplace, map, Posterior};
 use crate::sampler::{
     Chains, Elliptical, LogDensity, Move, Observer, RunControl, Sampler, SamplerSettings,
 };
@@ -56,7 +56,7 @@ pub(super) fn walkers_start<'t>(
     control: &RunControl,
     observers: &mut [&mut dyn Observer],
 ) -> Result<Probed<'t>> {
-    let mut laplace = mode::laplace_from(posterior, map);
+    let mut laplace = laplace::at_mode(posterior, map);
     // the log-density at the mode the walkers start about
     let mut top = posterior.log_density(laplace.mean.as_slice());
     let mut higher: Option<HigherGround> = None;
@@ -174,7 +174,7 @@ fn higher_ground(
     let Some(map) = map::refine(posterior, &chains.positions[best * d..(best + 1) * d]) else {
         return Ok(None);
     };
-    let laplace = mode::laplace_from(posterior, &map);
+    let laplace = laplace::at_mode(posterior, &map);
     let new_top = posterior.log_density(laplace.mean.as_slice());
     Ok((new_top > top + HIGHER_GROUND).then_some((map, laplace, new_top)))
 }
@@ -220,7 +220,7 @@ fn spread(log_ratio: impl Iterator<Item = f64>) -> f64 {
     if w.len() < 2 {
         return 0.0;
     }
-    crate::sampler::diagnostics::variance(&w).sqrt()
+    crate::numeric::variance(&w).sqrt()
 }
 
 /// [`laplace_misfit`] for the coordinates the ensemble moves propose:

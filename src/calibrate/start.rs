@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::identify::{identify_current, CurrentIdentification};
 use crate::model::{Integrator, Scheme};
 use crate::posterior::map::{self, MapEstimate, StepCheck};
-use crate::posterior::{memory, mode, Memory, ParameterModel, Posterior};
+use crate::posterior::{laplace, memory, Memory, ParameterModel, Posterior};
 
 /// Where sampling starts: the identification, the MAP, the step chosen and
 /// the posterior with it.
@@ -65,7 +65,9 @@ pub fn start(
         integ.scheme.scheme()
     };
     let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
-    let posterior = settings.posterior(campaign, base);
+    let mut stages = Stages { campaign, settings, base };
+    let posterior = stages.posterior();
+    let settings = &stages.settings;
     if let Some(a) = posterior.likelihood.adjustment() {
         if a.coordinates != posterior.layout.theta_names() {
             return Err(Error::Usage(format!(
@@ -99,9 +101,10 @@ pub fn start(
     });
     let map = map::best_map(&posterior, &starts)
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
-    let law_alone = law_alone_rms(campaign, &settings, base, &posterior, &starts);
-    let (posterior, map) = temper(campaign, &mut settings, base, posterior, map, log)?;
-    let (posterior, map) = adjust(campaign, &mut settings, base, posterior, map, log)?;
+    let law_alone = stages.law_alone_rms(&posterior, &starts);
+    let (posterior, map) = stages.temper(posterior, map, log)?;
+    let (posterior, map) = stages.adjust(posterior, map, log)?;
+    let mut settings = stages.settings;
     log(&format!(
         "  MAP: log-density {:.1} after {:.1} s; choosing the integrator step",
         map.log_density,
@@ -174,74 +177,110 @@ pub fn start(
     })
 }
 
-/// With the tempered likelihood ([`Memory::Tempered`]): each run's memory
-/// time k from its whitened residuals at `map` (where not set already),
-/// written into `settings`, and the MAP searched again on the posterior
-/// whose runs' log-likelihoods count 1/k. Otherwise `posterior` and `map`
-/// as they are.
-fn temper(
-    campaign: &Campaign,
-    settings: &mut CalibrationSettings,
+/// What the start's later stages share: the campaign, the settings as the
+/// start fills them in, and the integrator of the MAP search. A stage that
+/// changes the likelihood writes what it measured into the settings and
+/// builds the posterior anew from them ([`Stages::searched_again`]).
+struct Stages<'a> {
+    campaign: &'a Campaign,
+    settings: CalibrationSettings,
     base: Integrator,
-    posterior: Posterior,
-    map: MapEstimate,
-    log: &mut dyn FnMut(&str),
-) -> Result<(Posterior, MapEstimate)> {
-    let lik = &mut settings.likelihood;
-    if lik.memory != Memory::Tempered
-        || posterior.runs.iter().all(|r| lik.memory_times.contains_key(&r.id))
-    {
-        return Ok((posterior, map));
-    }
-    let times = map::memory_times(&posterior, &map)
-        .ok_or_else(|| Error::Compute("the residuals at the MAP could not be integrated".into()))?;
-    for (run, k) in posterior.runs.iter().zip(times) {
-        lik.memory_times.entry(run.id.clone()).or_insert(k);
-    }
-    let listed: Vec<String> =
-        posterior.runs.iter().map(|r| format!("{} {:.1}", r.id, lik.memory_times[&r.id])).collect();
-    log(&format!("  memory: each run's log-likelihood counts 1/k, k the integrated autocorrelation time of its whitened MAP residuals (samples): {}", listed.join(", ")));
-    let tempered = settings.posterior(campaign, base);
-    let x = map.x[..tempered.layout.fitted.len()].to_vec();
-    let map = map::refine(&tempered, &x)
-        .ok_or_else(|| Error::Compute("the MAP search of the tempered likelihood failed".into()))?;
-    Ok((tempered, map))
 }
 
-/// With the adjusted likelihood ([`Memory::Adjusted`]): the curvature
-/// adjustment measured at `map`, the MAP of the independent likelihood
-/// (where not set already), written into `settings`, and the MAP searched
-/// again on the adjusted posterior. Otherwise `posterior` and `map` as they
-/// are.
-fn adjust(
-    campaign: &Campaign,
-    settings: &mut CalibrationSettings,
-    base: Integrator,
-    posterior: Posterior,
-    map: MapEstimate,
-    log: &mut dyn FnMut(&str),
-) -> Result<(Posterior, MapEstimate)> {
-    if settings.likelihood.memory != Memory::Adjusted
-        || settings.likelihood.memory_adjustment.is_some()
-    {
-        return Ok((posterior, map));
+impl Stages<'_> {
+    fn posterior(&self) -> Posterior {
+        self.settings.posterior(self.campaign, self.base)
     }
-    if settings.parameter_model() != ParameterModel::PerCurrent {
-        return Err(Error::Usage("`--memory adjusted` takes one parameter set per current (not the current law); `--memory tempered` takes any".into()));
+
+    /// The posterior of the settings as they are now, and its MAP searched
+    /// from the θ of `map` (the `what` in the message if that fails).
+    fn searched_again(&self, map: &MapEstimate, what: &str) -> Result<(Posterior, MapEstimate)> {
+        let posterior = self.posterior();
+        let x = map.x[..posterior.layout.fitted.len()].to_vec();
+        let map = map::refine(&posterior, &x)
+            .ok_or_else(|| Error::Compute(format!("the MAP search of {what} failed")))?;
+        Ok((posterior, map))
     }
-    // centred on the mode of the independent posterior, not the surrogate's optimum
-    let centre = mode::from_map(&posterior, &map).map_or_else(|| map.x.clone(), |m| m.x);
-    let adjustment = memory::adjustment(&posterior, &map, &centre).ok_or_else(|| {
-        Error::Compute("the memory adjustment could not be measured at the MAP".into())
-    })?;
-    let (lo, hi) = adjustment.inflation_range();
-    log(&format!("  memory: the likelihood's curvature adjusted to its score's covariance given the residuals' memory: variance inflation {lo:.1}–{hi:.1} by direction"));
-    settings.likelihood.memory_adjustment = Some(adjustment);
-    let adjusted = settings.posterior(campaign, base);
-    let x = map.x[..adjusted.layout.fitted.len()].to_vec();
-    let map = map::refine(&adjusted, &x)
-        .ok_or_else(|| Error::Compute("the MAP search of the adjusted likelihood failed".into()))?;
-    Ok((adjusted, map))
+
+    /// With the tempered likelihood ([`Memory::Tempered`]): each run's
+    /// memory time k from its whitened residuals at `map` (where not set
+    /// already), written into the settings, and the MAP searched again on
+    /// the posterior whose runs' log-likelihoods count 1/k. Otherwise
+    /// `posterior` and `map` as they are.
+    fn temper(
+        &mut self,
+        posterior: Posterior,
+        map: MapEstimate,
+        log: &mut dyn FnMut(&str),
+    ) -> Result<(Posterior, MapEstimate)> {
+        let lik = &mut self.settings.likelihood;
+        if lik.memory != Memory::Tempered
+            || posterior.runs.iter().all(|r| lik.memory_times.contains_key(&r.id))
+        {
+            return Ok((posterior, map));
+        }
+        let times = map::memory_times(&posterior, &map).ok_or_else(|| {
+            Error::Compute("the residuals at the MAP could not be integrated".into())
+        })?;
+        for (run, k) in posterior.runs.iter().zip(times) {
+            lik.memory_times.entry(run.id.clone()).or_insert(k);
+        }
+        let listed: Vec<String> = posterior
+            .runs
+            .iter()
+            .map(|r| format!("{} {:.1}", r.id, lik.memory_times[&r.id]))
+            .collect();
+        log(&format!("  memory: each run's log-likelihood counts 1/k, k the integrated autocorrelation time of its whitened MAP residuals (samples): {}", listed.join(", ")));
+        self.searched_again(&map, "the tempered likelihood")
+    }
+
+    /// With the adjusted likelihood ([`Memory::Adjusted`]): the curvature
+    /// adjustment measured at `map`, the MAP of the independent likelihood
+    /// (where not set already), written into the settings, and the MAP
+    /// searched again on the adjusted posterior. Otherwise `posterior` and
+    /// `map` as they are.
+    fn adjust(
+        &mut self,
+        posterior: Posterior,
+        map: MapEstimate,
+        log: &mut dyn FnMut(&str),
+    ) -> Result<(Posterior, MapEstimate)> {
+        let lik = &self.settings.likelihood;
+        if lik.memory != Memory::Adjusted || lik.memory_adjustment.is_some() {
+            return Ok((posterior, map));
+        }
+        if self.settings.parameter_model() != ParameterModel::PerCurrent {
+            return Err(Error::Usage("`--memory adjusted` takes one parameter set per current (not the current law); `--memory tempered` takes any".into()));
+        }
+        // centred on the mode of the independent posterior, not the surrogate's optimum
+        let centre = laplace::mode(&posterior, &map).map_or_else(|| map.x.clone(), |m| m.x);
+        let adjustment = memory::adjustment(&posterior, &map, &centre).ok_or_else(|| {
+            Error::Compute("the memory adjustment could not be measured at the MAP".into())
+        })?;
+        let (lo, hi) = adjustment.inflation_range();
+        log(&format!("  memory: the likelihood's curvature adjusted to its score's covariance given the residuals' memory: variance inflation {lo:.1}–{hi:.1} by direction"));
+        self.settings.likelihood.memory_adjustment = Some(adjustment);
+        self.searched_again(&map, "the adjusted likelihood")
+    }
+
+    /// Each run's residual RMS at the MAP of the same posterior with
+    /// independent Gaussian noise (the law alone, no force of the noise's
+    /// own), from the same `starts`; `None` where the noise model has no
+    /// force of its own (it does not model memory) or the search fails.
+    fn law_alone_rms(&self, posterior: &Posterior, starts: &[Vec<f64>]) -> Option<Vec<f64>> {
+        if !posterior.noise.models_memory() {
+            return None;
+        }
+        let mut alone = self.settings.clone();
+        alone.likelihood.noise = crate::noise::NoiseKind::Gaussian;
+        alone.likelihood.memory = Memory::Independent;
+        let plain = alone.posterior(self.campaign, self.base);
+        let fitted = plain.layout.fitted.len();
+        let starts: Vec<Vec<f64>> =
+            starts.iter().map(|s| s[..fitted.min(s.len())].to_vec()).collect();
+        let found = map::best_map(&plain, &starts)?;
+        Some(map::residual_rms(&plain, &found.x)?.into_iter().map(|(rms, _)| rms).collect())
+    }
 }
 
 /// Lag-1 autocorrelation of the MAP residuals above which independent noise
@@ -300,30 +339,6 @@ fn memory_warnings(posterior: &Posterior, map: &MapEstimate) -> Vec<String> {
 /// the discrepancy than without it, all runs together are 2.2× at 1 A and
 /// 4–8× at 0.5 and 0.25 A (docs/calibration.md, "Model discrepancy").
 pub const CONFOUNDING_RATIO: f64 = 2.0;
-
-/// Each run's residual RMS at the MAP of the same posterior with
-/// independent Gaussian noise (the law alone, no force of the noise's
-/// own), from the same `starts`; `None` where the noise model has no
-/// force of its own (it does not model memory) or the search fails.
-fn law_alone_rms(
-    campaign: &Campaign,
-    settings: &CalibrationSettings,
-    base: Integrator,
-    posterior: &Posterior,
-    starts: &[Vec<f64>],
-) -> Option<Vec<f64>> {
-    if !posterior.noise.models_memory() {
-        return None;
-    }
-    let mut alone = settings.clone();
-    alone.likelihood.noise = crate::noise::NoiseKind::Gaussian;
-    alone.likelihood.memory = Memory::Independent;
-    let plain = alone.posterior(campaign, base);
-    let fitted = plain.layout.fitted.len();
-    let starts: Vec<Vec<f64>> = starts.iter().map(|s| s[..fitted.min(s.len())].to_vec()).collect();
-    let found = map::best_map(&plain, &starts)?;
-    Some(map::residual_rms(&plain, &found.x)?.into_iter().map(|(rms, _)| rms).collect())
-}
 
 /// [`confounding_warning`] of the law's path at `x` (the posterior's
 /// median) against the law alone's RMS (`alone`).

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
 
-use crate::identify::IdentifyOptions;
+use crate::identify::IdentifySettings;
 use crate::pipeline::{LooOptions, PredictOptions, SampleOptions};
 use crate::study::PlanOptions;
 use crate::synth::Overrides;
@@ -88,7 +88,7 @@ pub enum Command {
         #[arg(long)]
         force: bool,
         #[command(flatten)]
-        identify: IdentifyOptions,
+        identify: IdentifySettings,
     },
     /// Posterior sampling from all runs, started from the identification
     Sample {

@@ -71,7 +71,8 @@ fn dispatch(cli: Cli) -> Result<()> {
             pipeline.run(&manifest, &out, &options).map(|reports| print::reports(&reports, clock))
         }
         Some(Command::Identify { manifest, out, force, identify }) => {
-            let settings = identify.settings()?;
+            identify.check()?;
+            let settings = identify;
             let campaign = pipeline.load(&manifest)?;
             pipeline.identify(&campaign, &out, &settings, force).map(drop)
         }

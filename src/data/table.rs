@@ -131,9 +131,7 @@ impl Record {
         let mut checks: Vec<(&[f64], &str, f64, &str)> = vec![
             (&self.time, columns.time.0, limits.time_s, "limits.time_s"),
             (
-                &self.displacement,
-                columns.displacement.0,
-                limits.displacement_m,
+                &self.displacement, columns.displacement.0, limits.displacement_m,
                 "limits.displacement_m",
             ),
             (&self.force, columns.force.0, limits.force_n, "limits.force_n"),

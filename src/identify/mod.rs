@@ -29,54 +29,47 @@ use crate::model::{Integrator, Params, PARAM_NAMES};
 use hardening::{Asymptote, CurveFit, Eq7};
 use yield_stress::YieldFit;
 
-/// The options of `mrbp identify` that override the identification's
-/// defaults.
-#[derive(clap::Args, Debug, Clone)]
-pub struct IdentifyOptions {
+/// Choices of the identification; the defaults are the documented rules.
+/// `mrbp identify` sets the first two from its options, a settings file
+/// (`[identify]`) any.
+#[derive(clap::Args, Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IdentifySettings {
     /// Loading branch of each record to identify from (0: the first, from rest)
     #[arg(long, default_value_t = IdentifySettings::default().branch)]
     pub branch: usize,
     /// Half-width (ms) of the smoothing of τ, γ and their derivatives
     #[arg(long, default_value_t = IdentifySettings::default().smooth_ms)]
     pub smooth_ms: f64,
+    /// G is fitted while τ has covered less than this share of its rise.
+    #[arg(skip = IdentifySettings::default().elastic_share)]
+    pub elastic_share: f64,
+    /// The offset inelastic strain of the yield point (0.2 %).
+    #[arg(skip = IdentifySettings::default().offset_strain)]
+    pub offset_strain: f64,
+    /// Share of the τ span of ψ(τ) that counts as each end.
+    #[arg(skip = IdentifySettings::default().end_share)]
+    pub end_share: f64,
+    /// Points of τ(γᴵ) used for the eq. 7 fit, log-spaced in γᴵ.
+    #[arg(skip = IdentifySettings::default().curve_points)]
+    pub curve_points: usize,
+    /// Half-width (ms) of the local cubic that smooths the strain driving
+    /// the Euler check of the combined estimate (the calibration's default).
+    #[arg(skip = IdentifySettings::default().drive_smooth_ms)]
+    pub drive_smooth_ms: f64,
 }
 
-impl IdentifyOptions {
-    pub fn settings(&self) -> crate::Result<IdentifySettings> {
+impl IdentifySettings {
+    /// Refuses a smoothing width that is not positive.
+    pub fn check(&self) -> crate::Result<()> {
         if !(self.smooth_ms > 0.0) {
             return Err(crate::Error::Usage(format!(
                 "--smooth-ms must be positive, got {}",
                 self.smooth_ms
             )));
         }
-        Ok(IdentifySettings {
-            branch: self.branch,
-            smooth_ms: self.smooth_ms,
-            ..IdentifySettings::default()
-        })
+        Ok(())
     }
-}
-
-/// Choices of the identification; the defaults are the documented rules.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct IdentifySettings {
-    /// Which loading branch of each record (0: the first, from rest).
-    pub branch: usize,
-    /// Half-width (ms) of the local line fits that smooth τ, γ and give
-    /// their derivatives.
-    pub smooth_ms: f64,
-    /// G is fitted while τ has covered less than this share of its rise.
-    pub elastic_share: f64,
-    /// The offset inelastic strain of the yield point (0.2 %).
-    pub offset_strain: f64,
-    /// Share of the τ span of ψ(τ) that counts as each end.
-    pub end_share: f64,
-    /// Points of τ(γᴵ) used for the eq. 7 fit, log-spaced in γᴵ.
-    pub curve_points: usize,
-    /// Half-width (ms) of the local cubic that smooths the strain driving
-    /// the Euler check of the combined estimate (the calibration's default).
-    pub drive_smooth_ms: f64,
 }
 
 impl Default for IdentifySettings {
@@ -390,12 +383,7 @@ pub fn identify_current(
         if let (Some((tau02, _)), Some((small, large))) = (r.yield_point, r.ends) {
             let kappa = tau02 / yield_fit.r0;
             let (r1, d1) = hardening::solve_r1_d1(
-                large.intercept,
-                small.intercept,
-                large.m,
-                small.m,
-                yield_fit.r0,
-                kappa,
+                large.intercept, small.intercept, large.m, small.m, yield_fit.r0, kappa,
             );
             r.r1 = r1;
             r.d1 = d1;

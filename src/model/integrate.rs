@@ -303,25 +303,13 @@ impl Integrator {
             // SAFETY: the CPU has AVX2 (checked just above)
             unsafe {
                 self.integrate_avx2::<VARYING>(
-                    &usable,
-                    t,
-                    gamma,
-                    initial_tau,
-                    &mut outcome,
-                    &mut schedule,
-                    &mut visit,
+                    &usable, t, gamma, initial_tau, &mut outcome, &mut schedule, &mut visit,
                 )
             };
             return outcome;
         }
         self.integrate::<Portable, VARYING>(
-            &usable,
-            t,
-            gamma,
-            initial_tau,
-            &mut outcome,
-            &mut schedule,
-            &mut visit,
+            &usable, t, gamma, initial_tau, &mut outcome, &mut schedule, &mut visit,
         );
         outcome
     }
@@ -341,13 +329,7 @@ impl Integrator {
         visit: &mut impl FnMut(usize, &LaneStates),
     ) {
         self.integrate::<super::simd::avx2::Avx2, VARYING>(
-            params,
-            t,
-            gamma,
-            initial_tau,
-            outcome,
-            schedule,
-            visit,
+            params, t, gamma, initial_tau, outcome, schedule, visit,
         );
     }
 

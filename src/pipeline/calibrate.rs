@@ -263,18 +263,11 @@ impl Pipeline<'_> {
             self.prepare(&joint.dir, "--out", &[], &[], true)?;
             let meta = store::between_runs::layer_runs(&joint.dir, &folders);
             store::between_runs::write(
-                &joint.dir,
-                &layer,
-                group,
-                &joint.record.calibration_id,
-                &meta,
+                &joint.dir, &layer, group, &joint.record.calibration_id, &meta,
             )?;
             if let Some(rows) = &typical {
                 store::between_runs::write_typical(
-                    &joint.dir,
-                    rows,
-                    &joint.record.calibration_id,
-                    &meta,
+                    &joint.dir, rows, &joint.record.calibration_id, &meta,
                 )?;
             }
             if stage.alone.len() >= 2 {
@@ -285,11 +278,7 @@ impl Pipeline<'_> {
                     .map(|(run, cal)| (run.clone(), cal.record.calibration_id.clone()))
                     .collect();
                 store::consistency::write(
-                    &joint.dir,
-                    &parameters,
-                    &joint.record.calibration_id,
-                    &ids,
-                    &meta,
+                    &joint.dir, &parameters, &joint.record.calibration_id, &ids, &meta,
                 )?;
                 self.emit(Event::Consistency(&parameters));
             }
@@ -298,21 +287,13 @@ impl Pipeline<'_> {
                 let mut rows = Vec::new();
                 for left_out in [LeftOut::Run, LeftOut::Current] {
                     rows.extend(between_runs::leave_out(
-                        joint,
-                        &stage.runs,
-                        &layer_runs,
-                        left_out,
-                        loo.draws,
-                        loo.replicates,
+                        joint, &stage.runs, &layer_runs, left_out, loo.draws, loo.replicates,
                         loo.seed,
                     )?);
                 }
                 if !rows.is_empty() {
                     store::between_runs::write_leave_one_out(
-                        &joint.dir,
-                        &rows,
-                        &joint.record.calibration_id,
-                        &meta,
+                        &joint.dir, &rows, &joint.record.calibration_id, &meta,
                     )?;
                     self.emit(Event::NewTestLeftOut {
                         rows: &rows,

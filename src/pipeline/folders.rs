@@ -4,12 +4,37 @@
 //! after minutes of sampling, and holds the folder ([`crate::lock`]) until
 //! the command ends.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::lock::Writing;
 use crate::store;
+
+/// A folder made ready by [`prepare`] and held for writing. Released at
+/// its end; the folders [`prepare`] created for it are removed again if
+/// nothing but the lock file was written into them (a command refused
+/// before any work leaves no folder behind).
+#[derive(Debug)]
+pub struct Held {
+    lock: Option<Writing>,
+    /// The folders that did not exist before, deepest first.
+    created: Vec<PathBuf>,
+}
+
+impl Drop for Held {
+    fn drop(&mut self) {
+        drop(self.lock.take());
+        for dir in &self.created {
+            let Ok(entries) = std::fs::read_dir(dir) else { continue };
+            let names: Vec<_> = entries.flatten().map(|e| e.file_name()).collect();
+            if names.iter().all(|n| n == crate::lock::FILE) {
+                let _ = std::fs::remove_file(dir.join(crate::lock::FILE));
+                let _ = std::fs::remove_dir(dir);
+            }
+        }
+    }
+}
 
 /// The files of a calibration folder derived from its chains: a new
 /// calibration removes them, since they would describe the old one.
@@ -39,13 +64,7 @@ pub const RECORDS: &str = "records";
 /// The report's figures (SVG and PNG) start so; the identification's
 /// (`fig1…fig5`), which the calibration itself writes, do not.
 const FIGURES: [&str; 8] = [
-    "bands_",
-    "adequacy_",
-    "residuals",
-    "corner",
-    "marginals",
-    "traces",
-    "diagnostics",
+    "bands_", "adequacy_", "residuals", "corner", "marginals", "traces", "diagnostics",
     "consistency",
 ];
 
@@ -73,7 +92,7 @@ pub fn prepare(
     inputs: &[&Campaign],
     results: &[&str],
     force: bool,
-) -> Result<Writing> {
+) -> Result<Held> {
     let shown = out.display();
     if out.is_file() {
         return Err(Error::Usage(format!("{option} {shown}: this is a file, not a folder")));
@@ -94,13 +113,20 @@ pub fn prepare(
             }
         }
     }
+    let created: Vec<PathBuf> = out
+        .ancestors()
+        .take_while(|d| !d.as_os_str().is_empty() && !d.exists())
+        .map(Path::to_path_buf)
+        .collect();
     std::fs::create_dir_all(out).map_err(|e| {
         Error::Usage(format!("{option} {shown}: cannot create this folder ({})", reason(&e)))
     })?;
+    // from here on, a refusal removes what this call created
+    let mut held = Held { lock: None, created };
     tempfile::NamedTempFile::new_in(out).map_err(|e| {
         Error::Usage(format!("{option} {shown}: cannot write in this folder ({})", reason(&e)))
     })?;
-    let held = crate::lock::write(out)?;
+    held.lock = Some(crate::lock::write(out)?);
     crate::atomic::clean_leftovers(out)?;
     let present: Vec<&str> = results.iter().copied().filter(|f| out.join(f).exists()).collect();
     if !present.is_empty() && !force {

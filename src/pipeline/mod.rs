@@ -87,7 +87,7 @@ pub type Render = fn(Event<'_>) -> (bool, String);
 struct Beside<T> {
     result: Result<T>,
     said: Vec<(bool, String)>,
-    held: Vec<crate::lock::Writing>,
+    held: Vec<folders::Held>,
 }
 
 /// Which runs to calibrate and how, as the command line says it.
@@ -195,7 +195,7 @@ pub struct Pipeline<'a> {
     pub progress: bool,
     /// The folders the stages have written, held until the pipeline ends:
     /// no other process writes them, nor reads them half-written.
-    held: Vec<crate::lock::Writing>,
+    held: Vec<folders::Held>,
     /// The listener's words for an event, where stages may run side by side.
     render: Option<Render>,
 }

@@ -278,13 +278,7 @@ impl LaneParams {
     ) -> [Result<(), IntegrationError>; LANES] {
         match (self, &run.current) {
             (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.run_lanes_along(
-                laws,
-                lags_s,
-                current,
-                &run.time,
-                &run.gamma,
-                run.initial_tau,
-                visit,
+                laws, lags_s, current, &run.time, &run.gamma, run.initial_tau, visit,
             ),
             _ => integrator.run_lanes(
                 &self.at(run.current_a),
@@ -301,12 +295,7 @@ impl LaneParams {
     pub fn euler_steps(&self, integrator: &Integrator, run: &RunData) -> u64 {
         match (self, &run.current) {
             (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.euler_steps_along(
-                &laws[0],
-                lags_s[0],
-                current,
-                &run.time,
-                &run.gamma,
-                run.initial_tau,
+                &laws[0], lags_s[0], current, &run.time, &run.gamma, run.initial_tau,
             ),
             _ => integrator.euler_steps(
                 &self.at(run.current_a)[0],

@@ -297,7 +297,7 @@ const SETTLING_FITS: usize = 4;
 
 /// One Levenberg-Marquardt fit from `start` with the noise profiled there:
 /// a point in the basin of the posterior's mode, with its Gauss-Newton
-/// curvature, for [`super::mode::newton`] to finish (which reaches the
+/// curvature, for [`crate::newton::newton`] to finish (which reaches the
 /// mode itself, where the noise's dependence on θ moves it).
 pub fn basin(post: &Posterior, start: &[f64]) -> Option<MapEstimate> {
     refine_fitting(post, start, 1).filter(|m| m.log_density.is_finite())
@@ -564,33 +564,6 @@ pub fn choose_substeps(
         m *= 2;
         coarse = finer;
     }
-}
-
-/// The Laplace approximation of the whole posterior: a Gaussian around the
-/// MAP with the covariance of θ from the surrogate's Hessian and, for the
-/// noise of each run, the sd its noise model gives for n residuals (1/√(2n)
-/// for ln σ, say; nearly independent of θ; √k times that where the run's
-/// likelihood is tempered by k).
-pub fn laplace(post: &Posterior, map: &MapEstimate) -> Elliptical {
-    let (d, l) = (post.dim(), &post.layout);
-    let nt = l.fitted.len();
-    let mut chol = DMatrix::zeros(d, d);
-    // a θ covariance that is not positive definite: a tiny ball instead
-    let theta = map
-        .cov
-        .clone()
-        .cholesky()
-        .map(|c| c.l())
-        .unwrap_or_else(|| DMatrix::identity(nt, nt) * 1e-4);
-    chol.view_mut((0, 0), (nt, nt)).copy_from(&theta);
-    let nr = post.runs.len();
-    for i in l.noise.clone() {
-        let (p, j) = ((i - l.noise.start) / nr, (i - l.noise.start) % nr);
-        // a tempered run's noise is known as from n/k samples
-        chol[(i, i)] = post.noise.laplace_sd(&post.runs[j], &l.noise_values(&map.x, j))[p]
-            / post.weight(j).sqrt();
-    }
-    Elliptical::from_factor(DVector::from_column_slice(&map.x), chol)
 }
 
 /// The Euler steps of one log-density at `x` (all runs): what the

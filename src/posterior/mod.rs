@@ -17,11 +17,11 @@
 //! The model side knows nothing of MCMC: the likelihood integrates the B-P
 //! law along each run's measured strain history and compares stresses.
 
+pub mod laplace;
 pub mod layout;
 pub mod likelihood;
 pub mod map;
 pub mod memory;
-pub mod mode;
 pub mod parameters;
 pub mod prior;
 pub mod sample;

@@ -192,7 +192,7 @@ pub fn bands_of(
             }
         }
         if k > 0 && run.tau[k].is_finite() {
-            lppd += log_mean_exp(&log_p);
+            lppd += crate::numeric::log_mean_exp(&log_p);
         }
         for (band, q) in model.iter_mut().zip(selected_quantiles(&mut at_k, &MODEL_PROBS)) {
             band[k] = q;
@@ -252,15 +252,6 @@ fn explain_median(
     let stiffness = crate::noise::stiffness_path(run, median, g);
     let residuals: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - median[k]).collect();
     noise.explain(run, &residuals, &stiffness, &values)
-}
-
-/// ln of the mean of exp(v), without overflow.
-fn log_mean_exp(v: &[f64]) -> f64 {
-    let m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    if !m.is_finite() {
-        return m;
-    }
-    m + (v.iter().map(|x| (x - m).exp()).sum::<f64>() / v.len() as f64).ln()
 }
 
 /// One run's bands with the record they describe: what `bands.parquet`

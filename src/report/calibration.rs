@@ -94,11 +94,7 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
     }
     coverage_section(&mut page, r);
     adequacy::section(
-        &mut page,
-        dir,
-        &r.prediction.bands,
-        &r.prediction.adequacy,
-        &r.campaign.geometry,
+        &mut page, dir, &r.prediction.bands, &r.prediction.adequacy, &r.campaign.geometry,
         &r.cal.settings.likelihood,
     )?;
     validation_section(&mut page, r, &loo_figs)?;
@@ -359,18 +355,8 @@ fn posterior_section(page: &mut Page, cal: &Calibration) {
     page.para("ESS/s: bulk effective sample size per second of the whole calibration (identification, MAP, step rule and sampling).");
     page.table(
         &[
-            "parameter",
-            "mean",
-            "sd",
-            "q05",
-            "q50",
-            "q95",
-            "ESS bulk",
-            "ESS tail",
-            "ESS/s",
-            "R̂",
-            "τ (steps)",
-            "",
+            "parameter", "mean", "sd", "q05", "q50", "q95", "ESS bulk", "ESS tail", "ESS/s", "R̂",
+            "τ (steps)", "",
         ],
         &rows,
     );
@@ -494,14 +480,9 @@ fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut
         .collect();
     page.table(
         &[
-            "held out",
-            "new test: inside 95 % (%)",
-            "joint: inside 95 % (%)",
-            "new test: RMS to median (Pa)",
-            "joint: RMS to median (Pa)",
-            "new test: lppd per sample",
-            "joint: lppd per sample",
-            "",
+            "held out", "new test: inside 95 % (%)", "joint: inside 95 % (%)",
+            "new test: RMS to median (Pa)", "joint: RMS to median (Pa)",
+            "new test: lppd per sample", "joint: lppd per sample", "",
         ],
         &table,
     );
@@ -524,12 +505,8 @@ fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut
         page.para("A current the layer never saw: every run at this current left out, the layer fitted to the runs at the other currents, its centre here read off its curve in the current (docs/calibration.md), and each run predicted as a new test there.");
         page.table(
             &[
-                "held out with its current",
-                "inside 95 % (%)",
-                "inside model band (%)",
-                "RMS to median (Pa)",
-                "lppd per sample",
-                "",
+                "held out with its current", "inside 95 % (%)", "inside model band (%)",
+                "RMS to median (Pa)", "lppd per sample", "",
             ],
             &by_current,
         );
@@ -632,14 +609,8 @@ pub(super) fn coverage_table(page: &mut Page, rows: &[CoverageRow], leave_one_ou
         .collect();
     page.table(
         &[
-            "run",
-            "current (A)",
-            "samples",
-            "inside 95 % predictive (%)",
-            "inside 95 % model (%)",
-            "RMS residual to median (Pa)",
-            "draws",
-            "",
+            "run", "current (A)", "samples", "inside 95 % predictive (%)", "inside 95 % model (%)",
+            "RMS residual to median (Pa)", "draws", "",
         ],
         &rows,
     );

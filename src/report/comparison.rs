@@ -198,11 +198,7 @@ fn differences_section(page: &mut Page, comparison: &Comparison) {
         .collect();
     page.table(
         &[
-            "a",
-            "b",
-            "parameter",
-            "a − b: median [5 %, 95 %]",
-            "a / b: median [5 %, 95 %]",
+            "a", "b", "parameter", "a − b: median [5 %, 95 %]", "a / b: median [5 %, 95 %]",
             "P(a > b)",
         ],
         &table,
@@ -316,14 +312,8 @@ fn law_section(page: &mut Page, entries: &[Entry]) {
         }
         page.table(
             &[
-                "run",
-                "current (A)",
-                "law",
-                "law: inside 95 % (%)",
-                "law: RMS to median (Pa)",
-                "per-current: inside 95 % (%)",
-                "per-current: RMS (Pa)",
-                "held out ≥ 80 %",
+                "run", "current (A)", "law", "law: inside 95 % (%)", "law: RMS to median (Pa)",
+                "per-current: inside 95 % (%)", "per-current: RMS (Pa)", "held out ≥ 80 %",
             ],
             &table,
         );

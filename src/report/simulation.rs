@@ -30,13 +30,8 @@ pub fn write(dir: &Path, s: &Simulation, calibration: &str) -> Result<()> {
                     .with_opacity(opacity)]
             }
         };
-        c.series.extend(band(
-            "95 % predictive",
-            PALETTE[5],
-            &s.predictive[0],
-            &s.predictive[1],
-            0.25,
-        ));
+        c.series
+            .extend(band("95 % predictive", PALETTE[5], &s.predictive[0], &s.predictive[1], 0.25));
         c.series.extend(band("95 % model", PALETTE[0], &s.model[0], &s.model[4], 0.35));
         c.series.extend(band("50 % model", PALETTE[0], &s.model[1], &s.model[3], 0.6));
         c.series.push(

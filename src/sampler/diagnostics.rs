@@ -13,6 +13,7 @@ use rustfft::{num_complex::Complex, FftPlanner};
 use statrs::distribution::{ContinuousCDF, Normal};
 
 use super::chains::Chains;
+use crate::numeric::{mean, variance};
 
 /// Sokal's window constant: the sum runs to the first lag M ≥ C τ(M).
 const SOKAL_C: f64 = 5.0;
@@ -104,17 +105,6 @@ pub fn integrated_time(chains: &[Vec<f64>]) -> f64 {
         }
     }
     tau.max(1.0)
-}
-
-/// The mean of `x`.
-pub fn mean(x: &[f64]) -> f64 {
-    x.iter().sum::<f64>() / x.len() as f64
-}
-
-/// The sample variance of `x` (divisor n − 1).
-pub fn variance(x: &[f64]) -> f64 {
-    let m = mean(x);
-    x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (x.len() as f64 - 1.0)
 }
 
 /// Each chain cut in two halves (the middle draw dropped when odd).

@@ -96,13 +96,12 @@ impl Elliptical {
     /// where the full one is singular or rests on `points` ≤ d points.
     pub fn or_diagonal(moments: Moments, points: usize) -> Option<Elliptical> {
         let Moments { mean, cov } = moments;
-        let diagonal = || DMatrix::from_diagonal(&cov.diagonal());
-        let chol = if points > mean.len() {
-            cov.clone().cholesky().or_else(|| diagonal().cholesky())
+        let l = if points > mean.len() {
+            crate::numeric::cholesky_or_diagonal(&cov)
         } else {
-            diagonal().cholesky()
+            crate::numeric::diagonal_factor(&cov)
         }?;
-        Some(Elliptical { mean, l: chol.l() })
+        Some(Elliptical { mean, l })
     }
 
     /// The distribution with this mean and lower Cholesky factor.

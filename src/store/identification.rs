@@ -76,11 +76,7 @@ pub fn write(path: &Path, results: &[CurrentIdentification], id: Option<&str>) -
                     push(&r.run, c, name, v, v);
                 }
                 push(
-                    &r.run,
-                    c,
-                    "eq7_converged",
-                    f.converged as u8 as f64,
-                    f.converged as u8 as f64,
+                    &r.run, c, "eq7_converged", f.converged as u8 as f64, f.converged as u8 as f64,
                 );
             }
             if let Some(f) = &r.steady {

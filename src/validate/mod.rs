@@ -7,7 +7,7 @@
 //! run that carries so much of the information that these weights cannot be
 //! trusted (k̂ > 0.7) is reached by importance sampling from the Laplace
 //! approximation of the posterior without it (a Student-t about its mode,
-//! found by Newton's method on the log-density, [`crate::posterior::mode`],
+//! found by Newton's method on the log-density, [`crate::posterior::laplace::mode`],
 //! from one Levenberg-Marquardt fit started at the reweighted draws' mean),
 //! and where that k̂ is too large too, by sampling that posterior afresh.
 //! The held-out run's noise is not known to that posterior; the prediction
@@ -27,8 +27,8 @@ use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
 use crate::data::{RecordPart, RunData};
+use crate::posterior::laplace;
 use crate::posterior::map;
-use crate::posterior::mode;
 use crate::posterior::{Draw, Draws, Posterior};
 use crate::predict::{
     bands_of, model_paths, predict_run, CoverageRow, PredictOptions, PredictSettings, RunBands,
@@ -346,7 +346,7 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
                 left_out.id()
             ))
         })?;
-        let laplace = mode::laplace_from(&posterior, &map);
+        let laplace = laplace::at_mode(&posterior, &map);
         let (k_hat, by_laplace) =
             laplace_importance(&target, &posterior, &laplace, settings.sampler.seed, loo)?;
         row.pareto_k_laplace = k_hat;
@@ -387,7 +387,7 @@ const HOPELESS_K: f64 = 1.5;
 fn recentred(post: &Posterior, start: &[f64]) -> Option<Posterior> {
     let plain = post.without_adjustment();
     let map = map::basin(&plain, start)?;
-    let mode = mode::from_map(&plain, &map)?;
+    let mode = laplace::mode(&plain, &map)?;
     Some(post.recentred(&mode.x))
 }
 

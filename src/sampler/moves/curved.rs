@@ -43,10 +43,10 @@
 use nalgebra::{DMatrix, DVector};
 use rand::RngExt;
 
-use super::super::diagnostics::{mean, variance};
 use super::super::elliptical::{standard_log_density, t_factor, Elliptical};
-use super::mixture::{distinct, log_sum_exp, thinned, SPREAD};
+use super::mixture::{distinct, thinned, SPREAD};
 use super::Independent;
+use crate::numeric::{log_sum_exp, mean, variance};
 
 /// The narrowest and widest the tube may become along the ridge, as a
 /// share of its mean width² (v(t) is clamped to this range): a quadratic

@@ -19,6 +19,7 @@ use rand::RngExt;
 
 use super::super::elliptical::{Elliptical, Moments};
 use super::Independent;
+use crate::numeric::log_sum_exp;
 
 /// The most components a fit may have.
 pub const MAX_COMPONENTS: usize = 4;
@@ -219,14 +220,6 @@ pub fn propose(
         ])
     };
     q(x) - q(y)
-}
-
-pub(super) fn log_sum_exp(v: &[f64]) -> f64 {
-    let m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    if !m.is_finite() {
-        return m;
-    }
-    m + v.iter().map(|t| (t - m).exp()).sum::<f64>().ln()
 }
 
 /// A component of weight `w` with the `moments` (ridged).

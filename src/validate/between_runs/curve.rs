@@ -6,8 +6,6 @@ use nalgebra::{Cholesky, DMatrix, DVector};
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
-use super::gibbs::cholesky;
-
 /// The current's coordinate along the centres' curve: asinh(I / I_s),
 /// I_s = [`CURRENT_SCALE_A`] — ln(2I/I_s) above a few tenths of an ampere
 /// (a power law in the current is a line), finite and smooth down to 0 A.
@@ -115,7 +113,7 @@ pub(super) fn predict_centres(
         let mean = kxs.transpose() * chol.solve(&mu);
         let cov = &kss - kxs.transpose() * chol.solve(&kxs);
         let e = DVector::from_iterator(p, (0..p).map(|_| rng.sample::<f64, _>(StandardNormal)));
-        let draw = mean + cholesky(&((&cov + cov.transpose()) * 0.5)) * e;
+        let draw = mean + crate::numeric::draw_factor(&((&cov + cov.transpose()) * 0.5)) * e;
         for (j, o) in out.iter_mut().enumerate() {
             o[k] = draw[j];
         }

@@ -9,6 +9,8 @@ use nalgebra::{Cholesky, DMatrix, DVector};
 use rand::{Rng, RngExt};
 use rand_distr::{ChiSquared, Gamma, StandardNormal};
 
+use crate::numeric::draw_factor;
+
 use super::curve::{predict_centres, CurrentCurve, CURVE_AMPLITUDE};
 use super::likelihood::RunLikelihood;
 
@@ -187,7 +189,7 @@ impl<'a> Chain<'a> {
         match self.curve {
             // μ_c | Σ, z ~ N(z̄_c, Σ/m_c)
             None => {
-                let factor = cholesky(&self.sigma);
+                let factor = draw_factor(&self.sigma);
                 for (g, mean) in self.means.iter_mut().enumerate() {
                     *mean = &zbar[g]
                         + &factor * normals(rng, d) / (self.members[g].len() as f64).sqrt();
@@ -258,15 +260,8 @@ impl<'a> Chain<'a> {
             }
         }
         scale_moves(
-            self.runs,
-            self.group,
-            &self.means,
-            &self.a,
-            nu,
-            &mut self.sigma,
-            &mut precision,
-            &mut self.z,
-            rng,
+            self.runs, self.group, &self.means, &self.a, nu, &mut self.sigma, &mut precision,
+            &mut self.z, rng,
         );
         let prior = self.curve.map(|c| c.precision(&self.eta, scales));
         translate(self.runs, &self.members, prior.as_ref(), &mut self.means, &mut self.z, rng);
@@ -280,7 +275,7 @@ impl<'a> Chain<'a> {
         if let Some(curve) = self.curve.filter(|c| !c.predict.is_empty()) {
             all.extend(predict_centres(curve, &self.means, &self.eta, self.scales, rng));
         }
-        let factor = cholesky(&self.sigma);
+        let factor = draw_factor(&self.sigma);
         let new_tests =
             all.iter().map(|mean| (mean + &factor * normals(rng, d)).as_slice().to_vec()).collect();
         let eta = if self.curve.is_some() { self.eta.clone() } else { Vec::new() };
@@ -440,22 +435,13 @@ fn slice(u0: f64, f: impl Fn(f64) -> f64, rng: &mut impl Rng) -> f64 {
     u0
 }
 
-/// The lower Cholesky factor of a covariance (of its diagonal, should
-/// rounding have made it indefinite).
-pub(super) fn cholesky(sigma: &DMatrix<f64>) -> DMatrix<f64> {
-    match Cholesky::new(sigma.clone()) {
-        Some(c) => c.l(),
-        None => DMatrix::from_diagonal(&sigma.diagonal().map(|v| v.max(0.0).sqrt())),
-    }
-}
-
 /// A draw of IW(`dof`, `psi`): W ~ Wishart(dof, Ψ⁻¹) by Bartlett's
 /// decomposition, Σ = W⁻¹.
 fn inverse_wishart(psi: &DMatrix<f64>, dof: f64, rng: &mut impl Rng) -> DMatrix<f64> {
     let d = psi.nrows();
     let psi_inverse =
         Cholesky::new(psi.clone()).map_or_else(|| DMatrix::identity(d, d), |c| c.inverse());
-    let l = cholesky(&psi_inverse);
+    let l = draw_factor(&psi_inverse);
     let mut b = DMatrix::<f64>::zeros(d, d);
     for i in 0..d {
         b[(i, i)] = rng

@@ -562,10 +562,7 @@ fn coordinates_of(cal: &Calibration, layout: &Layout) -> (Vec<Coordinate>, Place
         })
     };
     let spring = place(
-        &mut coordinates,
-        terms.gas_spring,
-        "gas_spring_n_per_m",
-        terms.gas_spring_sd_n_per_m,
+        &mut coordinates, terms.gas_spring, "gas_spring_n_per_m", terms.gas_spring_sd_n_per_m,
     );
     let offset =
         place(&mut coordinates, terms.force_offset, "force_offset_n", terms.force_offset_sd_n);

@@ -22,6 +22,9 @@
 //! sampling intervals (shorter is white noise) to a share of the
 //! excitation's period (longer would mimic the law's own parameters).
 
+mod filter;
+mod process;
+
 use std::sync::Arc;
 
 use rand::{Rng, RngExt};
@@ -34,6 +37,9 @@ use super::model::{
 };
 use crate::data::RunData;
 use crate::model::LANES;
+use filter::{branch_start, filter_run, smooth_run, Filter};
+pub use process::sample_path;
+use process::Process;
 
 const PARAMETERS: &[Parameter] = &[
     Parameter { name: "sigma", unit: "Pa", transform: Transform::Log, pool: Pool::RootMeanSquare },
@@ -103,297 +109,6 @@ impl Discrepancy {
     fn process(&self, run: &RunData, values: &NoiseValues) -> Process {
         Process::new(self.settings.kernel, values[1], values[2], run.step_s)
     }
-}
-
-/// A path of the Matérn process of scale `sd` and time scale `ell` at the
-/// times `time`, started from its stationary state: exact at any spacing
-/// (the virtual stand's known discrepancy, `mrbp synth`).
-pub fn sample_path(
-    kernel: Kernel,
-    sd: f64,
-    ell: f64,
-    time: &[f64],
-    rng: &mut impl Rng,
-) -> Vec<f64> {
-    let mut process = Process::new(kernel, sd, ell, 0.0);
-    let mut z = || -> f64 { rng.sample(StandardNormal) };
-    let mut state = process.draw_start(z(), z());
-    let mut path = Vec::with_capacity(time.len());
-    for (k, t) in time.iter().enumerate() {
-        if k > 0 {
-            process.step(t - time[k - 1]);
-            state = process.advance(process.noise_factor(), state, z(), z());
-        }
-        path.push(state[0]);
-    }
-    path
-}
-
-/// The Matérn process in state-space form at one time step: its transition
-/// Φ, the noise Q it gathers over the step and its stationary covariance
-/// P∞ (ν = 1/2 uses the first state only).
-#[derive(Clone, Copy, Debug)]
-struct Process {
-    kernel: Kernel,
-    sd: f64,
-    /// λ = √3/ℓ (ν = 3/2) or 1/ℓ (ν = 1/2).
-    lambda: f64,
-    phi: [[f64; 2]; 2],
-    q: [f64; 3],
-}
-
-impl Process {
-    fn new(kernel: Kernel, sd: f64, ell: f64, dt: f64) -> Process {
-        let lambda = match kernel {
-            Kernel::Matern12 => 1.0 / ell,
-            Kernel::Matern32 => 3f64.sqrt() / ell,
-        };
-        let mut p = Process { kernel, sd, lambda, phi: [[0.0; 2]; 2], q: [0.0; 3] };
-        p.step(dt);
-        p
-    }
-
-    /// Sets Φ and Q for a step of `dt`.
-    fn step(&mut self, dt: f64) {
-        let (s2, l) = (self.sd * self.sd, self.lambda);
-        let x = l * dt;
-        let e = (-x).exp();
-        let e2 = e * e;
-        match self.kernel {
-            Kernel::Matern12 => {
-                self.phi = [[e, 0.0], [0.0, 0.0]];
-                self.q = [-s2 * (-2.0 * x).exp_m1(), 0.0, 0.0];
-            }
-            Kernel::Matern32 => {
-                self.phi = [[e * (1.0 + x), e * dt], [-e * l * x, e * (1.0 - x)]];
-                // 1 − e^{−2x}(1 + 2x + 2x²) = 4x³/3 − 2x⁴ + 8x⁵/5 − …
-                let q00 = if x < 1e-3 {
-                    x * x * x * (4.0 / 3.0 - 2.0 * x + 1.6 * x * x)
-                } else {
-                    -(-2.0 * x).exp_m1() - e2 * (2.0 * x + 2.0 * x * x)
-                };
-                let q11 = -(-2.0 * x).exp_m1() + e2 * (2.0 * x - 2.0 * x * x);
-                self.q = [s2 * q00, 2.0 * s2 * l * x * x * e2, s2 * l * l * q11];
-            }
-        }
-    }
-
-    /// The Cholesky factor of Q: (l00, l10, l11).
-    fn noise_factor(&self) -> [f64; 3] {
-        let [q00, q01, q11] = self.q;
-        let l00 = q00.max(0.0).sqrt();
-        let l10 = if l00 > 0.0 { q01 / l00 } else { 0.0 };
-        [l00, l10, (q11 - l10 * l10).max(0.0).sqrt()]
-    }
-
-    /// A draw of (δ, δ′) from the stationary state, given two standard
-    /// normals.
-    fn draw_start(&self, z0: f64, z1: f64) -> [f64; 2] {
-        let [p00, _, p11] = self.stationary();
-        [p00.sqrt() * z0, p11.sqrt() * z1]
-    }
-
-    /// (δ, δ′) one step on from `x`, given two standard normals and the
-    /// Cholesky factor `l` of Q ([`Self::noise_factor`], computed once per
-    /// step by a caller that advances many paths).
-    #[inline(always)]
-    fn advance(&self, l: [f64; 3], x: [f64; 2], z0: f64, z1: f64) -> [f64; 2] {
-        let [[a, b], [c, d]] = self.phi;
-        [a * x[0] + b * x[1] + l[0] * z0, c * x[0] + d * x[1] + l[1] * z0 + l[2] * z1]
-    }
-
-    /// The stationary covariance (p00, p01, p11).
-    fn stationary(&self) -> [f64; 3] {
-        let s2 = self.sd * self.sd;
-        match self.kernel {
-            Kernel::Matern12 => [s2, 0.0, 0.0],
-            Kernel::Matern32 => [s2, 0.0, s2 * self.lambda * self.lambda],
-        }
-    }
-}
-
-/// The Kalman filter of one path: the state (δ, δ′, b) — b the branch's
-/// strain offset — its mean and covariance.
-#[derive(Clone, Copy, Debug, Default)]
-struct Filter {
-    m: [f64; 3],
-    /// p00, p01, p11, p0b, p1b, pbb.
-    p: [f64; 6],
-}
-
-impl Filter {
-    /// At the stationary state of `process`, before the first sample.
-    fn start(process: &Process) -> Filter {
-        let [p00, p01, p11] = process.stationary();
-        Filter { m: [0.0; 3], p: [p00, p01, p11, 0.0, 0.0, 0.0] }
-    }
-
-    /// One step of `process`, and a fresh branch offset of variance `v`
-    /// where a branch begins.
-    #[inline(always)]
-    fn predict(&mut self, process: &Process, new_branch: Option<f64>) {
-        let [[a, b], [c, d]] = process.phi;
-        let [p00, p01, p11, p0b, p1b, pbb] = self.p;
-        let (m0, m1) = (self.m[0], self.m[1]);
-        self.m[0] = a * m0 + b * m1;
-        self.m[1] = c * m0 + d * m1;
-        // Φ P Φᵀ + Q on the process block
-        let (r00, r01) = (a * p00 + b * p01, a * p01 + b * p11);
-        let (r10, r11) = (c * p00 + d * p01, c * p01 + d * p11);
-        let q = process.q;
-        self.p[0] = r00 * a + r01 * b + q[0];
-        self.p[1] = r00 * c + r01 * d + q[1];
-        self.p[2] = r10 * c + r11 * d + q[2];
-        match new_branch {
-            Some(v) => {
-                self.m[2] = 0.0;
-                self.p[3] = 0.0;
-                self.p[4] = 0.0;
-                self.p[5] = v;
-            }
-            None => {
-                self.p[3] = a * p0b + b * p1b;
-                self.p[4] = c * p0b + d * p1b;
-                self.p[5] = pbb;
-            }
-        }
-    }
-
-    /// Takes the residual `r` (observed δ + c b + e, e of variance `white`):
-    /// returns the innovation and its variance.
-    #[inline(always)]
-    fn update(&mut self, r: f64, c: f64, white: f64) -> (f64, f64) {
-        let [p00, p01, p11, p0b, p1b, pbb] = self.p;
-        let h = [p00 + c * p0b, p01 + c * p1b, p0b + c * pbb];
-        let s = h[0] + c * h[2] + white;
-        let v = r - self.m[0] - c * self.m[2];
-        let k = [h[0] / s, h[1] / s, h[2] / s];
-        self.m[0] += k[0] * v;
-        self.m[1] += k[1] * v;
-        self.m[2] += k[2] * v;
-        self.p = [
-            (p00 - k[0] * h[0]).max(0.0),
-            p01 - k[0] * h[1],
-            (p11 - k[1] * h[1]).max(0.0),
-            p0b - k[0] * h[2],
-            p1b - k[1] * h[2],
-            (pbb - k[2] * h[2]).max(0.0),
-        ];
-        (v, s)
-    }
-}
-
-/// The variance of the strain error's offset drawn afresh where sample k of
-/// `run` begins a loading branch (the first compared sample, or a
-/// reversal), with errors in variables of variance `strain_var`.
-#[inline(always)]
-fn branch_start(run: &RunData, k: usize, strain_var: f64) -> Option<f64> {
-    (strain_var > 0.0 && (k == 1 || run.reverses[k]))
-        .then_some(strain_var * run.strain_smoothing_share)
-}
-
-/// The filter's innovations along a run: for each sample k ≥ 1 of the
-/// residuals `r` (indexed from k = 1) the innovation and its variance.
-fn filter_run(
-    run: &RunData,
-    process: &Process,
-    sigma: f64,
-    strain_var: f64,
-    stiffness: Option<&[f64]>,
-    r: &[f64],
-    mut visit: impl FnMut(usize, f64, f64),
-) {
-    let mut f = Filter::start(process);
-    let mut step = *process;
-    for (i, &res) in r.iter().enumerate() {
-        let k = i + 1;
-        if !run.uniform {
-            step.step(run.time[k] - run.time[k - 1]);
-        }
-        let c = stiffness.map_or(0.0, |s| s[k]);
-        f.predict(&step, branch_start(run, k, strain_var));
-        let (v, s) = f.update(res, c, sigma * sigma + c * c * strain_var);
-        visit(k, v, s);
-    }
-}
-
-/// The Rauch–Tung–Striebel smoother of [`filter_run`]'s filter, on the full
-/// state (δ, δ′, b) with explicit matrices: a branch start makes b afresh
-/// (its transition 0, its noise the offset's variance). Singular predicted
-/// covariances (ν = 1/2 uses one state; no errors in variables, no b) are
-/// inverted by SVD.
-fn smooth_run(
-    run: &RunData,
-    process: &Process,
-    sigma: f64,
-    strain_var: f64,
-    stiffness: Option<&[f64]>,
-    r: &[f64],
-) -> Explained {
-    use nalgebra::{Matrix3, RowVector3, Vector3};
-    let n = r.len();
-    let mut step = *process;
-    let [p00, p01, p11] = process.stationary();
-    let mut m = Vector3::zeros();
-    let mut p = Matrix3::new(p00, p01, 0.0, p01, p11, 0.0, 0.0, 0.0, 0.0);
-    let mut predicted: Vec<(Vector3<f64>, Matrix3<f64>, Matrix3<f64>)> = Vec::with_capacity(n);
-    let mut filtered: Vec<(Vector3<f64>, Matrix3<f64>)> = Vec::with_capacity(n);
-    let mut innovations = Vec::with_capacity(n);
-    for (i, &res) in r.iter().enumerate() {
-        let k = i + 1;
-        if !run.uniform {
-            step.step(run.time[k] - run.time[k - 1]);
-        }
-        let [[a, b], [c, d]] = step.phi;
-        let [q00, q01, q11] = step.q;
-        let branch = branch_start(run, k, strain_var);
-        let phi =
-            Matrix3::new(a, b, 0.0, c, d, 0.0, 0.0, 0.0, if branch.is_some() { 0.0 } else { 1.0 });
-        let q = Matrix3::new(q00, q01, 0.0, q01, q11, 0.0, 0.0, 0.0, branch.unwrap_or(0.0));
-        let (mp, pp) = (phi * m, phi * p * phi.transpose() + q);
-        let cs = stiffness.map_or(0.0, |s| s[k]);
-        let h = RowVector3::new(1.0, 0.0, cs);
-        let ph = pp * h.transpose();
-        let s = (h * ph)[(0, 0)] + sigma * sigma + cs * cs * strain_var;
-        let v = res - (h * mp)[(0, 0)];
-        let gain = ph / s;
-        m = mp + gain * v;
-        p = pp - gain * ph.transpose();
-        innovations.push(v / s.sqrt());
-        predicted.push((mp, pp, phi));
-        filtered.push((m, p));
-    }
-    let (mut mean, mut sd) = (vec![0.0; n], vec![0.0; n]);
-    let Some(&(mut ms, mut ps)) = filtered.last() else {
-        return Explained::default();
-    };
-    for i in (0..n).rev() {
-        if i + 1 < n {
-            let (mf, pf) = filtered[i];
-            let (mp, pp, phi) = predicted[i + 1];
-            let inverse = scaled_inverse(&pp);
-            let g = pf * phi.transpose() * inverse;
-            ms = mf + g * (ms - mp);
-            ps = pf + g * (ps - pp) * g.transpose();
-        }
-        mean[i] = ms[0];
-        sd[i] = ps[(0, 0)].max(0.0).sqrt();
-    }
-    Explained { mean, sd, innovations }
-}
-
-/// The (pseudo-)inverse of a covariance whose states differ in scale by many
-/// orders (δ in Pa, δ′ in Pa/s, b in strain): inverted as a correlation
-/// matrix, by SVD, so a state without variance (unused) drops out.
-fn scaled_inverse(p: &nalgebra::Matrix3<f64>) -> nalgebra::Matrix3<f64> {
-    let scale =
-        nalgebra::Vector3::from_fn(
-            |i, _| if p[(i, i)] > 0.0 { 1.0 / p[(i, i)].sqrt() } else { 0.0 },
-        );
-    let d = nalgebra::Matrix3::from_diagonal(&scale);
-    let correlation = d * p * d;
-    let inverse = correlation.pseudo_inverse(1e-12).unwrap_or_else(|_| nalgebra::Matrix3::zeros());
-    d * inverse * d
 }
 
 impl NoiseModel for Discrepancy {
@@ -874,18 +589,21 @@ mod tests {
         }
     }
 
+    /// Both kernels, without and with errors in variables (strain variance).
+    const KERNELS_AND_STRAIN_NOISE: [(Kernel, f64); 4] = [
+        (Kernel::Matern32, 0.0),
+        (Kernel::Matern12, 0.0),
+        (Kernel::Matern32, 1e-8),
+        (Kernel::Matern12, 1e-8),
+    ];
+
     /// The scorer and the pointwise terms both equal the multivariate
     /// normal density of the residuals with the dense covariance
     /// K + σ² I (+ the errors-in-variables terms D + v c cᵀ per branch), by
     /// Cholesky — an independent computation — for both kernels.
     #[test]
     fn the_filter_is_the_dense_gaussian_process() {
-        for (kernel_kind, strain_var) in [
-            (Kernel::Matern32, 0.0),
-            (Kernel::Matern12, 0.0),
-            (Kernel::Matern32, 1e-8),
-            (Kernel::Matern12, 1e-8),
-        ] {
+        for (kernel_kind, strain_var) in KERNELS_AND_STRAIN_NOISE {
             let (run, path) = run(strain_var);
             let (sigma, sd, ell, g) = (SIGMA, SD, ELL, G);
             let n = run.compared();
@@ -956,12 +674,7 @@ mod tests {
     /// 1e-6 of the sd; its innovations are the filter's.
     #[test]
     fn the_smoother_is_the_dense_conditional() {
-        for (kernel_kind, strain_var) in [
-            (Kernel::Matern32, 0.0),
-            (Kernel::Matern12, 0.0),
-            (Kernel::Matern32, 1e-8),
-            (Kernel::Matern12, 1e-8),
-        ] {
+        for (kernel_kind, strain_var) in KERNELS_AND_STRAIN_NOISE {
             let (run, path) = run(strain_var);
             let (sigma, sd, ell) = (SIGMA, SD, ELL);
             let n = run.compared();

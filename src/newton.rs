@@ -1,28 +1,18 @@
-//! The posterior's mode and its curvature, from the log-density itself.
+//! Newton's method on a log-density: its mode and the curvature there.
 //!
-//! The MAP search ([`super::map`]) fits a Gaussian surrogate: each run's
-//! noise is held fixed while θ moves and its curvature is Gauss-Newton's.
-//! Where the noise depends on θ (errors in variables: the strain's noise
-//! reaches the stress through G) the surrogate's optimum is not the mode,
-//! and where the posterior is not Gaussian its width is not the surrogate's:
-//! on the measured 0.25 A records a posterior without one run lies
-//! 3.5–4.4 of its sds from the surrogate's optimum in G and is up to 1.7×
-//! wider in one direction, so importance sampling from the surrogate fails;
-//! walkers started there spent most of a calibration's steps drifting in G
-//! (and a chain judged converged still carried 4 MCSE of that start).
-//!
-//! [`newton`] starts from the surrogate's Laplace approximation and, in the
-//! coordinates that approximation whitens, takes Newton steps on the
-//! log-density with derivatives by central differences, then measures the
-//! curvature at the mode it reached: the Laplace approximation of the
-//! posterior itself, from which a calibration's walkers start and
-//! leave-one-out draws its importance samples. It is generic over
-//! [`LogDensity`].
+//! [`newton`] starts from a Gaussian guess (an [`Elliptical`]: its mean is
+//! where the search begins, its factor whitens the coordinates) and, in
+//! those coordinates, takes Newton steps on the log-density with
+//! derivatives by central differences, then measures the curvature at the
+//! mode it reached: the Laplace approximation of the density itself. It is
+//! generic over [`LogDensity`] and uses a target's blocks
+//! ([`LogDensity::blocks`]) where the guess keeps them apart: a point that
+//! differs from an evaluated one only in a block is scored from that
+//! point's memo. The posterior's use of it (from the MAP search's
+//! surrogate) is `posterior::laplace`.
 
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
-use super::map::{self, MapEstimate};
-use super::Posterior;
 use crate::sampler::density::{block_log_densities, log_densities, log_densities_memo};
 use crate::sampler::{Elliptical, LogDensity};
 
@@ -63,18 +53,6 @@ pub struct Mode {
     /// Gaussian about the mode whose precision is the negated Hessian
     /// (flat or convex directions held at [`MIN_CURVATURE`]).
     pub laplace: Elliptical,
-}
-
-/// The Laplace approximation of `post` at its mode, reached by [`newton`]
-/// from the MAP's; the MAP's own where the differences cannot be taken.
-pub fn laplace_from(post: &Posterior, map: &MapEstimate) -> Elliptical {
-    from_map(post, map).map_or_else(|| map::laplace(post, map), |m| m.laplace)
-}
-
-/// The mode of `post` reached by [`newton`] from the MAP's Laplace
-/// approximation; `None` where the differences cannot be taken.
-pub fn from_map(post: &Posterior, map: &MapEstimate) -> Option<Mode> {
-    newton(post, &map::laplace(post, map))
 }
 
 /// The log-density in the coordinates z of `start` (x = mean + L z).
