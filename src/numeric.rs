@@ -70,7 +70,7 @@ mod tests {
         assert!((&l * l.transpose() - &full).norm() < 1e-12);
         assert_eq!((l[(0, 0)], l[(1, 0)], l[(1, 1)]), (2.0, 1.0, 2.0));
         // correlation above 1: the diagonal alone
-        let indefinite = DMatrix::from_row_slice(2, 2, &[4.0, 5.0, 5.0, 9.0]);
+        let indefinite = DMatrix::from_row_slice(2, 2, &[4.0, 7.0, 7.0, 9.0]);
         let l = cholesky_or_diagonal(&indefinite).unwrap();
         assert_eq!(l, DMatrix::from_row_slice(2, 2, &[2.0, 0.0, 0.0, 3.0]));
         let zero = DMatrix::from_row_slice(2, 2, &[4.0, 0.0, 0.0, 0.0]);
