@@ -38,6 +38,7 @@ pub mod error;
 pub mod fit;
 pub mod identify;
 pub mod interrupt;
+pub mod laws;
 pub mod lock;
 pub mod model;
 pub mod newton;

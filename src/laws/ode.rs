@@ -1,0 +1,335 @@
+//! The integrator of the laws with an internal state driven by the
+//! displacement and its velocity (the Bouc-Wen family): written once, in
+//! the lanes of [`crate::model::simd`], for every [`StateLaw`].
+//!
+//! The excitation is the run's strain as the B-P integrator takes it:
+//! linear between samples, so over each sample interval the displacement
+//! x = h γ moves at the interval's constant velocity v. The state (at most
+//! two variables) takes explicit Euler sub-steps of equal length within
+//! the interval, at least [`Integrator::substeps`] and as many more as keep
+//! h λ ≤ [`Integrator::stability`], λ the law's bound on the rate at which
+//! its state can change over the interval ([`StateLaw::stiffness`]); each
+//! lane counts its own sub-steps (a lane that is through waits for the
+//! others), so a parameter set gives the same bits in any lane. More than
+//! [`Integrator::max_substeps`] sub-steps in one interval is an
+//! [`IntegrationError::TooStiff`]. With [`Integrator::extrapolate`] a
+//! second track takes twice the sub-steps and the stress reported is
+//! 2 τ_{h/2} − τ_h (second order). The scheme choice is the B-P law's:
+//! these states are integrated explicitly whatever it says.
+//!
+//! The force at a sample uses the state there and the velocity of a smooth
+//! path through the samples (central differences), and is reported as
+//! stress, F/A, with the run's area.
+
+use super::{DamperLaw, LawKind, LawParameter, LawValues, LANES};
+use crate::data::RunData;
+use crate::model::simd::{F64xN, Portable};
+use crate::model::{uses_avx2, IntegrationError, Integrator};
+
+/// A law whose force follows from a state of up to two variables, driven by
+/// the displacement x (m) and its velocity v (m/s). Every method is
+/// evaluated in lanes, for [`Portable`] and for AVX2 alike: write them with
+/// the [`F64xN`] operations only, and `#[inline(always)]`.
+pub trait StateLaw: Send + Sync + std::fmt::Debug + Default + 'static {
+    const KIND: LawKind;
+    const PARAMETERS: &'static [LawParameter];
+
+    /// The lanes' constants, read off their parameter sets.
+    type Lanes<S: F64xN>: Copy;
+
+    fn lanes<S: F64xN>(params: &[LawValues; LANES]) -> Self::Lanes<S>;
+
+    /// d(state)/dt at displacement `x`, velocity `v` and `state`.
+    fn rate<S: F64xN>(c: &Self::Lanes<S>, x: S, v: S, state: [S; 2]) -> [S; 2];
+
+    /// A bound (1/s) on how fast the state can change over an interval at
+    /// velocity `v` that starts at (`x`, `state`): the largest magnitude of
+    /// an eigenvalue of ∂rate/∂state there, or above it.
+    fn stiffness<S: F64xN>(c: &Self::Lanes<S>, x: S, v: S, state: [S; 2]) -> S;
+
+    /// The force (N) at displacement `x`, velocity `v` and `state`.
+    fn force<S: F64xN>(c: &Self::Lanes<S>, x: S, v: S, state: [S; 2]) -> S;
+
+    /// The largest quasi-static stiffness dF/dx (N/m) of one parameter set.
+    fn force_stiffness_bound(p: &LawValues) -> f64;
+
+    /// Parameter sets a MAP search may start from, given the records' peak
+    /// force (N), velocity (m/s) and stroke (m).
+    fn starts(force: f64, velocity: f64, stroke: f64) -> Vec<LawValues>;
+}
+
+/// A [`StateLaw`] as a [`DamperLaw`]: the registry's entry of such a law.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Ode<L>(L);
+
+impl<L: StateLaw> Ode<L> {
+    pub fn new() -> Self {
+        Ode(L::default())
+    }
+}
+
+impl<L: StateLaw> DamperLaw for Ode<L> {
+    fn kind(&self) -> LawKind {
+        L::KIND
+    }
+
+    fn parameters(&self) -> &'static [LawParameter] {
+        L::PARAMETERS
+    }
+
+    fn run_lanes(
+        &self,
+        integrator: &Integrator,
+        params: &[LawValues; LANES],
+        run: &RunData,
+        visit: &mut dyn FnMut(usize, &[f64; LANES]),
+    ) -> [Result<(), IntegrationError>; LANES] {
+        let mut outcome: [Result<(), IntegrationError>; LANES] = std::array::from_fn(|_| Ok(()));
+        // a lane with invalid parameters runs a valid set and is reported failed
+        let mut usable = *params;
+        let fallback = L::starts(1.0, 1.0, 1.0)[0];
+        for (lane, p) in params.iter().enumerate() {
+            if let Err(e) = self.validate(p) {
+                outcome[lane] = Err(IntegrationError::InvalidParams(e));
+                usable[lane] = fallback;
+            }
+        }
+        if run.time.is_empty() {
+            return outcome;
+        }
+        #[cfg(target_arch = "x86_64")]
+        if uses_avx2() {
+            // SAFETY: the CPU has AVX2 (checked just above)
+            unsafe { integrate_avx2::<L>(integrator, &usable, run, &mut outcome, visit) };
+            return outcome;
+        }
+        integrate::<L, Portable>(integrator, &usable, run, &mut outcome, visit);
+        outcome
+    }
+
+    fn euler_steps(&self, integrator: &Integrator, params: &LawValues, run: &RunData) -> u64 {
+        let mut outcome = std::array::from_fn(|_| Ok(()));
+        integrate::<L, Portable>(integrator, &[*params; LANES], run, &mut outcome, &mut |_, _| {})
+    }
+
+    fn stiffness_bound(&self, params: &LawValues, run: &RunData) -> f64 {
+        L::force_stiffness_bound(params) * run.gap_m / run.area_m2
+    }
+
+    fn starts(&self, runs: &[RunData]) -> Vec<LawValues> {
+        let (force, velocity, stroke) = super::scales(runs);
+        L::starts(force.max(1e-3), velocity.max(1e-6), stroke.max(1e-6))
+            .into_iter()
+            .map(|v| super::clamped(self, v))
+            .collect()
+    }
+}
+
+/// [`integrate`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn integrate_avx2<L: StateLaw>(
+    integrator: &Integrator,
+    params: &[LawValues; LANES],
+    run: &RunData,
+    outcome: &mut [Result<(), IntegrationError>; LANES],
+    visit: &mut dyn FnMut(usize, &[f64; LANES]),
+) -> u64 {
+    integrate::<L, crate::model::simd::avx2::Avx2>(integrator, params, run, outcome, visit)
+}
+
+/// One Euler track of every lane: its state.
+#[derive(Clone, Copy)]
+struct Track<S> {
+    state: [S; 2],
+}
+
+/// The larger of `a` and `b`, lane by lane.
+#[inline(always)]
+fn max<S: F64xN>(a: S, b: S) -> S {
+    S::select(a.gt(b), a, b)
+}
+
+/// The loop over the samples of `run` in the lanes of `S`; returns lane
+/// 0's sub-steps (both tracks where extrapolating).
+#[inline(always)]
+fn integrate<L: StateLaw, S: F64xN>(
+    integrator: &Integrator,
+    params: &[LawValues; LANES],
+    run: &RunData,
+    outcome: &mut [Result<(), IntegrationError>; LANES],
+    visit: &mut dyn FnMut(usize, &[f64; LANES]),
+) -> u64 {
+    let (t, gamma) = (&run.time, &run.gamma);
+    let c = L::lanes::<S>(params);
+    let (h_gap, inv_area) = (run.gap_m, 1.0 / run.area_m2);
+    let zero = S::splat(0.0);
+    let mut coarse = Track { state: [zero; 2] };
+    let mut finer = coarse;
+    let fine = Integrator { substeps: 2 * integrator.substeps, ..*integrator };
+    let rates = super::strain_rates(run);
+    let mut steps = 0u64;
+    let mut failed = [false; LANES];
+    // no closures over lanes here: a closure would not inherit the AVX2
+    // target feature of the function this loop is compiled into
+    let (x, v) = (S::splat(h_gap * gamma[0]), S::splat(h_gap * rates[0]));
+    visit(0, &(L::force(&c, x, v, coarse.state) * S::splat(inv_area)).to_array());
+    for k in 0..t.len() - 1 {
+        let dt = t[k + 1] - t[k];
+        if !(dt > 0.0) {
+            let e = IntegrationError::InvalidHistory(format!(
+                "time does not increase at sample {}",
+                k + 1
+            ));
+            *outcome = std::array::from_fn(|_| Err(e.clone()));
+            return steps;
+        }
+        let x0 = h_gap * gamma[k];
+        let v = h_gap * (gamma[k + 1] - gamma[k]) / dt;
+        steps +=
+            interval::<L, S>(integrator, &c, &mut coarse, x0, v, dt, t[k], outcome, &mut failed);
+        if integrator.extrapolate {
+            steps += interval::<L, S>(&fine, &c, &mut finer, x0, v, dt, t[k], outcome, &mut failed);
+        }
+        let (x, v) = (S::splat(h_gap * gamma[k + 1]), S::splat(h_gap * rates[k + 1]));
+        let force = if integrator.extrapolate {
+            S::splat(2.0) * L::force(&c, x, v, finer.state) - L::force(&c, x, v, coarse.state)
+        } else {
+            L::force(&c, x, v, coarse.state)
+        };
+        let stress = force * S::splat(inv_area);
+        let finite = stress.finite().mask_to_bools();
+        for lane in 0..LANES {
+            if !finite[lane] && !failed[lane] {
+                failed[lane] = true;
+                outcome[lane] = Err(IntegrationError::NonFinite { time: t[k + 1] });
+            }
+        }
+        visit(k + 1, &stress.to_array());
+    }
+    steps
+}
+
+/// One sample interval of length `dt` from displacement `x0` at velocity
+/// `v` for every lane of `track`: each lane's sub-steps, the state at the
+/// interval's end; returns lane 0's sub-steps. A lane that would need
+/// more than the integrator allows fails (once) and is held.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn interval<L: StateLaw, S: F64xN>(
+    integrator: &Integrator,
+    c: &L::Lanes<S>,
+    track: &mut Track<S>,
+    x0: f64,
+    v: f64,
+    dt: f64,
+    t0: f64,
+    outcome: &mut [Result<(), IntegrationError>; LANES],
+    failed: &mut [bool; LANES],
+) -> u64 {
+    let (xs, vs) = (S::splat(x0), S::splat(v));
+    let lambda = L::stiffness(c, xs, vs, track.state);
+    let least = S::splat(integrator.substeps as f64);
+    let wanted = (lambda * S::splat(dt / integrator.stability)).ceil();
+    // NaN (a state gone bad) asks for the least: the force reports it
+    let count = max(least, S::select(wanted.finite(), wanted, least));
+    let cap = S::splat(integrator.max_substeps as f64);
+    let over = count.gt(cap).mask_to_bools();
+    let count = count.min(cap);
+    for lane in 0..LANES {
+        if over[lane] && !failed[lane] {
+            failed[lane] = true;
+            outcome[lane] =
+                Err(IntegrationError::TooStiff { time: t0, substeps: integrator.max_substeps });
+        }
+    }
+    let counts = count.to_array();
+    let most = counts.iter().copied().fold(0.0, f64::max) as usize;
+    let h = S::splat(dt) / count;
+    let mut state = track.state;
+    for i in 0..most {
+        let active = S::splat(i as f64).lt(count);
+        let x = xs + vs * (h * S::splat(i as f64));
+        let d = L::rate(c, x, vs, state);
+        state = [
+            S::select(active, state[0] + h * d[0], state[0]),
+            S::select(active, state[1] + h * d[1], state[1]),
+        ];
+    }
+    track.state = state;
+    counts[0] as u64
+}
+
+/// |w|ⁿ for n ≥ 1 (0 at w = 0), in lanes.
+#[inline(always)]
+pub fn abs_pow<S: F64xN>(w: S, n: S) -> S {
+    crate::model::simd::exp(n * crate::model::simd::ln(w.abs()))
+}
+
+/// tanh a, in lanes (±1 beyond where eᵃ overflows).
+#[inline(always)]
+pub fn tanh<S: F64xN>(a: S) -> S {
+    let one = S::splat(1.0);
+    let e = crate::model::simd::exp(S::splat(2.0) * a.abs());
+    (one - S::splat(2.0) / (e + one)).copysign(a)
+}
+
+/// The normalised Bouc-Wen element's rate (Ikhouane & Rodellar's form):
+/// ẇ = ρ [u − σ |u| |w|ⁿ sgn w + (σ − 1) u |w|ⁿ] for the element's
+/// velocity `u`; |w| ≤ 1 for σ ≥ 0.
+#[inline(always)]
+pub fn bouc_wen_rate<S: F64xN>(rho: S, sigma: S, n: S, u: S, w: S) -> S {
+    let wn = abs_pow(w, n);
+    let signed = S::select(w.lt(S::splat(0.0)), -wn, wn);
+    rho * (u - sigma * u.abs() * signed + (sigma - S::splat(1.0)) * u * wn)
+}
+
+/// A bound on |∂ẇ/∂w| of [`bouc_wen_rate`] over |w| ≤ 1 at element
+/// velocity magnitude `u_abs`: ρ |u| n (σ + |σ − 1|).
+#[inline(always)]
+pub fn bouc_wen_stiffness<S: F64xN>(rho: S, sigma: S, n: S, u_abs: S) -> S {
+    rho * u_abs * n * (sigma + (sigma - S::splat(1.0)).abs())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::laws::{bingham, bouc_wen, spencer, testing};
+
+    /// The AVX2 build gives the portable build's bits, for every state law
+    /// (where the CPU has AVX2), with and without extrapolation.
+    #[test]
+    fn avx2_and_portable_builds_agree_bit_for_bit() {
+        fn both<L: StateLaw>(p: &LawValues) {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                let run = testing::crank_run(1000.0, 1.0);
+                let sets: [LawValues; LANES] = std::array::from_fn(|lane| {
+                    let mut q = *p;
+                    q[lane % L::PARAMETERS.len()] *= 1.0 + 0.03 * lane as f64;
+                    q
+                });
+                for extrapolate in [false, true] {
+                    let i = Integrator { extrapolate, ..Integrator::default() };
+                    let mut a = Vec::new();
+                    let mut b = Vec::new();
+                    let mut oa = std::array::from_fn(|_| Ok(()));
+                    let mut ob = std::array::from_fn(|_| Ok(()));
+                    let sa = integrate::<L, Portable>(&i, &sets, &run, &mut oa, &mut |_, s| {
+                        a.push(s.map(f64::to_bits))
+                    });
+                    // SAFETY: the CPU has AVX2 (checked above)
+                    let sb = unsafe {
+                        integrate_avx2::<L>(&i, &sets, &run, &mut ob, &mut |_, s| {
+                            b.push(s.map(f64::to_bits))
+                        })
+                    };
+                    assert_eq!((sa, a), (sb, b), "{:?}", L::KIND);
+                }
+            }
+        }
+        both::<bouc_wen::BoucWen>(&bouc_wen::values(1500.0, 600.0, 4000.0, 0.6, 2.3));
+        both::<spencer::Spencer>(&spencer::values(3000.0, 4.0e4, 3000.0, 600.0, 1.0e4, 0.5, 2.0));
+        both::<bingham::Bingham>(&bingham::values(800.0, 500.0, 0.01));
+    }
+}
