@@ -37,7 +37,7 @@ pub fn pointwise(
         .map(|(k, p)| p + run.terms_stress(k, draw.spring_n_per_m, draw.offset_n))
         .collect();
     let stiffness = if noise.uses_stiffness(run) {
-        stiffness_path(run, path, draw.params.g)
+        stiffness_path(run, path, draw.stiffness(run))
     } else {
         vec![0.0; path.len()]
     };

@@ -80,7 +80,7 @@ fn the_likelihood_is_evaluated_at_the_moved_parameters() {
                 post.noise.as_ref(),
                 &post.integrator,
                 run,
-                &LaneParams::Fixed([params; LANES]),
+                &LaneParams::bodner_partom(&[params; LANES]),
                 &coordinates,
                 terms,
             )[0]

@@ -329,7 +329,8 @@ fn map_search_crosses_the_walls_of_a_truncated_prior() {
     }
     let a = start(&campaign, &boxed, &mut |_| {}).unwrap();
     let b = start(&campaign, &open, &mut |_| {}).unwrap();
-    let identification = a.identification.params.to_array();
+    let identification =
+        a.identification.as_ref().expect("the B-P law is identified").params.to_array();
     let (_, hi) = boxed.prior["R1"].bounds();
     assert!(
         identification[2] > hi,

@@ -112,7 +112,7 @@ fn median_at_one_draw_is_the_law_solution() {
     let (step, chain) = cal.draw_positions(1)[0];
     let draw = cal.sample.draw_without(step, chain, "sine", 1.0);
     let gap = cal.record.geometry.unwrap().gap_m;
-    let truth = reference(&draw.params, &s.time, &s.displacement, gap);
+    let truth = reference(&draw.params(), &s.time, &s.displacement, gap);
     let peak = truth.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     // the clean sine is driven unsmoothed here and smoothed there; Euler at
     // the calibration's sub-steps against 1 µs: agreement to 1 % of the peak

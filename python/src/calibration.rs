@@ -21,7 +21,7 @@ use crate::{arrays, noted, raise, values, Arrays, ChainColumns, DataNode};
 pub(crate) struct Calibration {
     pub(crate) inner: mrbp::calibrate::Calibration,
     /// How it was made in memory (for `save`); none when read from a folder.
-    pub(crate) made: Option<(Arc<mrbp::data::Campaign>, CurrentIdentification)>,
+    pub(crate) made: Option<(Arc<mrbp::data::Campaign>, Option<CurrentIdentification>)>,
 }
 
 #[pymethods]
@@ -137,8 +137,13 @@ impl Calibration {
         let saved = py
             .detach(move || {
                 let mut quiet = |_: mrbp::pipeline::Event<'_>| {};
-                mrbp::pipeline::Pipeline::new(&mut quiet, false)
-                    .save(&campaign, &folder, cal, &identification, force)
+                mrbp::pipeline::Pipeline::new(&mut quiet, false).save(
+                    &campaign,
+                    &folder,
+                    cal,
+                    identification.as_ref(),
+                    force,
+                )
             })
             .map_err(raise)?;
         self.inner = saved;

@@ -152,9 +152,10 @@ impl CalibrationRecord {
                     }
                 })
                 .collect(),
-            identification: PARAM_NAMES
+            identification: start
+                .identification
                 .iter()
-                .zip(start.identification.params.to_array())
+                .flat_map(|id| PARAM_NAMES.iter().zip(id.params.to_array()))
                 .map(|(n, v)| (n.to_string(), v))
                 .collect(),
             map: named(&start.posterior.layout.to_si(&start.map.x)),

@@ -13,13 +13,19 @@ use crate::data::Campaign;
 use crate::data::RecordPart;
 use crate::error::{Error, Result};
 use crate::identify::IdentifySettings;
+use crate::laws::LawKind;
 use crate::model::{Integrator, Scheme, PARAM_NAMES};
 use crate::noise::{NoiseKind, NoiseModel};
+use crate::posterior::parameters::law_priors;
 use crate::posterior::prior::default_priors;
 use crate::posterior::{
     Coordinates, LikelihoodSettings, ModelKind, ModelTerms, ParameterModel, Posterior, Prior,
 };
 use crate::sampler::{Move, RunControl, SamplerSettings};
+
+fn is_bodner_partom(law: &LawKind) -> bool {
+    law.is_bodner_partom()
+}
 
 /// Which Euler scheme integrates the likelihood.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -188,6 +194,10 @@ pub struct Overrides {
     /// How the B-P parameters relate to the runs (default: per-current)
     #[arg(long, value_enum)]
     pub model: Option<ModelKind>,
+    /// The damper law (default: bodner-partom; docs/calibration.md, "Damper
+    /// laws")
+    #[arg(long, value_enum)]
+    pub law: Option<LawKind>,
     /// Walkers per ensemble (default: the smallest even number ≥ max(64, 6 × the dimension the ensemble moves explore: with `--noise discrepancy` each run's noise, moved on its own, is not counted))
     #[arg(long)]
     pub walkers: Option<usize>,
@@ -257,6 +267,9 @@ impl Overrides {
             s.likelihood.errors_in_variables = false;
         }
         s.model = self.model.unwrap_or(s.model);
+        if let Some(law) = self.law {
+            s.set_law(law);
+        }
         s.check().map_err(Error::Usage)?;
         Ok(s)
     }
@@ -267,6 +280,9 @@ impl Overrides {
 #[serde(deny_unknown_fields, default)]
 pub struct CalibrationSettings {
     pub model: ModelKind,
+    /// The damper law (`law = "spencer"`; the B-P law where absent).
+    #[serde(skip_serializing_if = "is_bodner_partom")]
+    pub law: LawKind,
     /// Reference current of the current law (A): R0, R1, D1 are its values there.
     pub reference_current_a: f64,
     /// The current curves' anchor currents (A): their `*_low` and `*_high`
@@ -284,7 +300,8 @@ pub struct CalibrationSettings {
     pub integrator: IntegratorSettings,
     pub sampler: SamplingSettings,
     pub identify: IdentifySettings,
-    /// Priors by parameter name (G, R0, R1, D1, m1, m2, n).
+    /// Priors by parameter name (the law's: G, R0, R1, D1, m1, m2, n for
+    /// the B-P law).
     pub prior: BTreeMap<String, Prior>,
     /// Bounds of every noise scale σ (Pa); log-uniform prior between them.
     pub sigma_bounds_pa: (f64, f64),
@@ -296,6 +313,7 @@ impl Default for CalibrationSettings {
     fn default() -> Self {
         CalibrationSettings {
             model: ModelKind::PerCurrent,
+            law: LawKind::BodnerPartom,
             reference_current_a: 1.0,
             anchor_currents_a: None,
             coil_lag: None,
@@ -322,19 +340,45 @@ impl CalibrationSettings {
             .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
         let mut s: CalibrationSettings = toml::from_str(&text)
             .map_err(|e| Error::input(path, format!("invalid settings: {}", e.message())))?;
+        // priors not named keep the B-P law's defaults, which give way to
+        // the file's law's own
+        let law = std::mem::take(&mut s.law);
         for (name, prior) in PARAM_NAMES.iter().zip(default_priors()) {
             s.prior.entry(name.to_string()).or_insert(prior);
         }
+        s.set_law(law);
         s.check().map_err(|m| Error::input(path, m))?;
         Ok(s)
     }
 
+    /// These settings with the damper law `law`: the priors the old law's
+    /// defaults filled in give way to the new law's (a prior set by hand
+    /// stays, and is refused by [`Self::check`] if the law has no such
+    /// parameter).
+    pub fn set_law(&mut self, law: LawKind) {
+        let old = law_priors(self.law);
+        let old_names = self.law.law().names();
+        self.prior.retain(|name, p| {
+            old_names.iter().position(|n| n == name).is_none_or(|i| *p != old[i])
+        });
+        self.law = law;
+        for (name, prior) in law.law().names().iter().zip(law_priors(law)) {
+            self.prior.entry(name.to_string()).or_insert(prior);
+        }
+    }
+
     pub fn check(&self) -> std::result::Result<(), String> {
+        let names = self.law.law().names();
         for name in self.prior.keys() {
-            if !PARAM_NAMES.contains(&name.as_str()) {
-                return Err(format!("prior for unknown parameter '{name}'"));
+            if !names.contains(&name.as_str()) {
+                return Err(format!(
+                    "prior for unknown parameter '{name}' (the {} law's are {})",
+                    self.law.name(),
+                    names.join(", ")
+                ));
             }
         }
+        ParameterModel::check_law(self.model, self.law).map_err(|e| e.to_string())?;
         for (name, p) in &self.prior {
             p.check(name)?;
         }
@@ -371,15 +415,23 @@ impl CalibrationSettings {
         Ok(())
     }
 
-    /// The priors in parameter order.
-    pub fn priors(&self) -> [Prior; 7] {
-        std::array::from_fn(|i| self.prior[PARAM_NAMES[i]])
+    /// The priors of the law's parameters, in their order.
+    pub fn priors(&self) -> Vec<Prior> {
+        let defaults = law_priors(self.law);
+        self.law
+            .law()
+            .names()
+            .iter()
+            .zip(defaults)
+            .map(|(n, d)| self.prior.get(*n).copied().unwrap_or(d))
+            .collect()
     }
 
-    /// How θ gives the B-P parameters of each run.
+    /// How θ gives the law's parameters of each run.
     pub fn parameter_model(&self) -> ParameterModel {
         ParameterModel::new(
             self.model,
+            self.law,
             self.reference_current_a,
             self.anchor_currents_a,
             self.coil_lag.unwrap_or(false),

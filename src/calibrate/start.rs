@@ -19,7 +19,8 @@ pub struct Start {
     pub current_a: f64,
     /// The settings with the walkers and sub-steps filled in.
     pub settings: CalibrationSettings,
-    pub identification: CurrentIdentification,
+    /// The paper's identification (the B-P law's start; none for another law).
+    pub identification: Option<CurrentIdentification>,
     pub map: MapEstimate,
     pub step_study: Vec<StepCheck>,
     pub posterior: Posterior,
@@ -55,7 +56,11 @@ pub fn start(
     settings.fill_coil_lag(!campaign.varying_runs().is_empty());
     let model = settings.parameter_model();
     let current_a = model.identification_current(&campaign.currents())?;
-    let identification = identify_current(campaign, current_a, &settings.identify);
+    // the paper's identification starts the B-P law
+    let identification = model
+        .law()
+        .is_bodner_partom()
+        .then(|| identify_current(campaign, current_a, &settings.identify));
     let integ = settings.integrator.clone();
     // the MAP search runs on the linearly implicit scheme unless told
     // otherwise: its likelihood is smooth on any record
@@ -82,23 +87,38 @@ pub fn start(
         let s = &settings.sampler;
         s.sampler(s.walkers, s.seed).check(posterior.layout.dim())?;
     }
-    // the identification may be far off (docs/identification.md): also start
-    // from the prior medians and keep the better optimum
-    let from_identification: Vec<f64> =
-        model.start(&identification.params, current_a).iter().map(|v| v.ln()).collect();
+    // ln θ from the identification (the B-P law) or the starts another
+    // law reads off the records; either may be far off
+    // (docs/identification.md): also from the prior medians, and the best
+    // optimum is kept
+    let mut from_records: Vec<Vec<f64>> = match &identification {
+        Some(id) => vec![model.start(&id.params, current_a).iter().map(|v| v.ln()).collect()],
+        None => {
+            let law = model.law().law();
+            let n = law.parameters().len();
+            law.starts(&posterior.runs)
+                .iter()
+                .map(|v| v[..n].iter().map(|v| v.ln()).collect())
+                .collect()
+        }
+    };
     let medians: Vec<f64> = posterior
         .priors
         .iter()
-        .zip(&from_identification)
+        .zip(&from_records[0])
         .map(|(p, v)| p.centre().map(|(c, _)| c).unwrap_or(*v))
         .collect();
-    // θ from either, the model terms (if any) from zero
+    from_records.push(medians);
+    // θ from each, the model terms (if any) from zero
     let fitted = posterior.layout.fitted.len();
-    let starts = [from_identification, medians].map(|log| {
-        let mut x = posterior.layout.theta_coordinates(&log);
-        x.resize(fitted, 0.0);
-        x
-    });
+    let starts: Vec<Vec<f64>> = from_records
+        .into_iter()
+        .map(|log| {
+            let mut x = posterior.layout.theta_coordinates(&log);
+            x.resize(fitted, 0.0);
+            x
+        })
+        .collect();
     let map = map::best_map(&posterior, &starts)
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
     let law_alone = stages.law_alone_rms(&posterior, &starts);

@@ -56,8 +56,8 @@ impl StateLaw for Bingham {
     }
 
     #[inline(always)]
-    fn stiffness<S: F64xN>(_c: &Lanes<S>, _x: S, _v: S, _state: [S; 2]) -> S {
-        S::splat(0.0)
+    fn jacobian<S: F64xN>(_c: &Lanes<S>, _x: S, _v: S, _state: [S; 2]) -> [[S; 2]; 2] {
+        [[S::splat(0.0); 2]; 2]
     }
 
     #[inline(always)]

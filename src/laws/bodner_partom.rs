@@ -43,7 +43,7 @@ pub fn values_of(p: &Params) -> LawValues {
 pub struct BodnerPartom;
 
 impl BodnerPartom {
-    pub fn new() -> Self {
+    pub const fn new() -> Self {
         BodnerPartom
     }
 }

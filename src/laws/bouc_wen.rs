@@ -5,14 +5,15 @@
 //! F = c0 ẋ + fz w,   ẇ = ρ [ẋ − σ |ẋ| |w|ⁿ sgn w + (σ − 1) ẋ |w|ⁿ],
 //!
 //! |w| ≤ 1 for σ ≥ 0, so fz is the hysteretic force's amplitude and 1/ρ the
-//! displacement over which it builds up. The classical form (Spencer et
+//! displacement over which it builds up; σ (`shape` in outputs, beside the
+//! noise's σ) sets how the loop turns at a reversal. The classical form (Spencer et
 //! al.'s notation) F = c0 ẋ + α z, ż = −γ |ẋ| z |z|ⁿ⁻¹ − β ẋ |z|ⁿ + A ẋ is the
 //! same model with z₀ = (A/(β + γ))^(1/n), w = z/z₀, fz = α z₀, ρ = A/z₀
 //! and σ = γ/(β + γ); α and A alone are not identifiable (only α z₀ is).
 //! The parallel spring k0 (x − x0) of some writings is the model terms'
 //! gas spring and force offset.
 
-use super::ode::{bouc_wen_rate, bouc_wen_stiffness, StateLaw};
+use super::ode::{bouc_wen_derivatives, bouc_wen_rate, StateLaw};
 use super::{LawKind, LawParameter, LawValues, LANES, MAX_LAW_PARAMETERS};
 use crate::model::simd::F64xN;
 
@@ -22,8 +23,9 @@ pub(super) const FZ: LawParameter =
     LawParameter { name: "fz", unit: "N", range: (1e-3, 1e6), plausible: (30.0, 3000.0) };
 pub(super) const RHO: LawParameter =
     LawParameter { name: "rho", unit: "1/m", range: (1.0, 1e8), plausible: (1e2, 1e5) };
+/// σ, named `shape` in outputs (beside the noise's σ of each run).
 pub(super) const SIGMA: LawParameter =
-    LawParameter { name: "sigma", unit: "-", range: (1e-3, 1e3), plausible: (0.2, 1.5) };
+    LawParameter { name: "shape", unit: "-", range: (1e-3, 1e3), plausible: (0.2, 1.5) };
 pub(super) const N: LawParameter =
     LawParameter { name: "n", unit: "-", range: (1.0, 20.0), plausible: (1.2, 3.5) };
 
@@ -65,8 +67,10 @@ impl StateLaw for BoucWen {
     }
 
     #[inline(always)]
-    fn stiffness<S: F64xN>(c: &Lanes<S>, _x: S, v: S, _state: [S; 2]) -> S {
-        bouc_wen_stiffness(c.rho, c.sigma, c.n, v.abs())
+    fn jacobian<S: F64xN>(c: &Lanes<S>, _x: S, v: S, state: [S; 2]) -> [[S; 2]; 2] {
+        let zero = S::splat(0.0);
+        let (_, dw) = bouc_wen_derivatives(c.rho, c.sigma, c.n, v, state[0]);
+        [[dw, zero], [zero, zero]]
     }
 
     #[inline(always)]

@@ -22,7 +22,7 @@ const PARAMETERS: [LawParameter; 8] = {
 pub struct BpViscous;
 
 impl BpViscous {
-    pub fn new() -> Self {
+    pub const fn new() -> Self {
         BpViscous
     }
 }

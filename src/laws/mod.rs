@@ -23,8 +23,8 @@
 //! **Adding a law**: a file here with a type that implements [`DamperLaw`]
 //! (a law with an internal state driven by displacement and velocity, as
 //! the Bouc-Wen family, implements [`ode::StateLaw`] instead and gets the
-//! lanes, the step control and AVX2 from [`ode`]) and has `fn new() ->
-//! Self`, and its line in the [`registry!`] below, which makes its name a
+//! lanes, the step control and AVX2 from [`ode`]) and has `const fn new()
+//! -> Self`, and its line in the [`registry!`] below, which makes its name a
 //! value of `--law` and of `[model] law`. Its tests run the conformance
 //! harness of `testing` (lanes against one at a time, the integrator's
 //! order, the parameters recovered from its own virtual records).
@@ -35,8 +35,6 @@ pub mod bouc_wen;
 pub mod bp_viscous;
 pub mod ode;
 pub mod spencer;
-
-use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
@@ -85,6 +83,11 @@ pub trait DamperLaw: Send + Sync + std::fmt::Debug {
         run: &RunData,
         visit: &mut dyn FnMut(usize, &[f64; LANES]),
     ) -> [Result<(), IntegrationError>; LANES];
+
+    /// The order of its integrator's error in the sub-step (1: Euler).
+    fn order(&self) -> u32 {
+        1
+    }
 
     /// The Euler steps one integration of `params` along `run` takes.
     fn euler_steps(&self, integrator: &Integrator, params: &LawValues, run: &RunData) -> u64;
@@ -146,9 +149,12 @@ macro_rules! registry {
 
         impl LawKind {
             /// The law of this name.
-            pub fn law(self) -> Arc<dyn DamperLaw> {
+            pub fn law(self) -> &'static dyn DamperLaw {
                 match self {
-                    $(LawKind::$variant => Arc::new(<$law>::new()),)+
+                    $(LawKind::$variant => {
+                        static LAW: $law = <$law>::new();
+                        &LAW
+                    })+
                 }
             }
 

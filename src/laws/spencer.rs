@@ -12,7 +12,7 @@
 //! force offset. The internal displacement starts at the record's first
 //! displacement, the hysteresis at rest.
 
-use super::ode::{bouc_wen_rate, bouc_wen_stiffness, StateLaw};
+use super::ode::{bouc_wen_derivatives, bouc_wen_rate, StateLaw};
 use super::{bouc_wen, LawKind, LawParameter, LawValues, LANES, MAX_LAW_PARAMETERS};
 use crate::model::simd::F64xN;
 
@@ -80,17 +80,14 @@ impl StateLaw for Spencer {
         [y_dot, bouc_wen_rate(c.rho, c.sigma, c.n, v - y_dot, state[1])]
     }
 
-    /// k0/(c0 + c1) for y; for w the element's own bound at |u| ≤ |ẋ| + |ẏ|
-    /// (|w| ≤ 1), and ρ fz/(c0 + c1) (1 + σ + |σ − 1|) through u's
-    /// dependence on w.
+    /// ∂ẏ/∂y = −k0/(c0 + c1), ∂ẏ/∂w = fz/(c0 + c1); ẇ through u = ẋ − ẏ
+    /// and directly.
     #[inline(always)]
-    fn stiffness<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: [S; 2]) -> S {
-        let one = S::splat(1.0);
-        let shape = c.sigma + (c.sigma - one).abs();
-        let y_dot_bound = (c.fz + c.c0 * v.abs() + c.k0 * (x - state[0]).abs()) * c.inv_c;
-        c.k0 * c.inv_c
-            + c.rho * c.fz * c.inv_c * (one + shape)
-            + bouc_wen_stiffness(c.rho, c.sigma, c.n, v.abs() + y_dot_bound)
+    fn jacobian<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: [S; 2]) -> [[S; 2]; 2] {
+        let (dy_dy, dy_dw) = (S::splat(0.0) - c.k0 * c.inv_c, c.fz * c.inv_c);
+        let u = v - y_rate(c, x, v, state);
+        let (dw_du, dw_dw) = bouc_wen_derivatives(c.rho, c.sigma, c.n, u, state[1]);
+        [[dy_dy, dy_dw], [S::splat(0.0) - dw_du * dy_dy, dw_dw - dw_du * dy_dw]]
     }
 
     #[inline(always)]

@@ -357,8 +357,12 @@ impl Pipeline<'_> {
         refs.push(&mut checkpointer);
         let made = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)?;
 
-        let cal =
-            self.write_calibration(campaign, dir, made.calibration, &made.start.identification)?;
+        let cal = self.write_calibration(
+            campaign,
+            dir,
+            made.calibration,
+            made.start.identification.as_ref(),
+        )?;
         // the chains are complete in chains.parquet: the checkpoint has done its job
         let _ = std::fs::remove_file(&checkpoint);
         self.emit(Event::Calibrated { cal: &cal, alone });
@@ -366,7 +370,8 @@ impl Pipeline<'_> {
     }
 
     /// Writes `cal`, a calibration of `campaign` made in memory (from the
-    /// Python package, say) that started from `identification`, into `dir`
+    /// Python package, say) that started from `identification` (the B-P
+    /// law's; none for another law), into `dir`
     /// as `mrbp sample` would; an earlier calibration there is replaced
     /// only if `force`.
     /// A campaign that has no manifest on disk (made from records in
@@ -377,7 +382,7 @@ impl Pipeline<'_> {
         campaign: &Campaign,
         dir: &Path,
         mut cal: Calibration,
-        identification: &CurrentIdentification,
+        identification: Option<&CurrentIdentification>,
         force: bool,
     ) -> Result<Calibration> {
         self.prepare(dir, "the folder", &[campaign], &folders::CALIBRATION, force)?;
@@ -400,20 +405,27 @@ impl Pipeline<'_> {
         campaign: &Campaign,
         dir: &Path,
         mut cal: Calibration,
-        identification: &CurrentIdentification,
+        identification: Option<&CurrentIdentification>,
     ) -> Result<Calibration> {
         // the folder's earlier calibration is incomplete from here on
         // (no calibration.toml) until the new one is whole
         store::folder::retire(dir)?;
         folders::clear_derived(dir)?;
-        let group = campaign.at_current(identification.current_a);
-        let identification = std::slice::from_ref(identification);
-        store::identification::write(
-            &dir.join(store::identification::FILE),
-            identification,
-            Some(&cal.record.calibration_id),
-        )?;
-        report::identification::write(dir, &group, identification)?;
+        // the paper's identification and its figures, of a B-P calibration
+        let table = dir.join(store::identification::FILE);
+        match identification {
+            Some(identification) => {
+                let group = campaign.at_current(identification.current_a);
+                let identification = std::slice::from_ref(identification);
+                store::identification::write(
+                    &table,
+                    identification,
+                    Some(&cal.record.calibration_id),
+                )?;
+                report::identification::write(dir, &group, identification)?;
+            }
+            None => crate::atomic::remove(&table)?,
+        }
         store::folder::write(dir, &mut cal)?;
         Ok(cal)
     }

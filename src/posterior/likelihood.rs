@@ -8,9 +8,9 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use crate::data::{RecordPart, RunData};
-use crate::model::{
-    tangent_stiffness, FieldLaw, IntegrationError, Integrator, LaneStates, Params, LANES,
-};
+use crate::laws::bodner_partom::values_of;
+use crate::laws::{LawKind, LawValues};
+use crate::model::{tangent_stiffness, FieldLaw, IntegrationError, Integrator, Params, LANES};
 use crate::noise::{DiscrepancySettings, NoiseKind, NoiseModel, NoiseOptions, NoiseValues};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -256,69 +256,79 @@ impl LikelihoodSettings {
     }
 }
 
-/// The B-P parameters of up to [`LANES`] points along one run: a set per
-/// lane, or each lane's law and coil lag where the run's current varies.
+/// The law's parameters of up to [`LANES`] points along one run: a set per
+/// lane, or (the B-P law) each lane's current law and coil lag where the
+/// run's current varies.
 // on the stack for one batch of lanes: boxing the larger variant would
 // allocate in the likelihood's loop
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug)]
 pub enum LaneParams {
-    Fixed([Params; LANES]),
+    Fixed { law: LawKind, values: [LawValues; LANES] },
     Along { laws: [FieldLaw; LANES], lags_s: [f64; LANES] },
 }
 
 impl LaneParams {
-    /// Integrates every lane along `run` ([`Integrator::run_lanes`], or
-    /// [`Integrator::run_lanes_along`] the run's current where it varies).
+    /// The B-P parameter sets of every lane.
+    pub fn bodner_partom(params: &[Params; LANES]) -> Self {
+        LaneParams::Fixed { law: LawKind::BodnerPartom, values: params.each_ref().map(values_of) }
+    }
+
+    /// Integrates every lane along `run` ([`DamperLaw::run_lanes`], or the
+    /// B-P law's [`Integrator::run_lanes_along`] the run's current where it
+    /// varies), calling `visit(k, stress)` at every sample.
     pub fn integrate(
         &self,
         integrator: &Integrator,
         run: &RunData,
-        visit: impl FnMut(usize, &LaneStates),
+        mut visit: impl FnMut(usize, &[f64; LANES]),
     ) -> [Result<(), IntegrationError>; LANES] {
         match (self, &run.current) {
             (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.run_lanes_along(
-                laws, lags_s, current, &run.time, &run.gamma, run.initial_tau, visit,
-            ),
-            _ => integrator.run_lanes(
-                &self.at(run.current_a),
+                laws,
+                lags_s,
+                current,
                 &run.time,
                 &run.gamma,
                 run.initial_tau,
-                visit,
+                |k, s| visit(k, &s.tau),
             ),
+            _ => {
+                let (law, values) = self.at(run.current_a);
+                law.law().run_lanes(integrator, &values, run, &mut visit)
+            }
         }
     }
 
     /// The Euler steps lane 0's integration along `run` takes
-    /// ([`Integrator::euler_steps`], or its twin along a varying current).
+    /// ([`DamperLaw::euler_steps`], or the B-P law's along a varying current).
     pub fn euler_steps(&self, integrator: &Integrator, run: &RunData) -> u64 {
         match (self, &run.current) {
             (LaneParams::Along { laws, lags_s }, Some(current)) => integrator.euler_steps_along(
                 &laws[0], lags_s[0], current, &run.time, &run.gamma, run.initial_tau,
             ),
-            _ => integrator.euler_steps(
-                &self.at(run.current_a)[0],
-                &run.time,
-                &run.gamma,
-                run.initial_tau,
-            ),
-        }
-    }
-
-    /// Every lane's parameters at a steady current `current_a`.
-    pub fn at(&self, current_a: f64) -> [Params; LANES] {
-        match self {
-            LaneParams::Fixed(p) => *p,
-            LaneParams::Along { laws, .. } => {
-                std::array::from_fn(|lane| laws[lane].params_at(current_a))
+            _ => {
+                let (law, values) = self.at(run.current_a);
+                law.law().euler_steps(integrator, &values[0], run)
             }
         }
     }
 
-    /// Each lane's G along `run`, the bound of the law's tangent stiffness:
-    /// where the current varies, the largest (G is monotone in the current,
-    /// so at the record's lowest or highest current).
+    /// The law and every lane's parameters at a steady current `current_a`.
+    pub fn at(&self, current_a: f64) -> (LawKind, [LawValues; LANES]) {
+        match self {
+            LaneParams::Fixed { law, values } => (*law, *values),
+            LaneParams::Along { laws, .. } => (
+                LawKind::BodnerPartom,
+                std::array::from_fn(|lane| values_of(&laws[lane].params_at(current_a))),
+            ),
+        }
+    }
+
+    /// Each lane's bound of the law's tangent stiffness along `run`
+    /// ([`DamperLaw::stiffness_bound`]; for the B-P law G): where the
+    /// current varies, the largest (G is monotone in the current, so at the
+    /// record's lowest or highest current).
     pub fn g_bound(&self, run: &RunData) -> [f64; LANES] {
         match (self, &run.current) {
             (LaneParams::Along { laws, .. }, Some(current)) => {
@@ -329,7 +339,10 @@ impl LaneParams {
                     laws[lane].params_at(lo).g.max(laws[lane].params_at(hi).g)
                 })
             }
-            _ => self.at(run.current_a).map(|p| p.g),
+            _ => {
+                let (law, values) = self.at(run.current_a);
+                values.map(|v| law.law().stiffness_bound(&v, run))
+            }
         }
     }
 }
@@ -378,14 +391,14 @@ pub fn run_log_likelihood_memo(
         let dg = run.gamma[k] - run.gamma[k - 1];
         for lane in 0..LANES {
             let model = if with_terms {
-                s.tau[lane] + run.terms_stress(k, terms[lane].0, terms[lane].1)
+                s[lane] + run.terms_stress(k, terms[lane].0, terms[lane].1)
             } else {
-                s.tau[lane]
+                s[lane]
             };
             residual[lane] = obs - model;
             if stiff {
-                stiffness[lane] = tangent_stiffness(s.tau[lane] - prev_model[lane], dg, g[lane]);
-                prev_model[lane] = s.tau[lane];
+                stiffness[lane] = tangent_stiffness(s[lane] - prev_model[lane], dg, g[lane]);
+                prev_model[lane] = s[lane];
             }
         }
         scorer.push(k, &residual, &stiffness);

@@ -94,7 +94,7 @@ fn run_residuals(
     let outcome = params.integrate(&post.integrator, r, |k, s| {
         if k > 0 {
             for (lane, o) in out.iter_mut().enumerate() {
-                o.push(r.tau[k] - s.tau[lane] - r.terms_stress(k, terms[lane].0, terms[lane].1));
+                o.push(r.tau[k] - s[lane] - r.terms_stress(k, terms[lane].0, terms[lane].1));
             }
         }
     });

@@ -31,6 +31,7 @@ use std::borrow::Cow;
 use std::sync::Arc;
 
 use crate::data::{Campaign, RunData};
+use crate::laws::LawValues;
 use crate::model::{FieldLaw, Integrator, Params, LANES};
 use crate::noise::{NoiseModel, NoiseValues, MAX_PARAMETERS};
 use crate::sampler::LogDensity;
@@ -178,9 +179,9 @@ impl Posterior {
         p
     }
 
-    /// The B-P parameters at a coil current, from the sampler's coordinates `x`.
-    pub fn params_at_current(&self, x: &[f64], current_a: f64) -> Params {
-        self.model.params(&self.theta(x), current_a)
+    /// The law's parameters at a coil current, from the sampler's coordinates `x`.
+    pub fn values_at_current(&self, x: &[f64], current_a: f64) -> LawValues {
+        self.model.values(&self.theta(x), current_a)
     }
 
     /// θ in SI units at the sampler's coordinates `x`.
@@ -194,7 +195,7 @@ impl Posterior {
         self.model.field(&self.theta(x))
     }
 
-    /// The B-P parameters of the points `xs` (sampler coordinates, up to
+    /// The law's parameters of the points `xs` (sampler coordinates, up to
     /// [`LANES`]; the last repeated) along run `run`: at its current, or
     /// following it where it varies and θ is a law.
     pub fn lane_params(&self, xs: &[&[f64]], run: &RunData) -> LaneParams {
@@ -204,9 +205,10 @@ impl Posterior {
                 std::array::from_fn(|lane| self.field_at(point(lane)).expect("a law"));
             return LaneParams::Along { laws: fields.map(|f| f.0), lags_s: fields.map(|f| f.1) };
         }
-        LaneParams::Fixed(std::array::from_fn(|lane| {
-            self.params_at_current(point(lane), run.current_a)
-        }))
+        LaneParams::Fixed {
+            law: self.model.law(),
+            values: std::array::from_fn(|lane| self.values_at_current(point(lane), run.current_a)),
+        }
     }
 
     /// Log-prior of the coordinates (the priors are densities of ln θ,
@@ -268,7 +270,7 @@ impl Posterior {
             })
             .collect();
         let alive: Vec<&[f64]> = moved.iter().map(|p| p.as_ref()).collect();
-        let mut params = LaneParams::Fixed([Params::reference_1a(); LANES]);
+        let mut params = LaneParams::bodner_partom(&[Params::reference_1a(); LANES]);
         for (i, r) in self.runs.iter().enumerate() {
             // a current law gives each run its own parameters; one set is
             // the same for every run and computed once

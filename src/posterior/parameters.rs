@@ -12,6 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use super::prior::Prior;
 use crate::error::{Error, Result};
+use crate::laws::bodner_partom::values_of;
+use crate::laws::{LawKind, LawValues};
 use crate::model::{CurrentCurves, CurrentLaw, FieldLaw, Params, PARAM_NAMES, PHYSICAL_RANGE};
 
 /// The choice as written in settings files and on the command line.
@@ -79,11 +81,14 @@ pub const BEND_PRIOR: Prior = Prior::LogNormal {
     upper: 403.428_793_492_735_1,
 };
 
-/// How θ maps to the B-P parameters of a run.
+/// How θ maps to the parameters of a run's damper law.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ParameterModel {
-    /// θ = (G, R0, R1, D1, m1, m2, n) for every run.
+    /// θ = (G, R0, R1, D1, m1, m2, n) of the B-P law for every run.
     PerCurrent,
+    /// θ = the parameters of another damper law ([`crate::laws`]) for
+    /// every run (of one current).
+    Law { law: LawKind },
     /// θ = the current law's [`LAW_NAMES`], with its reference current (A),
     /// and the coil's lag where `lag`.
     CurrentLaw { reference_a: f64, lag: bool },
@@ -93,16 +98,20 @@ pub enum ParameterModel {
 }
 
 impl ParameterModel {
-    /// The model of `kind`; the curves' anchors (`anchors_a`) are known
-    /// once the calibrated currents are (NaN until then). A law has the
-    /// coil's lag as a coordinate where `lag` (runs whose current varies).
+    /// The model of `kind` for the damper law `law`; the curves' anchors
+    /// (`anchors_a`) are known once the calibrated currents are (NaN until
+    /// then). A current law has the coil's lag as a coordinate where `lag`
+    /// (runs whose current varies). Only the B-P law follows the current
+    /// ([`Self::check_law`] refuses the others in a current law).
     pub fn new(
         kind: ModelKind,
+        law: LawKind,
         reference_a: f64,
         anchors_a: Option<(f64, f64)>,
         lag: bool,
     ) -> Self {
         match kind {
+            ModelKind::PerCurrent if !law.is_bodner_partom() => ParameterModel::Law { law },
             ModelKind::PerCurrent => ParameterModel::PerCurrent,
             ModelKind::CurrentLaw => ParameterModel::CurrentLaw { reference_a, lag },
             ModelKind::CurrentCurves => {
@@ -125,9 +134,9 @@ impl ParameterModel {
     /// for one parameter set.
     pub fn field_law(&self, theta: &[f64]) -> Option<FieldLaw> {
         match *self {
-            ParameterModel::PerCurrent => None,
+            ParameterModel::PerCurrent | ParameterModel::Law { .. } => None,
             ParameterModel::CurrentLaw { reference_a, .. } => {
-                Some(FieldLaw::Law(Self::law(reference_a, theta)))
+                Some(FieldLaw::Law(Self::current_law(reference_a, theta)))
             }
             ParameterModel::CurrentCurves { low_a, high_a, .. } => {
                 Some(FieldLaw::Curves(Self::curves(low_a, high_a, theta)))
@@ -150,9 +159,29 @@ impl ParameterModel {
         }
     }
 
+    /// Refuses a current law or current curves of a law other than B-P.
+    pub fn check_law(kind: ModelKind, law: LawKind) -> Result<()> {
+        if kind.is_law() && !law.is_bodner_partom() {
+            return Err(Error::Usage(format!(
+                "--model {} takes the B-P law; the {} law is calibrated per current (--model per-current)",
+                clap::ValueEnum::to_possible_value(&kind).map(|v| v.get_name().to_string()).unwrap_or_default(),
+                law.name()
+            )));
+        }
+        Ok(())
+    }
+
+    /// The damper law whose parameters θ gives.
+    pub fn law(&self) -> LawKind {
+        match self {
+            ParameterModel::Law { law } => *law,
+            _ => LawKind::BodnerPartom,
+        }
+    }
+
     pub fn kind(&self) -> ModelKind {
         match self {
-            ParameterModel::PerCurrent => ModelKind::PerCurrent,
+            ParameterModel::PerCurrent | ParameterModel::Law { .. } => ModelKind::PerCurrent,
             ParameterModel::CurrentLaw { .. } => ModelKind::CurrentLaw,
             ParameterModel::CurrentCurves { .. } => ModelKind::CurrentCurves,
         }
@@ -167,6 +196,7 @@ impl ParameterModel {
     pub fn names(&self) -> &'static [&'static str] {
         match self {
             ParameterModel::PerCurrent => &PARAM_NAMES,
+            ParameterModel::Law { law } => law_names(*law),
             ParameterModel::CurrentLaw { lag: false, .. } => &LAW_NAMES,
             ParameterModel::CurrentLaw { lag: true, .. } => &LAW_NAMES_LAGGED,
             ParameterModel::CurrentCurves { lag: false, .. } => &CURVE_NAMES,
@@ -178,6 +208,7 @@ impl ParameterModel {
     /// share, walked together in [`super::Coordinates::SaturationShare`].
     pub fn saturation_pairs(&self) -> Vec<(usize, usize)> {
         match self {
+            ParameterModel::Law { .. } => Vec::new(),
             ParameterModel::CurrentCurves { .. } => vec![
                 (self.index("R1_low"), self.index("D1_low")),
                 (self.index("R1_high"), self.index("D1_high")),
@@ -191,15 +222,17 @@ impl ParameterModel {
         self.names().iter().position(|n| *n == name).expect("a coordinate of the parameter model")
     }
 
-    /// Priors of θ from the priors of the seven B-P parameters. In a current
+    /// Priors of θ from the priors of the law's parameters (`law`; the B-P
+    /// law's seven for a current law or curves). In a current
     /// law those describe the reference current; G_field and G_zero each get
     /// G's prior, and I_s a log-normal with median I_ref and a factor e
     /// spread, within [0.05 I_ref, 20 I_ref]. The curves' values at each
     /// anchor get the parameter's prior, their bends [`BEND_PRIOR`].
-    pub fn priors(&self, bp: &[Prior; 7]) -> Vec<Prior> {
-        let mut p = bp.to_vec();
+    pub fn priors(&self, law: &[Prior]) -> Vec<Prior> {
+        let mut p = law.to_vec();
+        let bp = law;
         match *self {
-            ParameterModel::PerCurrent => {}
+            ParameterModel::PerCurrent | ParameterModel::Law { .. } => {}
             ParameterModel::CurrentLaw { reference_a, .. } => {
                 p.push(Prior::LogNormal {
                     median: reference_a,
@@ -232,7 +265,7 @@ impl ParameterModel {
     }
 
     /// The current law at θ (SI, in the order of [`LAW_NAMES`]).
-    fn law(reference_a: f64, theta: &[f64]) -> CurrentLaw {
+    fn current_law(reference_a: f64, theta: &[f64]) -> CurrentLaw {
         CurrentLaw {
             reference_a,
             g_field: theta[0],
@@ -247,12 +280,28 @@ impl ParameterModel {
         }
     }
 
-    /// The B-P parameters at a coil current from θ in SI units.
+    /// The law's parameters at a coil current from θ in SI units.
+    pub fn values(&self, theta: &[f64], current_a: f64) -> LawValues {
+        match *self {
+            ParameterModel::Law { .. } => {
+                let mut v = [0.0; crate::laws::MAX_LAW_PARAMETERS];
+                let n = theta.len().min(v.len());
+                v[..n].copy_from_slice(&theta[..n]);
+                v
+            }
+            _ => values_of(&self.params(theta, current_a)),
+        }
+    }
+
+    /// The B-P parameters at a coil current from θ in SI units (the B-P
+    /// law's models; another law's θ gives nonsense here).
     pub fn params(&self, theta: &[f64], current_a: f64) -> Params {
         match *self {
-            ParameterModel::PerCurrent => Params::from_array(std::array::from_fn(|i| theta[i])),
+            ParameterModel::PerCurrent | ParameterModel::Law { .. } => {
+                Params::from_array(std::array::from_fn(|i| theta.get(i).copied().unwrap_or(0.0)))
+            }
             ParameterModel::CurrentLaw { reference_a, .. } => {
-                Self::law(reference_a, theta).params_at(current_a)
+                Self::current_law(reference_a, theta).params_at(current_a)
             }
             ParameterModel::CurrentCurves { low_a, high_a, .. } => {
                 Self::curves(low_a, high_a, theta).params_at(current_a)
@@ -274,7 +323,9 @@ impl ParameterModel {
 
     fn start_without_lag(&self, p: &Params, current_a: f64) -> Vec<f64> {
         let reference_a = match *self {
-            ParameterModel::PerCurrent => return p.to_array().to_vec(),
+            ParameterModel::PerCurrent | ParameterModel::Law { .. } => {
+                return p.to_array().to_vec()
+            }
             ParameterModel::CurrentCurves { .. } => {
                 let mut theta = p.to_array().to_vec();
                 theta.extend(p.to_array());
@@ -304,7 +355,7 @@ impl ParameterModel {
     /// law's reference. Refuses currents the model cannot take.
     pub fn identification_current(&self, currents: &[f64]) -> Result<f64> {
         match *self {
-            ParameterModel::PerCurrent => match currents {
+            ParameterModel::PerCurrent | ParameterModel::Law { .. } => match currents {
                 [c] => Ok(*c),
                 _ => Err(Error::Usage(format!(
                     "a calibration takes runs of one current; got {currents:?} A"
@@ -330,11 +381,35 @@ impl ParameterModel {
     /// a law's reference, or the curves' high anchor.
     pub fn describes_current(&self, identification_current: f64) -> f64 {
         match *self {
-            ParameterModel::PerCurrent => identification_current,
+            ParameterModel::PerCurrent | ParameterModel::Law { .. } => identification_current,
             ParameterModel::CurrentLaw { reference_a, .. } => reference_a,
             ParameterModel::CurrentCurves { high_a, .. } => high_a,
         }
     }
+}
+
+/// The names of a law's parameters, as a slice that lives as long as the
+/// program (made once per law).
+fn law_names(law: LawKind) -> &'static [&'static str] {
+    static NAMES: std::sync::OnceLock<Vec<(LawKind, &'static [&'static str])>> =
+        std::sync::OnceLock::new();
+    let all = NAMES.get_or_init(|| {
+        LawKind::ALL
+            .iter()
+            .map(|&k| {
+                let names: &'static [&'static str] = Box::leak(k.law().names().into_boxed_slice());
+                (k, names)
+            })
+            .collect()
+    });
+    all.iter().find(|(k, _)| *k == law).map(|(_, n)| *n).unwrap_or(&[])
+}
+
+/// A law's default priors: for each parameter a log-normal whose ±1 sd
+/// spans its plausible values, truncated at its physical range (the B-P
+/// law's rule, [`super::prior::default_priors`]).
+pub fn law_priors(law: LawKind) -> Vec<Prior> {
+    law.law().parameters().iter().map(|p| Prior::spanning(p.plausible, p.range)).collect()
 }
 
 #[cfg(test)]
@@ -362,7 +437,13 @@ mod tests {
     /// priors line up with their names.
     #[test]
     fn curves_map_their_coordinates() {
-        let model = ParameterModel::new(ModelKind::CurrentCurves, 1.0, Some((0.25, 1.0)), false);
+        let model = ParameterModel::new(
+            ModelKind::CurrentCurves,
+            LawKind::BodnerPartom,
+            1.0,
+            Some((0.25, 1.0)),
+            false,
+        );
         let p = Params::reference_1a();
         let theta = model.start(&p, 0.5);
         assert_eq!(theta.len(), CURVE_NAMES.len());

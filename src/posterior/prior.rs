@@ -1,4 +1,4 @@
-//! Priors of the B-P parameters, on the log scale.
+//! Priors of a law's parameters, on the log scale.
 
 use serde::{Deserialize, Serialize};
 
@@ -57,10 +57,9 @@ impl Prior {
         }
     }
 
-    /// A log-normal whose ±1 sd spans the plausible range [a, b], truncated
-    /// to the physical range of parameter `index`.
-    fn plausible(index: usize, a: f64, b: f64) -> Self {
-        let (lower, upper) = PHYSICAL_RANGE[index];
+    /// A log-normal whose ±1 sd spans the plausible values [a, b],
+    /// truncated to the physical range [lower, upper].
+    pub fn spanning((a, b): (f64, f64), (lower, upper): (f64, f64)) -> Self {
         Prior::LogNormal { median: (a * b).sqrt(), sd_log: 0.5 * (b / a).ln(), lower, upper }
     }
 
@@ -101,7 +100,7 @@ impl Prior {
 /// | m2 | 1e-4 – 1e-2 1/Pa |
 /// | n | 0.5 – 3 |
 pub fn default_priors() -> [Prior; 7] {
-    std::array::from_fn(|i| Prior::plausible(i, PLAUSIBLE_RANGE[i].0, PLAUSIBLE_RANGE[i].1))
+    std::array::from_fn(|i| Prior::spanning(PLAUSIBLE_RANGE[i], PHYSICAL_RANGE[i]))
 }
 
 #[cfg(test)]

@@ -9,17 +9,21 @@ use super::layout::Layout;
 use super::likelihood::LaneParams;
 use super::parameters::ParameterModel;
 use crate::data::RunData;
+use crate::laws::bodner_partom::{params_of, values_of};
+use crate::laws::{LawKind, LawValues};
 use crate::model::{FieldLaw, Params};
 use crate::noise::NoiseValues;
 use crate::sampler::{Chains, Diagnostics, ParameterDiagnostics};
 
-/// One posterior draw as a run sees it: the B-P parameters, the model
+/// One posterior draw as a run sees it: the law's parameters, the model
 /// terms (0 where off) and the noise parameters of that run (SI, in the
 /// noise model's order).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Draw {
-    /// The B-P parameters at the run's (nominal) current.
-    pub params: Params,
+    /// The damper law.
+    pub law: LawKind,
+    /// Its parameters at the run's (nominal) current.
+    pub values: LawValues,
     /// A law's draw: how the parameters follow the current, and the coil's
     /// lag (s), for a run whose current varies.
     pub field: Option<(FieldLaw, f64)>,
@@ -31,7 +35,23 @@ pub struct Draw {
 impl Draw {
     /// A draw of the B-P law alone: no model terms, noise `noise`.
     pub fn of_law(params: Params, noise: NoiseValues) -> Self {
-        Draw { params, field: None, spring_n_per_m: 0.0, offset_n: 0.0, noise }
+        Draw::of(LawKind::BodnerPartom, values_of(&params), noise)
+    }
+
+    /// A draw of `law` alone: no model terms, noise `noise`.
+    pub fn of(law: LawKind, values: LawValues, noise: NoiseValues) -> Self {
+        Draw { law, values, field: None, spring_n_per_m: 0.0, offset_n: 0.0, noise }
+    }
+
+    /// The B-P parameters of a draw of the B-P law.
+    pub fn params(&self) -> Params {
+        params_of(&self.values)
+    }
+
+    /// The bound of the law's tangent stiffness at the draw's parameters
+    /// (for the B-P law its G at the run's nominal current).
+    pub fn stiffness(&self, run: &RunData) -> f64 {
+        self.law.law().stiffness_bound(&self.values, run)
     }
 
     /// The parameters of up to `LANES` draws (the last repeated) along `run`.
@@ -42,7 +62,10 @@ impl Draw {
                 laws: std::array::from_fn(|lane| at(lane).field.expect("a law").0),
                 lags_s: std::array::from_fn(|lane| at(lane).field.expect("a law").1),
             },
-            _ => LaneParams::Fixed(std::array::from_fn(|lane| at(lane).params)),
+            _ => LaneParams::Fixed {
+                law: draws[0].law,
+                values: std::array::from_fn(|lane| at(lane).values),
+            },
         }
     }
 
@@ -95,10 +118,17 @@ impl PosteriorSample {
         Some(positions.iter().map(|&(s, c)| self.chains.at(s, c, i)).collect())
     }
 
-    /// The B-P parameters at one position, at a coil current.
+    /// The B-P parameters at one position, at a coil current (a B-P
+    /// calibration's).
     pub fn params_at(&self, step: usize, chain: usize, current_a: f64) -> Params {
         let x = self.chains.point(step, chain);
         self.model.params(&x[self.layout.theta.clone()], current_a)
+    }
+
+    /// The law's parameters at one position, at a coil current.
+    pub fn values_at(&self, step: usize, chain: usize, current_a: f64) -> LawValues {
+        let x = self.chains.point(step, chain);
+        self.model.values(&x[self.layout.theta.clone()], current_a)
     }
 
     /// A law's field law and coil lag at one position; `None` for one
@@ -116,7 +146,8 @@ impl PosteriorSample {
             Some(j) => {
                 let (spring_n_per_m, offset_n) = self.layout.terms(x, j);
                 Draw {
-                    params: self.params_at(step, chain, current_a),
+                    law: self.model.law(),
+                    values: self.values_at(step, chain, current_a),
                     field: self.field_at(step, chain),
                     spring_n_per_m,
                     offset_n,
@@ -137,7 +168,8 @@ impl PosteriorSample {
         let others: Vec<usize> = (0..l.runs.len()).filter(|&i| l.runs[i] != run).collect();
         let offsets: Vec<f64> = others.iter().map(|&i| l.terms(x, i).1).collect();
         Draw {
-            params: self.params_at(step, chain, current_a),
+            law: self.model.law(),
+            values: self.values_at(step, chain, current_a),
             field: self.field_at(step, chain),
             spring_n_per_m: l.terms(x, 0).0,
             offset_n: crate::noise::Pool::Mean.of(&offsets),
@@ -271,7 +303,7 @@ mod tests {
         };
         let own = sample.draw(0, 0, "b", 1.0);
         assert_eq!((own.noise, own.offset_n), ([4.0, 0.6, 0.0, 0.0], 0.0));
-        assert_eq!(own.params, Params::reference_1a());
+        assert_eq!(own.params(), Params::reference_1a());
         let unseen = sample.draw(0, 0, "c", 1.0);
         assert!(
             (unseen.noise[0] - 12.5f64.sqrt()).abs() < 1e-12

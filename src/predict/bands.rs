@@ -123,7 +123,7 @@ pub fn model_paths(
             let mut tau = vec![vec![0.0; n]; chunk.len()];
             let outcome = Draw::lanes(chunk, run).integrate(integrator, run, |k, s| {
                 for (lane, path) in tau.iter_mut().enumerate() {
-                    path[k] = s.tau[lane];
+                    path[k] = s[lane];
                 }
             });
             for _ in chunk {
@@ -248,7 +248,7 @@ fn explain_median(
     let median_of = |v: Vec<f64>| crate::sampler::quantile(&v, 0.5);
     let values: NoiseValues =
         std::array::from_fn(|p| median_of(kept.iter().map(|(d, _)| d.noise[p]).collect()));
-    let g = median_of(kept.iter().map(|(d, _)| d.params.g).collect());
+    let g = median_of(kept.iter().map(|(d, _)| d.stiffness(run)).collect());
     let stiffness = crate::noise::stiffness_path(run, median, g);
     let residuals: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - median[k]).collect();
     noise.explain(run, &residuals, &stiffness, &values)

@@ -130,6 +130,9 @@ fn calibrated_at(cal: &Calibration) -> String {
             format!("{:?} A, each parameter its own curve in the coil current through its values at {low_a} and {high_a} A", cal.record.currents)
         }
         ParameterModel::PerCurrent => format!("{} A", cal.record.current_a),
+        ParameterModel::Law { law } => {
+            format!("{} A, the {} law", cal.record.current_a, law.name())
+        }
     }
 }
 

@@ -146,6 +146,9 @@ pub fn calibration(cal: &Calibration) -> String {
             format!("current curves (anchors {low_a} and {high_a} A) from {:?} A", rec.currents)
         }
         ParameterModel::PerCurrent => format!("posterior at {} A", rec.current_a),
+        ParameterModel::Law { law } => {
+            format!("posterior at {} A, the {} law", rec.current_a, law.name())
+        }
     };
     let s = &cal.settings;
     row!(

@@ -152,7 +152,10 @@ pub fn new_tests(
                 *v = column[i];
             }
             crate::posterior::Draw {
-                params: crate::model::Params::from_array(std::array::from_fn(|k| theta[k][i])),
+                law: crate::laws::LawKind::BodnerPartom,
+                values: crate::laws::bodner_partom::values_of(&crate::model::Params::from_array(
+                    std::array::from_fn(|k| theta[k][i]),
+                )),
                 field: None,
                 spring_n_per_m: spring.as_ref().map_or(0.0, |c| c[i]),
                 offset_n: offset.as_ref().map_or(0.0, |c| c[i]),

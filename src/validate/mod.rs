@@ -547,7 +547,8 @@ fn unseen_draw(posterior: &Posterior, x: &[f64], current_a: f64) -> Draw {
     let currents: Vec<f64> = posterior.runs.iter().map(|r| r.current_a).collect();
     let offsets: Vec<f64> = runs.iter().map(|&j| l.terms(x, j).1).collect();
     Draw {
-        params: posterior.params_at_current(x, current_a),
+        law: posterior.model.law(),
+        values: posterior.values_at_current(x, current_a),
         field: posterior.field_at(x),
         spring_n_per_m: l.terms(x, 0).0,
         offset_n: crate::noise::Pool::Mean.of(&offsets),

@@ -233,12 +233,16 @@ impl BetweenRuns {
         let layout = theta_layout(first.cal, &datas);
         let (coordinates, places) = coordinates_of(first.cal, &layout);
         let noise = first.cal.settings.noise_model();
-        let priors = first.cal.settings.priors();
+        let priors: [Prior; 7] = first.cal.settings.priors().try_into().map_err(|_| {
+            Error::Usage(
+                "the between-run layer takes runs calibrated alone with the B-P law".into(),
+            )
+        })?;
         let mut all = Vec::with_capacity(runs.len());
         for run in runs {
             if coordinates_of(run.cal, &layout) != (coordinates.clone(), places.clone())
                 || run.cal.settings.sampler.coordinates != first.cal.settings.sampler.coordinates
-                || run.cal.settings.priors() != priors
+                || run.cal.settings.priors() != priors.to_vec()
             {
                 return Err(Error::Usage(format!("{} was calibrated alone with other priors, model terms, coordinates or noise model than the others", run.id)));
             }
@@ -492,7 +496,8 @@ impl BetweenRuns {
             noise[p] = self.coordinates[k].scale.to_si(z[k]);
         }
         Draw {
-            params: Params::from_array(theta),
+            law: crate::laws::LawKind::BodnerPartom,
+            values: crate::laws::bodner_partom::values_of(&Params::from_array(theta)),
             field: None,
             spring_n_per_m: self.places.spring.map_or(0.0, |k| z[k]),
             offset_n: self.places.offset.map_or(0.0, |k| z[k]),
