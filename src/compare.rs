@@ -71,8 +71,9 @@ pub struct Comparison {
 }
 
 impl Comparison {
-    /// Every calibration's summary, and for every pair the difference of
-    /// every parameter both have (noise scales are per run and left out).
+    /// Every calibration's summary, and for every pair of one damper law
+    /// the difference of every parameter both have (noise scales are per
+    /// run and left out).
     /// A law also says how its B-P parameters differ between currents: each
     /// pair of the currents it saw or a per-current entry stands for,
     /// labelled "`label` at I A", from the same draws (paired).
@@ -94,7 +95,10 @@ impl Comparison {
             .collect();
         let mut differences = Vec::new();
         for (i, a) in entries.iter().enumerate() {
-            for b in &entries[i + 1..] {
+            // parameters of one name in two laws are not one quantity
+            for b in
+                entries[i + 1..].iter().filter(|b| b.sample.model.law() == a.sample.model.law())
+            {
                 for name in a.sample.layout.theta_names() {
                     if let (Some(da), Some(db)) =
                         (a.sample.values(name, &a.positions), b.sample.values(name, &b.positions))

@@ -6,6 +6,7 @@
 //! made this way ([`SynthSettings::default`]); `mrbp synth --out data`
 //! regenerates it bit for bit.
 
+use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::Path;
 
@@ -15,6 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::atomic;
 use crate::data::{Columns, Geometry, Manifest, Record, RunSpec};
 use crate::error::{Error, Result};
+use crate::laws::{LawKind, LawValues};
 use crate::model::{CurrentCurves, CurrentLaw, FieldLaw, Integrator, Params, LANES};
 use crate::noise::Kernel;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
@@ -158,6 +160,59 @@ pub struct SynthSettings {
     /// (`[[switched]]`), beside the records of one current each.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub switched: Vec<SwitchedRun>,
+    /// Another damper law than the B-P fluid of `[law]` (`[damper]`,
+    /// `mrbp synth --law NAME`): the records are that law's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub damper: Option<Damper>,
+}
+
+/// The stand's damper as a law other than the B-P fluid: its parameters
+/// at 1 A by name (SI; a parameter not named takes the law's typical
+/// value, [`crate::laws::DamperLaw::typical`]). Its forces (N) and
+/// dashpots (N s/m) follow the coil current as the stand's stresses do,
+/// by s(I)/s(1 A) with s(I) = tanh(I/I_s) and `[law] saturation_a` = I_s;
+/// its other parameters do not.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Damper {
+    pub law: LawKind,
+    #[serde(default)]
+    pub at_1a: BTreeMap<String, f64>,
+}
+
+impl Damper {
+    /// The law with its typical parameters at 1 A.
+    pub fn typical(law: LawKind) -> Damper {
+        let l = law.law();
+        let values = l.typical();
+        Damper {
+            law,
+            at_1a: l.names().iter().zip(values).map(|(n, v)| (n.to_string(), v)).collect(),
+        }
+    }
+
+    /// The parameters at `current_a` with the stand's saturation current
+    /// `saturation_a`; refuses a name the law does not have.
+    pub fn values_at(&self, current_a: f64, saturation_a: f64) -> Result<LawValues> {
+        let law = self.law.law();
+        let names = law.names();
+        if let Some(unknown) = self.at_1a.keys().find(|k| !names.contains(&k.as_str())) {
+            return Err(Error::Usage(format!(
+                "[damper.at_1a]: the {} law has no parameter '{unknown}' (its are {})",
+                self.law.name(),
+                names.join(", ")
+            )));
+        }
+        let scale = (current_a / saturation_a).tanh() / (1.0 / saturation_a).tanh();
+        let mut values = law.typical();
+        for (k, p) in law.parameters().iter().enumerate() {
+            let at_1a = self.at_1a.get(p.name).copied().unwrap_or(values[k]);
+            values[k] = if p.unit == "N" || p.unit == "N s/m" { at_1a * scale } else { at_1a };
+        }
+        law.validate(&values)
+            .map_err(|e| Error::Usage(format!("[damper] at {current_a} A: {e}")))?;
+        Ok(values)
+    }
 }
 
 /// A record whose coil current steps through `levels_a`, round and round,
@@ -292,6 +347,7 @@ impl Default for SynthSettings {
             seed: 20_261_122,
             extra_force: ExtraForce::default(),
             switched: Vec::new(),
+            damper: None,
         }
     }
 }
@@ -347,6 +403,12 @@ pub struct Overrides {
     /// A viscous force the law lacks, c times the piston velocity (N s/m)
     #[arg(long, value_name = "N_S_PER_M")]
     pub viscous_force: Option<f64>,
+    /// The damper law the records are made with (default: the B-P fluid of
+    /// the settings' `[law]`; another law with its typical parameters at 1 A
+    /// unless the settings' `[damper]` names them). In `study plan`, the
+    /// law of the calibrations' `--law`.
+    #[arg(skip)]
+    pub law: Option<LawKind>,
 }
 
 impl Overrides {
@@ -376,6 +438,12 @@ impl Overrides {
         }
         s.extra_force.viscous_n_s_per_m =
             self.viscous_force.unwrap_or(s.extra_force.viscous_n_s_per_m);
+        match self.law {
+            None => {}
+            Some(LawKind::BodnerPartom) => s.damper = None,
+            Some(law) if s.damper.as_ref().is_some_and(|d| d.law == law) => {}
+            Some(law) => s.damper = Some(Damper::typical(law)),
+        }
         Ok(s)
     }
 }
@@ -389,12 +457,20 @@ const TRUTH_SUBSTEPS: u32 = 16;
 /// The random stream of a record's extra force, beside its sensor noise's.
 const EXTRA_FORCE_STREAM: u64 = 0xe7f;
 
-/// One virtual record: `cycles` crank revolutions at `rpm` with parameters
-/// `p`, noise from the stream `(seed, stream)`, and the extra force with
-/// the smooth force `smooth` (scale (N), time scale (s)).
+/// What a virtual record's true stress comes from: the stand's B-P fluid
+/// or another damper law, at the record's current.
+#[derive(Clone, Copy, Debug)]
+pub enum Truth {
+    BodnerPartom(Params),
+    Law(LawKind, LawValues),
+}
+
+/// One virtual record: `cycles` crank revolutions at `rpm` of the damper
+/// `truth`, noise from the stream `(seed, stream)`, and the extra force
+/// with the smooth force `smooth` (scale (N), time scale (s)).
 pub fn virtual_record(
     settings: &SynthSettings,
-    p: &Params,
+    truth: &Truth,
     rpm: f64,
     current_a: f64,
     smooth: Option<(f64, f64)>,
@@ -405,15 +481,31 @@ pub fn virtual_record(
     let time: Vec<f64> = (0..=n).map(|k| k as f64 / settings.rate_hz).collect();
     let x: Vec<f64> = time.iter().map(|&t| settings.crank.displacement(rpm, t)).collect();
     let gamma: Vec<f64> = x.iter().map(|x| x / settings.geometry.gap_m).collect();
-    let truth = Integrator {
+    let integrator = Integrator {
         substeps: TRUTH_SUBSTEPS,
         extrapolate: true,
         max_substeps: 1_000_000,
         ..Integrator::default()
-    }
-    .run(p, &time, &gamma)
-    .map_err(|e| Error::Compute(format!("virtual experiment at {rpm} rpm: {e}")))?;
-    sensed(settings, rpm, time, x, &truth.tau, vec![current_a; n + 1], smooth, stream)
+    };
+    let failed = |e| Error::Compute(format!("virtual experiment at {rpm} rpm: {e}"));
+    let tau = match truth {
+        Truth::BodnerPartom(p) => integrator.run(p, &time, &gamma).map_err(failed)?.tau,
+        Truth::Law(law, values) => {
+            let g = settings.geometry;
+            let run = crate::data::RunData::new(
+                String::new(),
+                time.clone(),
+                gamma,
+                vec![0.0; n + 1],
+                0.0,
+                current_a,
+                (g.area_m2, g.gap_m),
+                (0.0, 0.0),
+            );
+            law.law().path(&integrator, values, &run).map_err(failed)?
+        }
+    };
+    sensed(settings, rpm, time, x, &tau, vec![current_a; n + 1], smooth, stream)
 }
 
 /// Finer time steps per sample of a switched record's true response: the
@@ -541,6 +633,12 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     for run in &settings.switched {
         run.check(&settings.law)?;
     }
+    if let (Some(d), false) = (&settings.damper, settings.switched.is_empty()) {
+        return Err(Error::Usage(format!(
+            "switched-current records follow the B-P fluid's current law; the {} law of [damper] has none",
+            d.law.name()
+        )));
+    }
     std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
     let _held = crate::lock::write(dir)?;
     crate::atomic::clean_leftovers(dir)?;
@@ -550,8 +648,14 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     let mut panels = Vec::new();
     let mut stream = 0u64;
     for &current in &settings.currents_a {
-        let p = settings.law.params_at(current);
-        p.validate().map_err(|e| Error::Usage(format!("at {current} A: {e}")))?;
+        let truth = match &settings.damper {
+            Some(d) => Truth::Law(d.law, d.values_at(current, settings.law.saturation_a)?),
+            None => {
+                let p = settings.law.params_at(current);
+                p.validate().map_err(|e| Error::Usage(format!("at {current} A: {e}")))?;
+                Truth::BodnerPartom(p)
+            }
+        };
         let mut chart = Chart::new(
             format!("virtual records at {current} A"),
             "piston displacement x (mm)",
@@ -562,7 +666,7 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
             let id = run_id(current, rpm);
             let file = format!("{id}.csv");
             let smooth = settings.extra_force.smooth(i, settings.rpms.len())?;
-            let rec = virtual_record(settings, &p, rpm, current, smooth, stream)?;
+            let rec = virtual_record(settings, &truth, rpm, current, smooth, stream)?;
             stream += 1;
             chart.series.push(
                 Series::line(
@@ -700,19 +804,21 @@ mod tests {
     fn the_extra_force_adds_to_the_law_and_noise() {
         let base = small_stand();
         let p = base.law.law().params_at(1.0);
-        let plain = virtual_record(&base, &p, 400.0, 1.0, None, 0).unwrap();
+        let plain = virtual_record(&base, &Truth::BodnerPartom(p), 400.0, 1.0, None, 0).unwrap();
         let viscous = SynthSettings {
             extra_force: ExtraForce { viscous_n_s_per_m: 500.0, ..ExtraForce::default() },
             ..base.clone()
         };
-        let rec = virtual_record(&viscous, &p, 400.0, 1.0, None, 0).unwrap();
+        let rec = virtual_record(&viscous, &Truth::BodnerPartom(p), 400.0, 1.0, None, 0).unwrap();
         assert_eq!(rec.displacement, plain.displacement);
         for k in 0..rec.time.len() {
             let added = rec.force[k] - plain.force[k];
             let expected = 500.0 * base.crank.velocity(400.0, rec.time[k]);
             assert!((added - expected).abs() < 1e-9, "sample {k}: {added} vs {expected}");
         }
-        let rec = virtual_record(&base, &p, 400.0, 1.0, Some((80.0, 0.005)), 0).unwrap();
+        let rec =
+            virtual_record(&base, &Truth::BodnerPartom(p), 400.0, 1.0, Some((80.0, 0.005)), 0)
+                .unwrap();
         let added: Vec<f64> = rec.force.iter().zip(&plain.force).map(|(a, b)| a - b).collect();
         let mean = added.iter().sum::<f64>() / added.len() as f64;
         let sd =

@@ -74,6 +74,11 @@ pub enum Command {
         /// Seed of the sensor noise (default: that of the bundled campaign)
         #[arg(long)]
         seed: Option<u64>,
+        /// The damper law the records are made with (default: the B-P fluid
+        /// of the settings' `[law]`; another law with its typical parameters
+        /// at 1 A unless the settings' `[damper]` names them)
+        #[arg(long, value_enum)]
+        law: Option<crate::laws::LawKind>,
         #[command(flatten)]
         options: Overrides,
     },

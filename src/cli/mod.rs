@@ -51,7 +51,8 @@ fn dispatch(cli: Cli) -> Result<()> {
         None => pipeline.bundled().map(|reports| print::reports(&reports, clock)),
         Some(Command::Check { manifest }) => pipeline.check(&manifest).map(drop),
         Some(Command::Status { dir }) => status(&dir),
-        Some(Command::Synth { out, config, seed, options }) => {
+        Some(Command::Synth { out, config, seed, law, options }) => {
+            let options = crate::synth::Overrides { law, ..options };
             let manifest =
                 crate::synth::write_campaign(&options.settings(config.as_deref(), seed)?, &out)?;
             println!(

@@ -76,8 +76,12 @@ impl DamperLaw for BodnerPartom {
         params[0]
     }
 
-    fn starts(&self, _runs: &[RunData]) -> Vec<LawValues> {
+    fn starts_at(&self, _force: f64, _velocity: f64, _stroke: f64) -> Vec<LawValues> {
         vec![values_of(&Params::from_array(std::array::from_fn(Params::plausible_centre)))]
+    }
+
+    fn typical(&self) -> LawValues {
+        values_of(&Params::reference_1a())
     }
 }
 

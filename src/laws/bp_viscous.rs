@@ -79,10 +79,13 @@ impl DamperLaw for BpViscous {
         params[0]
     }
 
-    fn starts(&self, runs: &[RunData]) -> Vec<LawValues> {
-        let (force, velocity, _) = super::scales(runs);
-        let bp = BodnerPartom.starts(runs)[0];
-        vec![values(&params_of(&bp), 0.1 * force.max(1e-3) / velocity.max(1e-6))]
+    fn starts_at(&self, force: f64, velocity: f64, stroke: f64) -> Vec<LawValues> {
+        let bp = BodnerPartom.starts_at(force, velocity, stroke)[0];
+        vec![values(&params_of(&bp), 0.1 * force / velocity)]
+    }
+
+    fn typical(&self) -> LawValues {
+        values(&Params::reference_1a(), 0.1 * 2700.0 / 0.28)
     }
 }
 

@@ -97,9 +97,24 @@ pub trait DamperLaw: Send + Sync + std::fmt::Debug {
     /// the stress (errors in variables).
     fn stiffness_bound(&self, params: &LawValues, run: &RunData) -> f64;
 
-    /// Parameter sets a MAP search may start from, read off the records
-    /// of one current (each inside the physical range).
-    fn starts(&self, runs: &[RunData]) -> Vec<LawValues>;
+    /// Parameter sets a MAP search may start from, given the records' peak
+    /// force (N), velocity (m/s) and stroke (m, half the peak-to-peak
+    /// displacement), each inside the physical range.
+    fn starts_at(&self, force: f64, velocity: f64, stroke: f64) -> Vec<LawValues>;
+
+    /// Parameter sets a MAP search may start from, read off the records of
+    /// one current ([`Self::starts_at`] their scales).
+    fn starts(&self, runs: &[RunData]) -> Vec<LawValues> {
+        let (force, velocity, stroke) = scales(runs);
+        self.starts_at(force.max(1e-3), velocity.max(1e-6), stroke.max(1e-6))
+    }
+
+    /// A parameter set typical of an RD-1005-3-class damper at 1 A (peak
+    /// force 2.7 kN at 0.28 m/s over a 6.75 mm stroke, the virtual stand's
+    /// at 400 rpm): the truth `mrbp synth --law` uses by default.
+    fn typical(&self) -> LawValues {
+        self.starts_at(2700.0, 0.28, 0.00675)[0]
+    }
 
     /// The stress of one parameter set at every sample of `run`.
     fn path(

@@ -122,12 +122,8 @@ impl<L: StateLaw> DamperLaw for Ode<L> {
         L::force_stiffness_bound(params) * run.gap_m / run.area_m2
     }
 
-    fn starts(&self, runs: &[RunData]) -> Vec<LawValues> {
-        let (force, velocity, stroke) = super::scales(runs);
-        L::starts(force.max(1e-3), velocity.max(1e-6), stroke.max(1e-6))
-            .into_iter()
-            .map(|v| super::clamped(self, v))
-            .collect()
+    fn starts_at(&self, force: f64, velocity: f64, stroke: f64) -> Vec<LawValues> {
+        L::starts(force, velocity, stroke).into_iter().map(|v| super::clamped(self, v)).collect()
     }
 }
 

@@ -112,7 +112,9 @@ impl PlanOptions {
         }
         let settings = self.sample.settings()?;
         let synth = || -> Result<SynthSettings> {
-            let mut s = self.synth.settings(self.synth_config.as_deref(), self.noise_seed)?;
+            // the records are of the law the calibrations take
+            let synth = crate::synth::Overrides { law: self.sample.law, ..self.synth.clone() };
+            let mut s = synth.settings(self.synth_config.as_deref(), self.noise_seed)?;
             if self.synth_config.is_none() && self.synth.currents.is_none() {
                 s.currents_a = vec![self.current.unwrap_or(1.0)];
             }
