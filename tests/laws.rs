@@ -156,3 +156,68 @@ fn what_a_law_cannot_do_is_refused() {
         &["prior for unknown parameter 'G'", "c0, fc, v0"],
     );
 }
+
+/// `run --law A,B --leave-one-out` on records of Bingham's law: each law's
+/// whole job in its own folder, then laws.parquet (every law, record and
+/// kind) and a report that ranks the generating law first on the records
+/// it did not see, decisively (its held-out nRMSE is the noise's).
+#[test]
+#[ignore = "slow tier: a validation study of two laws with leave-one-out"]
+fn the_validation_study_ranks_the_generating_law_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = virtual_campaign(dir.path(), "bingham");
+    let out = dir.path().join("out");
+    let o = ok(&[
+        "run",
+        arg(&manifest),
+        "--law",
+        "bouc-wen,bingham",
+        "--leave-one-out",
+        "--out",
+        arg(&out),
+        "--draws",
+        "100",
+    ]);
+    let said = said(&o);
+    assert!(said.contains("at 1 A the bingham law predicts the held-out tests best"), "{said}");
+    assert!(said.contains("decisive on these tests"), "{said}");
+    for law in ["bouc-wen", "bingham"] {
+        assert!(out.join(law).join("I1.0A/loo.parquet").exists(), "{law}");
+    }
+    let path = out.join("laws/laws.parquet");
+    let t = read_parquet(&path).unwrap();
+    assert_eq!(
+        mrbp::store::column_names(&t),
+        [
+            "law", "current_a", "run", "kind", "samples", "nrmse", "e_t", "e_x", "e_v",
+            "inside_p95", "band_width", "lppd", "seconds"
+        ]
+    );
+    // two laws × three records × in sample and held out
+    assert_eq!(t.height(), 12);
+    let rows = mrbp::store::laws::read(&path).unwrap();
+    let held: Vec<_> = rows
+        .iter()
+        .filter(|r| r.law == LawKind::Bingham && r.kind == mrbp::validate::laws::Kind::HeldOut)
+        .collect();
+    assert_eq!(held.len(), 3);
+    for r in held {
+        // 15 N of noise over a peak force of about 2.7 kN: well under 2 %
+        assert!(r.nrmse < 0.02 && r.inside_p95 > 0.85, "{r:?}");
+    }
+    let html = std::fs::read_to_string(out.join("laws/report.html")).unwrap();
+    for id in ["verdict", "standings", "records", "figures", "reproduce"] {
+        assert!(html.contains(&format!("id=\"{id}\"")), "{id}");
+    }
+    // one law is not a comparison: `sample` refuses several
+    let o = mrbp(&[
+        "sample",
+        arg(&manifest),
+        "--law",
+        "bouc-wen,bingham",
+        "--out",
+        arg(&dir.path().join("s")),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("run --law"));
+}

@@ -195,9 +195,10 @@ pub struct Overrides {
     #[arg(long, value_enum)]
     pub model: Option<ModelKind>,
     /// The damper law (default: bodner-partom; docs/calibration.md, "Damper
-    /// laws")
-    #[arg(long, value_enum)]
-    pub law: Option<LawKind>,
+    /// laws"); `run` takes several, comma separated, and ranks them by what
+    /// they predict (with --leave-one-out)
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub law: Vec<LawKind>,
     /// Walkers per ensemble (default: the smallest even number ≥ max(64, 6 × the dimension the ensemble moves explore: with `--noise discrepancy` each run's noise, moved on its own, is not counted))
     #[arg(long)]
     pub walkers: Option<usize>,
@@ -267,8 +268,8 @@ impl Overrides {
             s.likelihood.errors_in_variables = false;
         }
         s.model = self.model.unwrap_or(s.model);
-        if let Some(law) = self.law {
-            s.set_law(law);
+        if let Some(law) = self.law.first() {
+            s.set_law(*law);
         }
         s.check().map_err(Error::Usage)?;
         Ok(s)

@@ -79,6 +79,11 @@ fn dispatch(cli: Cli) -> Result<()> {
         }
         Some(Command::Sample { manifest, out, options }) => {
             let request = options.request()?;
+            if request.laws.len() > 1 {
+                return Err(Error::Usage(
+                    "sample calibrates one law; `mrbp run --law A,B,…` calibrates several and ranks them".into(),
+                ));
+            }
             let campaign = pipeline.load(&manifest)?;
             pipeline.sample(&campaign, &out, &request).map(drop)
         }

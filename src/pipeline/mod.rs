@@ -12,6 +12,7 @@ pub mod bundled;
 mod calibrate;
 mod compare;
 pub mod folders;
+pub mod laws;
 mod predict;
 mod run;
 mod simulate;
@@ -23,6 +24,7 @@ use crate::calibrate::{Calibration, CalibrationSettings};
 use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::CurrentIdentification;
+use crate::laws::LawKind;
 use crate::predict::PredictionRecord;
 use crate::sampler::{Observer, Progress};
 use crate::validate::between_runs::NewTestRow;
@@ -135,8 +137,11 @@ impl SampleOptions {
         if self.per_run && settings.model.is_law() {
             return Err(Error::Usage("--per-run calibrates each run alone, which a current law cannot (one run has one current): use the per-current model".into()));
         }
+        let mut laws = self.settings.law.clone();
+        laws.dedup();
         Ok(SampleRequest {
             settings,
+            laws,
             current: self.current,
             hold_out_current: self.hold_out_current.clone(),
             resume: self.resume,
@@ -151,6 +156,9 @@ impl SampleOptions {
 #[derive(Clone, Debug)]
 pub struct SampleRequest {
     pub settings: CalibrationSettings,
+    /// The laws asked for (`--law A,B`): empty or one, the settings' law;
+    /// several, a comparison of laws (`run`), which the settings' first.
+    pub laws: Vec<LawKind>,
     /// Only the runs at this current (per-current model).
     pub current: Option<f64>,
     /// Currents left out of a current-law calibration, to be predicted.

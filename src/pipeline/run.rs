@@ -26,6 +26,9 @@ impl Pipeline<'_> {
         out: &Path,
         options: &RunOptions,
     ) -> Result<Vec<PathBuf>> {
+        if options.sample.laws.len() > 1 {
+            return self.run_laws(manifest, out, options);
+        }
         let campaign = self.check(manifest)?;
         let all = campaign.currents();
         let currents = match options.sample.current {

@@ -17,6 +17,7 @@ pub mod comparison;
 pub mod figures;
 pub mod html;
 pub mod identification;
+pub mod laws;
 pub mod prediction;
 pub mod simulation;
 pub mod text;

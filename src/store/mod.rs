@@ -33,6 +33,7 @@ pub mod coverage;
 pub mod folder;
 pub mod identification;
 pub mod inference;
+pub mod laws;
 pub mod parquet;
 pub mod prediction;
 pub mod record;

@@ -113,7 +113,10 @@ impl PlanOptions {
         let settings = self.sample.settings()?;
         let synth = || -> Result<SynthSettings> {
             // the records are of the law the calibrations take
-            let synth = crate::synth::Overrides { law: self.sample.law, ..self.synth.clone() };
+            let synth = crate::synth::Overrides {
+                law: self.sample.law.first().copied(),
+                ..self.synth.clone()
+            };
             let mut s = synth.settings(self.synth_config.as_deref(), self.noise_seed)?;
             if self.synth_config.is_none() && self.synth.currents.is_none() {
                 s.currents_a = vec![self.current.unwrap_or(1.0)];

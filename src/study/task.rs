@@ -124,6 +124,7 @@ fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<
     let resume = out.join(crate::store::folder::CHECKPOINT).exists();
     let request = SampleRequest {
         settings: spec.settings.clone(),
+        laws: vec![],
         current: spec.current_a,
         hold_out_current: vec![],
         resume,

@@ -15,6 +15,7 @@
 
 pub mod between_runs;
 pub mod consistency;
+pub mod laws;
 pub mod psis;
 
 use serde::{Deserialize, Serialize};

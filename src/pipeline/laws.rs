@@ -1,0 +1,149 @@
+//! Damper laws side by side: the whole job of each law on one campaign,
+//! then their standings on the same records (`mrbp run --law A,B,…`).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::{Pipeline, RunOptions};
+use crate::data::current_tag;
+use crate::error::{Error, Result};
+use crate::laws::LawKind;
+use crate::predict::RunBands;
+use crate::store;
+use crate::validate::laws::{measures, standings, Kind, LawRow};
+
+/// The study's folder in a run's `--out`.
+pub const FOLDER: &str = "laws";
+
+impl Pipeline<'_> {
+    /// Each of the laws `options.sample.laws` through the whole job on the
+    /// campaign of `manifest`, into `out/<law>/` (one calibration folder per
+    /// current, with its bands, leave-one-out and report, as `run` makes
+    /// for one law); then `out/laws/`: `laws.parquet` (every law, current,
+    /// record, in sample and held out) and `report.html`, which ranks the
+    /// laws current by current by what they predict of records they did
+    /// not see. Returns the reports written.
+    pub fn run_laws(
+        &mut self,
+        manifest: &Path,
+        out: &Path,
+        options: &RunOptions,
+    ) -> Result<Vec<PathBuf>> {
+        let campaign = self.check(manifest)?;
+        let study = out.join(FOLDER);
+        self.prepare(&study, "--out", &[&campaign], &[], true)?;
+        let currents = match options.sample.current {
+            Some(c) => vec![c],
+            None => campaign.currents(),
+        };
+        let mut reports = Vec::new();
+        let mut job_seconds = Vec::new();
+        for &law in &options.sample.laws {
+            let mut one = options.clone();
+            one.sample.settings.set_law(law);
+            one.sample.laws = vec![law];
+            // the current law is the B-P law's
+            one.current_law = options.current_law && law.is_bodner_partom();
+            self.note(&format!("the {} law:", law.name()));
+            let clock = Instant::now();
+            reports.extend(self.run(manifest, &out.join(law.name()), &one)?);
+            job_seconds.push((law, clock.elapsed().as_secs_f64()));
+        }
+        let held_out = options.leave_one_out.is_some();
+        let mut rows = Vec::new();
+        let mut ids = Vec::new();
+        let mut predictions: Vec<(LawKind, Vec<RunBands>)> = Vec::new();
+        for &law in &options.sample.laws {
+            let mut shown = Vec::new();
+            for &c in &currents {
+                let dir = out.join(law.name()).join(current_tag(c));
+                let cal = store::folder::read(&dir)?;
+                let seconds = cal.record.seconds_start + cal.record.seconds_sampling;
+                ids.push((
+                    format!("{}/{}", law.name(), current_tag(c)),
+                    cal.record.calibration_id.clone(),
+                ));
+                let area = campaign.geometry.area_m2;
+                let prediction = store::prediction::read(&dir)?.ok_or_else(|| {
+                    Error::Compute(format!("{}: no bands to judge the law by", dir.display()))
+                })?;
+                for (b, cov) in prediction.bands.iter().zip(&prediction.coverage) {
+                    rows.push(row(law, c, b, Kind::InSample, cov.lppd, seconds, area));
+                }
+                if held_out {
+                    let loo =
+                        store::coverage::read_leave_one_out(&dir, &cal.record.calibration_id)?
+                            .ok_or_else(|| {
+                                Error::Compute(format!("{}: no leave-one-out study", dir.display()))
+                            })?;
+                    for (b, r) in loo.bands.iter().zip(&loo.rows) {
+                        rows.push(row(law, c, b, Kind::HeldOut, r.coverage.lppd, seconds, area));
+                    }
+                    shown.extend(loo.bands);
+                } else {
+                    shown.extend(prediction.bands);
+                }
+            }
+            predictions.push((law, shown));
+        }
+        let standings = if held_out { standings(&rows)? } else { Vec::new() };
+        store::laws::write(&study.join(store::laws::FILE), &rows, &ids)?;
+        for line in crate::validate::laws::verdict(&standings) {
+            self.note(&line);
+        }
+        let laws: Vec<String> = options.sample.laws.iter().map(|l| l.name()).collect();
+        let command = format!(
+            "mrbp run {} --law {} --out {}{}",
+            manifest.display(),
+            laws.join(","),
+            out.display(),
+            if held_out { " --leave-one-out" } else { "" }
+        );
+        let report = crate::report::laws::write(&crate::report::laws::LawsReport {
+            dir: &study,
+            campaign: &campaign.name,
+            rows: &rows,
+            standings: &standings,
+            predictions: &predictions,
+            area_m2: campaign.geometry.area_m2,
+            job_seconds: &job_seconds,
+            command: &command,
+            held_out,
+        })?;
+        self.note(&format!(
+            "wrote {} and {}",
+            study.join(store::laws::FILE).display(),
+            report.display()
+        ));
+        reports.push(report);
+        Ok(reports)
+    }
+}
+
+/// One record's row: its error measures from `bands`, its lppd.
+fn row(
+    law: LawKind,
+    current_a: f64,
+    bands: &RunBands,
+    kind: Kind,
+    lppd: f64,
+    seconds: f64,
+    area_m2: f64,
+) -> LawRow {
+    let m = measures(bands, area_m2);
+    LawRow {
+        law,
+        current_a,
+        run: bands.run.clone(),
+        kind,
+        samples: m.samples,
+        nrmse: m.nrmse,
+        e_t: m.e_t,
+        e_x: m.e_x,
+        e_v: m.e_v,
+        inside_p95: m.inside_p95,
+        band_width: m.band_width,
+        lppd,
+        seconds,
+    }
+}

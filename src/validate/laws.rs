@@ -1,0 +1,371 @@
+//! Damper laws side by side: how well each predicts the records, in sample
+//! and on tests it did not see, in the measures of a Bayesian comparison
+//! (log predictive density, coverage, band width) and in those
+//! practitioners quote.
+//!
+//! For one record with measured force F, model force F̂ (the posterior
+//! median path: the bands' q50 with the model terms, as force), residual
+//! r = F − F̂:
+//!
+//! * nRMSE = RMS(r) / max |F|, the share of the peak force;
+//! * E_t = ‖r‖ / ‖F − F̄‖, E_x the same with each sample weighted by |ẋ|
+//!   and E_v by |ẍ| (Spencer et al. 1997: the error as a function of time,
+//!   of displacement and of velocity, each over the force's own spread
+//!   weighted alike);
+//! * the share of the record inside the 95 % predictive band, the band's
+//!   mean width as a share of the peak force, and the log pointwise
+//!   predictive density (lppd).
+//!
+//! Held out, the record is predicted by the posterior of the law without
+//! it (leave-one-out: `loo_bands.parquet`, `loo.parquet`); the laws are
+//! ranked, current by current, by the sum of their held-out lppd over the
+//! tests, with the standard error of each difference from the best law
+//! over the tests as units (whole tests held out, as ArviZ's `compare`
+//! takes pointwise terms): SE = √(n var(d)), d each test's difference.
+
+use crate::error::{Error, Result};
+use crate::laws::LawKind;
+use crate::predict::RunBands;
+
+/// In sample or held out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    InSample,
+    HeldOut,
+}
+
+impl Kind {
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::InSample => "in-sample",
+            Kind::HeldOut => "held-out",
+        }
+    }
+
+    pub fn parse(name: &str) -> Option<Kind> {
+        [Kind::InSample, Kind::HeldOut].into_iter().find(|k| k.name() == name)
+    }
+}
+
+/// How one law predicts one record.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LawRow {
+    pub law: LawKind,
+    pub current_a: f64,
+    pub run: String,
+    pub kind: Kind,
+    pub samples: usize,
+    /// RMS(F − F̂) / max |F|.
+    pub nrmse: f64,
+    pub e_t: f64,
+    pub e_x: f64,
+    pub e_v: f64,
+    /// Share of the samples inside the 95 % predictive band.
+    pub inside_p95: f64,
+    /// The 95 % predictive band's mean width over max |F|.
+    pub band_width: f64,
+    /// Log pointwise predictive density of the record (Σ over its samples).
+    pub lppd: f64,
+    /// Wall time of the calibration that predicted it (s): the law's
+    /// calibration in sample, its leave-one-out study held out.
+    pub seconds: f64,
+}
+
+/// The error measures of `bands` (one record, its median path and bands in
+/// stress) with the damper's `area_m2`: every sample after the first.
+pub fn measures(bands: &RunBands, area_m2: f64) -> Measures {
+    let n = bands.time.len();
+    let f = &bands.force;
+    let model: Vec<f64> = bands.model[2].iter().map(|t| t * area_m2).collect();
+    let peak = f.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    // |ẋ| and |ẍ| of the displacement by central differences
+    let x = &bands.displacement;
+    let t = &bands.time;
+    let derivative = |y: &[f64], k: usize| {
+        let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+        if b > a {
+            (y[b] - y[a]) / (t[b] - t[a])
+        } else {
+            0.0
+        }
+    };
+    let v: Vec<f64> = (0..n).map(|k| derivative(x, k)).collect();
+    let a: Vec<f64> = (0..n).map(|k| derivative(&v, k)).collect();
+    let mean_f = f[1..].iter().sum::<f64>() / (n - 1).max(1) as f64;
+    let ratio = |w: &dyn Fn(usize) -> f64| {
+        let (mut num, mut den) = (0.0, 0.0);
+        for k in 1..n {
+            num += w(k) * (f[k] - model[k]).powi(2);
+            den += w(k) * (f[k] - mean_f).powi(2);
+        }
+        (num / den).sqrt()
+    };
+    let rms = ((1..n).map(|k| (f[k] - model[k]).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+    let inside = (1..n)
+        .filter(|&k| {
+            bands.tau_obs[k] >= bands.predictive[0][k] && bands.tau_obs[k] <= bands.predictive[1][k]
+        })
+        .count();
+    let width = (1..n).map(|k| bands.predictive[1][k] - bands.predictive[0][k]).sum::<f64>()
+        / (n - 1) as f64
+        * area_m2;
+    Measures {
+        samples: n - 1,
+        nrmse: rms / peak,
+        e_t: ratio(&|_| 1.0),
+        e_x: ratio(&|k| v[k].abs()),
+        e_v: ratio(&|k| a[k].abs()),
+        inside_p95: inside as f64 / (n - 1) as f64,
+        band_width: width / peak,
+    }
+}
+
+/// The error measures of one record ([`measures`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measures {
+    pub samples: usize,
+    pub nrmse: f64,
+    pub e_t: f64,
+    pub e_x: f64,
+    pub e_v: f64,
+    pub inside_p95: f64,
+    pub band_width: f64,
+}
+
+/// One law at one current, its records together.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Standing {
+    pub law: LawKind,
+    pub current_a: f64,
+    /// Held-out lppd summed over the tests (elpd of leaving one test out).
+    pub elpd: f64,
+    /// Its difference from the best law's at this current (0 for the best)
+    /// and the standard error of that difference.
+    pub elpd_diff: f64,
+    pub elpd_diff_se: f64,
+    /// Means over the tests, in sample and held out.
+    pub nrmse_in: f64,
+    pub nrmse_out: f64,
+    /// Held-out samples inside the 95 % band, pooled over the tests.
+    pub inside_p95_out: f64,
+    pub band_width_out: f64,
+    /// Wall time of the calibration and of its leave-one-out study (s).
+    pub seconds: f64,
+    /// Rank at the current by held-out elpd (1: best).
+    pub rank: usize,
+}
+
+/// The laws' standings, current by current (rank 1 the best held-out
+/// elpd); the laws whose held-out rows miss a test another law has are
+/// refused (they were not compared on the same tests).
+pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
+    let mut currents: Vec<f64> = rows.iter().map(|r| r.current_a).collect();
+    currents.sort_by(f64::total_cmp);
+    currents.dedup();
+    let mut out = Vec::new();
+    for c in currents {
+        let at: Vec<&LawRow> = rows.iter().filter(|r| r.current_a == c).collect();
+        let mut laws: Vec<LawKind> = at.iter().map(|r| r.law).collect();
+        laws.dedup();
+        laws.sort_by_key(|l| LawKind::ALL.iter().position(|k| k == l));
+        laws.dedup();
+        let held = |law: LawKind| -> Vec<&LawRow> {
+            let mut v: Vec<&LawRow> =
+                at.iter().copied().filter(|r| r.law == law && r.kind == Kind::HeldOut).collect();
+            v.sort_by(|a, b| a.run.cmp(&b.run));
+            v
+        };
+        let tests: Vec<String> = held(laws[0]).iter().map(|r| r.run.clone()).collect();
+        for &law in &laws {
+            let runs: Vec<String> = held(law).iter().map(|r| r.run.clone()).collect();
+            if runs != tests {
+                return Err(Error::Compute(format!(
+                    "at {c} A the laws were held out on different tests ({} on {runs:?}, {} on {tests:?})",
+                    law.name(),
+                    laws[0].name()
+                )));
+            }
+        }
+        let elpd = |law: LawKind| held(law).iter().map(|r| r.lppd).sum::<f64>();
+        let best = laws
+            .iter()
+            .copied()
+            .max_by(|a, b| elpd(*a).total_cmp(&elpd(*b)))
+            .ok_or_else(|| Error::Compute(format!("no law at {c} A")))?;
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let mut standing: Vec<Standing> = laws
+            .iter()
+            .map(|&law| {
+                let h = held(law);
+                let d: Vec<f64> = h.iter().zip(held(best)).map(|(a, b)| a.lppd - b.lppd).collect();
+                let n = d.len() as f64;
+                let md = mean(&d);
+                let var = d.iter().map(|x| (x - md).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+                let ins: Vec<&LawRow> = at
+                    .iter()
+                    .copied()
+                    .filter(|r| r.law == law && r.kind == Kind::InSample)
+                    .collect();
+                let samples: usize = h.iter().map(|r| r.samples).sum();
+                Standing {
+                    law,
+                    current_a: c,
+                    elpd: elpd(law),
+                    elpd_diff: d.iter().sum(),
+                    elpd_diff_se: (n * var).sqrt(),
+                    nrmse_in: mean(&ins.iter().map(|r| r.nrmse).collect::<Vec<_>>()),
+                    nrmse_out: mean(&h.iter().map(|r| r.nrmse).collect::<Vec<_>>()),
+                    inside_p95_out: h.iter().map(|r| r.inside_p95 * r.samples as f64).sum::<f64>()
+                        / samples.max(1) as f64,
+                    band_width_out: mean(&h.iter().map(|r| r.band_width).collect::<Vec<_>>()),
+                    seconds: ins.first().map_or(0.0, |r| r.seconds)
+                        + h.first().map_or(0.0, |r| r.seconds),
+                    rank: 0,
+                }
+            })
+            .collect();
+        standing.sort_by(|a, b| b.elpd.total_cmp(&a.elpd));
+        for (k, s) in standing.iter_mut().enumerate() {
+            s.rank = k + 1;
+        }
+        out.extend(standing);
+    }
+    Ok(out)
+}
+
+/// The verdict in plain words, current by current: the law that predicts
+/// tests it did not see best, by how much more than the next (in units of
+/// the difference's standard error), and whether that is decisive (more
+/// than two standard errors) or not.
+pub fn verdict(standings: &[Standing]) -> Vec<String> {
+    let mut currents: Vec<f64> = standings.iter().map(|s| s.current_a).collect();
+    currents.dedup();
+    currents
+        .iter()
+        .map(|&c| {
+            let at: Vec<&Standing> = standings.iter().filter(|s| s.current_a == c).collect();
+            let first = at[0];
+            match at.get(1) {
+                None => format!("at {c} A only the {} law was calibrated", first.law.name()),
+                Some(second) => {
+                    let gap = -second.elpd_diff;
+                    let se = second.elpd_diff_se;
+                    let decisive = gap > 2.0 * se;
+                    format!(
+                        "at {c} A the {} law predicts the held-out tests best: {:.0} nats of log predictive density ahead of the {} law (± {:.0}, {}); held-out nRMSE {:.1} % against {:.1} %, its 95 % band {:.0} % of the peak force wide and holding {:.1} % of the held-out samples",
+                        first.law.name(),
+                        gap,
+                        second.law.name(),
+                        se,
+                        if decisive { "more than two standard errors: decisive on these tests" } else { "within two standard errors: not decisive on these tests" },
+                        100.0 * first.nrmse_out,
+                        100.0 * second.nrmse_out,
+                        100.0 * first.band_width_out,
+                        100.0 * first.inside_p95_out
+                    )
+                }
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A record whose force is its model's plus a known residual: nRMSE,
+    /// E_t and the coverage by hand.
+    #[test]
+    fn measures_by_hand() {
+        let n = 401;
+        let time: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
+        let x: Vec<f64> =
+            time.iter().map(|t| 0.01 * (2.0 * std::f64::consts::PI * t).sin()).collect();
+        let model_force: Vec<f64> =
+            time.iter().map(|t| 1000.0 * (2.0 * std::f64::consts::PI * t).cos()).collect();
+        // residual ±20 N alternating: RMS 20 N
+        let force: Vec<f64> = model_force
+            .iter()
+            .enumerate()
+            .map(|(k, f)| f + if k % 2 == 0 { 20.0 } else { -20.0 })
+            .collect();
+        let area = 0.05;
+        let tau = |v: &Vec<f64>| v.iter().map(|f| f / area).collect::<Vec<f64>>();
+        let q50 = tau(&model_force);
+        // a band ±30 N: every sample inside
+        let lo: Vec<f64> = model_force.iter().map(|f| (f - 30.0) / area).collect();
+        let hi: Vec<f64> = model_force.iter().map(|f| (f + 30.0) / area).collect();
+        let bands = RunBands {
+            run: "r".into(),
+            current_a: 1.0,
+            time: time.clone(),
+            gamma: x.clone(),
+            gamma_model: x.clone(),
+            tau_obs: tau(&force),
+            model: [q50.clone(), q50.clone(), q50.clone(), q50.clone(), q50],
+            predictive: [lo, hi],
+            displacement: x,
+            force: force.clone(),
+            discrepancy: None,
+            coil_current_a: None,
+        };
+        let m = measures(&bands, area);
+        let peak = force.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!((m.nrmse - 20.0 / peak).abs() < 1e-12, "{}", m.nrmse);
+        assert_eq!(m.inside_p95, 1.0);
+        assert!((m.band_width - 60.0 / peak).abs() < 1e-9);
+        // E_t: ‖r‖ / ‖F − F̄‖ computed here independently
+        let mean = force[1..].iter().sum::<f64>() / (n - 1) as f64;
+        let den: f64 = force[1..].iter().map(|f| (f - mean).powi(2)).sum();
+        assert!((m.e_t - (400.0 * (n - 1) as f64 / den).sqrt()).abs() < 1e-12);
+    }
+
+    fn row(law: LawKind, run: &str, kind: Kind, lppd: f64) -> LawRow {
+        LawRow {
+            law,
+            current_a: 1.0,
+            run: run.into(),
+            kind,
+            samples: 100,
+            nrmse: 0.05,
+            e_t: 0.1,
+            e_x: 0.1,
+            e_v: 0.1,
+            inside_p95: 0.95,
+            band_width: 0.2,
+            lppd,
+            seconds: 1.0,
+        }
+    }
+
+    /// The ranking and the standard error of a difference by hand: held-out
+    /// lppd per test (Bouc-Wen −100, −200; Spencer −110, −180) give elpd
+    /// −300 and −290: Spencer first, Bouc-Wen 10 nats behind.
+    #[test]
+    fn laws_are_ranked_by_held_out_elpd_with_the_se_of_the_difference() {
+        let rows = vec![
+            row(LawKind::BoucWen, "t1", Kind::HeldOut, -100.0),
+            row(LawKind::BoucWen, "t2", Kind::HeldOut, -200.0),
+            row(LawKind::Spencer, "t1", Kind::HeldOut, -110.0),
+            row(LawKind::Spencer, "t2", Kind::HeldOut, -180.0),
+            row(LawKind::BoucWen, "t1", Kind::InSample, -90.0),
+            row(LawKind::Spencer, "t1", Kind::InSample, -90.0),
+        ];
+        let s = standings(&rows).unwrap();
+        assert_eq!((s[0].law, s[0].rank, s[0].elpd), (LawKind::Spencer, 1, -290.0));
+        assert_eq!((s[1].law, s[1].rank, s[1].elpd_diff), (LawKind::BoucWen, 2, -10.0));
+        // d = (10, −20): mean −5, var = (225 + 225)/1 = 450, SE = √(2 · 450) = 30
+        assert!((s[1].elpd_diff_se - 30.0).abs() < 1e-12, "{}", s[1].elpd_diff_se);
+        assert_eq!(s[0].elpd_diff, 0.0);
+        let v = verdict(&s);
+        assert!(
+            v[0].contains("the spencer law predicts the held-out tests best: 10 nats"),
+            "{v:?}"
+        );
+        assert!(v[0].contains("not decisive"), "{v:?}");
+        // a law held out on other tests is refused
+        let mut other = rows.clone();
+        other[3].run = "t3".into();
+        assert!(standings(&other).is_err());
+    }
+}
