@@ -32,7 +32,9 @@ pub struct Entry<'a> {
 pub struct LayerCentre {
     /// The layer's draw indices.
     pub draw: Vec<f64>,
-    /// Per B-P parameter, its values at the draws (SI; NaN where none).
+    /// The law's parameters' names, and per parameter its values at the
+    /// draws (SI; NaN where none).
+    pub names: Vec<String>,
     pub centre: Vec<Vec<f64>>,
     /// Which fit: equal for the currents of one fit, whose draws pair.
     pub fit: String,
@@ -152,11 +154,11 @@ pub fn centre_differences(
     label_b: &str,
     b: &LayerCentre,
 ) -> Option<Vec<DifferenceRow>> {
-    if a.fit != b.fit || a.draw != b.draw {
+    if a.fit != b.fit || a.draw != b.draw || a.names != b.names {
         return None;
     }
     let mut rows = Vec::new();
-    for (k, parameter) in PARAM_NAMES.iter().enumerate() {
+    for (k, parameter) in a.names.iter().enumerate() {
         let (x, y): (Vec<f64>, Vec<f64>) = a.centre[k]
             .iter()
             .zip(&b.centre[k])
@@ -430,6 +432,7 @@ mod tests {
         let x = normal_draws(0.0, 1.0, 1000, 3);
         let centre = |shift: f64, fit: &str| LayerCentre {
             draw: (0..1000).map(|i| i as f64).collect(),
+            names: PARAM_NAMES.iter().map(|n| n.to_string()).collect(),
             centre: (0..7)
                 .map(|_| {
                     x.iter()

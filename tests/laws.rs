@@ -141,10 +141,6 @@ fn what_a_law_cannot_do_is_refused() {
         ],
         &["current-law", "bingham"],
     );
-    refused(
-        &["sample", arg(&manifest), "--law", "bingham", "--per-run", "--out", arg(&out)],
-        &["--per-run", "bingham"],
-    );
     let config = dir.path().join("prior.toml");
     std::fs::write(
         &config,
@@ -220,4 +216,48 @@ fn the_validation_study_ranks_the_generating_law_first() {
     ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("run --law"));
+}
+
+/// `--per-run` with a law other than B-P: each run calibrated alone, the
+/// between-run layer in the law's parameters (between_runs.parquet and
+/// consistency.parquet name them), and `simulate --new-test` draws new
+/// tests of it. Three runs of one virtual damper agree: each run's median
+/// inside the layer's 90 % interval for a new test.
+#[test]
+fn a_laws_runs_alone_feed_the_between_run_layer() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = virtual_campaign(dir.path(), "bingham");
+    let out = dir.path().join("out");
+    ok(&["sample", arg(&manifest), "--law", "bingham", "--per-run", "--out", arg(&out)]);
+    // one current: the folder is the calibration's
+    let folder = out;
+    let layer = read_parquet(&folder.join("between_runs.parquet")).unwrap();
+    let names = mrbp::store::column_names(&layer);
+    for c in ["c0", "fc", "v0", "centre_c0", "centre_fc", "centre_v0"] {
+        assert!(names.iter().any(|n| n == c), "{c} in {names:?}");
+    }
+    assert!(!names.iter().any(|n| n == "G"), "{names:?}");
+    let path = folder.join("consistency.parquet");
+    let table = read_parquet(&path).unwrap();
+    let parameter = str_column(&table, "parameter", &path).unwrap();
+    let label = str_column(&table, "label", &path).unwrap();
+    let (q05, q50, q95) = (
+        f64_column(&table, "q05", &path).unwrap(),
+        f64_column(&table, "q50", &path).unwrap(),
+        f64_column(&table, "q95", &path).unwrap(),
+    );
+    for p in ["c0", "fc", "v0"] {
+        let rows: Vec<usize> = (0..parameter.len()).filter(|&i| parameter[i] == p).collect();
+        let new = rows.iter().find(|&&i| label[i] == "new test").copied().expect(p);
+        let runs: Vec<usize> =
+            rows.iter().copied().filter(|&i| label[i].starts_with("I1.0_")).collect();
+        assert_eq!(runs.len(), 3, "{p}");
+        for i in runs {
+            assert!(q05[new] <= q50[i] && q50[i] <= q95[new], "{p} {}", label[i]);
+        }
+    }
+    let sim = dir.path().join("sim");
+    let input = manifest.with_file_name("I1.0_200rpm.csv");
+    ok(&["simulate", arg(&folder), "--input", arg(&input), "--new-test", "--out", arg(&sim)]);
+    assert!(sim.join("simulation.parquet").exists());
 }

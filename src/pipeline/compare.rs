@@ -25,8 +25,14 @@ fn layer_centre(cal: &Calibration) -> Option<compare::LayerCentre> {
     if !cal.dir.join(store::between_runs::FILE).exists() {
         return None;
     }
-    let table = store::between_runs::read(&cal.dir, &cal.record.calibration_id).ok()?;
-    Some(compare::LayerCentre { draw: table.draw, centre: table.centre, fit: table.fit })
+    let names = cal.sample.layout.theta_names();
+    let table = store::between_runs::read(&cal.dir, &cal.record.calibration_id, names).ok()?;
+    Some(compare::LayerCentre {
+        draw: table.draw,
+        names: names.to_vec(),
+        centre: table.centre,
+        fit: table.fit,
+    })
 }
 
 impl Pipeline<'_> {

@@ -128,12 +128,6 @@ impl SampleOptions {
                 "--hold-out-current needs --model current-law or current-curves".into(),
             ));
         }
-        if self.per_run && !settings.law.is_bodner_partom() {
-            return Err(Error::Usage(format!(
-                "--per-run and its between-run layer take the B-P law for now, not the {} law",
-                settings.law.name()
-            )));
-        }
         if self.per_run && settings.model.is_law() {
             return Err(Error::Usage("--per-run calibrates each run alone, which a current law cannot (one run has one current): use the per-current model".into()));
         }

@@ -97,7 +97,7 @@ impl Pipeline<'_> {
             Source::NewTest if cal.is_current_law() => {
                 return Err(Error::Usage(format!("--new-test draws new tests from the between-run layer of a per-current calibration; {} holds a law", cal.dir.display())))
             }
-            Source::NewTest => Some(crate::store::between_runs::new_tests(&cal.dir, &cal.record.calibration_id, &cal.sample.layout)?),
+            Source::NewTest => Some(crate::store::between_runs::new_tests(&cal.dir, &cal.record.calibration_id, cal.settings.parameter_model().law(), &cal.sample.layout)?),
         };
         let c = Columns::default();
         let map = ColumnMap::of(&c, false);

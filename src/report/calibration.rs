@@ -169,6 +169,7 @@ fn draw_figures(r: &CalibrationReport) -> Result<(Figures, Figures)> {
         };
         figures::against_current(
             dir,
+            &PARAM_NAMES,
             &[law],
             &[],
             " The values are in against_current.parquet.",

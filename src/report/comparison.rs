@@ -10,7 +10,6 @@ use crate::calibrate::Calibration;
 use crate::compare::{self, Comparison, CurrentRow};
 use crate::data::{loading_branches, REVERSAL_SHARE};
 use crate::error::Result;
-use crate::model::PARAM_NAMES;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 use crate::posterior::unit_of;
 use crate::predict::adequacy::{AdequacyRow, Excitation};
@@ -390,12 +389,26 @@ fn adequacy_section(page: &mut Page, entries: &[Entry]) {
     page.table(&header, &rows);
 }
 
-/// A forest plot per B-P parameter: each calibration's median and 90 %
-/// interval, one row per calibration, named on the y axis.
+/// The parameters of the damper laws of `entries`, each once, in the
+/// order of the first law that has it.
+fn law_parameters(entries: &[Entry]) -> Vec<&'static str> {
+    let mut names: Vec<&'static str> = Vec::new();
+    for e in entries {
+        for name in e.cal.settings.parameter_model().law().law().names() {
+            if !names.contains(&name) {
+                names.push(name);
+            }
+        }
+    }
+    names
+}
+
+/// A forest plot per parameter of the damper laws: each calibration's
+/// median and 90 % interval, one row per calibration, named on the y axis.
 fn forest(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
     let labels: Vec<String> = entries.iter().map(|e| e.label.clone()).collect();
     let mut panels = Vec::new();
-    for name in PARAM_NAMES {
+    for name in law_parameters(entries) {
         let mut c = Chart::new(name, format!("{name} ({})", unit_of(name)), "");
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for (k, e) in entries.iter().enumerate() {
@@ -423,7 +436,8 @@ fn forest(out: &Path, entries: &[Entry], figs: &mut Figures) -> Result<()> {
     Ok(())
 }
 
-/// Each B-P parameter against the coil current: every law's band beside
+/// Each parameter of the damper laws against the coil current: every
+/// current law's band beside
 /// the per-current calibrations, and the between-run layer's typical test
 /// and new test where there is one.
 fn against_current(
@@ -432,6 +446,7 @@ fn against_current(
     typical: Option<&[TypicalRow]>,
     figs: &mut Figures,
 ) -> Result<()> {
+    let names = law_parameters(entries);
     let laws: Vec<(&Entry, Vec<CurrentRow>)> = entries
         .iter()
         .filter(|e| e.is_law())
@@ -469,7 +484,7 @@ fn against_current(
     let (centre, new_test) = (as_rows(|r| r.centre), as_rows(|r| r.new_test));
     let calibrated: Vec<f64> = centre
         .iter()
-        .filter(|r| r.kind == compare::CurrentKind::Calibrated && r.parameter == PARAM_NAMES[0])
+        .filter(|r| r.kind == compare::CurrentKind::Calibrated && r.parameter == names[0])
         .map(|r| r.current_a)
         .collect();
     if typical.is_some() {
@@ -491,9 +506,16 @@ fn against_current(
         .filter(|e| !e.is_law())
         .map(|e| AtCurrent {
             current_a: e.cal.record.current_a,
-            quantiles: PARAM_NAMES.map(|name| {
-                e.cal.summary.iter().find(|r| r.parameter == name).map(|r| [r.q05, r.q50, r.q95])
-            }),
+            quantiles: names
+                .iter()
+                .map(|name| {
+                    e.cal
+                        .summary
+                        .iter()
+                        .find(|r| r.parameter == *name)
+                        .map(|r| [r.q05, r.q50, r.q95])
+                })
+                .collect(),
         })
         .collect();
     let mut more = String::new();
@@ -503,7 +525,7 @@ fn against_current(
     if typical.is_some() {
         more.push_str(" The between-run layer (each run calibrated alone, --per-run): a typical test of this damper (the layer's centre, green) and a new test (centre and between-test spread, purple), read off its curve in the current between and beyond the calibrated currents; the values are in typical_test.parquet of each current's folder.");
     }
-    super::figures::against_current(out, &curves, &per_current, &more, figs)
+    super::figures::against_current(out, &names, &curves, &per_current, &more, figs)
 }
 
 /// The predictive bands of every per-current calibration at one crank

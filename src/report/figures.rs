@@ -6,7 +6,6 @@ use std::path::Path;
 
 use crate::compare::{CurrentKind, CurrentRow};
 use crate::error::Result;
-use crate::model::PARAM_NAMES;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, GREY, PALETTE};
 use crate::posterior::{unit_of, PosteriorSample, Prior};
 use crate::predict::RunBands;
@@ -840,19 +839,22 @@ pub struct LawCurves<'a> {
     pub color: Option<plot::RGBColor>,
 }
 
-/// A per-current estimate drawn beside the laws: its current, and per B-P
-/// parameter (in [`PARAM_NAMES`] order) its 5 %, 50 % and 95 % quantiles.
+/// A per-current estimate drawn beside the laws: its current, and per
+/// parameter (in the order of the figure's names) its 5 %, 50 % and 95 %
+/// quantiles.
 pub struct AtCurrent {
     pub current_a: f64,
-    pub quantiles: [Option<[f64; 3]>; 7],
+    pub quantiles: Vec<Option<[f64; 3]>>,
 }
 
-/// Each B-P parameter against the coil current: every law's 90 % band and
+/// Each damper-law parameter `names` against the coil current: every
+/// current law's 90 % band and
 /// median over its grid (its calibrated currents marked), and the
 /// per-current estimates as medians with 90 % bars, into `dir/against_current`.
 /// `more`: a sentence added to the caption (the bands beside the laws').
 pub fn against_current(
     dir: &Path,
+    names: &[&str],
     laws: &[LawCurves],
     per_current: &[AtCurrent],
     more: &str,
@@ -867,7 +869,7 @@ pub fn against_current(
         return Ok(());
     }
     let mut panels = Vec::new();
-    for (k, name) in PARAM_NAMES.iter().enumerate() {
+    for (k, name) in names.iter().enumerate() {
         let mut c = Chart::new(*name, "coil current I (A)", format!("{name} ({})", unit_of(name)));
         for (j, law) in laws.iter().enumerate() {
             let rows: Vec<&CurrentRow> = law.rows.iter().filter(|r| r.parameter == *name).collect();
@@ -924,7 +926,7 @@ pub fn against_current(
         }
         let (mut x, mut y) = (vec![], vec![]);
         for p in per_current {
-            if let Some([q05, q50, q95]) = p.quantiles[k] {
+            if let Some(&Some([q05, q50, q95])) = p.quantiles.get(k) {
                 c.series.push(
                     Series::line(None, PALETTE[0], vec![p.current_a; 2], vec![q05, q95])
                         .with_width(2),
@@ -952,7 +954,7 @@ pub fn against_current(
     };
     figs.push(
         "against_current",
-        &format!("Each B-P parameter against the coil current: median and 90 % credible band from the off-state (0 A) to 1.2× the highest calibrated current (dots: the currents calibrated on; grey dashes: extrapolated beyond them){per}.{more}"),
+        &format!("Each parameter of the law against the coil current: median and 90 % credible band from the off-state (0 A) to 1.2× the highest calibrated current (dots: the currents calibrated on; grey dashes: extrapolated beyond them){per}.{more}"),
     );
     Ok(())
 }

@@ -1,8 +1,9 @@
 //! The between-run layer's files in a calibration folder (`--per-run`):
 //!
 //! - `between_runs.parquet`: draws of the layer at the folder's current —
-//!   a new test's parameters (B-P, terms, noise; SI) and the centre's B-P
-//!   parameters (`centre_<p>`, the typical test there), one row per draw.
+//!   a new test's parameters (the damper law's, terms, noise; SI) and the
+//!   centre's law parameters (`centre_<p>`, the typical test there), one
+//!   row per draw.
 //!   The draws of every current's folder from one fit share their `draw`
 //!   index, so centres at two currents can be compared draw by draw;
 //! - `loo_new_test.parquet`: each run predicted as a new test by the layer
@@ -10,7 +11,7 @@
 //!   current (`current`): the columns of `coverage.parquet`, `left_out` and
 //!   `max_r_hat` (of the layer's chains fitted without it).
 //!
-//! - `typical_test.parquet` (runs at two currents or more): each B-P
+//! - `typical_test.parquet` (runs at two currents or more): each law
 //!   parameter of the typical test (the centre) and of a new test against
 //!   the coil current, from 0 A to 1.2× the highest calibrated current, the
 //!   same rows in every current's folder of one fit.
@@ -27,7 +28,6 @@ use super::parquet::{
 };
 use crate::compare::CurrentKind;
 use crate::error::{Error, Result};
-use crate::model::PARAM_NAMES;
 use crate::predict::CoverageRow;
 use crate::validate::between_runs::{BetweenRuns, LeftOut, NewTestRow, TypicalRow};
 
@@ -67,18 +67,19 @@ pub fn write(dir: &Path, layer: &BetweenRuns, group: usize, id: &str, runs: &str
         .meta("mrbp.layer_max_r_hat", &layer.max_rhat.to_string())
         .meta("mrbp.layer_min_ess", &layer.min_ess.to_string())
         .i64("draw", picks.iter().map(|&i| i as i64).collect());
-    let theta = |z: &[f64]| layer.theta(z).filter(|t| layer.in_support(t)).unwrap_or([f64::NAN; 7]);
-    for (k, name) in PARAM_NAMES.iter().enumerate() {
+    let theta = |z: &[f64]| layer.theta(z).filter(|t| layer.in_support(t)).unwrap_or([f64::NAN; 8]);
+    let names = layer.names();
+    for (k, name) in names.iter().enumerate() {
         table = table
             .f64(name, picks.iter().map(|&i| theta(&layer.draws[i].new_tests[group])[k]).collect());
     }
-    for (k, c) in layer.coordinates.iter().enumerate().skip(PARAM_NAMES.len()) {
+    for (k, c) in layer.coordinates.iter().enumerate().skip(names.len()) {
         table = table.f64(
             &c.name,
             picks.iter().map(|&i| c.scale.to_si(layer.draws[i].new_tests[group][k])).collect(),
         );
     }
-    for (k, name) in PARAM_NAMES.iter().enumerate() {
+    for (k, name) in names.iter().enumerate() {
         table = table.f64(
             &format!("centre_{name}"),
             picks.iter().map(|&i| theta(&layer.draws[i].means[group])[k]).collect(),
@@ -87,7 +88,7 @@ pub fn write(dir: &Path, layer: &BetweenRuns, group: usize, id: &str, runs: &str
     write_parquet(&dir.join(FILE), table)
 }
 
-/// A new test's B-P parameters and the centre's, read back: per B-P
+/// A new test's law parameters and the centre's, read back: per
 /// parameter, its values over the draws; and which fit they came from
 /// (the calibration ids of the runs it took, sorted: the same in every
 /// current's folder of one fit).
@@ -98,9 +99,9 @@ pub struct LayerTable {
     pub fit: String,
 }
 
-/// The layer's draws in `dir`, derived from calibration `id`; refused if
-/// stale.
-pub fn read(dir: &Path, id: &str) -> Result<LayerTable> {
+/// The layer's draws in `dir`, derived from calibration `id` of the law
+/// whose parameters are `names`; refused if stale.
+pub fn read(dir: &Path, id: &str, names: &[String]) -> Result<LayerTable> {
     let path = dir.join(FILE);
     check(&path, dir, id)?;
     let df = read_parquet(&path)?;
@@ -113,20 +114,21 @@ pub fn read(dir: &Path, id: &str) -> Result<LayerTable> {
     ids.sort();
     Ok(LayerTable {
         draw: col("draw")?,
-        new_test: PARAM_NAMES.iter().map(|n| col(n)).collect::<Result<_>>()?,
-        centre: PARAM_NAMES.iter().map(|n| col(&format!("centre_{n}"))).collect::<Result<_>>()?,
+        new_test: names.iter().map(|n| col(n)).collect::<Result<_>>()?,
+        centre: names.iter().map(|n| col(&format!("centre_{n}"))).collect::<Result<_>>()?,
         fit: ids.join(","),
     })
 }
 
 /// New tests of the damper from the layer's draws in `dir` (derived from
-/// calibration `id`, whose `layout` names its noise parameters): each a
-/// draw of the B-P parameters, terms and noise; draws outside the prior's
+/// calibration `id` of `law`, whose `layout` names its noise parameters): each a
+/// draw of the law's parameters, terms and noise; draws outside the prior's
 /// support (NaN) left out. Also the layer's `mrbp.layer_runs`. Refused if
 /// missing or stale.
 pub fn new_tests(
     dir: &Path,
     id: &str,
+    law: crate::laws::LawKind,
     layout: &crate::posterior::Layout,
 ) -> Result<(Vec<crate::posterior::Draw>, String)> {
     let path = dir.join(FILE);
@@ -139,7 +141,8 @@ pub fn new_tests(
     check(&path, dir, id)?;
     let df = read_parquet(&path)?;
     let col = |n: &str| f64_column(&df, n, &path);
-    let theta: Vec<Vec<f64>> = PARAM_NAMES.iter().map(|n| col(n)).collect::<Result<_>>()?;
+    let names = layout.theta_names();
+    let theta: Vec<Vec<f64>> = names.iter().map(|n| col(n)).collect::<Result<_>>()?;
     let optional = |n: &str| if df.column(n).is_ok() { col(n).map(Some) } else { Ok(None) };
     let (spring, offset) = (optional("gas_spring_n_per_m")?, optional("force_offset_n")?);
     let noise: Vec<Vec<f64>> =
@@ -151,11 +154,13 @@ pub fn new_tests(
             for (v, column) in values.iter_mut().zip(&noise) {
                 *v = column[i];
             }
+            let mut law_values = [0.0; crate::laws::MAX_LAW_PARAMETERS];
+            for (v, column) in law_values.iter_mut().zip(&theta) {
+                *v = column[i];
+            }
             crate::posterior::Draw {
-                law: crate::laws::LawKind::BodnerPartom,
-                values: crate::laws::bodner_partom::values_of(&crate::model::Params::from_array(
-                    std::array::from_fn(|k| theta[k][i]),
-                )),
+                law,
+                values: law_values,
                 field: None,
                 spring_n_per_m: spring.as_ref().map_or(0.0, |c| c[i]),
                 offset_n: offset.as_ref().map_or(0.0, |c| c[i]),

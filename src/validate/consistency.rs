@@ -2,7 +2,7 @@
 //! calibration of them all — the first question of a validation study:
 //! does one parameter set describe every test?
 //!
-//! Per B-P parameter, in ln θ (the sampler's coordinate, where posteriors
+//! Per parameter of the damper law, in ln θ (the sampler's coordinate, where posteriors
 //! are near normal):
 //!
 //! - **χ²/ν** of the run-wise posterior means y_i about their
@@ -17,7 +17,6 @@ use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 use super::between_runs::BetweenRuns;
 use crate::calibrate::Calibration;
-use crate::model::PARAM_NAMES;
 use crate::sampler::quantile_sorted;
 
 /// The p-value below which the runs are said to disagree.
@@ -141,7 +140,7 @@ fn short(v: f64) -> String {
     format!("{v:.3e}")
 }
 
-/// The consistency of every B-P parameter of `joint` across the
+/// The consistency of every law parameter of `joint` across the
 /// calibrations of its runs one by one (`runs`, labelled by run id), with
 /// the new test of `layer` at `joint`'s current.
 pub fn consistency(
@@ -155,7 +154,8 @@ pub fn consistency(
     let Some(group) = layer.group(joint.record.current_a) else {
         return Vec::new();
     };
-    PARAM_NAMES
+    layer
+        .names()
         .iter()
         .enumerate()
         .filter_map(|(k, name)| {

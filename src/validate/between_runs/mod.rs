@@ -2,8 +2,9 @@
 //! of tests, so that a calibration can say what **a new test** of the
 //! damper would give, not only what these records give.
 //!
-//! Each run i, at coil current c(i), has its own parameters z_i: the B-P
-//! parameters in the calibration's own coordinates (by default the
+//! Each run i, at coil current c(i), has its own parameters z_i: the damper
+//! law's parameters in the calibration's own coordinates (ln θ; for the
+//! B-P law by default the
 //! hardening coordinates ln G, ln(R0 + D1), ln Z*, ln(D1/R0), ln m1, ln m2,
 //! ln n, with Z* the drag stress after the median plastic work of the runs
 //! fitted: combinations a record determines nearly independently of each
@@ -32,8 +33,8 @@
 //! sampler then draws each z_i, the centres, Σ and the prior's auxiliary
 //! scales from their conditionals (normal, inverse Wishart by Bartlett's
 //! decomposition, inverse gamma): continuous draws, which mix where the
-//! tests agree as well as where they disagree. No log-density of the B-P
-//! law is computed: the runs' own chains carry their likelihoods.
+//! tests agree as well as where they disagree. No log-density of the
+//! damper law is computed: the runs' own chains carry their likelihoods.
 
 //!
 //! One concept, four files: the run's likelihood as the layer takes it
@@ -53,12 +54,10 @@ use crate::calibrate::Calibration;
 use crate::compare::CurrentKind;
 use crate::data::{same_current, RunData};
 use crate::error::{Error, Result};
-use crate::model::{Params, PARAM_NAMES};
+use crate::laws::{LawKind, LawValues, MAX_LAW_PARAMETERS};
 use crate::noise::{NoiseModel, NoiseValues, Transform, MAX_PARAMETERS};
 use crate::posterior::layout::Hardening;
-use crate::posterior::{
-    evenly_spaced, Coordinates, Draw, Layout, ModelTerms, ParameterModel, Prior,
-};
+use crate::posterior::{evenly_spaced, Coordinates, Draw, Layout, ModelTerms, Prior};
 use crate::sampler::{quantile_sorted, Chains, Diagnostics};
 use rand::RngExt;
 use rand_distr::StandardNormal;
@@ -79,8 +78,8 @@ pub enum Scale {
     Log,
     /// atanh v of a correlation.
     Atanh,
-    /// v itself (a force, a stiffness; and the B-P parameters' coordinates,
-    /// which [`BetweenRuns::theta`] maps).
+    /// v itself (a force, a stiffness; and the law's parameters'
+    /// coordinates, which [`BetweenRuns::theta`] maps).
     Linear,
 }
 
@@ -112,8 +111,8 @@ impl Scale {
 /// One coordinate of the layer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Coordinate {
-    /// The calibration's name of a B-P coordinate (`ln G`, `ln (R0 + D1)`,
-    /// …), a term's (`gas_spring_n_per_m`, `force_offset_n`) or a noise
+    /// The calibration's name of a law's coordinate (`ln G`, `ln (R0 + D1)`,
+    /// `ln c0`, …), a term's (`gas_spring_n_per_m`, `force_offset_n`) or a noise
     /// parameter's (`sigma`, …).
     pub name: String,
     pub scale: Scale,
@@ -124,7 +123,7 @@ pub struct Coordinate {
 /// Where each group of coordinates sits in a point of the layer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Places {
-    /// The seven B-P coordinates come first.
+    /// The law's coordinates come first.
     pub spring: Option<usize>,
     pub offset: Option<usize>,
     /// The noise model's parameters, in its order.
@@ -147,7 +146,9 @@ pub struct LayerRun<'a> {
 pub struct BetweenRuns {
     pub coordinates: Vec<Coordinate>,
     pub places: Places,
-    /// How the first seven coordinates give θ.
+    /// The damper law the runs were calibrated with, and how the layer's
+    /// first coordinates (one per parameter of the law) give θ.
+    pub law: LawKind,
     pub layout: Layout,
     /// The currents, in the order of each draw's centres and new tests:
     /// first the calibrated ones (increasing), then those predicted.
@@ -157,7 +158,7 @@ pub struct BetweenRuns {
     /// The runs it was fitted to.
     pub runs: Vec<String>,
     /// The calibrations' priors of θ, whose support a new test keeps to.
-    pub priors: [Prior; 7],
+    pub priors: Vec<Prior>,
     /// The centres' curve in the current (runs at two currents or more),
     /// and the coordinates' prior scales it was fitted with.
     pub curve: Option<CurrentCurve>,
@@ -185,7 +186,7 @@ impl BetweenRuns {
         let Some(first) = runs.first() else {
             return Err(Error::Usage("the between-run layer needs runs calibrated alone".into()));
         };
-        if first.cal.settings.parameter_model() != ParameterModel::PerCurrent {
+        if first.cal.settings.parameter_model().is_current_law() {
             return Err(Error::Usage(
                 "the between-run layer takes runs calibrated alone with one parameter set each"
                     .into(),
@@ -233,18 +234,16 @@ impl BetweenRuns {
         let layout = theta_layout(first.cal, &datas);
         let (coordinates, places) = coordinates_of(first.cal, &layout);
         let noise = first.cal.settings.noise_model();
-        let priors: [Prior; 7] = first.cal.settings.priors().try_into().map_err(|_| {
-            Error::Usage(
-                "the between-run layer takes runs calibrated alone with the B-P law".into(),
-            )
-        })?;
+        let law = first.cal.settings.parameter_model().law();
+        let priors = first.cal.settings.priors();
         let mut all = Vec::with_capacity(runs.len());
         for run in runs {
             if coordinates_of(run.cal, &layout) != (coordinates.clone(), places.clone())
                 || run.cal.settings.sampler.coordinates != first.cal.settings.sampler.coordinates
-                || run.cal.settings.priors() != priors.to_vec()
+                || run.cal.settings.priors() != priors
+                || run.cal.settings.parameter_model().law() != law
             {
-                return Err(Error::Usage(format!("{} was calibrated alone with other priors, model terms, coordinates or noise model than the others", run.id)));
+                return Err(Error::Usage(format!("{} was calibrated alone with another law, other priors, model terms, coordinates or noise model than the others", run.id)));
             }
             let likelihood =
                 run_likelihood(run, &layout, &places, &coordinates, noise.as_ref(), &priors)
@@ -292,6 +291,7 @@ impl BetweenRuns {
         Ok(BetweenRuns {
             coordinates,
             places,
+            law,
             layout,
             currents,
             calibrated,
@@ -310,21 +310,36 @@ impl BetweenRuns {
         self.currents.iter().position(|c| same_current(*c, current_a))
     }
 
-    /// θ (SI) at the layer's point `z`; `None` outside the coordinates'
-    /// range (no positive R1).
-    pub fn theta(&self, z: &[f64]) -> Option<[f64; 7]> {
-        let log = self.layout.log_theta(&z[..7]);
-        let theta: [f64; 7] = std::array::from_fn(|k| log[k].exp());
-        theta.iter().all(|v| v.is_finite() && *v > 0.0).then_some(theta)
+    /// The number of the law's parameters.
+    pub fn parameters(&self) -> usize {
+        self.priors.len()
+    }
+
+    /// The names of the law's parameters, in θ's order.
+    pub fn names(&self) -> Vec<&'static str> {
+        self.law.law().names()
+    }
+
+    /// θ (SI; the law's parameters first, the rest zero) at the layer's
+    /// point `z`; `None` outside the coordinates' range (for the B-P law's
+    /// hardening coordinates, no positive R1).
+    pub fn theta(&self, z: &[f64]) -> Option<LawValues> {
+        let n = self.parameters();
+        let log = self.layout.log_theta(&z[..n]);
+        let mut theta = [0.0; MAX_LAW_PARAMETERS];
+        for k in 0..n {
+            theta[k] = log[k].exp();
+        }
+        theta[..n].iter().all(|v| v.is_finite() && *v > 0.0).then_some(theta)
     }
 
     /// Whether θ lies in the support of the calibrations' prior (the
     /// physical range, or tighter bounds the settings gave).
-    pub fn in_support(&self, theta: &[f64; 7]) -> bool {
+    pub fn in_support(&self, theta: &LawValues) -> bool {
         self.priors.iter().zip(theta).all(|(p, v)| p.log_density(v.ln()) > f64::NEG_INFINITY)
     }
 
-    /// B-P parameter `k` of a new test at current `group` over every kept
+    /// Law parameter `k` of a new test at current `group` over every kept
     /// draw (SI), sorted; draws without a θ in the prior's support left
     /// out (a new test is a physical damper).
     pub fn new_test_sorted(&self, group: usize, k: usize) -> Vec<f64> {
@@ -339,7 +354,7 @@ impl BetweenRuns {
         v
     }
 
-    /// B-P parameter `k` of the centre of current `group` (the typical
+    /// Law parameter `k` of the centre of current `group` (the typical
     /// test there) at every kept draw (SI), in the draws' order (paired
     /// across currents); NaN where the centre has no θ.
     pub fn centre(&self, group: usize, k: usize) -> Vec<f64> {
@@ -367,7 +382,7 @@ impl BetweenRuns {
         quantile_sorted(&d, 0.5) / 0.674_489_750_196_081_7
     }
 
-    /// The typical test (the centre) and a new test of each B-P parameter
+    /// The typical test (the centre) and a new test of each law parameter
     /// against the coil current, from `count` of the draws spread evenly:
     /// at the calibrated currents and on the comparison's grid from 0 A to
     /// 1.2× the highest ([`crate::compare::current_grid`]), the centre off
@@ -400,8 +415,8 @@ impl BetweenRuns {
             };
             let here =
                 CurrentCurve { x: curve.x.clone(), predict: vec![current_coordinate(current_a)] };
-            let mut centres: Vec<[f64; 7]> = Vec::new();
-            let mut tests: Vec<[f64; 7]> = Vec::new();
+            let mut centres: Vec<LawValues> = Vec::new();
+            let mut tests: Vec<LawValues> = Vec::new();
             for (i, &pick) in picks.iter().enumerate() {
                 let draw = &self.draws[pick];
                 let mut rng = crate::rng::stream(seed, &[0xB9, g as u64, i as u64]);
@@ -419,8 +434,8 @@ impl BetweenRuns {
                 centres.extend(self.theta(&centre).filter(|t| self.in_support(t)));
                 tests.extend(self.theta(&test).filter(|t| self.in_support(t)));
             }
-            for (k, parameter) in PARAM_NAMES.iter().enumerate() {
-                let q = |v: &[[f64; 7]]| {
+            for (k, parameter) in self.names().iter().enumerate() {
+                let q = |v: &[LawValues]| {
                     let mut x: Vec<f64> = v.iter().map(|t| t[k]).collect();
                     x.sort_by(f64::total_cmp);
                     [0.05, 0.5, 0.95].map(|p| quantile_sorted(&x, p))
@@ -490,14 +505,14 @@ impl BetweenRuns {
     }
 
     /// The draw of a run with layer point `z`, whose θ is `theta`.
-    fn draw_at(&self, theta: [f64; 7], z: &[f64]) -> Draw {
+    fn draw_at(&self, theta: LawValues, z: &[f64]) -> Draw {
         let mut noise = [0.0; MAX_PARAMETERS];
         for (p, k) in self.places.noise.clone().enumerate() {
             noise[p] = self.coordinates[k].scale.to_si(z[k]);
         }
         Draw {
-            law: crate::laws::LawKind::BodnerPartom,
-            values: crate::laws::bodner_partom::values_of(&Params::from_array(theta)),
+            law: self.law,
+            values: theta,
             field: None,
             spring_n_per_m: self.places.spring.map_or(0.0, |k| z[k]),
             offset_n: self.places.offset.map_or(0.0, |k| z[k]),
@@ -536,7 +551,7 @@ fn convergence(chains: &[Vec<LayerDraw>], calibrated: usize) -> (f64, f64) {
     (diagnostics.max_rhat(), diagnostics.min_ess())
 }
 
-/// One row of `typical_test.parquet`: a B-P parameter at one coil current,
+/// One row of `typical_test.parquet`: a law's parameter at one coil current,
 /// the 5, 50 and 95 % quantiles of the typical test there (the layer's
 /// centre) and of a new test (SI).
 #[derive(Clone, Debug, PartialEq)]
@@ -552,10 +567,10 @@ pub struct TypicalRow {
 const TRIES: usize = 20;
 
 /// The layer's coordinates for calibrations made with `cal`'s settings,
-/// the B-P parameters walked as `layout` walks them.
+/// the law's parameters walked as `layout` walks them.
 fn coordinates_of(cal: &Calibration, layout: &Layout) -> (Vec<Coordinate>, Places) {
     let names = layout.coordinate_names();
-    let mut coordinates: Vec<Coordinate> = names[..PARAM_NAMES.len()]
+    let mut coordinates: Vec<Coordinate> = names[layout.theta.clone()]
         .iter()
         .map(|n| Coordinate { name: n.clone(), scale: Scale::Linear, spread_prior: 1.0 })
         .collect();
@@ -588,7 +603,7 @@ fn coordinates_of(cal: &Calibration, layout: &Layout) -> (Vec<Coordinate>, Place
 fn theta_layout(cal: &Calibration, runs: &[&RunData]) -> Layout {
     let ids: Vec<String> = runs.iter().map(|r| r.id.clone()).collect();
     let settings = &cal.settings;
-    let model = ParameterModel::PerCurrent;
+    let model = settings.parameter_model();
     let mut layout = Layout::new(
         &model,
         &ids,
@@ -613,14 +628,14 @@ fn run_likelihood(
     places: &Places,
     coordinates: &[Coordinate],
     noise: &dyn NoiseModel,
-    priors: &[Prior; 7],
+    priors: &[Prior],
 ) -> Option<RunLikelihood> {
     let cal = run.cal;
     let sample = &cal.sample;
     let terms = &cal.settings.terms;
     let normal = |v: f64, sd: f64| -0.5 * (v / sd) * (v / sd);
     let log_prior = |z: &[f64]| -> f64 {
-        let log_theta = layout.log_theta(&z[..7]);
+        let log_theta = layout.log_theta(&z[..priors.len()]);
         let mut lp: f64 = priors.iter().zip(&log_theta).map(|(p, v)| p.log_density(*v)).sum();
         if !lp.is_finite() {
             return f64::NEG_INFINITY;
@@ -641,12 +656,8 @@ fn run_likelihood(
     let mut points = Vec::new();
     for (s, c) in cal.draw_positions(RUN_DRAWS) {
         let point = sample.chains.point(s, c);
-        let log_theta: Vec<f64> = sample
-            .params_at(s, c, cal.record.current_a)
-            .to_array()
-            .iter()
-            .map(|v| v.ln())
-            .collect();
+        let values = sample.values_at(s, c, cal.record.current_a);
+        let log_theta: Vec<f64> = values[..priors.len()].iter().map(|v| v.ln()).collect();
         let mut z = layout.theta_coordinates(&log_theta);
         let (spring, offset) = sample.layout.terms(point, 0);
         if places.spring.is_some() {
