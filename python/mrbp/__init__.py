@@ -368,11 +368,15 @@ def calibrate(
     checkpoint: Optional[Path] = None,
     resume: bool = False,
     memory: Optional[str] = None,
+    law: Optional[str] = None,
 ) -> Calibration:
     """Calibrates the runs of ``campaign`` at ``current`` (or all runs with
     ``model="current-law"``), as ``mrbp sample`` does with the same options:
     the same seed gives the same chains, bit for bit.
 
+    law: the damper law, as ``--law``: 'bodner-partom' (default),
+        'bp-viscous', 'bouc-wen', 'spencer', 'bingham' (docs/calibration.md,
+        "Damper laws");
     noise: 'gaussian' (default), 'student-t', 'ar1', 'discrepancy';
     memory: 'independent' (default) or 'tempered' (each run's
         log-likelihood divided by its residuals' integrated autocorrelation
@@ -414,6 +418,7 @@ def calibrate(
         checkpoint=None if checkpoint is None else str(checkpoint),
         resume=resume,
         memory=memory,
+        law=law,
     )
     return Calibration(inner)
 

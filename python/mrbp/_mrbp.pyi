@@ -77,4 +77,6 @@ def calibrate(
     progress: Optional[Callable[[str, int, int, Optional[float], Optional[float], Optional[float], float], Any]] = None,
     checkpoint: Optional[str] = None,
     resume: bool = False,
+    memory: Optional[str] = None,
+    law: Optional[str] = None,
 ) -> Calibration: ...

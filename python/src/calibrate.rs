@@ -108,7 +108,7 @@ impl Observer for Python_ {
 /// state to `checkpoint` if given (every 100 steps too), which `resume`
 /// continues exactly. `progress` is a callable told of every step.
 #[pyfunction]
-#[pyo3(signature = (campaign, current = None, model = None, noise = None, seed = None, steps = None, walkers = None, ensembles = None, substeps = None, config = None, exact_input = false, progress = None, checkpoint = None, resume = false, memory = None))]
+#[pyo3(signature = (campaign, current = None, model = None, noise = None, seed = None, steps = None, walkers = None, ensembles = None, substeps = None, config = None, exact_input = false, progress = None, checkpoint = None, resume = false, memory = None, law = None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn calibrate(
     py: Python<'_>,
@@ -127,6 +127,7 @@ pub(crate) fn calibrate(
     checkpoint: Option<PathBuf>,
     resume: bool,
     memory: Option<String>,
+    law: Option<String>,
 ) -> PyResult<Calibration> {
     let value = |v: Option<String>| v.map(|s| s.trim().to_string()).filter(|s| !s.is_empty());
     let model = match value(model) {
@@ -155,8 +156,17 @@ pub(crate) fn calibrate(
         })?),
         None => None,
     };
+    let law = match value(law) {
+        Some(l) => vec![mrbp::laws::LawKind::from_str(&l, true).map_err(|_| {
+            let names: Vec<String> =
+                mrbp::laws::LawKind::ALL.iter().map(|k| k.name()).collect();
+            PyValueError::new_err(format!("law {l:?}: one of {}", names.join(", ")))
+        })?],
+        None => Vec::new(),
+    };
     let overrides = Overrides {
         config,
+        law,
         model,
         walkers,
         ensembles,

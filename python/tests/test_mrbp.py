@@ -63,6 +63,16 @@ def test_memory_of_the_residuals_as_the_command_line(campaign, tmp_path, memory)
     pd.testing.assert_frame_equal(cal.draws, chains, check_exact=True, check_dtype=False)
 
 
+def test_a_damper_law_as_the_command_line(campaign, tmp_path):
+    # law="bingham" is --law bingham: the same chains, bit for bit, under
+    # the law's parameter names
+    cal = mrbp.calibrate(campaign, current=1.0, seed=3, steps=10, law="bingham")
+    cli("sample", MANIFEST, "--out", tmp_path, "--current", 1.0, "--seed", 3, "--steps", 10, "--law", "bingham")
+    chains = pd.read_parquet(tmp_path / "chains.parquet")
+    assert {"c0", "fc", "v0"} <= set(chains.columns) and "G" not in chains.columns
+    pd.testing.assert_frame_equal(cal.draws, chains, check_exact=True, check_dtype=False)
+
+
 def test_saved_folder_is_the_command_lines(calibration, tmp_path):
     folder = tmp_path / "I1.0A"
     calibration.save(folder)
@@ -122,6 +132,8 @@ def test_bad_options_raise(campaign):
         mrbp.calibrate(campaign, seed=1, steps=10)
     with pytest.raises(ValueError, match='noise "white": one of gaussian'):
         mrbp.calibrate(campaign, current=1.0, noise="white", steps=10)
+    with pytest.raises(ValueError, match='law "hooke": one of bodner-partom'):
+        mrbp.calibrate(campaign, current=1.0, law="hooke", steps=10)
     with pytest.raises(ValueError, match='memory "hot": one of'):
         mrbp.calibrate(campaign, current=1.0, memory="hot", steps=10)
     with pytest.raises(ValueError, match="the campaign has runs at"):
