@@ -158,8 +158,7 @@ pub(crate) fn calibrate(
     };
     let law = match value(law) {
         Some(l) => vec![mrbp::laws::LawKind::from_str(&l, true).map_err(|_| {
-            let names: Vec<String> =
-                mrbp::laws::LawKind::ALL.iter().map(|k| k.name()).collect();
+            let names: Vec<String> = mrbp::laws::LawKind::ALL.iter().map(|k| k.name()).collect();
             PyValueError::new_err(format!("law {l:?}: one of {}", names.join(", ")))
         })?],
         None => Vec::new(),

@@ -66,6 +66,30 @@ pub struct RunData {
 }
 
 impl RunData {
+    /// This run with its strain at each sample taken `lag_s` later in the
+    /// record (linear between samples, and beyond either end along the
+    /// first or last interval): the drive of a displacement channel that
+    /// lags the force channel by `lag_s`.
+    pub fn with_strain_lag(mut self, lag_s: f64) -> RunData {
+        let (t, g) = (&self.time, &self.gamma);
+        let n = t.len();
+        if n < 2 {
+            return self;
+        }
+        let shifted: Vec<f64> = t
+            .iter()
+            .map(|&at| {
+                let at = at + lag_s;
+                // the interval [j − 1, j] that holds `at`, or the end one
+                let j = t.partition_point(|&s| s <= at).clamp(1, n - 1);
+                let w = (at - t[j - 1]) / (t[j] - t[j - 1]);
+                g[j - 1] + w * (g[j] - g[j - 1])
+            })
+            .collect();
+        self.gamma = shifted;
+        self
+    }
+
     /// The samples of `run` that `part` selects (always from the first
     /// sample: the state at any point depends on the whole history before it).
     pub fn from_run(run: &Run, part: RecordPart, smooth_strain_ms: f64) -> RunData {

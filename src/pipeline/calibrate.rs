@@ -210,13 +210,7 @@ impl Pipeline<'_> {
         let lik = &first.joint.settings.likelihood;
         let datas: Vec<Vec<RunData>> = stages
             .iter()
-            .map(|s| {
-                s.runs
-                    .runs
-                    .iter()
-                    .map(|r| RunData::from_run(r, lik.part, lik.smooth_strain_ms))
-                    .collect()
-            })
+            .map(|s| s.runs.runs.iter().map(|r| lik.run_data(r, lik.part)).collect())
             .collect();
         let layer_runs: Vec<LayerRun> = stages
             .iter()

@@ -77,7 +77,7 @@ impl Pipeline<'_> {
             .runs
             .iter()
             .filter(|run| cal.saw(run.id()))
-            .map(|run| RunData::from_run(run, likelihood.part, likelihood.smooth_strain_ms))
+            .map(|run| likelihood.run_data(run, likelihood.part))
             .collect();
         if runs.len() != cal.record.runs.len() {
             return Err(Error::Usage(format!(
@@ -194,11 +194,7 @@ impl Pipeline<'_> {
         let mut coverage = Vec::new();
         let mut failed = Vec::new();
         for (j, run) in campaign.runs.iter().enumerate() {
-            let data = RunData::from_run(
-                run,
-                RecordPart::WholeRecord,
-                cal.settings.likelihood.smooth_strain_ms,
-            );
+            let data = cal.settings.likelihood.run_data(run, RecordPart::WholeRecord);
             let calibrated = seen(run);
             let (id, current) = (run.id(), run.spec.current_a);
             let draws: Vec<Draw> = match calibrated {

@@ -131,6 +131,8 @@ impl Pipeline<'_> {
             self.prepare(out, "--out", &[], &[], true)?;
         }
         let clock = Instant::now();
+        // the excitation is the damper's own displacement: a stand's
+        // channel lag (`displacement_lag_ms`) does not apply
         let data = RunData::from_run(
             &run,
             RecordPart::WholeRecord,

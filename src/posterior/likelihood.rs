@@ -25,6 +25,13 @@ pub struct LikelihoodSettings {
     /// displacement is smooth on this scale, so the fit removes noise, not
     /// signal.
     pub smooth_strain_ms: f64,
+    /// The displacement channel's delay behind the force channel (ms): the
+    /// law is driven at each sample by the displacement recorded this much
+    /// later (0: the samples as recorded). A stand's two channels may be
+    /// filtered or sampled apart; docs/real-data.md measures it on the
+    /// measured damper. Every law takes it.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub displacement_lag_ms: f64,
     /// Degrees of freedom of the Student-t model.
     pub student_nu: f64,
     pub part: RecordPart,
@@ -179,6 +186,7 @@ impl Default for LikelihoodSettings {
         LikelihoodSettings {
             noise: NoiseKind::Gaussian,
             smooth_strain_ms: 2.0,
+            displacement_lag_ms: 0.0,
             student_nu: 5.0,
             part: RecordPart::WholeRecord,
             errors_in_variables: true,
@@ -190,8 +198,28 @@ impl Default for LikelihoodSettings {
     }
 }
 
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
 impl LikelihoodSettings {
+    /// The samples of `run` that `part` selects, as the likelihood takes
+    /// them: the strain smoothed, and shifted by the displacement's lag.
+    pub fn run_data(&self, run: &crate::data::Run, part: RecordPart) -> RunData {
+        let data = RunData::from_run(run, part, self.smooth_strain_ms);
+        match self.displacement_lag_ms {
+            0.0 => data,
+            lag => data.with_strain_lag(1e-3 * lag),
+        }
+    }
+
     pub fn check(&self) -> Result<(), String> {
+        if !(self.displacement_lag_ms.abs() <= 100.0) {
+            return Err(format!(
+                "displacement_lag_ms must lie within ±100 ms, not {}",
+                self.displacement_lag_ms
+            ));
+        }
         if !(self.smooth_strain_ms >= 0.0) {
             return Err("smooth_strain_ms must be 0 or positive".into());
         }

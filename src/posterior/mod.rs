@@ -79,11 +79,8 @@ impl Posterior {
         coordinates: Coordinates,
         terms: &ModelTerms,
     ) -> Posterior {
-        let runs: Vec<RunData> = campaign
-            .runs
-            .iter()
-            .map(|r| RunData::from_run(r, likelihood.part, likelihood.smooth_strain_ms))
-            .collect();
+        let runs: Vec<RunData> =
+            campaign.runs.iter().map(|r| likelihood.run_data(r, likelihood.part)).collect();
         let ids: Vec<String> = runs.iter().map(|r| r.id.clone()).collect();
         let noise = likelihood.noise_model(sigma_bounds);
         let mut layout = Layout::new(&model, &ids, noise.as_ref(), coordinates, terms);

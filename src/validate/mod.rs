@@ -287,8 +287,8 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
     let target = Target {
         j,
         run: left_out,
-        data: RunData::from_run(left_out, RecordPart::WholeRecord, lik.smooth_strain_ms),
-        compared: RunData::from_run(left_out, lik.part, lik.smooth_strain_ms).time.len(),
+        data: lik.run_data(left_out, RecordPart::WholeRecord),
+        compared: lik.run_data(left_out, lik.part).time.len(),
         predict: full.cal.predict_settings(loo.replicates, loo.seed),
         weight: lik.weight(left_out.id()),
     };

@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use super::{BetweenRuns, GibbsSettings, LayerRun};
 use crate::calibrate::Calibration;
-use crate::data::{same_current, Campaign, RecordPart, RunData};
+use crate::data::{same_current, Campaign, RecordPart};
 use crate::error::Result;
 use crate::predict::{predict_run, CoverageRow};
 
@@ -58,7 +58,7 @@ pub fn leave_out(
     seed: u64,
 ) -> Result<Vec<NewTestRow>> {
     let settings = joint.predict_settings(replicates, seed);
-    let smooth = joint.settings.likelihood.smooth_strain_ms;
+    let likelihood = &joint.settings.likelihood;
     let current = joint.record.current_a;
     let without = |run: &crate::data::Run, r: &LayerRun| match left_out {
         LeftOut::Run => r.id != run.id(),
@@ -111,7 +111,7 @@ pub fn leave_out(
                 }
             };
             let group = layer.group(current).expect("a current the layer was asked for");
-            let data = RunData::from_run(run, RecordPart::WholeRecord, smooth);
+            let data = likelihood.run_data(run, RecordPart::WholeRecord);
             let (new, outside) =
                 layer.new_tests(group, own.cal, &data, draws, seed ^ (0x2_0000 + j as u64));
             let mut prediction = predict_run(run, &data, j, &new, &settings, false, &|| {})?;
