@@ -199,7 +199,7 @@ fn the_validation_study_ranks_the_generating_law_first() {
     assert_eq!(held.len(), 3);
     for r in held {
         // 15 N of noise over a peak force of about 2.7 kN: well under 2 %
-        assert!(r.nrmse < 0.02 && r.inside_p95 > 0.85, "{r:?}");
+        assert!(r.measures.nrmse < 0.02 && r.measures.inside_p95 > 0.85, "{r:?}");
     }
     let html = std::fs::read_to_string(out.join("laws/report.html")).unwrap();
     for id in ["verdict", "standings", "records", "figures", "reproduce"] {

@@ -25,7 +25,7 @@
 //! the Bouc-Wen family, implements [`ode::StateLaw`] instead and gets the
 //! lanes, the step control and AVX2 from [`ode`]) and has `const fn new()
 //! -> Self`, and its line in the [`registry!`] below, which makes its name a
-//! value of `--law` and of `[model] law`. Its tests run the conformance
+//! value of `--law` and of `law =` in a settings file. Its tests run the conformance
 //! harness of `testing` (lanes against one at a time, the integrator's
 //! order, the parameters recovered from its own virtual records).
 
@@ -155,7 +155,7 @@ pub trait DamperLaw: Send + Sync + std::fmt::Debug {
 /// files give it.
 macro_rules! registry {
     ($($(#[$attr:meta])* $variant:ident => $law:ty,)+) => {
-        /// A damper law by name (`--law`, `[model] law`).
+        /// A damper law by name (`--law`, `law =` in a settings file).
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
         #[serde(rename_all = "kebab-case")]
         pub enum LawKind {

@@ -130,19 +130,12 @@ fn row(
     seconds: f64,
     area_m2: f64,
 ) -> LawRow {
-    let m = measures(bands, area_m2);
     LawRow {
         law,
         current_a,
         run: bands.run.clone(),
         kind,
-        samples: m.samples,
-        nrmse: m.nrmse,
-        e_t: m.e_t,
-        e_x: m.e_x,
-        e_v: m.e_v,
-        inside_p95: m.inside_p95,
-        band_width: m.band_width,
+        measures: measures(bands, area_m2),
         lppd,
         seconds,
     }

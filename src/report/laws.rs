@@ -104,11 +104,11 @@ pub fn write(r: &LawsReport) -> Result<PathBuf> {
                 num(x.current_a, 3),
                 esc(&x.run),
                 x.kind.name().into(),
-                format!("{:.1} %", 100.0 * x.nrmse),
-                num(x.e_t, 3),
-                num(x.e_x, 3),
-                num(x.e_v, 3),
-                format!("{:.1} %", 100.0 * x.inside_p95),
+                format!("{:.1} %", 100.0 * x.measures.nrmse),
+                num(x.measures.e_t, 3),
+                num(x.measures.e_x, 3),
+                num(x.measures.e_v, 3),
+                format!("{:.1} %", 100.0 * x.measures.inside_p95),
                 num(x.lppd, 5),
             ]
         })

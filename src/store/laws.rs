@@ -8,7 +8,7 @@ use std::path::Path;
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
 use crate::error::{Error, Result};
 use crate::laws::LawKind;
-use crate::validate::laws::{Kind, LawRow};
+use crate::validate::laws::{Kind, LawRow, Measures};
 
 /// The study's table in its folder.
 pub const FILE: &str = "laws.parquet";
@@ -24,13 +24,13 @@ pub fn table(rows: &[LawRow], ids: &[(String, String)]) -> Table {
         .f64("current_a", rows.iter().map(|r| r.current_a).collect())
         .str("run", rows.iter().map(|r| r.run.clone()).collect())
         .str("kind", rows.iter().map(|r| r.kind.name().to_string()).collect())
-        .i64("samples", rows.iter().map(|r| r.samples as i64).collect())
-        .f64("nrmse", rows.iter().map(|r| r.nrmse).collect())
-        .f64("e_t", rows.iter().map(|r| r.e_t).collect())
-        .f64("e_x", rows.iter().map(|r| r.e_x).collect())
-        .f64("e_v", rows.iter().map(|r| r.e_v).collect())
-        .f64("inside_p95", rows.iter().map(|r| r.inside_p95).collect())
-        .f64("band_width", rows.iter().map(|r| r.band_width).collect())
+        .i64("samples", rows.iter().map(|r| r.measures.samples as i64).collect())
+        .f64("nrmse", rows.iter().map(|r| r.measures.nrmse).collect())
+        .f64("e_t", rows.iter().map(|r| r.measures.e_t).collect())
+        .f64("e_x", rows.iter().map(|r| r.measures.e_x).collect())
+        .f64("e_v", rows.iter().map(|r| r.measures.e_v).collect())
+        .f64("inside_p95", rows.iter().map(|r| r.measures.inside_p95).collect())
+        .f64("band_width", rows.iter().map(|r| r.measures.band_width).collect())
         .f64("lppd", rows.iter().map(|r| r.lppd).collect())
         .f64("seconds", rows.iter().map(|r| r.seconds).collect())
         .meta(CALIBRATIONS, &named.join(","))
@@ -71,13 +71,15 @@ pub fn read(path: &Path) -> Result<Vec<LawRow>> {
                 run: run[i].clone(),
                 kind: Kind::parse(&kind[i])
                     .ok_or_else(|| bad(&format!("unknown kind '{}'", kind[i])))?,
-                samples: samples[i] as usize,
-                nrmse: nrmse[i],
-                e_t: e_t[i],
-                e_x: e_x[i],
-                e_v: e_v[i],
-                inside_p95: inside[i],
-                band_width: width[i],
+                measures: Measures {
+                    samples: samples[i] as usize,
+                    nrmse: nrmse[i],
+                    e_t: e_t[i],
+                    e_x: e_x[i],
+                    e_v: e_v[i],
+                    inside_p95: inside[i],
+                    band_width: width[i],
+                },
                 lppd: lppd[i],
                 seconds: seconds[i],
             })

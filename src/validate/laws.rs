@@ -54,16 +54,7 @@ pub struct LawRow {
     pub current_a: f64,
     pub run: String,
     pub kind: Kind,
-    pub samples: usize,
-    /// RMS(F − F̂) / max |F|.
-    pub nrmse: f64,
-    pub e_t: f64,
-    pub e_x: f64,
-    pub e_v: f64,
-    /// Share of the samples inside the 95 % predictive band.
-    pub inside_p95: f64,
-    /// The 95 % predictive band's mean width over max |F|.
-    pub band_width: f64,
+    pub measures: Measures,
     /// Log pointwise predictive density of the record (Σ over its samples).
     pub lppd: f64,
     /// Wall time of the calibration that predicted it (s): the law's
@@ -123,12 +114,16 @@ pub fn measures(bands: &RunBands, area_m2: f64) -> Measures {
 /// The error measures of one record ([`measures`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Measures {
+    /// The samples compared (every one after the first).
     pub samples: usize,
+    /// RMS(F − F̂) / max |F|.
     pub nrmse: f64,
     pub e_t: f64,
     pub e_x: f64,
     pub e_v: f64,
+    /// Share of the samples inside the 95 % predictive band.
     pub inside_p95: f64,
+    /// The 95 % predictive band's mean width over max |F|.
     pub band_width: f64,
 }
 
@@ -206,18 +201,23 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     .copied()
                     .filter(|r| r.law == law && r.kind == Kind::InSample)
                     .collect();
-                let samples: usize = h.iter().map(|r| r.samples).sum();
+                let samples: usize = h.iter().map(|r| r.measures.samples).sum();
                 Standing {
                     law,
                     current_a: c,
                     elpd: elpd(law),
                     elpd_diff: d.iter().sum(),
                     elpd_diff_se: (n * var).sqrt(),
-                    nrmse_in: mean(&ins.iter().map(|r| r.nrmse).collect::<Vec<_>>()),
-                    nrmse_out: mean(&h.iter().map(|r| r.nrmse).collect::<Vec<_>>()),
-                    inside_p95_out: h.iter().map(|r| r.inside_p95 * r.samples as f64).sum::<f64>()
+                    nrmse_in: mean(&ins.iter().map(|r| r.measures.nrmse).collect::<Vec<_>>()),
+                    nrmse_out: mean(&h.iter().map(|r| r.measures.nrmse).collect::<Vec<_>>()),
+                    inside_p95_out: h
+                        .iter()
+                        .map(|r| r.measures.inside_p95 * r.measures.samples as f64)
+                        .sum::<f64>()
                         / samples.max(1) as f64,
-                    band_width_out: mean(&h.iter().map(|r| r.band_width).collect::<Vec<_>>()),
+                    band_width_out: mean(
+                        &h.iter().map(|r| r.measures.band_width).collect::<Vec<_>>(),
+                    ),
                     seconds: ins.first().map_or(0.0, |r| r.seconds)
                         + h.first().map_or(0.0, |r| r.seconds),
                     rank: 0,
@@ -326,13 +326,15 @@ mod tests {
             current_a: 1.0,
             run: run.into(),
             kind,
-            samples: 100,
-            nrmse: 0.05,
-            e_t: 0.1,
-            e_x: 0.1,
-            e_v: 0.1,
-            inside_p95: 0.95,
-            band_width: 0.2,
+            measures: Measures {
+                samples: 100,
+                nrmse: 0.05,
+                e_t: 0.1,
+                e_x: 0.1,
+                e_v: 0.1,
+                inside_p95: 0.95,
+                band_width: 0.2,
+            },
             lppd,
             seconds: 1.0,
         }
