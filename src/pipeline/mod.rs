@@ -131,8 +131,13 @@ impl SampleOptions {
         if self.per_run && settings.model.is_law() {
             return Err(Error::Usage("--per-run calibrates each run alone, which a current law cannot (one run has one current): use the per-current model".into()));
         }
-        let mut laws = self.settings.law.clone();
-        laws.dedup();
+        // each law once (`--law a,b,a` is a and b), in the order given
+        let mut laws: Vec<LawKind> = Vec::new();
+        for law in &self.settings.law {
+            if !laws.contains(law) {
+                laws.push(*law);
+            }
+        }
         Ok(SampleRequest {
             settings,
             laws,

@@ -57,8 +57,8 @@ pub struct LawRow {
     pub measures: Measures,
     /// Log pointwise predictive density of the record (Σ over its samples).
     pub lppd: f64,
-    /// Wall time of the calibration that predicted it (s): the law's
-    /// calibration in sample, its leave-one-out study held out.
+    /// Wall time (s) of the law's calibration at this current (start and
+    /// sampling), on its in-sample and held-out rows alike.
     pub seconds: f64,
 }
 
@@ -144,7 +144,8 @@ pub struct Standing {
     /// Held-out samples inside the 95 % band, pooled over the tests.
     pub inside_p95_out: f64,
     pub band_width_out: f64,
-    /// Wall time of the calibration and of its leave-one-out study (s).
+    /// Wall time of the law's calibration at this current (s; the whole
+    /// job's, leave-one-out included, is the report's per law).
     pub seconds: f64,
     /// Rank at the current by held-out elpd (1: best).
     pub rank: usize,
@@ -218,8 +219,7 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     band_width_out: mean(
                         &h.iter().map(|r| r.measures.band_width).collect::<Vec<_>>(),
                     ),
-                    seconds: ins.first().map_or(0.0, |r| r.seconds)
-                        + h.first().map_or(0.0, |r| r.seconds),
+                    seconds: ins.first().or(h.first()).map_or(0.0, |r| r.seconds),
                     rank: 0,
                 }
             })
