@@ -77,8 +77,9 @@ fn identification_gives_a_usable_start_at_every_current() {
 /// on) and `report` on the 1 A records. Its posterior is close to the
 /// Laplace approximation at the mode (ln p/q over the initial walkers
 /// spreads by 0.9 nats; a Hessian rule that put one curvature 11× too low
-/// made it 8.8, above the 8 that sends a run on the curved move to 100 τ:
-/// 800 steps, 7 min, for the same posterior). The calibration must fit (residual under 15 % of the peak
+/// made it 8.8, above the 8 that sends a run on the curved move and on to
+/// twice the step at which it first converged: 800 steps, 7 min, for the
+/// same posterior, when that rule was 100 τ). The calibration must fit (residual under 15 % of the peak
 /// force on every run: measured 7–12 %), and the report must not hide what
 /// the law misses: the residuals of these records are correlated in time
 /// (lag-1 autocorrelation 0.92–0.99), so the memory warning is in

@@ -88,7 +88,12 @@ impl Observer for Python_ {
         }
     }
 
-    fn checked(&mut self, _state: &RunState, diagnostics: &mrbp::sampler::Diagnostics) {
+    fn checked(
+        &mut self,
+        _state: &RunState,
+        diagnostics: &mrbp::sampler::Diagnostics,
+        _waiting: Option<&mrbp::sampler::Waiting>,
+    ) {
         let ess = diagnostics.min_ess();
         if ess.is_finite() {
             self.checked = Some((ess, diagnostics.max_rhat()));

@@ -213,7 +213,12 @@ pub fn sample(
             } else if resumed.settings != probed.sampler.settings {
                 return Err(Error::input(path, "checkpoint of a sampler with other settings (walkers, ensembles, moves or seed)"));
             } else {
-                probe::Probed { sampler: resumed.with_reference(probed.laplace.clone()), ..probed }
+                // the probe's steps were the start's work: the chains are the checkpoint's
+                probe::Probed {
+                    sampler: resumed.with_reference(probed.laplace.clone()),
+                    stepping_seconds: 0.0,
+                    ..probed
+                }
             }
         }
         None => probe::walkers_start(
@@ -225,15 +230,15 @@ pub fn sample(
             observers,
         )?,
     };
-    // the Laplace approximation and the walkers' start (with its probe's
-    // steps) count with the start
-    let walkers_start = clock.elapsed().as_secs_f64();
+    // the Laplace approximation and the walkers' start count with the
+    // start; the probe's steps, the chains' first, with sampling
+    let walkers_start = clock.elapsed().as_secs_f64() - probed.stepping_seconds;
+    let probe_seconds = probed.stepping_seconds;
     let misfit = probed.far();
-    if misfit.is_some() {
-        control.min_tau_multiple = probe::FAR_TAU_MULTIPLE;
-    }
+    control.confirm = misfit.is_some();
     let probe::Probed { mut sampler, map, higher, spread, .. } = probed;
     let mut sampled = sampling::run(posterior, &mut sampler, &control, s.burn_in, observers)?;
+    sampled.seconds += probe_seconds;
     sampled.diagnostics.warnings.extend(probe::warnings(
         &higher,
         misfit,

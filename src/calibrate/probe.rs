@@ -24,6 +24,9 @@ pub(super) struct Probed<'t> {
     pub higher: Option<HigherGround>,
     /// ln p/q's spread over the initial walkers (nats).
     pub spread: f64,
+    /// The wall time of the sampler's steps so far: the chains' first
+    /// steps, which count as sampling, not as the start.
+    pub stepping_seconds: f64,
 }
 
 impl Probed<'_> {
@@ -69,13 +72,19 @@ pub(super) fn walkers_start<'t>(
         if let Some(moves) = far(spread).and_then(|_| moves_far_from_laplace(&settings.moves)) {
             sampler.settings.moves = moves;
         }
-        let done = |sampler, laplace, new_map, higher| {
-            Ok(Probed { sampler, laplace, map: new_map, higher, spread })
+        let done = |sampler, laplace, new_map, higher, stepping_seconds| {
+            Ok(Probed { sampler, laplace, map: new_map, higher, spread, stepping_seconds })
         };
         if higher.as_ref().is_some_and(|h| h.searches == MAX_SEARCHES) {
-            return done(sampler, laplace, new_map, higher);
+            return done(sampler, laplace, new_map, higher, 0.0);
         }
-        match higher_ground(posterior, &mut sampler, top, control, observers)? {
+        // the probe's steps are the chains' first: their time is sampling's
+        let clock = std::time::Instant::now();
+        for _ in 0..PROBE_STEPS.min(control.max_steps) {
+            sampler.step_observed(control, observers)?;
+        }
+        let stepping = clock.elapsed().as_secs_f64();
+        match higher_ground(posterior, &sampler, top) {
             Some((found, better, better_top)) => {
                 let gain = higher.as_ref().map_or(0.0, |h| h.gain) + better_top - top;
                 let searches = higher.as_ref().map_or(0, |h| h.searches) + 1;
@@ -87,7 +96,7 @@ pub(super) fn walkers_start<'t>(
                 new_map = Some(found);
                 (laplace, top) = (better, better_top);
             }
-            None => return done(sampler, laplace, new_map, higher),
+            None => return done(sampler, laplace, new_map, higher, stepping),
         }
     }
 }
@@ -145,22 +154,17 @@ impl HigherGround {
     }
 }
 
-/// Steps `sampler` [`PROBE_STEPS`] times (told to `observers`) and, if a walker has climbed more
-/// than [`HIGHER_GROUND`] above `top` (the log-density at the mode the
-/// walkers started about), searches the MAP again from the highest walker
-/// and reaches its mode: that MAP, the Laplace approximation at its mode
-/// and the log-density there, if the mode is higher ground too; otherwise
-/// `None`, and the sampler goes on from where it is.
+/// After the probe's [`PROBE_STEPS`] steps of `sampler`: if a walker has
+/// climbed more than [`HIGHER_GROUND`] above `top` (the log-density at the
+/// mode the walkers started about), the MAP searched again from the
+/// highest walker, the Laplace approximation at its mode and the
+/// log-density there, if that mode is higher ground too; otherwise `None`,
+/// and the sampler goes on from where it is.
 fn higher_ground(
     posterior: &Posterior,
-    sampler: &mut Sampler<Posterior>,
+    sampler: &Sampler<Posterior>,
     top: f64,
-    control: &RunControl,
-    observers: &mut [&mut dyn Observer],
-) -> Result<Option<(map::MapEstimate, Elliptical, f64)>> {
-    for _ in 0..PROBE_STEPS.min(control.max_steps) {
-        sampler.step_observed(control, observers)?;
-    }
+) -> Option<(map::MapEstimate, Elliptical, f64)> {
     let d = posterior.dim();
     let chains = &sampler.chains;
     let (best, lp) = chains
@@ -169,14 +173,12 @@ fn higher_ground(
         .enumerate()
         .fold((0, f64::NEG_INFINITY), |b, (i, &v)| if v > b.1 { (i, v) } else { b });
     if !(lp > top + HIGHER_GROUND) {
-        return Ok(None);
+        return None;
     }
-    let Some(map) = map::refine(posterior, &chains.positions[best * d..(best + 1) * d]) else {
-        return Ok(None);
-    };
+    let map = map::refine(posterior, &chains.positions[best * d..(best + 1) * d])?;
     let laplace = laplace::at_mode(posterior, &map);
     let new_top = posterior.log_density(laplace.mean.as_slice());
-    Ok((new_top > top + HIGHER_GROUND).then_some((map, laplace, new_top)))
+    (new_top > top + HIGHER_GROUND).then_some((map, laplace, new_top))
 }
 
 /// The spread (sd, nats) of ln p/q over the initial walkers above which
@@ -189,18 +191,6 @@ fn higher_ground(
 /// "The Hessian at half the points": the spread is only as good as the
 /// mode's Hessian).
 pub(super) const FAR_FROM_LAPLACE: f64 = 8.0;
-
-/// How many τ_max the chains must hold after burn-in where the posterior
-/// is far from its Laplace approximation, against
-/// [`crate::sampler::diagnostics::MIN_TAU_MULTIPLE`] elsewhere: walkers
-/// that started on a Gaussian spread about the mode need that long to fill
-/// a curved ridge, and they do it together, so R̂, which compares the
-/// ensembles, does not see it. Twice emcee's rule of thumb of 50: on a
-/// curved ridge with a long, thin end whose quantiles are known
-/// (`tests/sampler.rs`, `SkewedRidge`), runs that stopped at 50 τ left the
-/// far end's 95 % quantile short by 0.06 on average over 12 seeds (3.6
-/// standard errors of that average), at 100 τ within 0.005.
-pub const FAR_TAU_MULTIPLE: f64 = 100.0;
 
 /// The sd of ln p(x) − ln q(x) over the walkers of the chains' first step,
 /// draws of q: the Laplace approximation `laplace` spread by
@@ -265,7 +255,7 @@ fn far_message(misfit: f64, moves_changed: bool) -> String {
         ""
     };
     format!(
-        "the posterior is far from its Laplace approximation at the mode (ln p/q over the initial walkers spreads by {misfit:.1} nats, above {FAR_FROM_LAPLACE}): walkers that start on that approximation fill a curved or skewed posterior slowly and together, which R̂ does not see, so {moves}the run went on to {FAR_TAU_MULTIPLE} τ after burn-in (docs/calibration.md, \"Convergence\")"
+        "the posterior is far from its Laplace approximation at the mode (ln p/q over the initial walkers spreads by {misfit:.1} nats, above {FAR_FROM_LAPLACE}): walkers that start on that approximation fill a curved or skewed posterior slowly and together, which R̂ does not see, so {moves}the run went on to twice the step at which R̂, ESS and length first held and checked them again there (docs/calibration.md, \"Convergence\")"
     )
 }
 

@@ -54,7 +54,8 @@ pub fn run(
         PosteriorSample::from_coordinates(layout, posterior.model, chains, Vec::new())
             .diagnostics(burn_in_of(chains))
     };
-    sampler.run_until(control, observers, &diagnose)?;
+    let control = RunControl { names: layout.names.clone(), ..control.clone() };
+    sampler.run_until(&control, observers, &diagnose)?;
     let chains = sampler.chains.clone();
     let seconds = clock.elapsed().as_secs_f64();
     let sample = PosteriorSample::from_coordinates(layout, posterior.model, &chains, currents);

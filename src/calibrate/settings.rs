@@ -161,7 +161,7 @@ impl SamplingSettings {
             until_converged: self.steps == 0,
             check_every: self.check_every,
             min_ess: self.min_ess,
-            min_tau_multiple: crate::sampler::diagnostics::MIN_TAU_MULTIPLE,
+            ..RunControl::fixed(0)
         }
     }
 }

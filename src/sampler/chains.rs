@@ -56,6 +56,18 @@ impl Chains {
         }
     }
 
+    /// The chains as they were after their first `steps` steps (the
+    /// initial state counting as one).
+    pub fn first_steps(&self, steps: usize) -> Chains {
+        let n = steps.min(self.steps()) * self.chains();
+        Chains {
+            positions: self.positions[..n * self.dim].to_vec(),
+            log_prob: self.log_prob[..n].to_vec(),
+            accepted: self.accepted[..n].to_vec(),
+            ..*self
+        }
+    }
+
     /// The trace of coordinate `i` of every chain from step `from` on:
     /// `[chain][step]`.
     pub fn traces(&self, i: usize, from: usize) -> Vec<Vec<f64>> {

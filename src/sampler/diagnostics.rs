@@ -500,23 +500,6 @@ impl Diagnostics {
             .fold(f64::INFINITY, nan_min)
     }
 
-    /// Every R̂ below 1.01 and every bulk and tail ESS at least `min_ess`
-    /// (Vehtari et al. 2021): the ensembles agree and the draws are enough
-    /// for their purpose; and the chains at least [`MIN_TAU_MULTIPLE`] τ
-    /// long after burn-in, so that those estimates rest on more than a few
-    /// autocorrelation times.
-    pub fn converged(&self, min_ess: f64) -> bool {
-        self.converged_for(min_ess, MIN_TAU_MULTIPLE)
-    }
-
-    /// [`Self::converged`] with the chains at least `tau_multiple` τ_max
-    /// long after burn-in.
-    pub fn converged_for(&self, min_ess: f64, tau_multiple: f64) -> bool {
-        self.coordinates.iter().all(|c| c.r_hat < RHAT_THRESHOLD)
-            && self.min_ess() >= min_ess
-            && self.long_enough_for(tau_multiple)
-    }
-
     /// At least [`MIN_TAU_MULTIPLE`] τ_max after burn-in.
     pub fn long_enough(&self) -> bool {
         self.long_enough_for(MIN_TAU_MULTIPLE)

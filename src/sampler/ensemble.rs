@@ -15,58 +15,12 @@ use super::moves::mixture::last_fit_step;
 use super::moves::{Fit, Learned, Move};
 use super::observer::{Observer, RunState};
 use super::settings::SamplerSettings;
+use super::stopping::{RunControl, Stopping};
 use super::stranded;
 use crate::error::{Error, Result};
 
 /// Index of the stream that picks the move of an ensemble's step.
 const MOVE_STREAM: u64 = u64::MAX;
-
-/// How long to run.
-#[derive(Clone, Debug)]
-pub struct RunControl {
-    /// Run until this many steps in total (including steps already taken).
-    pub max_steps: usize,
-    /// Stop earlier once converged (see [`Diagnostics::converged`]), checked
-    /// at the steps [`RunControl::checks_at`] names. `false`: exactly
-    /// `max_steps`.
-    pub until_converged: bool,
-    /// The shortest interval between convergence checks.
-    pub check_every: usize,
-    /// Convergence also needs this bulk and tail ESS for every coordinate.
-    pub min_ess: f64,
-    /// ... and the chains this many τ_max long after burn-in
-    /// ([`Diagnostics::converged_for`]).
-    pub min_tau_multiple: f64,
-}
-
-impl RunControl {
-    /// Whether convergence is checked after step `step`: every
-    /// `check_every` steps while the chain is short, then at an interval
-    /// that doubles whenever the chain has grown to 16 intervals (a check
-    /// reads every draw, so checking at a fixed interval would cost time
-    /// quadratic in the chain's length: on a 2 360-step calibration the
-    /// checks took three quarters of the wall time). The interval stays
-    /// within 1/8 of the chain, so a run stops at most 1/8 later than it
-    /// could have. A function of the step alone, so a resumed run checks
-    /// where an uninterrupted one does.
-    pub fn checks_at(&self, step: usize) -> bool {
-        let mut interval = self.check_every.max(1);
-        while step >= 16 * interval {
-            interval *= 2;
-        }
-        step.is_multiple_of(interval)
-    }
-
-    pub fn fixed(steps: usize) -> Self {
-        RunControl {
-            max_steps: steps,
-            until_converged: false,
-            check_every: 500,
-            min_ess: 0.0,
-            min_tau_multiple: super::diagnostics::MIN_TAU_MULTIPLE,
-        }
-    }
-}
 
 /// Index of the stream that seeds an ensemble's mixture fits.
 const FIT_STREAM: u64 = u64::MAX - 2;
@@ -102,6 +56,8 @@ pub struct Sampler<'t, T: LogDensity> {
     reference: Option<Elliptical>,
     /// Whether observers were told that this run started.
     announced: bool,
+    /// The stopping rule's memory of this run.
+    stopping: Stopping,
     /// The target's blocks ([`LogDensity::blocks`]); empty where it has
     /// none or their memos would not fit in [`MEMO_BUDGET_BYTES`].
     blocks: Vec<Vec<usize>>,
@@ -210,6 +166,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             reference: None,
             settings,
             announced: false,
+            stopping: Stopping::default(),
             free: free_coordinates(d, &blocks),
             blocks,
             memos,
@@ -236,6 +193,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             history,
             reference: None,
             announced: false,
+            stopping: Stopping::default(),
             blocks,
             memos: Vec::new(),
             free,
@@ -270,6 +228,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     ) -> Result<()> {
         let mut accepted = 0;
         self.announce(control, observers)?;
+        self.replay_checks(control, diagnose);
         // steps taken before this run (a probe of the start, a resumed
         // run's) are checked where an uninterrupted run would have checked
         let mut converged =
@@ -285,23 +244,44 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
     }
 
     /// Whether the run has converged, where `control` checks at the current
-    /// step (telling `observers` what the check found).
+    /// step (telling `observers` what the check found and what the rule
+    /// waits for).
     fn converged_now(
-        &self,
+        &mut self,
         control: &RunControl,
         accepted: usize,
         observers: &mut [&mut dyn Observer],
         diagnose: &dyn Fn(&Chains) -> Diagnostics,
     ) -> bool {
-        let state = self.state(control, accepted);
-        if !(control.until_converged && control.checks_at(state.step)) {
+        let step = self.chains.steps().saturating_sub(1);
+        if !(control.until_converged && control.checks_at(step)) {
             return false;
         }
         let diag = diagnose(&self.chains);
+        let waiting = self.stopping.check(control, step, &diag);
+        let state = self.state(control, accepted);
         for o in observers.iter_mut() {
-            o.checked(&state, &diag);
+            o.checked(&state, &diag, waiting.as_ref());
         }
-        diag.converged_for(control.min_ess, control.min_tau_multiple)
+        waiting.is_none()
+    }
+
+    /// A run that confirms counts from the step at which the rule first
+    /// held: where chains were taken before this run (a resumed run's),
+    /// the checks an uninterrupted run made at those steps are made again
+    /// on the chains as they were, so both stop at the same step.
+    fn replay_checks(&mut self, control: &RunControl, diagnose: &dyn Fn(&Chains) -> Diagnostics) {
+        if !(control.until_converged && control.confirm) || self.stopping.first_held().is_some() {
+            return;
+        }
+        let now = self.chains.steps().saturating_sub(1);
+        for step in (1..now).filter(|s| control.checks_at(*s)) {
+            let diag = diagnose(&self.chains.first_steps(step + 1));
+            self.stopping.check(control, step, &diag);
+            if self.stopping.first_held().is_some() {
+                break;
+            }
+        }
     }
 
     /// Tells `observers` that the run started, once: a run continued by
@@ -650,27 +630,5 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             u -= w;
         }
         moves[moves.len() - 1].0
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::RunControl;
-
-    #[test]
-    fn convergence_checks_thin_out_as_the_chain_grows() {
-        let control =
-            RunControl { until_converged: true, check_every: 10, ..RunControl::fixed(5000) };
-        let checks: Vec<usize> = (1..=5000).filter(|s| control.checks_at(*s)).collect();
-        // every 10 steps below 160, then every 20, 40, 80, 160, 320
-        assert_eq!(&checks[..16], &(1..=16).map(|k| 10 * k).collect::<Vec<_>>()[..]);
-        assert_eq!(&checks[16..20], &[180, 200, 220, 240]);
-        assert!(checks.contains(&2560) && !checks.contains(&2600) && checks.contains(&2880));
-        // never more than 1/8 of the chain (nor less than 10 steps) between checks
-        for pair in checks.windows(2) {
-            assert!(pair[1] - pair[0] <= (pair[0] / 8).max(10), "{pair:?}");
-        }
-        // 55 checks in 5000 steps instead of 500
-        assert_eq!(checks.len(), 16 + 4 * 8 + 7);
     }
 }

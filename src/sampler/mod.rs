@@ -7,7 +7,8 @@
 //! * [`elliptical`]: a Student-t or Gaussian fitted to points (the
 //!   independence proposals, the Laplace approximation);
 //! * [`ensemble`]: several independent ensembles stepped with the parallel
-//!   red-blue update, and when to stop; [`settings`]: what a sampler is;
+//!   red-blue update; [`stopping`]: when to stop, and what a run waits
+//!   for; [`settings`]: what a sampler is;
 //! * [`chains`]: the history of a run;
 //! * [`observer`]: progress, diagnostics lines and checkpoints beside the
 //!   loop; [`checkpoint`]: the state on disk;
@@ -28,13 +29,15 @@ pub mod ensemble;
 pub mod moves;
 pub mod observer;
 pub mod settings;
+pub mod stopping;
 pub mod stranded;
 
 pub use chains::Chains;
 pub use density::LogDensity;
 pub use diagnostics::{quantile, quantile_sorted, Diagnostics, ParameterDiagnostics};
 pub use elliptical::{Elliptical, Moments};
-pub use ensemble::{RunControl, Sampler};
+pub use ensemble::Sampler;
 pub use moves::Move;
 pub use observer::{Checkpointer, Observer, Progress, RunState};
 pub use settings::SamplerSettings;
+pub use stopping::{RunControl, Waiting};

@@ -7,6 +7,7 @@ use super::chains::Chains;
 use super::checkpoint;
 use super::diagnostics::Diagnostics;
 use super::settings::SamplerSettings;
+use super::stopping::Waiting;
 use crate::error::{Error, Result};
 
 /// The state of a run as observers see it.
@@ -34,8 +35,15 @@ pub trait Observer {
     fn stepped(&mut self, _state: &RunState) -> Result<()> {
         Ok(())
     }
-    /// After every convergence check.
-    fn checked(&mut self, _state: &RunState, _diagnostics: &Diagnostics) {}
+    /// After every convergence check, with what the stopping rule waits
+    /// for (`None`: the run stops here).
+    fn checked(
+        &mut self,
+        _state: &RunState,
+        _diagnostics: &Diagnostics,
+        _waiting: Option<&Waiting>,
+    ) {
+    }
     /// After the last step.
     fn finished(&mut self, _state: &RunState) -> Result<()> {
         Ok(())
@@ -124,24 +132,37 @@ impl Observer for Progress {
         }
         Ok(())
     }
-    fn checked(&mut self, state: &RunState, diag: &Diagnostics) {
+    fn checked(&mut self, state: &RunState, diag: &Diagnostics, waiting: Option<&Waiting>) {
         let Some(min_ess) = state.min_ess else { return };
         let (ess, rhat) = (diag.min_ess(), diag.max_rhat());
+        let verdict = match waiting {
+            Some(w) => format!("waiting: {w}"),
+            None => "converged".to_string(),
+        };
         if ess.is_nan() {
             // too few steps after burn-in to estimate an ESS yet
+            print_line(&self.bar, &format!("  step {}: {verdict}", state.step));
             return;
         }
         self.status = format!(
             ", smallest ESS {ess:.0}/{min_ess:.0}, largest R̂ {rhat:.4}/{}",
             super::diagnostics::RHAT_THRESHOLD
         );
-        let line = format!("  step {}: smallest ESS {ess:.0} (target {min_ess:.0}), largest R̂ {rhat:.4}, τ_max {:.1}", state.step, diag.tau_max);
+        let line = format!(
+            "  step {}: smallest ESS {ess:.0} (target {min_ess:.0}), largest R̂ {rhat:.4}, τ_max {:.1}; {verdict}",
+            state.step, diag.tau_max
+        );
+        let until = match waiting {
+            Some(Waiting::Confirmation { until, .. }) => *until as f64,
+            _ => 0.0,
+        };
         match &self.bar {
             Some(bar) if !bar.is_hidden() => {
                 // ESS grows with the steps kept after burn-in: the steps still
                 // needed at this pace give the bar its length and its ETA
                 let kept = state.step.saturating_sub(diag.burn_in).max(1) as f64;
-                let needed = diag.burn_in as f64 + kept * (min_ess / ess.max(1.0)).max(1.0);
+                let needed =
+                    (diag.burn_in as f64 + kept * (min_ess / ess.max(1.0)).max(1.0)).max(until);
                 bar.set_length(
                     (needed.ceil() as u64).clamp(state.step as u64 + 1, state.max_steps as u64),
                 );
@@ -161,5 +182,13 @@ impl Observer for Progress {
             bar.finish_and_clear();
         }
         Ok(())
+    }
+}
+
+/// A line above the progress bar, or on standard error where it is hidden.
+fn print_line(bar: &Option<indicatif::ProgressBar>, line: &str) {
+    match bar {
+        Some(bar) if !bar.is_hidden() => bar.println(line),
+        _ => eprintln!("{line}"),
     }
 }
