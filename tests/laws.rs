@@ -303,6 +303,39 @@ fn the_validation_study_ranks_the_generating_law_first() {
     for id in ["verdict", "standings", "records", "figures", "reproduce"] {
         assert!(html.contains(&format!("id=\"{id}\"")), "{id}");
     }
+    // `status` judges the laws folder by the calibrations it names: whole
+    // now, stale once a law is calibrated again
+    let laws_status = || {
+        mrbp::store::status::status(&out)
+            .unwrap()
+            .into_iter()
+            .find(|s| s.kind == mrbp::store::status::Kind::Laws)
+            .expect("the laws folder is a results folder")
+    };
+    let whole = laws_status();
+    assert_eq!(whole.dir, out.join("laws"));
+    assert!(whole.complete(), "{:?}", whole.problems);
+    let again = out.join("bingham/I1.0A");
+    ok(&[
+        "sample",
+        arg(&manifest),
+        "--law",
+        "bingham",
+        "--seed",
+        "2",
+        "--force",
+        "--out",
+        arg(&again),
+    ]);
+    let stale = laws_status();
+    assert!(
+        stale
+            .problems
+            .iter()
+            .any(|p| p.contains("bingham/I1.0A") && p.contains("calibrated again")),
+        "{:?}",
+        stale.problems
+    );
     // one law is not a comparison: `sample` refuses several
     let o = mrbp(&[
         "sample",

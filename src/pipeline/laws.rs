@@ -109,6 +109,7 @@ impl Pipeline<'_> {
             job_seconds: &job_seconds,
             command: &command,
             held_out,
+            calibration_ids: &ids,
         })?;
         self.note(&format!(
             "wrote {} and {}",

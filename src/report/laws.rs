@@ -31,6 +31,9 @@ pub struct LawsReport<'a> {
     pub command: &'a str,
     /// Whether the records were held out (leave-one-out).
     pub held_out: bool,
+    /// The calibrations compared, `law/I<c>A` and id (named in the page,
+    /// for `mrbp status`).
+    pub calibration_ids: &'a [(String, String)],
 }
 
 /// Writes the figures and `report.html` into the study's folder.
@@ -38,6 +41,9 @@ pub fn write(r: &LawsReport) -> Result<PathBuf> {
     let dir = r.dir;
     atomic::remove(&dir.join(super::html::REPORT))?;
     let mut page = Page::new(&format!("mrbp: damper laws on {}", r.campaign));
+    for (_, id) in r.calibration_ids {
+        page.derived_from(id);
+    }
     let laws: Vec<String> = r.job_seconds.iter().map(|(l, _)| l.name()).collect();
     page.para(&format!(
         "The laws {} calibrated on the records of {} current by current (one parameter set per current, the same likelihood, noise model and model terms), {}.",

@@ -10,8 +10,8 @@
 use std::path::{Path, PathBuf};
 
 use super::{
-    comparison, consistency, coverage, folder, identification, parquet_meta, prediction, record,
-    simulation, CALIBRATION_ID,
+    comparison, consistency, coverage, folder, identification, laws, parquet_meta, prediction,
+    record, simulation, CALIBRATION_ID,
 };
 use crate::error::Result;
 
@@ -38,6 +38,8 @@ pub enum Kind {
     Comparison,
     Simulation,
     Campaign,
+    /// The damper laws side by side (`run --law A,B,…`: `DIR/laws/`).
+    Laws,
 }
 
 impl Kind {
@@ -48,6 +50,7 @@ impl Kind {
             Kind::Comparison => "comparison",
             Kind::Simulation => "simulation",
             Kind::Campaign => "campaign",
+            Kind::Laws => "damper laws",
         }
     }
 }
@@ -119,6 +122,8 @@ fn kind_of(dir: &Path) -> Option<Kind> {
         Some(Kind::Prediction)
     } else if [simulation::RECORD, simulation::FILE].iter().any(|f| has(f)) {
         Some(Kind::Simulation)
+    } else if has(laws::FILE) {
+        Some(Kind::Laws)
     } else if has("synth.toml") {
         Some(Kind::Campaign)
     } else {
@@ -138,6 +143,7 @@ fn check(dir: &Path, kind: Kind) -> Vec<String> {
         ),
         Kind::Simulation => check_simulation(dir, &mut problems),
         Kind::Comparison => check_comparison(dir, &mut problems),
+        Kind::Laws => check_laws(dir, &mut problems),
         Kind::Campaign => {
             if !dir.join("campaign.toml").exists() {
                 problems.push("campaign.toml missing: `mrbp synth` stopped while writing this campaign; make it again with `mrbp synth --out DIR`".into());
@@ -340,5 +346,36 @@ fn check_comparison(dir: &Path, problems: &mut Vec<String>) {
         }
     }
     let ids: Vec<String> = record.compared.iter().map(|c| c.calibration_id.clone()).collect();
+    check_report(dir, &ids, rebuild, problems);
+}
+
+/// A laws folder (`OUT/laws/`) judges the calibrations `OUT/<law>/I<c>A/`
+/// its table names: each must still hold the calibration it was made
+/// from, and its report name the same ones.
+fn check_laws(dir: &Path, problems: &mut Vec<String>) {
+    let rebuild = "mrbp run MANIFEST --law A,B,… --out OUT";
+    let path = dir.join(laws::FILE);
+    let named = match table_id(&path, laws::CALIBRATIONS) {
+        Err(e) => return problems.push(e),
+        Ok(None) => return problems.push(format!("{}: names no calibrations (made before laws tables named them); rebuild it with `{rebuild}`", laws::FILE)),
+        Ok(Some(named)) => named,
+    };
+    let Some(out) = dir.parent() else { return };
+    let mut ids = Vec::new();
+    for entry in named.split(',') {
+        let Some((label, id)) = entry.split_once('=') else {
+            return problems.push(format!(
+                "{}: unreadable calibration list '{named}'; rebuild it with `{rebuild}`",
+                laws::FILE
+            ));
+        };
+        ids.push(id.to_string());
+        let cal = out.join(label);
+        match record::read(&cal.join(folder::RECORD)).map(|r| r.calibration_id) {
+            Ok(now) if now == id => {}
+            Ok(now) => problems.push(format!("{}: calibrated again since this study (calibration {id} then, {now} now); rebuild it with `{rebuild}`", cal.display())),
+            Err(_) => problems.push(format!("{}: no complete calibration there any more (it held {id}); rebuild it with `{rebuild}`", cal.display())),
+        }
+    }
     check_report(dir, &ids, rebuild, problems);
 }
