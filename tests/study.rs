@@ -89,6 +89,46 @@ fn a_study_runs_here_once_per_task_and_collects_one_dataset() {
     );
 }
 
+/// A replicate study of another damper law (`--law`): its records are the
+/// law's, the truth beside each result is the law's parameter at the
+/// task's current (Bingham's typical c0, fc, v0 at 1 A, from `synth`'s
+/// own `synth.toml`, not from the study's code), and SBC, which draws the
+/// B-P parameters from their prior, is refused for it.
+#[test]
+fn a_replicate_study_of_another_law_holds_that_laws_truth() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("bingham");
+    let args = ["--cycles", "1", "--rate", "1000", "--rpm", "200", "--steps", "60"];
+    let mut plan =
+        vec!["study", "plan", dir.to_str().unwrap(), "--replicates", "2", "--law", "bingham"];
+    plan.extend(args);
+    let o = mrbp(&plan);
+    assert!(o.status.success(), "{}", said(&o));
+    let o = mrbp(&["study", "run", dir.to_str().unwrap(), "--jobs", "2"]);
+    assert!(o.status.success(), "{}", said(&o));
+    // the law's truth as `synth --law bingham` writes it
+    let synth = root.path().join("synth");
+    let o = mrbp(&["synth", "--out", synth.to_str().unwrap(), "--law", "bingham"]);
+    assert!(o.status.success(), "{}", said(&o));
+    let written: toml::Table =
+        std::fs::read_to_string(synth.join("synth.toml")).unwrap().parse().unwrap();
+    let at_1a = written["damper"]["at_1a"].as_table().unwrap();
+    let part = dir.join("collected/results/study=bingham/task=t000/part-0.parquet");
+    let df = read_parquet(&part).unwrap();
+    let params = str_column(&df, "parameter", &part).unwrap();
+    let truth = f64_column(&df, "truth", &part).unwrap();
+    for name in ["c0", "fc", "v0"] {
+        let i =
+            params.iter().position(|p| p == name).unwrap_or_else(|| panic!("{name}: {params:?}"));
+        assert_eq!(truth[i], at_1a[name].as_float().unwrap(), "{name}");
+    }
+    assert!(!params.iter().any(|p| p == "G"), "no B-P parameter in a Bingham study: {params:?}");
+    let sbc = root.path().join("sbc");
+    let o = mrbp(&["study", "plan", sbc.to_str().unwrap(), "--sbc", "2", "--law", "bingham"]);
+    assert_eq!(o.status.code(), Some(2), "{}", said(&o));
+    assert!(said(&o).contains("--replicates") && !sbc.join("study.toml").exists(), "{}", said(&o));
+}
+
 #[test]
 fn study_commands_refuse_what_is_not_a_study() {
     let empty = tempfile::tempdir().unwrap();

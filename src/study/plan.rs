@@ -125,6 +125,9 @@ impl PlanOptions {
         };
         let design = match (self.replicates, self.sbc) {
             (Some(n), _) => Design::Replicates { n, synth: synth()? },
+            (_, Some(_)) if self.sample.law.first().is_some_and(|l| !l.is_bodner_partom()) => {
+                return Err(Error::Usage("study plan: --sbc draws the B-P law's parameters from its prior; another --law takes --replicates (its truth the law's typical parameters, or [damper.at_1a] of --synth-config)".into()));
+            }
             (_, Some(n)) => Design::Sbc { n, synth: synth()? },
             _ => Design::Campaigns {
                 manifests: self.campaigns.clone(),
@@ -345,13 +348,22 @@ fn at_reference(law: &StandLaw, theta: Params, current: f64) -> Params {
 }
 
 /// The true coordinates of a virtual campaign at `current`: the B-P
-/// parameters, every run's noise level σ = force noise / area, and where
+/// parameters (or the damper law's, `[damper]`), every run's noise level σ = force noise / area, and where
 /// the stand adds a smooth force and nothing else beyond the law, every
 /// run's discrepancy scale (Pa) and time scale (s).
 fn truth_of(synth: &SynthSettings, current: f64) -> Result<BTreeMap<String, f64>> {
-    let params = synth.law.law().params_at(current).to_array();
-    let mut truth: BTreeMap<String, f64> =
-        PARAM_NAMES.iter().zip(params).map(|(n, v)| (n.to_string(), v)).collect();
+    let mut truth: BTreeMap<String, f64> = match &synth.damper {
+        // another damper law: its parameters at the task's current, by name
+        Some(damper) => {
+            let values = damper.values_at(current, synth.law.saturation_a)?;
+            let law = damper.law.law();
+            law.names().iter().zip(values).map(|(n, v)| (n.to_string(), v)).collect()
+        }
+        None => {
+            let params = synth.law.law().params_at(current).to_array();
+            PARAM_NAMES.iter().zip(params).map(|(n, v)| (n.to_string(), v)).collect()
+        }
+    };
     let extra = &synth.extra_force;
     for (i, rpm) in synth.rpms.iter().enumerate() {
         let run = run_id(current, *rpm);
