@@ -818,8 +818,8 @@ impl LogDensity for SkewedRidge {
 /// rule for posteriors far from Gaussian (R̂, ESS and 10 τ, then on to
 /// twice that step: `RunControl::confirm`), started in a small ball at the
 /// mode as a calibration starts. Over seeds 1–16 the rule first held at
-/// steps 260–400, where the 95 % quantile averaged 2.33 (truth 2.970: a
-/// run stopped there would put 90.6 % of the mass below its "95 %"
+/// steps 260–400, where the 95 % quantile averaged 2.32 (truth 2.970: a
+/// run stopped there would put 90.5 % of the mass below its "95 %"
 /// quantile); at twice that step 2.88 ± 0.09 (94.5 %), at 100 τ
 /// (960–1280 steps) 2.96 (docs/performance.md, "Stopping far from the
 /// Laplace approximation").
