@@ -14,7 +14,7 @@ ahead of the second).
     python scripts/law_ranking.py MRBP OUT REPLICATES [JOBS]
 
 Standard library only. A replicate whose verdict is already in OUT is not
-run again. Writes OUT/ranking.csv (generating, replicate, first, decisive).
+run again; one stopped half-way is run again from the start. Writes OUT/ranking.csv (generating, replicate, first, decisive).
 """
 import concurrent.futures as cf, csv, os, re, subprocess, sys
 
@@ -38,7 +38,7 @@ def replicate(generating, k):
         check=True, capture_output=True)
     run = subprocess.run(
         [MRBP, "run", os.path.join(data, "campaign.toml"), "--law", ",".join(LAWS),
-         "--leave-one-out", "--draws", "100", "--out", os.path.join(folder, "out"),
+         "--leave-one-out", "--draws", "100", "--out", os.path.join(folder, "out"), "--force",
          "--threads", threads],
         capture_output=True, text=True)
     said = run.stdout + run.stderr
