@@ -328,6 +328,11 @@ pub fn analysed_draws(available: usize) -> usize {
 }
 
 impl ParameterDiagnostics {
+    /// The smaller of the bulk and tail ESS (NaN if either is).
+    pub fn ess(&self) -> f64 {
+        nan_min(self.ess_bulk, self.ess_tail)
+    }
+
     /// Diagnostics of `[chain][draw]` traces whose chains form `ensembles`
     /// equal groups of consecutive walkers.
     ///
@@ -494,10 +499,7 @@ impl Diagnostics {
 
     /// The smallest bulk or tail ESS over coordinates.
     pub fn min_ess(&self) -> f64 {
-        self.coordinates
-            .iter()
-            .map(|c| nan_min(c.ess_bulk, c.ess_tail))
-            .fold(f64::INFINITY, nan_min)
+        self.coordinates.iter().map(ParameterDiagnostics::ess).fold(f64::INFINITY, nan_min)
     }
 
     /// At least [`MIN_TAU_MULTIPLE`] τ_max after burn-in.

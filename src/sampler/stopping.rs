@@ -129,24 +129,17 @@ pub fn unmet(
     if let Some((i, c)) = rhat {
         return Some(Waiting::RHat { coordinate: name(i), value: c.r_hat });
     }
-    let ess = |c: &super::ParameterDiagnostics| {
-        if c.ess_bulk.is_nan() || c.ess_tail.is_nan() {
-            f64::NAN
-        } else {
-            c.ess_bulk.min(c.ess_tail)
-        }
-    };
-    if diag.coordinates.iter().any(|c| ess(c).is_nan()) {
+    if diag.coordinates.iter().any(|c| c.ess().is_nan()) {
         return Some(Waiting::Draws);
     }
     let smallest = diag
         .coordinates
         .iter()
         .enumerate()
-        .min_by(|a, b| ess(a.1).total_cmp(&ess(b.1)))
-        .filter(|(_, c)| ess(c) < min_ess);
+        .min_by(|a, b| a.1.ess().total_cmp(&b.1.ess()))
+        .filter(|(_, c)| c.ess() < min_ess);
     if let Some((i, c)) = smallest {
-        return Some(Waiting::Ess { coordinate: name(i), value: ess(c), target: min_ess });
+        return Some(Waiting::Ess { coordinate: name(i), value: c.ess(), target: min_ess });
     }
     let kept = (diag.steps + 1).saturating_sub(diag.burn_in);
     if (kept as f64) < tau_multiple * diag.tau_max {

@@ -326,13 +326,7 @@ fn check_comparison(dir: &Path, problems: &mut Vec<String>) {
         Err(e) => return problems.push(e.to_string()),
     };
     for c in &record.compared {
-        let cal = c.folder_from(dir);
-        let now = record::read(&cal.join(folder::RECORD)).map(|r| r.calibration_id);
-        match now {
-            Ok(now) if now == c.calibration_id => {}
-            Ok(now) => problems.push(format!("{}: calibrated again since this comparison (calibration {} then, {now} now); rebuild it with `{rebuild}`", cal.display(), c.calibration_id)),
-            Err(_) => problems.push(format!("{}: no complete calibration there any more (it held {}); rebuild it with `{rebuild}`", cal.display(), c.calibration_id)),
-        }
+        check_source(&c.folder_from(dir), &c.calibration_id, "comparison", rebuild, problems);
     }
     let ids = comparison::ids_text(&record);
     for file in [comparison::SUMMARIES, comparison::DIFFERENCES] {
@@ -370,12 +364,17 @@ fn check_laws(dir: &Path, problems: &mut Vec<String>) {
             ));
         };
         ids.push(id.to_string());
-        let cal = out.join(label);
-        match record::read(&cal.join(folder::RECORD)).map(|r| r.calibration_id) {
-            Ok(now) if now == id => {}
-            Ok(now) => problems.push(format!("{}: calibrated again since this study (calibration {id} then, {now} now); rebuild it with `{rebuild}`", cal.display())),
-            Err(_) => problems.push(format!("{}: no complete calibration there any more (it held {id}); rebuild it with `{rebuild}`", cal.display())),
-        }
+        check_source(&out.join(label), id, "study", rebuild, problems);
     }
     check_report(dir, &ids, rebuild, problems);
+}
+
+/// A calibration folder `cal` that a derived folder (a `what`) was made
+/// from must still hold calibration `id`.
+fn check_source(cal: &Path, id: &str, what: &str, rebuild: &str, problems: &mut Vec<String>) {
+    match record::read(&cal.join(folder::RECORD)).map(|r| r.calibration_id) {
+        Ok(now) if now == id => {}
+        Ok(now) => problems.push(format!("{}: calibrated again since this {what} (calibration {id} then, {now} now); rebuild it with `{rebuild}`", cal.display())),
+        Err(_) => problems.push(format!("{}: no complete calibration there any more (it held {id}); rebuild it with `{rebuild}`", cal.display())),
+    }
 }
