@@ -1,6 +1,6 @@
 """Executes a Jupyter notebook end to end in its own folder (nbclient and
 ipykernel) and fails on the first cell that raises: the example notebooks
-run in CI (tests/python.rs). Usage: python scripts/run_notebook.py NOTEBOOK
+run in CI (tests/it/python.rs). Usage: python scripts/run_notebook.py NOTEBOOK
 """
 
 import sys

@@ -1,7 +1,7 @@
 """The Python package against the command line: the same chains at the
 same seed, folders each reads of the other, clear exceptions.
 
-Run by ``cargo test --release`` (tests/python.rs), which passes the
+Run by ``cargo test --release`` (tests/it/python.rs), which passes the
 command line's binary as MRBP_BIN; by hand: ``pip install ./python`` then
 ``MRBP_BIN=target/release/mrbp pytest python/tests``.
 """

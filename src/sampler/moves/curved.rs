@@ -68,7 +68,7 @@ const HISTORY_DEGREE: usize = 3;
 /// Gaussian kernel density falls off like a Gaussian, faster than a ridge
 /// whose far end thins out exponentially, and an independence proposal
 /// lighter than its target leaves that end short (on a Gumbel ridge,
-/// `tests/sampler.rs`, the 99 % quantile by 4–5 standard errors in 3 of 12
+/// `tests/it/sampler.rs`, the 99 % quantile by 4–5 standard errors in 3 of 12
 /// seeds).
 const REACH: f64 = 0.2;
 const REACH_DF: f64 = 3.0;

@@ -4,12 +4,10 @@
 //! the one-line message it expects. Refusals are exit 2 and name the file,
 //! row, column or option; nothing is left half-written.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use common::{mrbp_in, said};
+use crate::common::{mrbp_in, said};
 
 /// A record of `n` samples at 1 kHz: two cycles of ±5 mm and a force that
 /// follows the velocity's sign, as a damper's does.

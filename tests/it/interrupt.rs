@@ -4,13 +4,11 @@
 //! of an uninterrupted run. A re-calibration into a folder with --force
 //! removes the files derived from the old chains.
 
-mod common;
-
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{mrbp_in, said};
+use crate::common::{mrbp_in, said};
 use mrbp::store::read_parquet;
 
 #[test]

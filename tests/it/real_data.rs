@@ -3,11 +3,9 @@
 //! at every current, and a short calibration with the model terms ends in a
 //! report that says where the B-P law misses the damper.
 
-mod common;
-
 use std::path::PathBuf;
 
-use common::ok;
+use crate::common::ok;
 
 use mrbp::data::Campaign;
 use mrbp::identify::{identify_campaign, IdentifySettings};
@@ -275,7 +273,7 @@ fn the_tempered_likelihood_widens_the_measured_intervals() {
 /// and its held-out runs are predicted worse than the independent
 /// model's (docs/real-data.md). 20 steps: the law's path has moved from
 /// the start long before. On virtual records whose force is of the model's
-/// own kind the check stays silent (tests/calibration.rs).
+/// own kind the check stays silent (tests/it/calibration.rs).
 #[test]
 #[ignore = "slow tier: the discrepancy model on the measured records"]
 fn a_discrepancy_that_takes_over_the_laws_force_is_named() {

@@ -3,11 +3,9 @@
 //! a law's calibration predicts, reports and compares like the B-P law's;
 //! what a law cannot do is refused clearly.
 
-mod common;
-
 use std::collections::BTreeMap;
 
-use common::{arg, mrbp, ok, said};
+use crate::common::{arg, mrbp, ok, said};
 use mrbp::laws::LawKind;
 use mrbp::store::{f64_column, read_parquet, str_column};
 
@@ -49,7 +47,7 @@ fn truth(manifest: &std::path::Path) -> BTreeMap<String, f64> {
         .collect()
 }
 
-/// Every law other than B-P (whose own test is tests/calibration.rs)
+/// Every law other than B-P (whose own test is tests/it/calibration.rs)
 /// covers each of its parameters within 3.5 posterior sd: a correct
 /// posterior exceeds that with probability ~5e-4 per parameter, ~1e-2 over
 /// the 23 checked; and the force laws' bands follow their equations

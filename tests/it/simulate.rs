@@ -4,11 +4,9 @@
 //! here; a current law simulates currents between and near its own; what
 //! cannot be simulated is refused before anything is written.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
-use common::{mrbp, ok, said, synth_small};
+use crate::common::{mrbp, ok, said, synth_small};
 use mrbp::store::simulation;
 
 /// A small calibration at each of `currents` (one run each, 30 steps), or

@@ -1,9 +1,7 @@
 //! Bayesian calibration end to end on small virtual campaigns with known
 //! parameters: recovery, the output tables, and reproducibility.
 
-mod common;
-
-use common::{arg, mrbp, ok, one_revolution, virtual_campaign};
+use crate::common::{arg, mrbp, ok, one_revolution, virtual_campaign};
 use mrbp::calibrate::calibrate;
 use mrbp::calibrate::CalibrationSettings;
 use mrbp::data::Campaign;

@@ -8,13 +8,11 @@
 //! (`MRBP_ABORT_AFTER_WRITE`, every write is one) and, in its long form
 //! (`MRBP_CRASH_TEST=full`), after every write and at 24 moments by SIGKILL.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use common::{mrbp, said, synth_small};
+use crate::common::{mrbp, said, synth_small};
 use mrbp::store::status::{status, FolderStatus};
 
 /// A small virtual campaign: one run at each of two currents.

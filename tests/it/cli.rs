@@ -1,12 +1,10 @@
 //! The command line as a user meets it: exit status and one-line messages
 //! for bad input, and the bundled campaign.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use common::mrbp;
+use crate::common::mrbp;
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).to_string()

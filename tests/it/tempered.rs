@@ -2,11 +2,9 @@
 //! log-likelihood counts 1/k, k the integrated autocorrelation time of its
 //! whitened MAP residuals.
 
-mod common;
-
 use std::collections::BTreeMap;
 
-use common::{one_revolution, virtual_campaign, with_smooth_force};
+use crate::common::{one_revolution, virtual_campaign, with_smooth_force};
 
 use mrbp::calibrate::{calibrate, start, CalibrationSettings};
 use mrbp::data::Campaign;

@@ -2,11 +2,9 @@
 //! `mrbp compare` over per-current calibrations, and the current law
 //! predicting a current it never saw.
 
-mod common;
-
 use std::path::Path;
 
-use common::{arg, mrbp, ok, one_revolution, said, write_virtual};
+use crate::common::{arg, mrbp, ok, one_revolution, said, write_virtual};
 
 use mrbp::store::{column_names, f64_column, read_parquet, str_column};
 use mrbp::synth::SynthSettings;

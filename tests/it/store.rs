@@ -2,11 +2,9 @@
 //! a whole `mrbp run` on two currents, then each store module's reader
 //! agrees with what the run said and with the other files.
 
-mod common;
-
 use std::path::Path;
 
-use common::{arg, ok, write_virtual};
+use crate::common::{arg, ok, write_virtual};
 
 use mrbp::store;
 use mrbp::synth::SynthSettings;

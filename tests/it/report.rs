@@ -2,12 +2,12 @@
 //! with leave-one-out, then what it wrote (bands, coverage, the report) and
 //! the report in a real browser.
 
-mod common;
-
 use std::path::Path;
 use std::process::Command;
 
-use common::{mrbp, one_revolution, said, skipped, slow_tier, with_smooth_force, write_virtual};
+use crate::common::{
+    mrbp, one_revolution, said, skipped, slow_tier, with_smooth_force, write_virtual,
+};
 
 use mrbp::store::{column_names, f64_column, read_parquet, str_column};
 use mrbp::synth::SynthSettings;

@@ -4,12 +4,10 @@
 //! makes a missing package a failure; elsewhere the suite runs where that
 //! Python can import `mrbp` and `pytest`, and is skipped with a line if not.
 
-mod common;
-
 use std::path::Path;
 use std::process::Command;
 
-use common::{python_with, said};
+use crate::common::{python_with, said};
 
 const REQUIRED: &str = "MRBP_PYTHON_PACKAGE_CHECK";
 

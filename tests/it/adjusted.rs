@@ -3,9 +3,7 @@
 //! coordinates, its curvature at the independent posterior's mode set to
 //! H V⁻¹ H, V the covariance of its score given the residuals' memory.
 
-mod common;
-
-use common::{ok, one_revolution, virtual_campaign, with_smooth_force};
+use crate::common::{ok, one_revolution, virtual_campaign, with_smooth_force};
 use mrbp::calibrate::{start, CalibrationSettings};
 use mrbp::data::Campaign;
 use mrbp::model::{Integrator, Params, LANES};

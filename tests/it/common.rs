@@ -1,10 +1,6 @@
 //! What the test files share: running the command line, the small virtual
 //! campaigns they calibrate, and the checks that run only where their
 //! tools are (Python, a browser) or only in the slow tier.
-//!
-//! Tiers: `cargo test --release` runs the fast tier; the slow tier's tests
-//! carry `#[ignore = "slow tier: …"]` and run with
-//! `cargo test --release -- --include-ignored` (CI runs both).
 
 #![allow(dead_code)] // each test file uses its own part of this module
 

@@ -1,11 +1,9 @@
 //! Consistency across runs (`mrbp sample --per-run`) on virtual runs with a
 //! known truth: two tests of one damper and a third made with twice its G.
 
-mod common;
-
 use std::path::Path;
 
-use common::{mrbp, ok, one_revolution};
+use crate::common::{mrbp, ok, one_revolution};
 
 use mrbp::store::{column_names, read_parquet};
 use mrbp::synth::{write_campaign, SynthSettings};

@@ -2,12 +2,10 @@
 //! and on a loopback Dask cluster that loses a worker mid-study
 //! (scripts/dask_loopback_check.py), with the same results.
 
-mod common;
-
 use std::path::Path;
 use std::process::Command;
 
-use common::{mrbp, said, slow_tier};
+use crate::common::{mrbp, said, slow_tier};
 
 use mrbp::store::{column_names, f64_column, read_parquet, str_column};
 
@@ -81,7 +79,7 @@ fn a_study_runs_here_once_per_task_and_collects_one_dataset() {
     let cluster = root.path().join("cluster");
     plan(&cluster);
     let mrbp_path = Path::new(env!("CARGO_BIN_EXE_mrbp"));
-    common::python_check(
+    crate::common::python_check(
         "dask_loopback_check.py",
         &[mrbp_path, &local, &cluster],
         "dask.distributed, pandas, pyarrow",

@@ -3,9 +3,7 @@
 //! it as the README says (scripts/arviz_check.py, in CI from a virtual
 //! environment with xarray, zarr and ArviZ).
 
-mod common;
-
-use common::{arg, ok, one_revolution, write_virtual};
+use crate::common::{arg, ok, one_revolution, write_virtual};
 
 use mrbp::calibrate::CalibrationSettings;
 use mrbp::data::Campaign;
@@ -102,7 +100,7 @@ fn arviz_opens_the_store_and_agrees_with_the_summary() {
         );
     }
 
-    common::python_check(
+    crate::common::python_check(
         "arviz_check.py",
         &[&dir],
         "arviz, xarray, zarr, pandas, pyarrow, matplotlib",

@@ -1,9 +1,7 @@
 //! The deterministic identification end to end: recovery on noise-free
 //! virtual records with known parameters, and the bundled campaign.
 
-mod common;
-
-use common::{ok, write_virtual};
+use crate::common::{ok, write_virtual};
 use mrbp::data::Campaign;
 use mrbp::identify::{identify_campaign, identify_current, IdentifySettings};
 use mrbp::model::{Params, PHYSICAL_RANGE};
