@@ -13,6 +13,12 @@ ahead of the second).
 
     python scripts/law_ranking.py MRBP OUT REPLICATES [JOBS]
 
+Every law is calibrated with independent residuals (`--memory
+independent`), as the study was first run (the default, `auto`, would
+allow for the memory a wrong law leaves in its residuals, and does not
+for the generating law's white ones): the ranking compares the laws under
+one likelihood.
+
 Standard library only. A replicate whose verdict is already in OUT is not
 run again; one stopped half-way is run again from the start. Writes OUT/ranking.csv (generating, replicate, first, decisive).
 """
@@ -39,7 +45,7 @@ def replicate(generating, k):
     run = subprocess.run(
         [MRBP, "run", os.path.join(data, "campaign.toml"), "--law", ",".join(LAWS),
          "--leave-one-out", "--draws", "100", "--out", os.path.join(folder, "out"), "--force",
-         "--threads", threads],
+         "--memory", "independent", "--threads", threads],
         capture_output=True, text=True)
     said = run.stdout + run.stderr
     found = VERDICT.search(said)

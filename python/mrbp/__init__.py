@@ -186,7 +186,11 @@ class Calibration:
     @property
     def summary(self) -> "pd.DataFrame":
         """One row per coordinate, as ``summary.parquet``: mean, sd, q05,
-        q50, q95, ess_bulk, ess_tail, r_hat, tau_int, mcse_mean (SI units)."""
+        q50, q95, ess_bulk, ess_tail, r_hat, tau_int, mcse_mean (SI units).
+        What the intervals hold for, and where the likelihood allowed for
+        the residuals' memory the intervals had they been taken as
+        independent, are in summary.parquet's ``holds_for`` and
+        ``independent_*`` columns."""
         frame = pd.DataFrame(dict(self._inner.summary_columns()))
         frame.insert(0, "parameter", self._inner.summary_parameters())
         return frame
@@ -378,9 +382,11 @@ def calibrate(
         'bp-viscous', 'bouc-wen', 'spencer', 'bingham' (docs/calibration.md,
         "Damper laws");
     noise: 'gaussian' (default), 'student-t', 'ar1', 'discrepancy';
-    memory: 'independent' (default) or 'tempered' (each run's
+    memory: 'auto' (default: independent where the MAP residuals have no
+        memory, else 'adjusted'), 'independent', 'tempered' (each run's
         log-likelihood divided by its residuals' integrated autocorrelation
-        time, as ``--memory tempered``);
+        time, as ``--memory tempered``) or 'adjusted' (each parameter
+        widened by the memory of the part of the records that informs it);
     steps: a fixed number of steps (default: until R̂ < 1.01 and ESS ≥ 400);
     config: a settings file (TOML) as ``--config``;
     progress: True for a progress bar (tqdm's where installed, a notebook

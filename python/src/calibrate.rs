@@ -156,7 +156,7 @@ pub(crate) fn calibrate(
     let memory = match value(memory) {
         Some(m) => Some(mrbp::posterior::Memory::from_str(&m, true).map_err(|_| {
             PyValueError::new_err(format!(
-                "memory {m:?}: one of 'independent', 'tempered', 'adjusted'"
+                "memory {m:?}: one of 'auto', 'independent', 'tempered', 'adjusted'"
             ))
         })?),
         None => None,

@@ -25,7 +25,7 @@ use crate::error::{Error, Result};
 use crate::posterior::{Draws, PosteriorSample, SummaryRow};
 use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
-pub use record::{command_line, CalibrationRecord, StepRow};
+pub use record::{command_line, CalibrationRecord, IntervalRow, StepRow};
 pub use sampling::Sampled;
 pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
 pub use start::{
@@ -61,6 +61,34 @@ impl Calibration {
     /// Wall time of the whole calibration (s): start and sampling.
     pub fn seconds(&self) -> f64 {
         self.record.seconds_start + self.record.seconds_sampling
+    }
+
+    /// What the posterior's intervals hold for, in a phrase (summary.parquet's
+    /// `holds_for`, the report): these records — with their residuals'
+    /// memory allowed for or modelled, or as if their residuals were
+    /// independent where they have memory the likelihood ignores.
+    pub fn intervals_hold_for(&self) -> String {
+        let lik = &self.settings.likelihood;
+        if let Some(a) = lik.allowance() {
+            let how = match a {
+                crate::posterior::Allowance::Tempered { .. } => "tempered",
+                crate::posterior::Allowance::Adjusted { .. } => "adjusted",
+            };
+            return format!(
+                "these records, their residuals' memory allowed for ({how} likelihood)"
+            );
+        }
+        if lik.noise.model(&Default::default()).models_memory() {
+            return format!(
+                "these records, their residuals' memory modelled ({:?} noise)",
+                lik.noise
+            );
+        }
+        if self.record.runs_with_memory() > 0 {
+            return "these records if their residuals were independent (they have memory: too narrow)"
+                .to_string();
+        }
+        "these records".to_string()
     }
 
     /// A short name for tables and legends: the folder's name.

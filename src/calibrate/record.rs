@@ -19,6 +19,16 @@ pub struct StepRow {
     pub parameter: String,
 }
 
+/// One coordinate's interval from an approximation (SI units).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IntervalRow {
+    pub parameter: String,
+    pub sd: f64,
+    pub q05: f64,
+    pub q50: f64,
+    pub q95: f64,
+}
+
 /// `calibration.toml`, read back by `predict`, `report` and `compare`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct CalibrationRecord {
@@ -77,6 +87,16 @@ pub struct CalibrationRecord {
     /// or a noise without a force).
     #[serde(default)]
     pub confounding: Vec<String>,
+    /// Where `memory = "auto"` found memory in the MAP residuals: what it
+    /// found and the likelihood it chose.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub memory_found: Option<String>,
+    /// Where the likelihood allows for the residuals' memory: each
+    /// coordinate's interval had the residuals been taken as independent
+    /// (the Laplace approximation of that posterior at its mode), shown
+    /// beside the posterior's own. Empty otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub independent: Vec<IntervalRow>,
     /// The campaign's geometry (A, h): what turns the bands into forces.
     #[serde(default)]
     pub geometry: Option<Geometry>,
@@ -176,6 +196,18 @@ impl CalibrationRecord {
             warnings: sampled.diagnostics.warnings.clone(),
             model_warnings: start.warnings.clone(),
             confounding: Vec::new(),
+            memory_found: start.memory_found.clone(),
+            independent: start
+                .independent
+                .iter()
+                .map(|(parameter, [sd, q05, q50, q95])| IntervalRow {
+                    parameter: parameter.clone(),
+                    sd: *sd,
+                    q05: *q05,
+                    q50: *q50,
+                    q95: *q95,
+                })
+                .collect(),
             geometry: Some(campaign.geometry),
             calibration_id: new_calibration_id(),
         }

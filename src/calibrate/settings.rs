@@ -215,10 +215,12 @@ pub struct Overrides {
     /// Residual model (default: gaussian)
     #[arg(long, value_enum)]
     pub noise: Option<NoiseKind>,
-    /// How the residuals' memory enters the likelihood (default: independent;
-    /// `tempered`: each run counts once per integrated autocorrelation time
-    /// of its MAP residuals; `adjusted`: each parameter widened by the
-    /// memory of the part of the records that informs it, docs/calibration.md)
+    /// How the residuals' memory enters the likelihood (default: auto —
+    /// independent where the MAP residuals have no memory, else adjusted;
+    /// `independent`: every residual new evidence; `tempered`: each run
+    /// counts once per integrated autocorrelation time of its MAP
+    /// residuals; `adjusted`: each parameter widened by the memory of the
+    /// part of the records that informs it, docs/calibration.md)
     #[arg(long, value_enum)]
     pub memory: Option<crate::posterior::Memory>,
     /// Samples in the likelihood (default: whole-record)
@@ -390,11 +392,10 @@ impl CalibrationSettings {
         self.likelihood.check()?;
         if let Some(a) = self.likelihood.adjustment() {
             let d = self.parameter_model().names().len();
-            if self.parameter_model() != ParameterModel::PerCurrent || a.centre.len() != d {
+            if self.parameter_model().is_current_law() || a.centre.len() != d {
                 return Err(format!(
-                    "memory_adjustment: {} parameters, but the adjusted likelihood takes the {} of one parameter set per current (not the current law)",
+                    "memory_adjustment: {} parameters, but the adjusted likelihood takes the {d} of one parameter set per current (not the current law)",
                     a.centre.len(),
-                    PARAM_NAMES.len()
                 ));
             }
         }

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::identify::{identify_current, CurrentIdentification};
 use crate::model::{Integrator, Scheme};
 use crate::posterior::map::{self, MapEstimate, StepCheck};
-use crate::posterior::{laplace, memory, Memory, ParameterModel, Posterior};
+use crate::posterior::{laplace, memory, Memory, Posterior};
 
 /// Where sampling starts: the identification, the MAP, the step chosen and
 /// the posterior with it.
@@ -31,6 +31,15 @@ pub struct Start {
     /// discrepancy, AR(1)): what [`confounding`] compares the posterior's
     /// law path with.
     pub law_alone_rms: Option<Vec<f64>>,
+    /// Where `memory = "auto"` found memory in the MAP residuals: what it
+    /// found and the likelihood it chose, in a sentence.
+    pub memory_found: Option<String>,
+    /// Where the likelihood allows for the residuals' memory (tempered or
+    /// adjusted): the same records' intervals with the residuals taken as
+    /// independent, in SI ([`laplace::si_intervals`] of the independent
+    /// posterior's Laplace approximation), what the narrow intervals of a
+    /// calibration that ignored the memory would have said. Empty otherwise.
+    pub independent: Vec<(String, [f64; 4])>,
     pub seconds: f64,
 }
 
@@ -70,7 +79,7 @@ pub fn start(
         integ.scheme.scheme()
     };
     let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
-    let mut stages = Stages { campaign, settings, base };
+    let mut stages = Stages { campaign, settings, base, independent: Vec::new() };
     let posterior = stages.posterior();
     let settings = &stages.settings;
     if let Some(a) = posterior.likelihood.adjustment() {
@@ -122,8 +131,32 @@ pub fn start(
     let map = map::best_map(&posterior, &starts)
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
     let law_alone = stages.law_alone_rms(&posterior, &starts);
+    let (posterior, memory_found) = stages.choose_memory(posterior, &map, log);
     let (posterior, map) = stages.temper(posterior, map, log)?;
-    let (posterior, map) = stages.adjust(posterior, map, log)?;
+    let (posterior, map, memory_found) = match memory_found {
+        // what `auto` chose must not fail where the tempered likelihood,
+        // which takes any posterior, would do
+        Some(found) => match stages.adjust(posterior.clone(), map.clone(), log) {
+            Ok((posterior, map)) => (posterior, map, Some(found)),
+            Err(e) => {
+                log(&format!("  memory: {e}; the tempered likelihood instead"));
+                stages.settings.likelihood.memory = Memory::Tempered;
+                stages.settings.likelihood.memory_adjustment = None;
+                let (posterior, map) = stages.temper(posterior, map, log)?;
+                let found = found.replace("the adjusted likelihood", "the tempered likelihood");
+                (
+                    posterior,
+                    map,
+                    Some(format!("{found}; the adjusted likelihood failed here ({e})")),
+                )
+            }
+        },
+        None => {
+            let (posterior, map) = stages.adjust(posterior, map, log)?;
+            (posterior, map, None)
+        }
+    };
+    let independent = std::mem::take(&mut stages.independent);
     let mut settings = stages.settings;
     log(&format!(
         "  MAP: log-density {:.1} after {:.1} s; choosing the integrator step",
@@ -193,6 +226,8 @@ pub fn start(
         posterior,
         warnings,
         law_alone_rms: law_alone,
+        memory_found,
+        independent,
         seconds: clock.elapsed().as_secs_f64(),
     })
 }
@@ -205,6 +240,8 @@ struct Stages<'a> {
     campaign: &'a Campaign,
     settings: CalibrationSettings,
     base: Integrator,
+    /// [`Start::independent`], once a stage has measured it.
+    independent: Vec<(String, [f64; 4])>,
 }
 
 impl Stages<'_> {
@@ -220,6 +257,47 @@ impl Stages<'_> {
         let map = map::refine(&posterior, &x)
             .ok_or_else(|| Error::Compute(format!("the MAP search of {what} failed")))?;
         Ok((posterior, map))
+    }
+
+    /// `memory = "auto"` resolved at `map`, the MAP of the likelihood with
+    /// independent residuals: where every run's whitened residuals have a
+    /// lag-1 autocorrelation of at most [`MEMORY_WARNING`] (or the noise
+    /// model has memory of its own), independent; else adjusted (one
+    /// parameter set per current) or tempered (a parameter model across
+    /// currents), with a sentence saying what was found and chosen.
+    fn choose_memory(
+        &mut self,
+        mut posterior: Posterior,
+        map: &MapEstimate,
+        log: &mut dyn FnMut(&str),
+    ) -> (Posterior, Option<String>) {
+        if self.settings.likelihood.memory != Memory::Auto {
+            return (posterior, None);
+        }
+        let rhos = match posterior.noise.models_memory() {
+            true => None,
+            false => map::whitened_autocorrelation(&posterior, map),
+        }
+        .unwrap_or_default();
+        let with = rhos.iter().filter(|r| **r > MEMORY_WARNING).count();
+        if with == 0 {
+            self.settings.likelihood.memory = Memory::Independent;
+            posterior.likelihood.memory = Memory::Independent;
+            return (posterior, None);
+        }
+        let (chosen, name) = match self.settings.parameter_model().is_current_law() {
+            true => (Memory::Tempered, "tempered"),
+            false => (Memory::Adjusted, "adjusted"),
+        };
+        self.settings.likelihood.memory = chosen;
+        let (lo, hi) =
+            rhos.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &r| (a.min(r), b.max(r)));
+        let said = format!(
+            "the MAP residuals have memory (lag-1 autocorrelation {lo:.2}–{hi:.2}, above {MEMORY_WARNING} in {with} of {} runs), so the {name} likelihood allows for it (`memory = \"auto\"`; `--memory independent` takes the residuals as independent)",
+            rhos.len()
+        );
+        log(&format!("  memory: {said}"));
+        (posterior, Some(said))
     }
 
     /// With the tempered likelihood ([`Memory::Tempered`]): each run's
@@ -239,6 +317,11 @@ impl Stages<'_> {
         {
             return Ok((posterior, map));
         }
+        self.independent = laplace::si_intervals(
+            &posterior,
+            &laplace::surrogate(&posterior, &map),
+            self.settings.sampler.seed,
+        );
         let times = map::memory_times(&posterior, &map).ok_or_else(|| {
             Error::Compute("the residuals at the MAP could not be integrated".into())
         })?;
@@ -269,11 +352,18 @@ impl Stages<'_> {
         if lik.memory != Memory::Adjusted || lik.memory_adjustment.is_some() {
             return Ok((posterior, map));
         }
-        if self.settings.parameter_model() != ParameterModel::PerCurrent {
+        if self.settings.parameter_model().is_current_law() {
             return Err(Error::Usage("`--memory adjusted` takes one parameter set per current (not the current law); `--memory tempered` takes any".into()));
         }
-        // centred on the mode of the independent posterior, not the surrogate's optimum
-        let centre = laplace::mode(&posterior, &map).map_or_else(|| map.x.clone(), |m| m.x);
+        // centred on the mode of the independent posterior, not the
+        // surrogate's optimum; its Laplace approximation there says what
+        // the independent residuals' intervals would be
+        let (centre, independent) = match laplace::mode(&posterior, &map) {
+            Some(m) => (m.x, m.laplace),
+            None => (map.x.clone(), laplace::surrogate(&posterior, &map)),
+        };
+        self.independent =
+            laplace::si_intervals(&posterior, &independent, self.settings.sampler.seed);
         let adjustment = memory::adjustment(&posterior, &map, &centre).ok_or_else(|| {
             Error::Compute("the memory adjustment could not be measured at the MAP".into())
         })?;

@@ -42,6 +42,8 @@ impl Pipeline<'_> {
             let mut one = options.clone();
             one.sample.settings.set_law(law);
             one.sample.laws = vec![law];
+            // the study ranks by held-out runs; each run alone only where asked
+            one.sample.per_run_where_memory = false;
             // the current law is the B-P law's
             one.current_law = options.current_law && law.is_bodner_partom();
             self.note(&format!("the {} law:", law.name()));

@@ -114,15 +114,22 @@ pub struct SampleOptions {
     pub force: bool,
     /// Also calibrate each run alone (into OUT/runs/<run>/) and check that
     /// the runs agree: χ²/ν per parameter, and a between-run layer's
-    /// interval for a new test (consistency.parquet, the report)
+    /// interval for a new test (consistency.parquet, the report). `run`
+    /// does so by itself at a current of three runs or more whose
+    /// residuals have memory (measured records)
     #[arg(long)]
     pub per_run: bool,
+    /// `run`: never calibrate each run alone, not even where the residuals
+    /// have memory
+    #[arg(long, conflicts_with = "per_run")]
+    pub no_per_run: bool,
 }
 
 impl SampleOptions {
     /// The request: the settings file with the options applied, checked.
     pub fn request(&self) -> Result<SampleRequest> {
         let settings = self.settings.settings()?;
+        let settings_is_law = settings.model.is_law();
         if !self.hold_out_current.is_empty() && !settings.model.is_law() {
             return Err(Error::Usage(
                 "--hold-out-current needs --model current-law or current-curves".into(),
@@ -146,6 +153,7 @@ impl SampleOptions {
             resume: self.resume,
             force: self.force,
             per_run: self.per_run,
+            per_run_where_memory: !self.no_per_run && !settings_is_law,
         })
     }
 }
@@ -168,7 +176,17 @@ pub struct SampleRequest {
     pub force: bool,
     /// Also calibrate each run alone and compare.
     pub per_run: bool,
+    /// `run`: calibrate each run alone too at a current of
+    /// [`PER_RUN_WHERE_MEMORY`] runs or more whose joint calibration found
+    /// memory in its residuals (`memory = "auto"` chose to allow for it):
+    /// there the between-run layer gives the interval for a new test.
+    pub per_run_where_memory: bool,
 }
+
+/// The fewest runs at a current for which `run` calibrates each alone by
+/// itself where their residuals have memory: the between-run layer needs
+/// a spread between tests, which two runs barely show.
+pub const PER_RUN_WHERE_MEMORY: usize = 3;
 
 /// Leave-one-out validation, as the command line asks for it.
 #[derive(clap::Args, Debug, Clone, Copy)]

@@ -128,8 +128,11 @@ impl Pipeline<'_> {
         request.settings.model = ModelKind::PerCurrent;
         let mut stage = CurrentStage { reports: Vec::new(), entries: Vec::new(), deferred: None };
         for joint in self.sample(campaign, &out.join(current_tag(c)), &request)? {
-            if options.sample.per_run {
-                let runs = campaign.at_current(c);
+            let runs = campaign.at_current(c);
+            let where_memory = options.sample.per_run_where_memory
+                && joint.record.memory_found.is_some()
+                && runs.runs.len() >= super::PER_RUN_WHERE_MEMORY;
+            if options.sample.per_run || where_memory {
                 let alone = self.runs_alone(&runs, &joint, &request)?;
                 let prediction = self.predict(&joint, campaign, &joint.dir, &options.predict)?;
                 let loo = match loo {

@@ -62,3 +62,39 @@ pub fn surrogate(post: &Posterior, map: &MapEstimate) -> Elliptical {
     }
     Elliptical::from_factor(DVector::from_column_slice(&map.x), chol)
 }
+
+/// Draws of a Laplace approximation that [`si_intervals`] takes: the 5 and
+/// 95 % quantiles of 4 000 draws lie within about 0.03 sd of their own
+/// (Monte Carlo error √(p(1−p)/n)/φ(z_p) ≈ 0.027 sd), well below the
+/// printed digits' meaning for an approximation.
+pub const INTERVAL_DRAWS: usize = 4000;
+
+/// Coordinate by coordinate in SI units, as a posterior summary states a
+/// sample's: the sd and the 5, 50 and 95 % quantiles of `q` (a Laplace
+/// approximation in the sampler's coordinates of `post`), from
+/// [`INTERVAL_DRAWS`] draws of a fixed stream (`seed`): the same numbers
+/// every time. A parameter sampled in ln keeps its skew.
+pub fn si_intervals(post: &Posterior, q: &Elliptical, seed: u64) -> Vec<(String, [f64; 4])> {
+    let mut rng = crate::rng::stream(seed, &[0x1a91ace]);
+    let mut y = vec![0.0; q.dim()];
+    let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(INTERVAL_DRAWS); post.dim()];
+    for _ in 0..INTERVAL_DRAWS {
+        q.draw(None, 1.0, &mut rng, &mut y);
+        for (c, v) in columns.iter_mut().zip(post.layout.to_si(&y)) {
+            c.push(v);
+        }
+    }
+    post.layout
+        .names
+        .iter()
+        .zip(columns)
+        .map(|(name, mut c)| {
+            let n = c.len() as f64;
+            let mean = c.iter().sum::<f64>() / n;
+            let sd = (c.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            c.sort_by(f64::total_cmp);
+            let at = |p| crate::sampler::diagnostics::quantile_sorted(&c, p);
+            (name.clone(), [sd, at(0.05), at(0.5), at(0.95)])
+        })
+        .collect()
+}

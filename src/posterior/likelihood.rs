@@ -167,8 +167,14 @@ impl MemoryAdjustment {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum Memory {
-    /// Every residual is new evidence (the noise model's own likelihood).
+    /// Chosen at the MAP: independent where the residuals have no memory
+    /// (every run's whitened lag-1 autocorrelation at most
+    /// `calibrate::MEMORY_WARNING`), else adjusted (one parameter set per
+    /// current) or tempered (a parameter model across currents). The
+    /// calibration's config.toml keeps the choice.
     #[default]
+    Auto,
+    /// Every residual is new evidence (the noise model's own likelihood).
     Independent,
     /// Each run's log-likelihood divided by the integrated autocorrelation
     /// time of its whitened residuals at the MAP: a run of n correlated
@@ -191,7 +197,7 @@ impl Default for LikelihoodSettings {
             part: RecordPart::WholeRecord,
             errors_in_variables: true,
             discrepancy: DiscrepancySettings::default(),
-            memory: Memory::Independent,
+            memory: Memory::Auto,
             memory_times: BTreeMap::new(),
             memory_adjustment: None,
         }

@@ -185,6 +185,7 @@ pub fn calibration(cal: &Calibration) -> String {
             p.parameter, p.mean, p.sd, p.q05, p.q50, p.q95, p.ess_bulk, p.ess_tail, p.ess_bulk / seconds, p.r_hat, p.tau_int
         );
     }
+    out.push_str(&independent_beside(cal));
     if rec.warnings.is_empty() {
         row!(
             out,
@@ -197,6 +198,53 @@ pub fn calibration(cal: &Calibration) -> String {
         row!(out, "warning: {w}");
     }
     row!(out, "wall time: {seconds:.1} s (identification, MAP, step rule and walkers' start {:.1} s, sampling {:.1} s)", rec.seconds_start, rec.seconds_sampling);
+    out
+}
+
+/// What the intervals above hold for, where the likelihood allows for the
+/// residuals' memory, and beside them the intervals of the same records
+/// had their residuals been taken as independent: narrower by the memory,
+/// labelled as such. Empty where the residuals were taken as independent.
+pub fn independent_beside(cal: &Calibration) -> String {
+    let rec = &cal.record;
+    let mut out = String::new();
+    if rec.independent.is_empty() {
+        return out;
+    }
+    if let Some(found) = &rec.memory_found {
+        row!(out, "memory: {found}");
+    }
+    row!(
+        out,
+        "the intervals above hold for these records with their residuals' memory allowed for; for a test not yet run, the between-run layer's (`mrbp run` at a current of three runs or more, or `--per-run`)"
+    );
+    row!(
+        out,
+        "these records, if the residuals were independent (Laplace approximation at that posterior's mode; too narrow: the residuals have memory):"
+    );
+    row!(
+        out,
+        "{:<22} {:>10} {:>11} {:>11} {:>11} {:>14}",
+        "parameter",
+        "sd",
+        "q05",
+        "q50",
+        "q95",
+        "widened ×"
+    );
+    for i in &rec.independent {
+        let Some(p) = cal.summary.iter().find(|p| p.parameter == i.parameter) else { continue };
+        row!(
+            out,
+            "{:<22} {:>10.3e} {:>11.4e} {:>11.4e} {:>11.4e} {:>14.2}",
+            i.parameter,
+            i.sd,
+            i.q05,
+            i.q50,
+            i.q95,
+            (p.q95 - p.q05) / (i.q95 - i.q05)
+        );
+    }
     out
 }
 

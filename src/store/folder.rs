@@ -89,9 +89,9 @@ pub fn write(dir: &Path, cal: &mut Calibration) -> Result<()> {
     summary::write(
         &dir.join(SUMMARY),
         &cal.summary,
-        cal.record.burn_in,
-        cal.record.steps,
-        cal.sample.chains.chains(),
+        (cal.record.burn_in, cal.record.steps, cal.sample.chains.chains()),
+        &cal.intervals_hold_for(),
+        &cal.record.independent,
         id,
     )?;
     if cal.is_current_law() {

@@ -4,18 +4,23 @@
 use std::path::Path;
 
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
+use crate::calibrate::IntervalRow;
 use crate::error::Result;
 use crate::posterior::SummaryRow;
 use crate::sampler::ParameterDiagnostics;
 
 /// The rows of a calibration whose draws run from `burn_in` to `steps`, of
-/// `walkers` chains in all, of calibration `id`.
+/// `walkers` chains in all, of calibration `id`; `holds_for` says what
+/// their intervals hold for, and where the likelihood allowed for the
+/// residuals' memory, `independent` holds the same records' intervals
+/// had the residuals been taken as independent (`independent_sd`, `…_q05`,
+/// `…_q50`, `…_q95`; NaN for a coordinate it lacks).
 pub fn write(
     path: &Path,
     rows: &[SummaryRow],
-    burn_in: usize,
-    steps: usize,
-    walkers: usize,
+    (burn_in, steps, walkers): (usize, usize, usize),
+    holds_for: &str,
+    independent: &[IntervalRow],
     id: &str,
 ) -> Result<()> {
     let n = rows.len();
@@ -25,12 +30,28 @@ pub fn write(
     for (name, values) in statistics(rows) {
         t = t.f64(name, values);
     }
-    let t = t
+    let mut t = t
         .i64("first_draw", vec![burn_in as i64; n])
         .i64("last_draw", vec![steps as i64; n])
-        .i64("walkers", vec![walkers as i64; n]);
+        .i64("walkers", vec![walkers as i64; n])
+        .str("holds_for", vec![holds_for.to_string(); n]);
+    if !independent.is_empty() {
+        let of = |r: &SummaryRow| independent.iter().find(|i| i.parameter == r.parameter);
+        let columns: [(&str, Interval); 4] = [
+            ("independent_sd", |i| i.sd),
+            ("independent_q05", |i| i.q05),
+            ("independent_q50", |i| i.q50),
+            ("independent_q95", |i| i.q95),
+        ];
+        for (name, f) in columns {
+            t = t.f64(name, rows.iter().map(|r| of(r).map_or(f64::NAN, f)).collect());
+        }
+    }
     write_parquet(path, t)
 }
+
+/// How an `independent_*` column reads an approximation's interval row.
+type Interval = fn(&IntervalRow) -> f64;
 
 /// A summary column: its name and how it reads a coordinate's statistics.
 type Statistic = (&'static str, fn(&ParameterDiagnostics) -> f64);

@@ -130,6 +130,7 @@ fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<
         resume,
         force: true,
         per_run: false,
+        per_run_where_memory: false,
     };
     let mut folders = pipeline.sample(&campaign, &out, &request)?;
     folders.pop().ok_or_else(|| Error::Compute(format!("task {}: no calibration made", spec.id)))
