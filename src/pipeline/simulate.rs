@@ -119,9 +119,16 @@ impl Pipeline<'_> {
             .map_or_else(|| "input".to_string(), |s| s.to_string_lossy().into_owned());
         let shear = Shear::from_record(&record, &geometry, None);
         let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
-        if varies && !cal.sample.model.has_lag() {
-            self.note("the law was calibrated without records whose current changes, so it has no coil lag: the field follows the current at once here");
-        }
+        // where the current changes, the coil's lag: the posterior's, or,
+        // for a law calibrated without such records, its prior
+        let coil_lag = match (varies, cal.sample.model.has_lag()) {
+            (false, _) => CoilLag::None,
+            (true, true) => CoilLag::Posterior,
+            (true, false) => {
+                self.note("the law was calibrated without records whose current changes, so its coil lag is not known: each draw takes one from the lag's prior (log-normal about 10 ms, a factor e either way; a damper coil settles in 5–30 ms), and the band carries it");
+                CoilLag::Prior
+            }
+        };
         let spec = RunSpec {
             current_varies: varies,
             ..RunSpec::new(id.clone(), input.to_path_buf(), current_a)
@@ -138,7 +145,7 @@ impl Pipeline<'_> {
             RecordPart::WholeRecord,
             cal.settings.likelihood.smooth_strain_ms,
         );
-        let draws: Vec<_> = match &layer {
+        let mut draws: Vec<_> = match &layer {
             // new tests of the damper, spread evenly over the layer's draws
             Some((tests, _)) => crate::posterior::evenly_spaced(tests.len(), options.draws)
                 .into_iter()
@@ -151,6 +158,14 @@ impl Pipeline<'_> {
                 .map(|&(s, c)| cal.sample.draw_without(s, c, &id, current_a))
                 .collect(),
         };
+        if coil_lag == CoilLag::Prior {
+            for (i, draw) in draws.iter_mut().enumerate() {
+                if let Some((_, lag)) = draw.field.as_mut() {
+                    let mut rng = crate::rng::stream(options.seed, &[LAG_STREAM, i as u64]);
+                    *lag = crate::posterior::LAG_PRIOR.draw(&mut rng);
+                }
+            }
+        }
         let settings = cal.predict_settings(options.replicates, options.seed);
         let bar = self.bar(draws.len() as u64);
         let b = bands(&data, 0, &draws, &settings, &|| bar.inc(1))?;
@@ -170,6 +185,7 @@ impl Pipeline<'_> {
             calibration_id: cal.record.calibration_id.clone(),
             extrapolated,
             layer_runs: layer.map(|(_, runs)| runs).unwrap_or_default(),
+            coil_lag: coil_lag.name().to_string(),
         };
         if b.failed > 0 {
             self.note(&format!(
@@ -289,3 +305,28 @@ impl Pipeline<'_> {
         Ok(outside)
     }
 }
+
+/// Where a simulation's coil lag comes from ([`SimulationRecord::coil_lag`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum CoilLag {
+    /// The current does not change: no lag acts.
+    None,
+    /// The law's posterior (calibrated on records whose current changes).
+    Posterior,
+    /// [`crate::posterior::LAG_PRIOR`], a draw for each posterior draw.
+    Prior,
+}
+
+impl CoilLag {
+    fn name(self) -> &'static str {
+        match self {
+            CoilLag::None => "",
+            CoilLag::Posterior => "posterior",
+            CoilLag::Prior => "prior",
+        }
+    }
+}
+
+/// The random stream of the coil lags drawn from their prior (with the
+/// simulation's seed and the draw's index).
+const LAG_STREAM: u64 = 0xc011_1a9;

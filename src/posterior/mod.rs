@@ -41,7 +41,7 @@ pub use likelihood::{
     run_log_likelihood, run_log_likelihood_memo, run_score, Allowance, LaneParams,
     LikelihoodSettings, Memory, MemoryAdjustment,
 };
-pub use parameters::{ModelKind, ParameterModel, CURVE_NAMES, LAW_NAMES};
+pub use parameters::{ModelKind, ParameterModel, CURVE_NAMES, LAG_PRIOR, LAW_NAMES};
 pub use prior::Prior;
 pub use sample::{evenly_spaced, Draw, Draws, PosteriorSample, SummaryRow};
 pub use terms::ModelTerms;

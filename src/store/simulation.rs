@@ -58,6 +58,12 @@ pub struct SimulationRecord {
     /// `mrbp.layer_runs`); empty for the calibration's posterior.
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub layer_runs: String,
+    /// Where the current changes, where its coil lag came from:
+    /// `posterior` (a law calibrated on records whose current changes) or
+    /// `prior` (one calibrated without: each draw takes a lag from the
+    /// lag's prior); empty where the current does not change.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub coil_lag: String,
 }
 
 /// The columns of `simulation.parquet`, in order: what the file and the
