@@ -329,4 +329,4 @@ impl CoilLag {
 
 /// The random stream of the coil lags drawn from their prior (with the
 /// simulation's seed and the draw's index).
-const LAG_STREAM: u64 = 0xc011_1a9;
+const LAG_STREAM: u64 = 0x0c01_11a9;
