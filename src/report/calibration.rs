@@ -363,7 +363,11 @@ fn posterior_section(page: &mut Page, cal: &Calibration) {
     page.para(&format!(
         "The intervals hold for {}{}. ESS/s: bulk effective sample size per second of the whole calibration (identification, MAP, step rule and sampling).",
         cal.intervals_hold_for(),
-        if rec.independent.is_empty() { "" } else { "; for a test not yet run, the between-run layer's (its section below where the runs were calibrated alone too)" }
+        if rec.independent.is_empty() {
+            String::new()
+        } else {
+            format!("; for a test not yet run, {}", crate::report::text::new_test_hint(cal))
+        }
     ));
     page.table(
         &[

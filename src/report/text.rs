@@ -216,7 +216,8 @@ pub fn independent_beside(cal: &Calibration) -> String {
     }
     row!(
         out,
-        "the intervals above hold for these records with their residuals' memory allowed for; for a test not yet run, the between-run layer's (`mrbp run` at a current of three runs or more, or `--per-run`)"
+        "the intervals above hold for these records with their residuals' memory allowed for; for a test not yet run, {}",
+        new_test_hint(cal)
     );
     row!(
         out,
@@ -246,6 +247,17 @@ pub fn independent_beside(cal: &Calibration) -> String {
         );
     }
     out
+}
+
+/// Where a test not yet run of the damper is answered for: the between-run
+/// layer, which `run` makes by itself at a current of three runs or more
+/// with memory; a current law's runs are taken to it per current.
+pub fn new_test_hint(cal: &Calibration) -> &'static str {
+    if cal.is_current_law() {
+        "the between-run layer of the per-current calibrations (`mrbp run MANIFEST --per-run`)"
+    } else {
+        "the between-run layer's (`mrbp run` at a current of three runs or more, or `--per-run`)"
+    }
 }
 
 /// A run of a `--per-run` study calibrated alone, in one line (its
