@@ -494,10 +494,11 @@ pub fn confounding_warning(runs: &[(&str, usize)], rms: &[f64], alone: &[f64]) -
 
 /// What to do about residuals with memory under independent noise: said
 /// once after the runs' warnings.
-pub const MEMORY_REMEDY: &str = "about the runs' residual memory (the report's model adequacy section): `--memory tempered` widens the intervals by the measured memory \
-     at no cost per step (`--memory adjusted`: parameter by parameter), `--noise discrepancy` models the memory as a force the law lacks, \
+pub const MEMORY_REMEDY: &str = "about the runs' residual memory (the report's model adequacy section): the default, `--memory auto`, allows for it \
+     (the adjusted likelihood: each parameter widened by the memory of the part of the records that informs it; `--memory tempered`: one factor a run), \
+     `--noise discrepancy` models the memory as a force the law lacks, \
      and `--per-run` gives intervals that hold for a new test of this damper \
-     (docs/calibration.md, \"The tempered likelihood\", \"The adjusted likelihood\", \"Model discrepancy\", \"The between-run layer\")";
+     (docs/calibration.md, \"Which likelihood for measured records\", \"Model discrepancy\", \"The between-run layer\")";
 
 #[cfg(test)]
 mod tests {
