@@ -22,10 +22,11 @@ use std::path::{Path, PathBuf};
 
 use crate::data::{Campaign, Geometry, Manifest};
 use crate::error::{Error, Result};
+use crate::posterior::laplace::IntervalRow;
 use crate::posterior::{Draws, PosteriorSample, SummaryRow};
 use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
-pub use record::{command_line, CalibrationRecord, IntervalRow, StepRow};
+pub use record::{command_line, CalibrationRecord, StepRow};
 pub use sampling::Sampled;
 pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
 pub use start::{
@@ -89,6 +90,20 @@ impl Calibration {
                 .to_string();
         }
         "these records".to_string()
+    }
+
+    /// Where the likelihood allowed for the residuals' memory: each
+    /// coordinate's interval had the residuals been taken as independent,
+    /// with how many times wider the posterior's 90 % interval is.
+    pub fn independent_beside(&self) -> Vec<(&IntervalRow, f64)> {
+        self.record
+            .independent
+            .iter()
+            .filter_map(|i| {
+                let p = self.summary.iter().find(|p| p.parameter == i.parameter)?;
+                Some((i, (p.q95 - p.q05) / (i.q95 - i.q05)))
+            })
+            .collect()
     }
 
     /// A short name for tables and legends: the folder's name.

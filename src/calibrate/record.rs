@@ -11,22 +11,13 @@ use super::start::Start;
 use crate::data::{Campaign, Geometry, RecordPart};
 use crate::model::PARAM_NAMES;
 use crate::noise::NoiseKind;
+use crate::posterior::laplace::IntervalRow;
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StepRow {
     pub substeps: u32,
     pub largest_shift_sd: f64,
     pub parameter: String,
-}
-
-/// One coordinate's interval from an approximation (SI units).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct IntervalRow {
-    pub parameter: String,
-    pub sd: f64,
-    pub q05: f64,
-    pub q50: f64,
-    pub q95: f64,
 }
 
 /// `calibration.toml`, read back by `predict`, `report` and `compare`.
@@ -127,8 +118,10 @@ impl CalibrationRecord {
     /// How many runs the residual-memory warning names (its remedy line
     /// aside).
     pub fn runs_with_memory(&self) -> usize {
-        // the remedy line (its wording of any version) names no run
-        let remedy = |w: &str| w.starts_with("about the runs' residual memory");
+        // the remedy line names no run: known by its lead, the same in
+        // every version's wording
+        let lead = super::MEMORY_REMEDY.split(" (").next().unwrap_or(super::MEMORY_REMEDY);
+        let remedy = |w: &str| w.starts_with(lead);
         self.model_warnings.iter().filter(|w| !remedy(w)).count()
     }
 
@@ -199,17 +192,7 @@ impl CalibrationRecord {
             model_warnings: start.warnings.clone(),
             confounding: Vec::new(),
             memory_found: start.memory_found.clone(),
-            independent: start
-                .independent
-                .iter()
-                .map(|(parameter, [sd, q05, q50, q95])| IntervalRow {
-                    parameter: parameter.clone(),
-                    sd: *sd,
-                    q05: *q05,
-                    q50: *q50,
-                    q95: *q95,
-                })
-                .collect(),
+            independent: start.independent.clone(),
             geometry: Some(campaign.geometry),
             calibration_id: new_calibration_id(),
         }

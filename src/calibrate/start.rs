@@ -9,6 +9,7 @@ use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::{identify_current, CurrentIdentification};
 use crate::model::{Integrator, Scheme};
+use crate::posterior::laplace::IntervalRow;
 use crate::posterior::map::{self, MapEstimate, StepCheck};
 use crate::posterior::{laplace, memory, Memory, Posterior};
 
@@ -39,7 +40,7 @@ pub struct Start {
     /// independent, in SI ([`laplace::si_intervals`] of the independent
     /// posterior's Laplace approximation), what the narrow intervals of a
     /// calibration that ignored the memory would have said. Empty otherwise.
-    pub independent: Vec<(String, [f64; 4])>,
+    pub independent: Vec<IntervalRow>,
     pub seconds: f64,
 }
 
@@ -131,24 +132,18 @@ pub fn start(
     let map = map::best_map(&posterior, &starts)
         .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
     let law_alone = stages.law_alone_rms(&posterior, &starts);
-    let (posterior, memory_found) = stages.choose_memory(posterior, &map, log);
+    let (posterior, found) = stages.choose_memory(posterior, &map);
     let (posterior, map) = stages.temper(posterior, map, log)?;
-    let (posterior, map, memory_found) = match memory_found {
+    let (posterior, map, failed) = match found {
         // what `auto` chose must not fail where the tempered likelihood,
         // which takes any posterior, would do
-        Some(found) => match stages.adjust(posterior.clone(), map.clone(), log) {
-            Ok((posterior, map)) => (posterior, map, Some(found)),
+        Some(_) => match stages.adjust(posterior.clone(), map.clone(), log) {
+            Ok((posterior, map)) => (posterior, map, None),
             Err(e) => {
-                log(&format!("  memory: {e}; the tempered likelihood instead"));
                 stages.settings.likelihood.memory = Memory::Tempered;
                 stages.settings.likelihood.memory_adjustment = None;
                 let (posterior, map) = stages.temper(posterior, map, log)?;
-                let found = found.replace("the adjusted likelihood", "the tempered likelihood");
-                (
-                    posterior,
-                    map,
-                    Some(format!("{found}; the adjusted likelihood failed here ({e})")),
-                )
+                (posterior, map, Some(e))
             }
         },
         None => {
@@ -156,6 +151,11 @@ pub fn start(
             (posterior, map, None)
         }
     };
+    let memory_found = found.map(|f| {
+        let said = f.said(stages.settings.likelihood.memory, failed.as_ref());
+        log(&format!("  memory: {said}"));
+        said
+    });
     let independent = std::mem::take(&mut stages.independent);
     let mut settings = stages.settings;
     log(&format!(
@@ -241,7 +241,7 @@ struct Stages<'a> {
     settings: CalibrationSettings,
     base: Integrator,
     /// [`Start::independent`], once a stage has measured it.
-    independent: Vec<(String, [f64; 4])>,
+    independent: Vec<IntervalRow>,
 }
 
 impl Stages<'_> {
@@ -264,13 +264,12 @@ impl Stages<'_> {
     /// lag-1 autocorrelation of at most [`MEMORY_WARNING`] (or the noise
     /// model has memory of its own), independent; else adjusted (one
     /// parameter set per current) or tempered (a parameter model across
-    /// currents), with a sentence saying what was found and chosen.
+    /// currents), and what was found.
     fn choose_memory(
         &mut self,
         mut posterior: Posterior,
         map: &MapEstimate,
-        log: &mut dyn FnMut(&str),
-    ) -> (Posterior, Option<String>) {
+    ) -> (Posterior, Option<MemoryFound>) {
         if self.settings.likelihood.memory != Memory::Auto {
             return (posterior, None);
         }
@@ -285,19 +284,13 @@ impl Stages<'_> {
             posterior.likelihood.memory = Memory::Independent;
             return (posterior, None);
         }
-        let (chosen, name) = match self.settings.parameter_model().is_current_law() {
-            true => (Memory::Tempered, "tempered"),
-            false => (Memory::Adjusted, "adjusted"),
+        self.settings.likelihood.memory = match self.settings.parameter_model().is_current_law() {
+            true => Memory::Tempered,
+            false => Memory::Adjusted,
         };
-        self.settings.likelihood.memory = chosen;
         let (lo, hi) =
             rhos.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &r| (a.min(r), b.max(r)));
-        let said = format!(
-            "the MAP residuals have memory (lag-1 autocorrelation {lo:.2}–{hi:.2}, above {MEMORY_WARNING} in {with} of {} runs), so the {name} likelihood allows for it (`memory = \"auto\"`; `--memory independent` takes the residuals as independent)",
-            rhos.len()
-        );
-        log(&format!("  memory: {said}"));
-        (posterior, Some(said))
+        (posterior, Some(MemoryFound { lo, hi, with, runs: rhos.len() }))
     }
 
     /// With the tempered likelihood ([`Memory::Tempered`]): each run's
@@ -390,6 +383,30 @@ impl Stages<'_> {
             starts.iter().map(|s| s[..fitted.min(s.len())].to_vec()).collect();
         let found = map::best_map(&plain, &starts)?;
         Some(map::residual_rms(&plain, &found.x)?.into_iter().map(|(rms, _)| rms).collect())
+    }
+}
+
+/// What `memory = "auto"` found in the MAP residuals: the range of the
+/// runs' whitened lag-1 autocorrelations and how many of them are above
+/// [`MEMORY_WARNING`].
+struct MemoryFound {
+    lo: f64,
+    hi: f64,
+    with: usize,
+    runs: usize,
+}
+
+impl MemoryFound {
+    /// What was found and the likelihood that allows for it (`chosen`),
+    /// with why the adjusted one was not taken where it `failed`.
+    fn said(&self, chosen: Memory, failed: Option<&Error>) -> String {
+        let name = if chosen == Memory::Tempered { "tempered" } else { "adjusted" };
+        let failed = failed
+            .map_or(String::new(), |e| format!(" (the adjusted likelihood failed here: {e})"));
+        format!(
+            "the MAP residuals have memory (lag-1 autocorrelation {:.2}–{:.2}, above {MEMORY_WARNING} in {} of {} runs), so the {name} likelihood allows for it{failed} (`memory = \"auto\"`; `--memory independent` takes the residuals as independent)",
+            self.lo, self.hi, self.with, self.runs
+        )
     }
 }
 

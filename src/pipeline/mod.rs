@@ -129,13 +129,13 @@ impl SampleOptions {
     /// The request: the settings file with the options applied, checked.
     pub fn request(&self) -> Result<SampleRequest> {
         let settings = self.settings.settings()?;
-        let settings_is_law = settings.model.is_law();
-        if !self.hold_out_current.is_empty() && !settings.model.is_law() {
+        let is_law = settings.model.is_law();
+        if !self.hold_out_current.is_empty() && !is_law {
             return Err(Error::Usage(
                 "--hold-out-current needs --model current-law or current-curves".into(),
             ));
         }
-        if self.per_run && settings.model.is_law() {
+        if self.per_run && is_law {
             return Err(Error::Usage("--per-run calibrates each run alone, which a current law cannot (one run has one current): use the per-current model".into()));
         }
         // each law once (`--law a,b,a` is a and b), in the order given
@@ -153,7 +153,7 @@ impl SampleOptions {
             resume: self.resume,
             force: self.force,
             per_run: self.per_run,
-            per_run_where_memory: !self.no_per_run && !settings_is_law,
+            per_run_where_memory: !self.no_per_run && !is_law,
         })
     }
 }

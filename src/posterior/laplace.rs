@@ -74,7 +74,7 @@ pub const INTERVAL_DRAWS: usize = 4000;
 /// approximation in the sampler's coordinates of `post`), from
 /// [`INTERVAL_DRAWS`] draws of a fixed stream (`seed`): the same numbers
 /// every time. A parameter sampled in ln keeps its skew.
-pub fn si_intervals(post: &Posterior, q: &Elliptical, seed: u64) -> Vec<(String, [f64; 4])> {
+pub fn si_intervals(post: &Posterior, q: &Elliptical, seed: u64) -> Vec<IntervalRow> {
     let mut rng = crate::rng::stream(seed, &[0x1a91ace]);
     let mut y = vec![0.0; q.dim()];
     let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(INTERVAL_DRAWS); post.dim()];
@@ -94,7 +94,17 @@ pub fn si_intervals(post: &Posterior, q: &Elliptical, seed: u64) -> Vec<(String,
             let sd = (c.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
             c.sort_by(f64::total_cmp);
             let at = |p| crate::sampler::diagnostics::quantile_sorted(&c, p);
-            (name.clone(), [sd, at(0.05), at(0.5), at(0.95)])
+            IntervalRow { parameter: name.clone(), sd, q05: at(0.05), q50: at(0.5), q95: at(0.95) }
         })
         .collect()
+}
+
+/// One coordinate's interval from an approximation (SI units).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct IntervalRow {
+    pub parameter: String,
+    pub sd: f64,
+    pub q05: f64,
+    pub q50: f64,
+    pub q95: f64,
 }

@@ -380,19 +380,18 @@ fn posterior_section(page: &mut Page, cal: &Calibration) {
         return;
     }
     page.para("These records, if the residuals were independent: the Laplace approximation of that posterior at its mode. Too narrow for these records, whose residuals have memory; shown for comparison with a calibration that ignores it. \"Widened ×\": the 90 % interval above over this one.");
-    let rows: Vec<Vec<String>> = rec
-        .independent
-        .iter()
-        .filter_map(|i| {
-            let p = cal.summary.iter().find(|p| p.parameter == i.parameter)?;
-            Some(vec![
+    let rows: Vec<Vec<String>> = cal
+        .independent_beside()
+        .into_iter()
+        .map(|(i, widened)| {
+            vec![
                 esc(&i.parameter),
                 num(i.sd, 3),
                 num(i.q05, 4),
                 num(i.q50, 4),
                 num(i.q95, 4),
-                format!("{:.2}", (p.q95 - p.q05) / (i.q95 - i.q05)),
-            ])
+                format!("{widened:.2}"),
+            ]
         })
         .collect();
     page.table(&["parameter", "sd", "q05", "q50", "q95", "widened ×"], &rows);

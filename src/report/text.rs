@@ -233,8 +233,7 @@ pub fn independent_beside(cal: &Calibration) -> String {
         "q95",
         "widened ×"
     );
-    for i in &rec.independent {
-        let Some(p) = cal.summary.iter().find(|p| p.parameter == i.parameter) else { continue };
+    for (i, widened) in cal.independent_beside() {
         row!(
             out,
             "{:<22} {:>10.3e} {:>11.4e} {:>11.4e} {:>11.4e} {:>14.2}",
@@ -243,7 +242,7 @@ pub fn independent_beside(cal: &Calibration) -> String {
             i.q05,
             i.q50,
             i.q95,
-            (p.q95 - p.q05) / (i.q95 - i.q05)
+            widened
         );
     }
     out

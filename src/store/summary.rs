@@ -4,8 +4,8 @@
 use std::path::Path;
 
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
-use crate::calibrate::IntervalRow;
 use crate::error::Result;
+use crate::posterior::laplace::IntervalRow;
 use crate::posterior::SummaryRow;
 use crate::sampler::ParameterDiagnostics;
 
