@@ -10,11 +10,14 @@
 //!   posterior far from its Laplace approximation);
 //! * [`record`]: what a calibration did (`calibration.toml`);
 //! * [`sampling`]: one run of the sampler, for a calibration and for each
-//!   held-out calibration of leave-one-out alike.
+//!   held-out calibration of leave-one-out alike;
+//! * `sequential`: sequential Monte Carlo before the ensemble sampler
+//!   (`--sampler smc`).
 
 pub mod probe;
 pub mod record;
 pub mod sampling;
+mod sequential;
 pub mod settings;
 pub mod start;
 
@@ -26,9 +29,12 @@ use crate::posterior::laplace::IntervalRow;
 use crate::posterior::{Draws, PosteriorSample, SummaryRow};
 use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
-pub use record::{command_line, CalibrationRecord, StepRow};
+pub use record::{command_line, CalibrationRecord, SmcRecord, StepRow};
 pub use sampling::Sampled;
-pub use settings::{CalibrationSettings, IntegratorSettings, SamplingSettings, SchemeChoice};
+pub use settings::{
+    CalibrationSettings, IntegratorSettings, SamplerMethod, SamplingSettings, SchemeChoice,
+    SMC_REFERENCE_DF,
+};
 pub use start::{
     confounding_warning, start, Start, CONFOUNDING_RATIO, MEMORY_REMEDY, MEMORY_WARNING,
 };
@@ -235,48 +241,57 @@ pub fn sample(
     // (a function of the start alone, so a resumed run judges it the same)
     let clock = std::time::Instant::now();
     let mut control = s.control();
-    let probed = match resume_from {
+    // with sequential Monte Carlo, its particles replace the walkers placed
+    // about the Laplace approximation (and the probe's steps)
+    let smc = s.method == SamplerMethod::Smc;
+    let fresh =
+        |observers: &mut [&mut dyn Observer]| -> Result<(probe::Probed, Option<SmcRecord>)> {
+            let probed = probe::walkers_start(
+                posterior,
+                &start.map,
+                sampler_settings.clone(),
+                s.walkers * s.ensembles,
+                &control,
+                if smc { &mut [] } else { observers },
+            )?;
+            if !smc {
+                return Ok((probed, None));
+            }
+            let (sampler, record) =
+                sequential::from_laplace(posterior, &probed.laplace, &probed.sampler.settings)?;
+            Ok((probe::Probed { sampler, stepping_seconds: 0.0, ..probed }, Some(record)))
+        };
+    let (probed, smc_record) = match resume_from {
         Some(path) => {
             // the start judged again, unobserved: a checkpoint saved before
             // the walkers started afresh about a higher mode is of a start
             // the run left, and the run goes on from the new one instead
-            let probed = probe::walkers_start(
-                posterior,
-                &start.map,
-                sampler_settings,
-                s.walkers * s.ensembles,
-                &control,
-                &mut [],
-            )?;
+            let (probed, smc_record) = fresh(&mut [])?;
             let resumed = Sampler::resume(posterior, path)?;
             let first = resumed.chains.chains() * resumed.chains.dim;
             if resumed.chains.positions.get(..first) != probed.sampler.chains.positions.get(..first)
             {
-                probed
+                (probed, smc_record)
             } else if resumed.settings != probed.sampler.settings {
                 return Err(Error::input(path, "checkpoint of a sampler with other settings (walkers, ensembles, moves or seed)"));
             } else {
                 // the probe's steps were the start's work: the chains are the checkpoint's
-                probe::Probed {
+                let probed = probe::Probed {
                     sampler: resumed.with_reference(probed.laplace.clone()),
                     stepping_seconds: 0.0,
                     ..probed
-                }
+                };
+                (probed, smc_record)
             }
         }
-        None => probe::walkers_start(
-            posterior,
-            &start.map,
-            sampler_settings,
-            s.walkers * s.ensembles,
-            &control,
-            observers,
-        )?,
+        None => fresh(observers)?,
     };
     // the Laplace approximation and the walkers' start count with the
-    // start; the probe's steps, the chains' first, with sampling
-    let walkers_start = clock.elapsed().as_secs_f64() - probed.stepping_seconds;
-    let probe_seconds = probed.stepping_seconds;
+    // start; the probe's steps, the chains' first, and sequential Monte
+    // Carlo with sampling
+    let smc_seconds = smc_record.as_ref().map_or(0.0, |r| r.seconds);
+    let walkers_start = clock.elapsed().as_secs_f64() - probed.stepping_seconds - smc_seconds;
+    let probe_seconds = probed.stepping_seconds + smc_seconds;
     let misfit = probed.far();
     control.confirm = misfit.is_some();
     let probe::Probed { mut sampler, map, higher, spread, .. } = probed;
@@ -292,6 +307,7 @@ pub fn sample(
         start.map = map;
     }
     let mut record = CalibrationRecord::of(campaign, &start, walkers_start, spread, &sampled);
+    record.smc = smc_record;
     if let Some(alone) = &start.law_alone_rms {
         let median: Vec<f64> = sampled.diagnostics.coordinates.iter().map(|c| c.q50).collect();
         record.confounding =

@@ -88,6 +88,11 @@ pub struct CalibrationRecord {
     /// beside the posterior's own. Empty otherwise.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub independent: Vec<IntervalRow>,
+    /// Where the posterior was sampled by sequential Monte Carlo first
+    /// (`--sampler smc`): its temperatures and the integral of the
+    /// posterior density.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub smc: Option<SmcRecord>,
     /// The campaign's geometry (A, h): what turns the bands into forces.
     #[serde(default)]
     pub geometry: Option<Geometry>,
@@ -95,6 +100,37 @@ pub struct CalibrationRecord {
     /// stage can tell them from those of an earlier calibration.
     #[serde(default)]
     pub calibration_id: String,
+}
+
+/// What sequential Monte Carlo did before the ensemble sampler
+/// (`[smc]` of calibration.toml).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SmcRecord {
+    /// The reference it started from.
+    pub reference: String,
+    /// Each population's temperatures, from the first above 0 to 1.
+    pub temperatures: Vec<Vec<f64>>,
+    /// Each population's mutation steps at each temperature.
+    pub mutation_steps: Vec<Vec<usize>>,
+    /// ln ∫ p(x) dx of the posterior density p as mrbp evaluates it, in the
+    /// sampler's coordinates: its priors and likelihood without their
+    /// normalising constants, so only a difference between two
+    /// calibrations with the same priors, noise model and records is a log
+    /// Bayes factor.
+    pub log_integral: f64,
+    /// Its standard error from the incremental weights and from the spread
+    /// of the populations' estimates.
+    pub se_weights: f64,
+    pub se_spread: f64,
+    /// Each population's estimate.
+    pub per_population: Vec<f64>,
+    /// The rank-normalised split-R̂ of each coordinate over the final
+    /// particles, each population a chain (largest).
+    pub max_rhat: f64,
+    /// Posterior evaluations and wall time (s).
+    pub evaluations: usize,
+    pub seconds: f64,
 }
 
 /// A name for a new calibration: when and by which process it was made.
@@ -192,6 +228,7 @@ impl CalibrationRecord {
             model_warnings: start.warnings.clone(),
             confounding: Vec::new(),
             memory_found: start.memory_found.clone(),
+            smc: None,
             independent: start.independent.clone(),
             geometry: Some(campaign.geometry),
             calibration_id: new_calibration_id(),

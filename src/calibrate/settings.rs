@@ -98,10 +98,33 @@ impl IntegratorSettings {
     }
 }
 
+/// How the posterior is sampled.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum SamplerMethod {
+    /// The ensemble sampler from walkers about the Laplace approximation.
+    #[default]
+    Ensemble,
+    /// Tempered sequential Monte Carlo from the Laplace approximation
+    /// (a Student-t, [`SMC_REFERENCE_DF`]) to the posterior, each ensemble
+    /// a population ([`crate::sampler::smc`]); the ensemble sampler then
+    /// continues from its particles until converged. Gives the log
+    /// evidence.
+    Smc,
+}
+
+/// Degrees of freedom of the Student-t about the Laplace approximation
+/// that sequential Monte Carlo starts from: tails heavy enough to reach a
+/// basin or a ridge the approximation misses.
+pub const SMC_REFERENCE_DF: f64 = 5.0;
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SamplingSettings {
-    /// Walkers per ensemble; 0: [`SamplingSettings::walkers_for`] the dimension.
+    /// The ensemble sampler, or sequential Monte Carlo before it.
+    pub method: SamplerMethod,
+    /// Walkers per ensemble (particles per population); 0:
+    /// [`SamplingSettings::walkers_for`] the dimension.
     pub walkers: usize,
     pub ensembles: usize,
     pub seed: u64,
@@ -169,6 +192,7 @@ impl SamplingSettings {
 impl Default for SamplingSettings {
     fn default() -> Self {
         SamplingSettings {
+            method: SamplerMethod::Ensemble,
             walkers: 0,
             ensembles: 4,
             seed: 1,
@@ -205,6 +229,12 @@ pub struct Overrides {
     /// Independent ensembles (default 4)
     #[arg(long)]
     pub ensembles: Option<usize>,
+    /// The sampler (default: ensemble; `smc`: tempered sequential Monte
+    /// Carlo from the Laplace approximation to the posterior, each ensemble
+    /// a population, then the ensemble sampler from its particles; gives
+    /// the log evidence)
+    #[arg(long, value_enum)]
+    pub sampler: Option<SamplerMethod>,
     /// A fixed number of steps (default: until converged, R̂ < 1.01, ESS ≥ 400)
     #[arg(long)]
     pub steps: Option<usize>,
@@ -263,6 +293,7 @@ impl Overrides {
             s.integrator.substeps = positive(v as usize, "--substeps")? as u32;
         }
         s.sampler.seed = self.seed.unwrap_or(s.sampler.seed);
+        s.sampler.method = self.sampler.unwrap_or(s.sampler.method);
         s.likelihood.noise = self.noise.unwrap_or(s.likelihood.noise);
         s.likelihood.part = self.part.unwrap_or(s.likelihood.part);
         s.likelihood.memory = self.memory.unwrap_or(s.likelihood.memory);

@@ -173,6 +173,51 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         })
     }
 
+    /// A sampler whose step 0 is `positions` (one after another, ensemble
+    /// by ensemble) with their log-densities `log_prob` already known (a
+    /// population handed on by [`super::smc`]): nothing is evaluated again
+    /// unless the target has blocks, whose memos only an evaluation makes.
+    pub fn from_state(
+        target: &'t T,
+        settings: SamplerSettings,
+        positions: Vec<f64>,
+        log_prob: Vec<f64>,
+    ) -> Result<Self> {
+        let d = target.dim();
+        if !target.blocks().is_empty() {
+            let initial: Vec<Vec<f64>> = positions.chunks_exact(d).map(<[f64]>::to_vec).collect();
+            return Sampler::new(target, settings, &initial);
+        }
+        settings.check(d)?;
+        let nc = settings.walkers * settings.ensembles;
+        if positions.len() != nc * d || log_prob.len() != nc {
+            return Err(Error::Usage(format!(
+                "{} positions and {} log-densities for {nc} walkers",
+                positions.len() / d.max(1),
+                log_prob.len()
+            )));
+        }
+        Ok(Sampler {
+            target,
+            chains: Chains {
+                dim: d,
+                ensembles: settings.ensembles,
+                walkers: settings.walkers,
+                positions,
+                log_prob,
+                accepted: vec![false; nc],
+            },
+            history: (0, vec![Learned::default(); settings.ensembles]),
+            reference: None,
+            settings,
+            announced: false,
+            stopping: Stopping::default(),
+            free: (0..d).collect(),
+            blocks: Vec::new(),
+            memos: Vec::new(),
+        })
+    }
+
     /// A sampler restored from a checkpoint (see [`super::observer::Checkpointer`]).
     pub fn resume(target: &'t T, path: &Path) -> Result<Self> {
         let (settings, chains) = checkpoint::load(path, target.dim())?;

@@ -13,7 +13,9 @@
 //! * [`observer`]: progress, diagnostics lines and checkpoints beside the
 //!   loop; [`checkpoint`]: the state on disk;
 //! * [`diagnostics`]: autocorrelation time, R̂, ESS, MCSE, acceptance;
-//! * [`stranded`]: an ensemble left in a mode of negligible mass, drawn afresh.
+//! * [`stranded`]: an ensemble left in a mode of negligible mass, drawn afresh;
+//! * [`smc`]: tempered sequential Monte Carlo from a reference density to the
+//!   target, its populations mutated by the same moves; the evidence.
 //!
 //! Randomness is counter-based ([`crate::rng::stream`]): the draws of walker
 //! w of ensemble e at step s depend on (seed, e, s, w) only, so the chains are
@@ -29,6 +31,7 @@ pub mod ensemble;
 pub mod moves;
 pub mod observer;
 pub mod settings;
+pub mod smc;
 pub mod stopping;
 pub mod stranded;
 

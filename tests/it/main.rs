@@ -28,6 +28,7 @@ mod report;
 mod robustness;
 mod sampler;
 mod simulate;
+mod smc;
 mod store;
 mod study;
 mod tempered;

@@ -1,0 +1,69 @@
+//! Sequential Monte Carlo before the ensemble sampler (`--sampler smc`):
+//! from a Student-t about the Laplace approximation at the mode to the
+//! posterior ([`crate::sampler::smc`]), each of the sampler's ensembles a
+//! population of its walkers; the ensemble sampler then continues from the
+//! final particles, whose basins hold walkers in proportion to their mass.
+
+use std::time::Instant;
+
+use super::record::SmcRecord;
+use super::settings::SMC_REFERENCE_DF;
+use crate::error::Result;
+use crate::posterior::Posterior;
+use crate::sampler::smc::{self, Reference, SmcSettings};
+use crate::sampler::{Elliptical, Sampler, SamplerSettings};
+
+/// The sampler that continues from sequential Monte Carlo's particles on
+/// `posterior`, started from `laplace` with the walkers, ensembles, moves
+/// and seed of `settings`; and what it did.
+pub(super) fn from_laplace<'t>(
+    posterior: &'t Posterior,
+    laplace: &Elliptical,
+    settings: &SamplerSettings,
+) -> Result<(Sampler<'t, Posterior>, SmcRecord)> {
+    let clock = Instant::now();
+    let reference = Reference { dist: laplace.clone(), df: Some(SMC_REFERENCE_DF) };
+    let smc_settings = SmcSettings {
+        particles: settings.walkers,
+        populations: settings.ensembles,
+        moves: settings.moves.clone(),
+        seed: settings.seed,
+        ..SmcSettings::default()
+    };
+    let run = smc::run(
+        posterior,
+        &reference,
+        &smc_settings,
+        &mut |_, _| {},
+        &crate::interrupt::requested,
+    )?;
+    let chains = run.chains();
+    let max_rhat = (0..run.dim).map(|i| run.rhat(|x| x[i])).fold(0.0, f64::max);
+    let evaluations = run
+        .populations
+        .iter()
+        .map(|p| settings.walkers * (1 + p.stages.iter().map(|s| s.steps).sum::<usize>()))
+        .sum();
+    let record = SmcRecord {
+        reference: format!(
+            "Student-t ({SMC_REFERENCE_DF} degrees of freedom) about the Laplace approximation at the mode"
+        ),
+        temperatures: run.populations.iter().map(|p| p.stages.iter().map(|s| s.beta).collect()).collect(),
+        mutation_steps: run
+            .populations
+            .iter()
+            .map(|p| p.stages.iter().map(|s| s.steps).collect())
+            .collect(),
+        log_integral: run.evidence.log_z,
+        se_weights: run.evidence.se_weights,
+        se_spread: run.evidence.se_spread,
+        per_population: run.evidence.per_population.clone(),
+        max_rhat,
+        evaluations,
+        seconds: clock.elapsed().as_secs_f64(),
+    };
+    let sampler =
+        Sampler::from_state(posterior, settings.clone(), chains.positions, chains.log_prob)?
+            .with_reference(laplace.clone());
+    Ok((sampler, record))
+}
