@@ -119,6 +119,14 @@ pub struct SmcRecord {
     /// calibrations with the same priors, noise model and records is a log
     /// Bayes factor.
     pub log_integral: f64,
+    /// The log evidence ln p(records | law, priors, noise model):
+    /// `log_integral` with the priors' and the likelihood's normalising
+    /// constants ([`crate::posterior::Posterior::log_evidence_offset`]); the
+    /// same standard errors. Where the likelihood allowed for the
+    /// residuals' memory (tempered or adjusted), of that likelihood:
+    /// `evidence_of` says which.
+    pub log_evidence: f64,
+    pub evidence_of: String,
     /// Its standard error from the incremental weights and from the spread
     /// of the populations' estimates.
     pub se_weights: f64,

@@ -13,6 +13,18 @@ use crate::posterior::Posterior;
 use crate::sampler::smc::{self, Reference, SmcSettings};
 use crate::sampler::{Elliptical, Sampler, SamplerSettings};
 
+/// What the log evidence is of: the records' own likelihood, or the
+/// tempered or adjusted one that allowed for their memory.
+fn evidence_of(posterior: &Posterior) -> String {
+    if posterior.likelihood.adjustment().is_some() {
+        "the adjusted likelihood (the residuals' memory allowed for): a pseudo-evidence, comparable only between calibrations adjusted alike".into()
+    } else if (0..posterior.runs.len()).any(|j| posterior.weight(j) != 1.0) {
+        "the tempered likelihood (each run's log-likelihood weighted by its residuals' memory): a pseudo-evidence, comparable only between calibrations tempered alike".into()
+    } else {
+        "the records given the law, its priors and the noise model".into()
+    }
+}
+
 /// The sampler that continues from sequential Monte Carlo's particles on
 /// `posterior`, started from `laplace` with the walkers, ensembles, moves
 /// and seed of `settings`; and what it did.
@@ -55,6 +67,8 @@ pub(super) fn from_laplace<'t>(
             .map(|p| p.stages.iter().map(|s| s.steps).collect())
             .collect(),
         log_integral: run.evidence.log_z,
+        log_evidence: run.evidence.log_z + posterior.log_evidence_offset(),
+        evidence_of: evidence_of(posterior),
         se_weights: run.evidence.se_weights,
         se_spread: run.evidence.se_spread,
         per_population: run.evidence.per_population.clone(),

@@ -9,8 +9,8 @@ use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
 use super::model::{
-    log_uniform, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues,
-    Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform,
+    log_uniform, log_uniform_normaliser, normal_ln_pdf, rms, NoiseModel, NoiseOptions,
+    NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform,
 };
 use crate::data::RunData;
 use crate::model::LANES;
@@ -51,6 +51,11 @@ impl NoiseModel for Ar1 {
         }
         // uniform ρ: the Jacobian of ρ = tanh z
         (1.0 - rho * rho).ln()
+    }
+
+    /// σ log-uniform, ρ uniform on (−0.999, 0.999).
+    fn log_prior_normaliser(&self, _run: &RunData) -> f64 {
+        log_uniform_normaliser(self.sigma_bounds) + 1.998f64.ln()
     }
 
     fn laplace_sd(&self, run: &RunData, _coordinates: &NoiseValues) -> NoiseValues {

@@ -18,8 +18,9 @@ use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
 use super::model::{
-    log_uniform, log_variance_term, normal_ln_pdf, rms, NoiseModel, NoiseOptions, NoiseSimulator,
-    NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform, Whiten,
+    log_uniform, log_uniform_normaliser, log_variance_term, normal_ln_pdf, rms, NoiseModel,
+    NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer,
+    Scales, Transform, Whiten,
 };
 use crate::data::RunData;
 use crate::model::{tangent_stiffness, LANES};
@@ -62,6 +63,10 @@ impl NoiseModel for Gaussian {
 
     fn log_prior(&self, _run: &RunData, coordinates: &[f64]) -> f64 {
         log_uniform(coordinates[0], self.sigma_bounds)
+    }
+
+    fn log_prior_normaliser(&self, _run: &RunData) -> f64 {
+        log_uniform_normaliser(self.sigma_bounds)
     }
 
     fn laplace_sd(&self, run: &RunData, _coordinates: &NoiseValues) -> NoiseValues {

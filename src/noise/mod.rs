@@ -191,6 +191,79 @@ mod tests {
         }
     }
 
+    /// Every model, with and without errors in variables, at its profile
+    /// fit and at a point away from it: the scorer's log-likelihood plus
+    /// the constant it declares equals the sum of its pointwise terms,
+    /// whose constants are written out (what the evidence rests on).
+    #[test]
+    fn every_model_declares_the_constant_its_scorer_leaves_out() {
+        use testing::{pointwise_sum, run, scored};
+        for eiv in [false, true] {
+            let (run, path) = run(if eiv { 1e-8 } else { 0.0 });
+            let residuals: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - path[k]).collect();
+            let options = NoiseOptions { errors_in_variables: eiv, ..NoiseOptions::default() };
+            for kind in NoiseKind::ALL {
+                let m = kind.model(&options);
+                let fitted = m.profile(&run, &residuals, 5e6).coordinates;
+                let mut away = fitted;
+                for (c, p) in away.iter_mut().zip(m.parameters()) {
+                    *c += if p.transform == Transform::Log { 0.3 } else { -0.2 };
+                }
+                for c in [fitted, away] {
+                    let values: Vec<f64> = m
+                        .parameters()
+                        .iter()
+                        .zip(c)
+                        .map(|(p, v)| p.transform.to_si(v))
+                        .chain(std::iter::repeat(0.0))
+                        .take(MAX_PARAMETERS)
+                        .collect();
+                    let values: NoiseValues = values.try_into().unwrap();
+                    let total = pointwise_sum(m.as_ref(), &run, &path, values, 5e6);
+                    let with =
+                        scored(m.as_ref(), &run, &path, c, 5e6) + m.log_likelihood_constant(&run);
+                    assert!(
+                        (total - with).abs() < 1e-8 * total.abs(),
+                        "{kind:?} (errors in variables {eiv}) at {c:?}: pointwise {total}, scorer + constant {with}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Every model's prior normaliser equals ln ∫ exp(log prior) over its
+    /// coordinates, integrated here one coordinate at a time (each prior is
+    /// a product of one-dimensional ones) by the midpoint rule over the
+    /// support found by scanning.
+    #[test]
+    fn every_model_prior_normaliser_is_the_integral_of_its_prior() {
+        let (run, path) = testing::run(0.0);
+        let residuals: Vec<f64> = (1..run.time.len()).map(|k| run.tau[k] - path[k]).collect();
+        for kind in NoiseKind::ALL {
+            let m = kind.model(&NoiseOptions::default());
+            let at = m.profile(&run, &residuals, 5e6).coordinates;
+            let p0 = m.log_prior(&run, &at);
+            let d = m.parameters().len();
+            let mut log_integral = -((d - 1) as f64) * p0;
+            for i in 0..d {
+                let f = |v: f64| {
+                    let mut c = at;
+                    c[i] = v;
+                    m.log_prior(&run, &c).exp()
+                };
+                let (lo, hi, steps) = (-40.0, 40.0, 400_000);
+                let h = (hi - lo) / steps as f64;
+                let sum: f64 = (0..steps).map(|k| f(lo + (k as f64 + 0.5) * h)).sum();
+                log_integral += (sum * h).ln();
+            }
+            let declared = m.log_prior_normaliser(&run);
+            assert!(
+                (log_integral - declared).abs() < 1e-3,
+                "{kind:?}: integrated {log_integral}, declared {declared}"
+            );
+        }
+    }
+
     #[test]
     fn pooling_takes_the_rms_of_scales_and_the_mean_of_the_rest() {
         assert!((Pool::RootMeanSquare.of(&[3.0, 4.0]) - 12.5f64.sqrt()).abs() < 1e-15);

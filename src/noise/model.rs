@@ -254,6 +254,18 @@ pub trait NoiseModel: Send + Sync + std::fmt::Debug {
     /// transform included); −∞ outside the support.
     fn log_prior(&self, run: &RunData, coordinates: &[f64]) -> f64;
 
+    /// ln ∫ exp([`NoiseModel::log_prior`]) over the noise coordinates of
+    /// `run`: what makes the prior a density (the evidence needs it).
+    fn log_prior_normaliser(&self, run: &RunData) -> f64;
+
+    /// What the scorer's log-likelihood of `run` leaves out: the sum of the
+    /// pointwise terms (constants included) less the scorer's value, the
+    /// same at every parameter value. By default the normal density's
+    /// constant at each compared sample.
+    fn log_likelihood_constant(&self, run: &RunData) -> f64 {
+        -(run.compared() as f64) * HALF_LN_2PI
+    }
+
     /// Sd of each coordinate of `run` near `coordinates` in a Gaussian
     /// approximation of its posterior (the start of sampling).
     fn laplace_sd(&self, run: &RunData, coordinates: &NoiseValues) -> NoiseValues;
@@ -369,6 +381,11 @@ pub fn student_t_log_constant(nu: f64) -> f64 {
 /// The root mean square of residuals.
 pub fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|r| r * r).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+/// ln ∫ exp([`log_uniform`]) d ln σ: the log of the width of its support.
+pub fn log_uniform_normaliser(bounds: (f64, f64)) -> f64 {
+    (bounds.1 / bounds.0).ln().ln()
 }
 
 /// The log-uniform prior of a scale's ln σ between `bounds`: 0 inside, −∞

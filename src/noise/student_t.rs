@@ -8,8 +8,8 @@ use rand::{Rng, RngExt};
 use rand_distr::{StandardNormal, StudentT as StudentTDistribution};
 
 use super::model::{
-    log_uniform, rms, student_t_log_constant, NoiseModel, NoiseOptions, NoiseSimulator,
-    NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform,
+    log_uniform, log_uniform_normaliser, rms, student_t_log_constant, NoiseModel, NoiseOptions,
+    NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile, RunScorer, Scales, Transform,
 };
 use crate::data::RunData;
 use crate::model::LANES;
@@ -59,6 +59,15 @@ impl NoiseModel for StudentT {
 
     fn log_prior(&self, _run: &RunData, coordinates: &[f64]) -> f64 {
         log_uniform(coordinates[0], self.sigma_bounds)
+    }
+
+    fn log_prior_normaliser(&self, _run: &RunData) -> f64 {
+        log_uniform_normaliser(self.sigma_bounds)
+    }
+
+    /// The scorer's Student-t densities carry their constant.
+    fn log_likelihood_constant(&self, _run: &RunData) -> f64 {
+        0.0
     }
 
     fn laplace_sd(&self, run: &RunData, _coordinates: &NoiseValues) -> NoiseValues {

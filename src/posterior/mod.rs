@@ -235,6 +235,24 @@ impl Posterior {
         lp
     }
 
+    /// What turns ln ∫ exp(log-density) dx into the log evidence of the
+    /// records: minus the log of the integral of the prior as
+    /// [`Posterior::log_prior`] writes it (each θ prior's, each model
+    /// term's normal, each run's noise prior's normaliser), plus the
+    /// constants each run's likelihood leaves out, weighted as the run's
+    /// likelihood is ([`Posterior::weight`]).
+    pub fn log_evidence_offset(&self) -> f64 {
+        let (l, half_ln_2pi) = (&self.layout, crate::noise::HALF_LN_2PI);
+        let prior = self.priors.iter().map(Prior::log_normaliser).sum::<f64>()
+            + l.spring.len() as f64 * (half_ln_2pi + self.terms.gas_spring_sd_n_per_m.ln())
+            + l.offset.len() as f64 * (half_ln_2pi + self.terms.force_offset_sd_n.ln())
+            + self.runs.iter().map(|r| self.noise.log_prior_normaliser(r)).sum::<f64>();
+        let constants: f64 = (0..self.runs.len())
+            .map(|j| self.weight(j) * self.noise.log_likelihood_constant(&self.runs[j]))
+            .sum();
+        constants - prior
+    }
+
     /// Log-densities of up to [`LANES`] points integrated together; with
     /// `memos` (one per point, or none), each point's residuals for the
     /// sampler's block updates of the noise ([`LogDensity::blocks`]).

@@ -49,6 +49,23 @@ impl Prior {
         v.clamp(lower, upper)
     }
 
+    /// ln ∫ exp([`Prior::log_density`]) d ln θ: what makes it a density
+    /// (the truncated normal's mass between the bounds, the log-uniform's
+    /// width).
+    pub fn log_normaliser(&self) -> f64 {
+        use statrs::distribution::{ContinuousCDF, Normal};
+        let (lower, upper) = self.bounds();
+        match *self {
+            Prior::LogNormal { median, sd_log, .. } => {
+                let normal = Normal::standard();
+                let at = |bound: f64| (bound / median).ln() / sd_log;
+                let mass = normal.cdf(at(upper)) - normal.cdf(at(lower));
+                (sd_log * (2.0 * std::f64::consts::PI).sqrt()).ln() + mass.ln()
+            }
+            Prior::LogUniform { .. } => (upper / lower).ln().ln(),
+        }
+    }
+
     pub fn bounds(&self) -> (f64, f64) {
         match *self {
             Prior::LogNormal { lower, upper, .. } | Prior::LogUniform { lower, upper } => {
@@ -107,6 +124,30 @@ pub fn default_priors() -> [Prior; 7] {
 mod tests {
     use super::*;
     use crate::model::PARAM_NAMES;
+
+    /// ln ∫ exp(log_density) over ln θ by the midpoint rule (10⁶ points
+    /// over the support) for a truncated log-normal cut on both sides, one
+    /// cut far in a tail, and a log-uniform.
+    #[test]
+    fn the_normaliser_is_the_integral_of_the_density() {
+        for prior in [
+            Prior::LogNormal { median: 2e5, sd_log: 0.8, lower: 1e5, upper: 1e6 },
+            Prior::LogNormal { median: 1.0, sd_log: 0.3, lower: 1e-3, upper: 1.5 },
+            Prior::LogUniform { lower: 1.0, upper: 1e6 },
+        ] {
+            let (lo, hi) = prior.bounds();
+            let (a, b, steps) = (lo.ln(), hi.ln(), 1_000_000);
+            let h = (b - a) / steps as f64;
+            let sum: f64 =
+                (0..steps).map(|k| prior.log_density(a + (k as f64 + 0.5) * h).exp()).sum();
+            let integral = (sum * h).ln();
+            assert!(
+                (integral - prior.log_normaliser()).abs() < 1e-6,
+                "{prior:?}: integrated {integral}, normaliser {}",
+                prior.log_normaliser()
+            );
+        }
+    }
 
     #[test]
     fn log_normal_is_centred_and_truncated() {

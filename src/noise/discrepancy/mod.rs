@@ -31,9 +31,9 @@ use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 
 use super::model::{
-    log_uniform, log_variance_term, normal_ln_pdf, DiscrepancySettings, Explained, Kernel,
-    NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise, Pool, Profile,
-    RunScorer, Transform, Whiten,
+    log_uniform, log_uniform_normaliser, log_variance_term, normal_ln_pdf, DiscrepancySettings,
+    Explained, Kernel, NoiseModel, NoiseOptions, NoiseSimulator, NoiseValues, Parameter, Pointwise,
+    Pool, Profile, RunScorer, Transform, Whiten,
 };
 use crate::data::RunData;
 use crate::model::LANES;
@@ -129,6 +129,11 @@ impl NoiseModel for Discrepancy {
         log_uniform(c[0], scales)
             + log_uniform(c[1], scales)
             + log_uniform(c[2], self.time_bounds(run))
+    }
+
+    fn log_prior_normaliser(&self, run: &RunData) -> f64 {
+        2.0 * log_uniform_normaliser(self.scale_bounds(run))
+            + log_uniform_normaliser(self.time_bounds(run))
     }
 
     /// σ from the samples; σ_δ and ℓ from about duration/ℓ independent
