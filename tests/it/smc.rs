@@ -260,8 +260,8 @@ fn the_same_seed_gives_the_same_run_whatever_the_threads() {
 /// posterior means agree with the ensemble sampler's alone within 0.2 sd
 /// (each mean's Monte Carlo error is about sd/√ESS ≈ 0.03 sd with ESS ≥
 /// 400 in each), and the log evidence agrees with an independent
-/// computation, the Laplace approximation's (ln p at the mode + d/2 ln 2π
-/// + ½ ln |Σ| + the same normalising constants), within 0.5 nat: the
+/// computation, the Laplace approximation's (ln p at the mode, plus
+/// d/2 ln 2π, ½ ln |Σ| and the same normalising constants), within 0.5 nat: the
 /// posterior is near Gaussian (2–3 temperatures from a Student-t about
 /// it), and the two differ by its departure from a Gaussian, not by
 /// Monte Carlo error (se ≈ 0.03).
