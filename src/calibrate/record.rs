@@ -127,6 +127,9 @@ pub struct SmcRecord {
     /// `evidence_of` says which.
     pub log_evidence: f64,
     pub evidence_of: String,
+    /// Whether it is a pseudo-evidence (of a tempered or adjusted
+    /// likelihood).
+    pub pseudo_evidence: bool,
     /// Its standard error from the incremental weights and from the spread
     /// of the populations' estimates.
     pub se_weights: f64,

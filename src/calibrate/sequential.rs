@@ -13,15 +13,18 @@ use crate::posterior::Posterior;
 use crate::sampler::smc::{self, Reference, SmcSettings};
 use crate::sampler::{Elliptical, Sampler, SamplerSettings};
 
+/// What an evidence of the records' own likelihood is of.
+const RECORDS_OWN: &str = "the records given the law, its priors and the noise model";
+
 /// What the log evidence is of: the records' own likelihood, or the
 /// tempered or adjusted one that allowed for their memory.
-fn evidence_of(posterior: &Posterior) -> String {
+fn evidence_of(posterior: &Posterior) -> &'static str {
     if posterior.likelihood.adjustment().is_some() {
-        "the adjusted likelihood (the residuals' memory allowed for): a pseudo-evidence, comparable only between calibrations adjusted alike".into()
+        "the adjusted likelihood (the residuals' memory allowed for): a pseudo-evidence, comparable only between calibrations adjusted alike"
     } else if (0..posterior.runs.len()).any(|j| posterior.weight(j) != 1.0) {
-        "the tempered likelihood (each run's log-likelihood weighted by its residuals' memory): a pseudo-evidence, comparable only between calibrations tempered alike".into()
+        "the tempered likelihood (each run's log-likelihood weighted by its residuals' memory): a pseudo-evidence, comparable only between calibrations tempered alike"
     } else {
-        "the records given the law, its priors and the noise model".into()
+        RECORDS_OWN
     }
 }
 
@@ -68,7 +71,8 @@ pub(super) fn from_laplace<'t>(
             .collect(),
         log_integral: run.evidence.log_z,
         log_evidence: run.evidence.log_z + posterior.log_evidence_offset(),
-        evidence_of: evidence_of(posterior),
+        evidence_of: evidence_of(posterior).to_string(),
+        pseudo_evidence: evidence_of(posterior) != RECORDS_OWN,
         se_weights: run.evidence.se_weights,
         se_spread: run.evidence.se_spread,
         per_population: run.evidence.per_population.clone(),

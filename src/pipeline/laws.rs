@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::laws::LawKind;
 use crate::predict::RunBands;
 use crate::store;
-use crate::validate::laws::{measures, standings, Kind, LawRow};
+use crate::validate::laws::{measures, standings, Kind, LawEvidence, LawRow};
 
 /// The study's folder in a run's `--out`.
 pub const FOLDER: &str = "laws";
@@ -55,12 +55,24 @@ impl Pipeline<'_> {
         let mut rows = Vec::new();
         let mut ids = Vec::new();
         let mut predictions: Vec<(LawKind, Vec<RunBands>)> = Vec::new();
+        let mut evidence = Vec::new();
         for &law in &options.sample.laws {
             let mut shown = Vec::new();
             for &c in &currents {
                 let dir = out.join(law.name()).join(current_tag(c));
                 let cal = store::folder::read(&dir)?;
                 let seconds = cal.record.seconds_start + cal.record.seconds_sampling;
+                if let Some(smc) = &cal.record.smc {
+                    evidence.push((
+                        law,
+                        c,
+                        LawEvidence {
+                            log_evidence: smc.log_evidence,
+                            se: smc.se_weights.max(smc.se_spread),
+                            pseudo: smc.pseudo_evidence,
+                        },
+                    ));
+                }
                 ids.push((
                     format!("{}/{}", law.name(), current_tag(c)),
                     cal.record.calibration_id.clone(),
@@ -88,7 +100,11 @@ impl Pipeline<'_> {
             }
             predictions.push((law, shown));
         }
-        let standings = if held_out { standings(&rows)? } else { Vec::new() };
+        let mut standings = if held_out { standings(&rows)? } else { Vec::new() };
+        for s in &mut standings {
+            s.evidence =
+                evidence.iter().find(|(l, c, _)| *l == s.law && *c == s.current_a).map(|e| e.2);
+        }
         store::laws::write(&study.join(store::laws::FILE), &rows, &ids)?;
         for line in crate::validate::laws::verdict(&standings) {
             self.note(&line);

@@ -60,14 +60,15 @@ pub fn write(r: &LawsReport) -> Result<PathBuf> {
         for line in verdict(r.standings) {
             page.para(&line);
         }
-        page.note("Held-out log predictive density judges a law's whole predictive distribution (its path and its noise) on tests it did not see; with residuals that keep memory (the report of each law's calibration says how much) every law's noise is taken as more certain than it is, so differences of a few standard errors may not survive a likelihood that allows for the memory. The marginal likelihood (evidence) of each law is not shown: the ensemble sampler does not estimate it.");
+        page.note("Held-out log predictive density judges a law's whole predictive distribution (its path and its noise) on tests it did not see; with residuals that keep memory (the report of each law's calibration says how much) every law's noise is taken as more certain than it is, so differences of a few standard errors may not survive a likelihood that allows for the memory. The log evidence (marginal likelihood) of each law is shown where its calibrations were sampled by sequential Monte Carlo (run with --sampler smc).");
     } else {
         page.para("No verdict without records held out.");
     }
     page.section("standings", "Standings");
     let header = [
         "current (A)", "rank", "law", "held-out elpd", "Δ elpd ± se", "nRMSE in sample",
-        "nRMSE held out", "held out in 95 % band", "band width / peak", "calibration (s)",
+        "nRMSE held out", "held out in 95 % band", "band width / peak", "log evidence ± se",
+        "calibration (s)",
     ];
     let rows: Vec<Vec<String>> = r
         .standings
@@ -87,6 +88,14 @@ pub fn write(r: &LawsReport) -> Result<PathBuf> {
                 format!("{:.1} %", 100.0 * s.nrmse_out),
                 format!("{:.1} %", 100.0 * s.inside_p95_out),
                 format!("{:.0} %", 100.0 * s.band_width_out),
+                s.evidence.map_or("—".into(), |e| {
+                    format!(
+                        "{} ± {}{}",
+                        num(e.log_evidence, 7),
+                        num(e.se, 2),
+                        if e.pseudo { " (pseudo)" } else { "" }
+                    )
+                }),
                 num(s.seconds, 3),
             ]
         })

@@ -149,6 +149,19 @@ pub struct Standing {
     pub seconds: f64,
     /// Rank at the current by held-out elpd (1: best).
     pub rank: usize,
+    /// The log evidence of the law's calibration at this current, its
+    /// standard error, and whether it is a pseudo-evidence (a likelihood
+    /// tempered or adjusted for the residuals' memory); where it was
+    /// sampled by sequential Monte Carlo (`--sampler smc`).
+    pub evidence: Option<LawEvidence>,
+}
+
+/// A law's log evidence at one current.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LawEvidence {
+    pub log_evidence: f64,
+    pub se: f64,
+    pub pseudo: bool,
 }
 
 /// The laws' standings, current by current (rank 1 the best held-out
@@ -221,6 +234,7 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     ),
                     seconds: ins.first().or(h.first()).map_or(0.0, |r| r.seconds),
                     rank: 0,
+                    evidence: None,
                 }
             })
             .collect();
@@ -245,7 +259,7 @@ pub fn verdict(standings: &[Standing]) -> Vec<String> {
         .map(|&c| {
             let at: Vec<&Standing> = standings.iter().filter(|s| s.current_a == c).collect();
             let first = at[0];
-            match at.get(1) {
+            let line = match at.get(1) {
                 None => format!("at {c} A only the {} law was calibrated", first.law.name()),
                 Some(second) => {
                     let gap = -second.elpd_diff;
@@ -264,9 +278,47 @@ pub fn verdict(standings: &[Standing]) -> Vec<String> {
                         100.0 * first.inside_p95_out
                     )
                 }
+            };
+            match evidence_sentence(&at) {
+                Some(sentence) => format!("{line}. {sentence}"),
+                None => line,
             }
         })
         .collect()
+}
+
+/// What the log evidence says of the laws at one current (`at`, ranked by
+/// held-out elpd), where every law has one: which leads and by how much,
+/// and whether that agrees with the held-out ranking, with why it may
+/// not.
+fn evidence_sentence(at: &[&Standing]) -> Option<String> {
+    let with: Vec<(&Standing, LawEvidence)> =
+        at.iter().map(|s| s.evidence.map(|e| (*s, e))).collect::<Option<Vec<_>>>()?;
+    if with.len() < 2 {
+        return None;
+    }
+    let mut by_evidence = with.clone();
+    by_evidence.sort_by(|a, b| b.1.log_evidence.total_cmp(&a.1.log_evidence));
+    let ((top, e1), (next, e2)) = (by_evidence[0], by_evidence[1]);
+    let gap = e1.log_evidence - e2.log_evidence;
+    let se = e1.se.hypot(e2.se);
+    let agrees = top.law == at[0].law;
+    let pseudo = with.iter().any(|(_, e)| e.pseudo);
+    Some(format!(
+        "By the log evidence (all the tests in sample, priors included) the {} law leads the {} law by {gap:.1} ± {se:.1} nats{}; {}",
+        top.law.name(),
+        next.law.name(),
+        if pseudo {
+            " (a pseudo-evidence: the likelihood allowed for the residuals' memory)"
+        } else {
+            ""
+        },
+        if agrees {
+            "the same law as the held-out ranking"
+        } else {
+            "not the held-out ranking's law: the evidence weighs how well the priors foresaw the fit and counts every sample as new information, while held-out tests judge prediction; with residuals that keep memory the evidence overstates the information in the records most"
+        }
+    ))
 }
 
 #[cfg(test)]
@@ -369,5 +421,37 @@ mod tests {
         let mut other = rows.clone();
         other[3].run = "t3".into();
         assert!(standings(&other).is_err());
+    }
+
+    /// The evidence sentence: only where every law has an evidence; the
+    /// gap and its se by hand (e₁ − e₂ = 12.5, √(0.3² + 0.4²) = 0.5);
+    /// whether it names the held-out ranking's law; pseudo said.
+    #[test]
+    fn the_verdict_adds_the_evidence_where_every_law_has_one() {
+        let rows = vec![
+            row(LawKind::BoucWen, "t1", Kind::HeldOut, -100.0),
+            row(LawKind::BoucWen, "t2", Kind::HeldOut, -200.0),
+            row(LawKind::Spencer, "t1", Kind::HeldOut, -110.0),
+            row(LawKind::Spencer, "t2", Kind::HeldOut, -180.0),
+        ];
+        let mut s = standings(&rows).unwrap();
+        assert!(!verdict(&s)[0].contains("log evidence"));
+        s[0].evidence = Some(LawEvidence { log_evidence: -1000.0, se: 0.3, pseudo: false });
+        assert!(!verdict(&s)[0].contains("log evidence"), "one law alone has an evidence");
+        s[1].evidence = Some(LawEvidence { log_evidence: -1012.5, se: 0.4, pseudo: false });
+        let v = verdict(&s);
+        assert!(
+            v[0].contains("the spencer law leads the bouc-wen law by 12.5 ± 0.5 nats; the same law as the held-out ranking"),
+            "{v:?}"
+        );
+        s[1].evidence = Some(LawEvidence { log_evidence: -990.0, se: 0.4, pseudo: true });
+        let v = verdict(&s);
+        assert!(
+            v[0].contains(
+                "the bouc-wen law leads the spencer law by 10.0 ± 0.5 nats (a pseudo-evidence"
+            ),
+            "{v:?}"
+        );
+        assert!(v[0].contains("not the held-out ranking's law"), "{v:?}");
     }
 }
