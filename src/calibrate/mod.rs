@@ -252,13 +252,14 @@ pub fn sample(
                 sampler_settings.clone(),
                 s.walkers * s.ensembles,
                 &control,
-                if smc { &mut [] } else { observers },
+                if smc { &mut [] } else { &mut *observers },
             )?;
             if !smc {
                 return Ok((probed, None));
             }
-            let (sampler, record) =
-                sequential::from_laplace(posterior, &probed.laplace, &probed.sampler.settings)?;
+            let (sampler, record) = sequential::from_laplace(
+                posterior, &probed.laplace, &probed.sampler.settings, observers,
+            )?;
             Ok((probe::Probed { sampler, stepping_seconds: 0.0, ..probed }, Some(record)))
         };
     let (probed, smc_record) = match resume_from {

@@ -11,7 +11,7 @@ use super::settings::SMC_REFERENCE_DF;
 use crate::error::Result;
 use crate::posterior::Posterior;
 use crate::sampler::smc::{self, Reference, SmcSettings};
-use crate::sampler::{Elliptical, Sampler, SamplerSettings};
+use crate::sampler::{Elliptical, Observer, Sampler, SamplerSettings};
 
 /// What an evidence of the records' own likelihood is of.
 const RECORDS_OWN: &str = "the records given the law, its priors and the noise model";
@@ -35,6 +35,7 @@ pub(super) fn from_laplace<'t>(
     posterior: &'t Posterior,
     laplace: &Elliptical,
     settings: &SamplerSettings,
+    observers: &mut [&mut dyn Observer],
 ) -> Result<(Sampler<'t, Posterior>, SmcRecord)> {
     let clock = Instant::now();
     let reference = Reference { dist: laplace.clone(), df: Some(SMC_REFERENCE_DF) };
@@ -49,7 +50,11 @@ pub(super) fn from_laplace<'t>(
         posterior,
         &reference,
         &smc_settings,
-        &mut |_, _| {},
+        &mut |population, stage| {
+            for o in observers.iter_mut() {
+                o.tempered(population, stage);
+            }
+        },
         &crate::interrupt::requested,
     )?;
     let chains = run.chains();

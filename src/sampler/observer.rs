@@ -7,6 +7,7 @@ use super::chains::Chains;
 use super::checkpoint;
 use super::diagnostics::Diagnostics;
 use super::settings::SamplerSettings;
+use super::smc::Stage;
 use super::stopping::Waiting;
 use crate::error::{Error, Result};
 
@@ -48,6 +49,9 @@ pub trait Observer {
     fn finished(&mut self, _state: &RunState) -> Result<()> {
         Ok(())
     }
+    /// After each temperature of sequential Monte Carlo before the run
+    /// (population `population`, from 0).
+    fn tempered(&mut self, _population: usize, _stage: &Stage) {}
 }
 
 /// Saves the sampler's state every `every` steps and at the end; when
@@ -177,6 +181,20 @@ impl Observer for Progress {
             _ => eprintln!("{line}"),
         }
     }
+    fn tempered(&mut self, population: usize, stage: &Stage) {
+        print_line(
+            &self.bar,
+            &format!(
+                "  sequential Monte Carlo, population {}: β = {:.4} (ESS {:.0} kept), {} mutation steps, acceptance {:.2}",
+                population + 1,
+                stage.beta,
+                stage.ess,
+                stage.steps,
+                stage.acceptance
+            ),
+        );
+    }
+
     fn finished(&mut self, _state: &RunState) -> Result<()> {
         if let Some(bar) = self.bar.take() {
             bar.finish_and_clear();
