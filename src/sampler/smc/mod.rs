@@ -43,6 +43,14 @@ const RESAMPLE_STREAM: u64 = u64::MAX - 11;
 /// Stream that seeds a temperature's mutation.
 const MUTATE_STREAM: u64 = u64::MAX - 12;
 
+/// The smallest temperature at which ln p is recovered from ln π_β and
+/// ln r ([`Tempered::target_part`]) rather than evaluated again: dividing
+/// by β magnifies the rounding of ln π_β (about 1e-16 of its size) by
+/// 1/β, 4e-8 nats for a log-density of 2e5 at this β, while a first step
+/// forced tiny by particles whose density is astronomically small (as
+/// extreme parameters of a law make it) would turn it into nonsense.
+const RECOVER_FROM: f64 = 1e-3;
+
 /// What a sequential Monte Carlo run is.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -312,13 +320,17 @@ fn population<T: LogDensity>(
         }
         x = sampler.chains.last_positions().to_vec();
         log_r = x.chunks_exact(d).map(|xi| reference.log_density(xi)).collect();
-        log_p = sampler
-            .chains
-            .last_log_prob()
-            .iter()
-            .zip(&log_r)
-            .map(|(lt, lr)| tempered.target_part(*lt, *lr))
-            .collect();
+        log_p = if beta >= RECOVER_FROM {
+            sampler
+                .chains
+                .last_log_prob()
+                .iter()
+                .zip(&log_r)
+                .map(|(lt, lr)| tempered.target_part(*lt, *lr))
+                .collect()
+        } else {
+            log_densities(target, &x)
+        };
         let stage = Stage {
             beta,
             ess,
