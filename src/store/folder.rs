@@ -92,6 +92,7 @@ pub fn write(dir: &Path, cal: &mut Calibration) -> Result<()> {
         (cal.record.burn_in, cal.record.steps, cal.sample.chains.chains()),
         &cal.intervals_hold_for(),
         &cal.record.independent,
+        cal.record.smc.as_ref(),
         id,
     )?;
     if cal.is_current_law() {

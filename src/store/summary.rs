@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
+use crate::calibrate::SmcRecord;
 use crate::error::Result;
 use crate::posterior::laplace::IntervalRow;
 use crate::posterior::SummaryRow;
@@ -14,19 +15,27 @@ use crate::sampler::ParameterDiagnostics;
 /// their intervals hold for, and where the likelihood allowed for the
 /// residuals' memory, `independent` holds the same records' intervals
 /// had the residuals been taken as independent (`independent_sd`, `…_q05`,
-/// `…_q50`, `…_q95`; NaN for a coordinate it lacks).
+/// `…_q50`, `…_q95`; NaN for a coordinate it lacks); where the calibration
+/// was sampled by sequential Monte Carlo, `evidence` puts its log
+/// evidence in the file's metadata ([`LOG_EVIDENCE`]).
 pub fn write(
     path: &Path,
     rows: &[SummaryRow],
     (burn_in, steps, walkers): (usize, usize, usize),
     holds_for: &str,
     independent: &[IntervalRow],
+    evidence: Option<&SmcRecord>,
     id: &str,
 ) -> Result<()> {
     let n = rows.len();
-    let mut t = Table::new()
-        .derived_from(id)
-        .str("parameter", rows.iter().map(|r| r.parameter.clone()).collect());
+    let mut t = Table::new().derived_from(id);
+    if let Some(e) = evidence {
+        t = t
+            .meta(LOG_EVIDENCE, &e.log_evidence.to_string())
+            .meta(LOG_EVIDENCE_SE, &e.se_weights.max(e.se_spread).to_string())
+            .meta(EVIDENCE_OF, &e.evidence_of);
+    }
+    let mut t = t.str("parameter", rows.iter().map(|r| r.parameter.clone()).collect());
     for (name, values) in statistics(rows) {
         t = t.f64(name, values);
     }
@@ -49,6 +58,13 @@ pub fn write(
     }
     write_parquet(path, t)
 }
+
+/// The metadata keys of the log evidence where the calibration was sampled
+/// by sequential Monte Carlo (`calibration.toml`'s `[smc]`): its value,
+/// its standard error (the larger of the two) and what it is of.
+pub const LOG_EVIDENCE: &str = "mrbp.log_evidence";
+pub const LOG_EVIDENCE_SE: &str = "mrbp.log_evidence_se";
+pub const EVIDENCE_OF: &str = "mrbp.evidence_of";
 
 /// How an `independent_*` column reads an approximation's interval row.
 type Interval = fn(&IntervalRow) -> f64;

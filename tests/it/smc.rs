@@ -351,3 +351,34 @@ fn a_first_step_forced_tiny_keeps_the_evidence() {
     // Φ(4) − Φ(−4) = 1 − 6.334e-5
     assert_evidence(&run, 2.0 + 2.0 * LN_2PI + (1.0 - 6.334e-5f64).ln(), "walled Gaussian");
 }
+
+/// `mrbp sample --sampler smc`: config.toml keeps the method, the progress
+/// tells each temperature, calibration.toml's `[smc]` has the log evidence,
+/// and summary.parquet's metadata the same value; an ensemble calibration
+/// has neither.
+#[test]
+fn sample_with_smc_writes_the_evidence_into_both_files() {
+    use crate::common::{arg, ok, said, synth_small};
+    use mrbp::store::parquet::parquet_meta;
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = synth_small(dir.path(), "1.0");
+    let out = dir.path().join("smc");
+    let o = ok(&["sample", arg(&manifest), "--sampler", "smc", "--out", arg(&out)]);
+    assert!(said(&o).contains("sequential Monte Carlo, population 4: β = 1.0000"), "{}", said(&o));
+    let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(config.contains("method = \"smc\""), "{config}");
+    let record: toml::Value =
+        toml::from_str(&std::fs::read_to_string(out.join("calibration.toml")).unwrap()).unwrap();
+    let evidence = record["smc"]["log_evidence"].as_float().unwrap();
+    let summary = out.join("summary.parquet");
+    let meta = parquet_meta(&summary, mrbp::store::summary::LOG_EVIDENCE).unwrap().unwrap();
+    assert_eq!(meta.parse::<f64>().unwrap(), evidence);
+    assert!(parquet_meta(&summary, mrbp::store::summary::EVIDENCE_OF).unwrap().is_some());
+    let plain = dir.path().join("ensemble");
+    ok(&["sample", arg(&manifest), "--out", arg(&plain)]);
+    let record = std::fs::read_to_string(plain.join("calibration.toml")).unwrap();
+    assert!(!record.contains("[smc]"));
+    assert!(parquet_meta(&plain.join("summary.parquet"), mrbp::store::summary::LOG_EVIDENCE)
+        .unwrap()
+        .is_none());
+}
