@@ -297,22 +297,28 @@ fn evidence_sentence(at: &[&Standing]) -> Option<String> {
     if with.len() < 2 {
         return None;
     }
+    let pseudo: Vec<String> =
+        with.iter().filter(|(_, e)| e.pseudo).map(|(s, _)| s.law.name()).collect();
+    if !pseudo.is_empty() {
+        // each law's adjustment (or tempering) is its own: their
+        // pseudo-evidences do not compare, with one another or with an
+        // evidence proper
+        return Some(format!(
+            "The log evidence does not rank these laws: the likelihood of the {} law{} allowed for the residuals' memory, which makes it a pseudo-evidence of that law's own adjustment (--memory independent gives evidences that compare, of a likelihood that takes the residuals as independent)",
+            pseudo.join(", "),
+            if pseudo.len() > 1 { "s" } else { "" }
+        ));
+    }
     let mut by_evidence = with.clone();
     by_evidence.sort_by(|a, b| b.1.log_evidence.total_cmp(&a.1.log_evidence));
     let ((top, e1), (next, e2)) = (by_evidence[0], by_evidence[1]);
     let gap = e1.log_evidence - e2.log_evidence;
     let se = e1.se.hypot(e2.se);
     let agrees = top.law == at[0].law;
-    let pseudo = with.iter().any(|(_, e)| e.pseudo);
     Some(format!(
-        "By the log evidence (all the tests in sample, priors included) the {} law leads the {} law by {gap:.1} ± {se:.1} nats{}; {}",
+        "By the log evidence (all the tests in sample, priors included) the {} law leads the {} law by {gap:.1} ± {se:.2} nats; {}",
         top.law.name(),
         next.law.name(),
-        if pseudo {
-            " (a pseudo-evidence: the likelihood allowed for the residuals' memory)"
-        } else {
-            ""
-        },
         if agrees {
             "the same law as the held-out ranking"
         } else {
@@ -425,7 +431,8 @@ mod tests {
 
     /// The evidence sentence: only where every law has an evidence; the
     /// gap and its se by hand (e₁ − e₂ = 12.5, √(0.3² + 0.4²) = 0.5);
-    /// whether it names the held-out ranking's law; pseudo said.
+    /// whether it names the held-out ranking's law; no ranking where a
+    /// law's is a pseudo-evidence.
     #[test]
     fn the_verdict_adds_the_evidence_where_every_law_has_one() {
         let rows = vec![
@@ -441,17 +448,21 @@ mod tests {
         s[1].evidence = Some(LawEvidence { log_evidence: -1012.5, se: 0.4, pseudo: false });
         let v = verdict(&s);
         assert!(
-            v[0].contains("the spencer law leads the bouc-wen law by 12.5 ± 0.5 nats; the same law as the held-out ranking"),
+            v[0].contains("the spencer law leads the bouc-wen law by 12.5 ± 0.50 nats; the same law as the held-out ranking"),
             "{v:?}"
         );
-        s[1].evidence = Some(LawEvidence { log_evidence: -990.0, se: 0.4, pseudo: true });
+        s[1].evidence = Some(LawEvidence { log_evidence: -990.0, se: 0.4, pseudo: false });
         let v = verdict(&s);
         assert!(
-            v[0].contains(
-                "the bouc-wen law leads the spencer law by 10.0 ± 0.5 nats (a pseudo-evidence"
-            ),
+            v[0].contains("the bouc-wen law leads the spencer law by 10.0 ± 0.50 nats"),
             "{v:?}"
         );
         assert!(v[0].contains("not the held-out ranking's law"), "{v:?}");
+        s[1].evidence = Some(LawEvidence { log_evidence: -990.0, se: 0.4, pseudo: true });
+        let v = verdict(&s);
+        assert!(
+            v[0].contains("does not rank these laws: the likelihood of the bouc-wen law allowed"),
+            "{v:?}"
+        );
     }
 }
