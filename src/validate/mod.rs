@@ -337,9 +337,14 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         let kept = full.campaign.filtered(|r| r.id() != left_out.id());
         let posterior = settings.posterior(&kept, target.predict.integrator);
         let start = weighted_mean_theta(full, &posterior, &positions, &reweighted.weights);
-        let posterior = match adjusted {
+        // adjusted: searched from the centre, the independent likelihood's
+        // mode, where the adjusted likelihood is evaluated at the point
+        // itself (from the weighted draws' mean its point x* = c + C (x − c)
+        // can lie where the law cannot be integrated: B-P on Spencer's
+        // records without their 200 rpm run)
+        let (posterior, start) = match adjusted {
             true => recentred(&posterior, &start).ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the mode of the independent likelihood was not found", left_out.id())))?,
-            false => posterior,
+            false => (posterior, start),
         };
         let map = map::basin(&posterior, &start).ok_or_else(|| {
             Error::Compute(format!(
@@ -385,11 +390,11 @@ const HOPELESS_K: f64 = 1.5;
 /// the adjusted likelihood's peak lies C⁻¹ times as far from the centre as
 /// the likelihood's own, so a held-out posterior centred on the full
 /// calibration's mode would be pushed away by the run left out's pull.
-fn recentred(post: &Posterior, start: &[f64]) -> Option<Posterior> {
+fn recentred(post: &Posterior, start: &[f64]) -> Option<(Posterior, Vec<f64>)> {
     let plain = post.without_adjustment();
     let map = map::basin(&plain, start)?;
     let mode = laplace::mode(&plain, &map)?;
-    Some(post.recentred(&mode.x))
+    Some((post.recentred(&mode.x), mode.x))
 }
 
 /// Importance sampling from the held-out posterior's Laplace approximation
