@@ -3,11 +3,12 @@
 
 use std::path::PathBuf;
 
+use serde::{Deserialize, Serialize};
+
 use super::chains::Chains;
 use super::checkpoint;
 use super::diagnostics::Diagnostics;
 use super::settings::SamplerSettings;
-use super::smc::Stage;
 use super::stopping::Waiting;
 use crate::error::{Error, Result};
 
@@ -23,6 +24,21 @@ pub struct RunState<'a> {
     pub min_ess: Option<f64>,
     /// Proposals accepted in the last step.
     pub accepted: usize,
+}
+
+/// One temperature of a population of sequential Monte Carlo
+/// ([`super::smc`]), as observers are told it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage {
+    /// The temperature reached.
+    pub beta: f64,
+    /// The effective sample size of the weights that reached it.
+    pub ess: f64,
+    /// ln of their mean: this temperature's factor of the evidence.
+    pub log_increment: f64,
+    /// The mutation's steps and its mean acceptance rate.
+    pub steps: usize,
+    pub acceptance: f64,
 }
 
 /// Something that watches a sampler run. Every method has a default that

@@ -22,6 +22,7 @@ pub mod evidence;
 pub mod resample;
 pub mod tempering;
 
+pub use super::observer::Stage;
 pub use evidence::Evidence;
 pub use tempering::{Reference, Tempered};
 
@@ -123,20 +124,6 @@ impl SmcSettings {
     fn mutation(&self, seed: u64) -> SamplerSettings {
         SamplerSettings { walkers: self.particles, ensembles: 1, moves: self.moves.clone(), seed }
     }
-}
-
-/// One temperature of a population.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage {
-    /// The temperature reached.
-    pub beta: f64,
-    /// The effective sample size of the weights that reached it.
-    pub ess: f64,
-    /// ln of their mean: this temperature's factor of the evidence.
-    pub log_increment: f64,
-    /// The mutation's steps and its mean acceptance rate.
-    pub steps: usize,
-    pub acceptance: f64,
 }
 
 /// A population carried to β = 1.
