@@ -64,6 +64,7 @@ pub(super) fn from_laplace<'t>(
         .iter()
         .map(|p| settings.walkers * (1 + p.stages.iter().map(|s| s.steps).sum::<usize>()))
         .sum();
+    let of = evidence_of(posterior);
     let record = SmcRecord {
         reference: format!(
             "Student-t ({SMC_REFERENCE_DF} degrees of freedom) about the Laplace approximation at the mode"
@@ -76,8 +77,8 @@ pub(super) fn from_laplace<'t>(
             .collect(),
         log_integral: run.evidence.log_z,
         log_evidence: run.evidence.log_z + posterior.log_evidence_offset(),
-        evidence_of: evidence_of(posterior).to_string(),
-        pseudo_evidence: evidence_of(posterior) != RECORDS_OWN,
+        evidence_of: of.to_string(),
+        pseudo_evidence: of != RECORDS_OWN,
         se_weights: run.evidence.se_weights,
         se_spread: run.evidence.se_spread,
         per_population: run.evidence.per_population.clone(),

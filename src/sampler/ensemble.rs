@@ -152,25 +152,7 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 initial[c]
             )));
         }
-        Ok(Sampler {
-            target,
-            chains: Chains {
-                dim: d,
-                ensembles: settings.ensembles,
-                walkers: settings.walkers,
-                positions,
-                log_prob,
-                accepted: vec![false; nc],
-            },
-            history: (0, vec![Learned::default(); settings.ensembles]),
-            reference: None,
-            settings,
-            announced: false,
-            stopping: Stopping::default(),
-            free: free_coordinates(d, &blocks),
-            blocks,
-            memos,
-        })
+        Ok(Sampler::assemble(target, settings, positions, log_prob, blocks, memos))
     }
 
     /// A sampler whose step 0 is `positions` (one after another, ensemble
@@ -197,7 +179,22 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
                 log_prob.len()
             )));
         }
-        Ok(Sampler {
+        Ok(Sampler::assemble(target, settings, positions, log_prob, Vec::new(), Vec::new()))
+    }
+
+    /// A fresh run whose step 0 is `positions` with their log-densities,
+    /// the target's `blocks` updated on their own (none: every coordinate
+    /// free) from the walkers' `memos`.
+    fn assemble(
+        target: &'t T,
+        settings: SamplerSettings,
+        positions: Vec<f64>,
+        log_prob: Vec<f64>,
+        blocks: Vec<Vec<usize>>,
+        memos: Vec<Vec<f64>>,
+    ) -> Self {
+        let (d, nc) = (target.dim(), settings.walkers * settings.ensembles);
+        Sampler {
             target,
             chains: Chains {
                 dim: d,
@@ -212,10 +209,10 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
             settings,
             announced: false,
             stopping: Stopping::default(),
-            free: (0..d).collect(),
-            blocks: Vec::new(),
-            memos: Vec::new(),
-        })
+            free: free_coordinates(d, &blocks),
+            blocks,
+            memos,
+        }
     }
 
     /// A sampler restored from a checkpoint (see [`super::observer::Checkpointer`]).

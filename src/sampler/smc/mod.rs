@@ -96,12 +96,15 @@ impl Default for SmcSettings {
 impl SmcSettings {
     /// Checks the settings against a target of `dim` coordinates.
     pub fn check(&self, dim: usize) -> Result<()> {
-        self.mutation(0).check(dim).map_err(|e| match e {
-            Error::Usage(m) => Error::Usage(
-                m.replace("--walkers: walkers per ensemble", "particles per population"),
-            ),
-            other => other,
-        })?;
+        if !self.particles.is_multiple_of(2) || self.particles < 2 * dim.max(2) {
+            return Err(Error::Usage(format!(
+                "particles per population must be even and at least 2 × dimension = {}; got {}",
+                2 * dim.max(2),
+                self.particles
+            )));
+        }
+        // the moves, against a population that passed the test above
+        self.mutation(0).check(dim)?;
         if self.populations == 0 {
             return Err(Error::Usage("at least one population is needed".into()));
         }
@@ -111,10 +114,11 @@ impl SmcSettings {
                 self.ess_fraction
             )));
         }
-        if !(self.unmoved > 0.0 && self.unmoved < 1.0) || self.max_steps == 0 {
+        let share = |v: f64| v > 0.0 && v < 1.0;
+        if !share(self.unmoved) || !share(self.correlation) || self.max_steps == 0 {
             return Err(Error::Usage(format!(
-                "a mutation needs a chance in (0, 1) and at least one step; got {} and {}",
-                self.unmoved, self.max_steps
+                "a mutation needs a chance and a correlation in (0, 1) and at least one step; got {}, {} and {}",
+                self.unmoved, self.correlation, self.max_steps
             )));
         }
         Ok(())
