@@ -231,6 +231,21 @@ class Calibration:
         return self._inner.calibration_id
 
     @property
+    def log_evidence(self) -> Optional[dict]:
+        """Where the calibration was sampled by sequential Monte Carlo
+        (``sampler="smc"``): ``{"log_evidence", "se", "of", "pseudo"}``, the
+        log evidence ln p(records | law, priors, noise model), its standard
+        error, what it is of, and whether it is a pseudo-evidence (of a
+        likelihood tempered or adjusted for the residuals' memory:
+        comparable only between calibrations that allowed for it alike).
+        None for the ensemble sampler alone."""
+        found = self._inner.log_evidence
+        if found is None:
+            return None
+        value, se, of, pseudo = found
+        return {"log_evidence": value, "se": se, "of": of, "pseudo": pseudo}
+
+    @property
     def max_r_hat(self) -> float:
         return self._inner.max_r_hat
 
@@ -373,6 +388,7 @@ def calibrate(
     resume: bool = False,
     memory: Optional[str] = None,
     law: Optional[str] = None,
+    sampler: Optional[str] = None,
 ) -> Calibration:
     """Calibrates the runs of ``campaign`` at ``current`` (or all runs with
     ``model="current-law"``), as ``mrbp sample`` does with the same options:
@@ -382,6 +398,9 @@ def calibrate(
         'bp-viscous', 'bouc-wen', 'spencer', 'bingham' (docs/calibration.md,
         "Damper laws");
     noise: 'gaussian' (default), 'student-t', 'ar1', 'discrepancy';
+    sampler: 'ensemble' (default) or 'smc', as ``--sampler``: tempered
+        sequential Monte Carlo first, which gives the log evidence
+        (:attr:`Calibration.log_evidence`);
     memory: 'auto' (default: independent where the MAP residuals have no
         memory, else 'adjusted'), 'independent', 'tempered' (each run's
         log-likelihood divided by its residuals' integrated autocorrelation
@@ -425,6 +444,7 @@ def calibrate(
         resume=resume,
         memory=memory,
         law=law,
+        sampler=sampler,
     )
     return Calibration(inner)
 

@@ -8,7 +8,7 @@ use clap::ValueEnum;
 use pyo3::exceptions::{PyKeyboardInterrupt, PyValueError};
 use pyo3::prelude::*;
 
-use mrbp::calibrate::settings::Overrides;
+use mrbp::calibrate::settings::{Overrides, SamplerMethod};
 use mrbp::data::same_current;
 use mrbp::error::Error;
 use mrbp::posterior::ModelKind;
@@ -113,7 +113,7 @@ impl Observer for Python_ {
 /// state to `checkpoint` if given (every 100 steps too), which `resume`
 /// continues exactly. `progress` is a callable told of every step.
 #[pyfunction]
-#[pyo3(signature = (campaign, current = None, model = None, noise = None, seed = None, steps = None, walkers = None, ensembles = None, substeps = None, config = None, exact_input = false, progress = None, checkpoint = None, resume = false, memory = None, law = None))]
+#[pyo3(signature = (campaign, current = None, model = None, noise = None, seed = None, steps = None, walkers = None, ensembles = None, substeps = None, config = None, exact_input = false, progress = None, checkpoint = None, resume = false, memory = None, law = None, sampler = None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn calibrate(
     py: Python<'_>,
@@ -133,6 +133,7 @@ pub(crate) fn calibrate(
     resume: bool,
     memory: Option<String>,
     law: Option<String>,
+    sampler: Option<String>,
 ) -> PyResult<Calibration> {
     let value = |v: Option<String>| v.map(|s| s.trim().to_string()).filter(|s| !s.is_empty());
     let model = match value(model) {
@@ -168,9 +169,16 @@ pub(crate) fn calibrate(
         })?],
         None => Vec::new(),
     };
+    let sampler = match value(sampler) {
+        Some(m) => Some(SamplerMethod::from_str(&m, true).map_err(|_| {
+            PyValueError::new_err(format!("sampler {m:?}: one of 'ensemble', 'smc'"))
+        })?),
+        None => None,
+    };
     let overrides = Overrides {
         config,
         law,
+        sampler,
         model,
         walkers,
         ensembles,

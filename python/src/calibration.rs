@@ -97,6 +97,17 @@ impl Calibration {
         self.inner.record.calibration_id.clone()
     }
 
+    /// The log evidence, its standard error, what it is of and whether it
+    /// is a pseudo-evidence, where sequential Monte Carlo sampled it.
+    #[getter]
+    fn log_evidence(&self) -> Option<(f64, f64, String, bool)> {
+        self.inner
+            .record
+            .smc
+            .as_ref()
+            .map(|e| (e.log_evidence, e.se(), e.evidence_of.clone(), e.pseudo_evidence))
+    }
+
     /// The largest R̂ of the summary.
     #[getter]
     fn max_r_hat(&self) -> f64 {

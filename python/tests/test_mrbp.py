@@ -73,6 +73,26 @@ def test_a_damper_law_as_the_command_line(campaign, tmp_path):
     pd.testing.assert_frame_equal(cal.draws, chains, check_exact=True, check_dtype=False)
 
 
+def test_sequential_monte_carlo_as_the_command_line(campaign, tmp_path, calibration):
+    # sampler="smc" is --sampler smc: the same chains, bit for bit, and the
+    # same log evidence as calibration.toml's [smc] and summary.parquet's
+    # metadata; the ensemble sampler alone has none
+    cal = mrbp.calibrate(campaign, current=1.0, seed=3, steps=10, sampler="smc")
+    cli("sample", MANIFEST, "--out", tmp_path, "--current", 1.0, "--seed", 3, "--steps", 10, "--sampler", "smc")
+    chains = pd.read_parquet(tmp_path / "chains.parquet")
+    pd.testing.assert_frame_equal(cal.draws, chains, check_exact=True, check_dtype=False)
+    import pyarrow.parquet as pq
+    meta = pq.read_schema(tmp_path / "summary.parquet").metadata
+    evidence = cal.log_evidence
+    assert evidence["log_evidence"] == float(meta[b"mrbp.log_evidence"])
+    assert evidence["se"] == float(meta[b"mrbp.log_evidence_se"])
+    assert evidence["of"] == meta[b"mrbp.evidence_of"].decode()
+    assert evidence["pseudo"] is False
+    assert calibration.log_evidence is None
+    with pytest.raises(ValueError, match="sampler 'nuts': one of 'ensemble', 'smc'"):
+        mrbp.calibrate(campaign, current=1.0, steps=10, sampler="nuts")
+
+
 def test_saved_folder_is_the_command_lines(calibration, tmp_path):
     folder = tmp_path / "I1.0A"
     calibration.save(folder)

@@ -67,7 +67,8 @@ pub(super) fn walkers_start<'t>(
     loop {
         let init = map::initial_walkers(posterior, &laplace, count, settings.seed);
         let mut sampler =
-            Sampler::new(posterior, settings.clone(), &init)?.with_reference(laplace.clone());
+            Sampler::from_state(posterior, settings.clone(), init.positions, init.log_prob)?
+                .with_reference(laplace.clone());
         let spread = misfit(posterior, &sampler.chains, &laplace);
         if let Some(moves) = far(spread).and_then(|_| moves_far_from_laplace(&settings.moves)) {
             sampler.settings.moves = moves;

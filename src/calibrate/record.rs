@@ -144,6 +144,35 @@ pub struct SmcRecord {
     pub seconds: f64,
 }
 
+impl SmcRecord {
+    /// Its larger standard error (the weights', the populations' spread).
+    pub fn se(&self) -> f64 {
+        self.se_weights.max(self.se_spread)
+    }
+
+    /// One sentence for the printed summary and the report: the ladder it
+    /// climbed, the log evidence with its standard error, what that is of.
+    pub fn summary(&self) -> String {
+        let rungs: Vec<usize> = self.temperatures.iter().map(Vec::len).collect();
+        let (lo, hi) =
+            (rungs.iter().copied().min().unwrap_or(0), rungs.iter().copied().max().unwrap_or(0));
+        let ladder = if lo == hi { format!("{lo}") } else { format!("{lo}–{hi}") };
+        let steps: usize = self.mutation_steps.iter().flatten().sum();
+        format!(
+            "sequential Monte Carlo from {}: {} population(s), {ladder} temperature(s) each, {steps} mutation steps in all, {} log-densities, {:.1} s; log evidence {:.2} ± {:.2} (standard error: weights {:.2}, populations' spread {:.2}), of {}",
+            self.reference,
+            self.per_population.len(),
+            self.evaluations,
+            self.seconds,
+            self.log_evidence,
+            self.se(),
+            self.se_weights,
+            self.se_spread,
+            self.evidence_of
+        )
+    }
+}
+
 /// A name for a new calibration: when and by which process it was made.
 fn new_calibration_id() -> String {
     let nanos = std::time::SystemTime::now()

@@ -105,11 +105,10 @@ pub enum SamplerMethod {
     /// The ensemble sampler from walkers about the Laplace approximation.
     #[default]
     Ensemble,
-    /// Tempered sequential Monte Carlo from the Laplace approximation
-    /// (a Student-t, [`SMC_REFERENCE_DF`]) to the posterior, each ensemble
-    /// a population ([`crate::sampler::smc`]); the ensemble sampler then
-    /// continues from its particles until converged. Gives the log
-    /// evidence.
+    /// Tempered sequential Monte Carlo from a Student-t (5 degrees of
+    /// freedom) about the Laplace approximation to the posterior, each
+    /// ensemble a population; the ensemble sampler then continues from its
+    /// particles until converged. Gives the log evidence.
     Smc,
 }
 

@@ -68,7 +68,7 @@ impl Pipeline<'_> {
                         c,
                         LawEvidence {
                             log_evidence: smc.log_evidence,
-                            se: smc.se_weights.max(smc.se_spread),
+                            se: smc.se(),
                             pseudo: smc.pseudo_evidence,
                         },
                     ));

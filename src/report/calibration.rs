@@ -9,8 +9,8 @@ use super::adequacy;
 use super::figures::{self, Figures};
 use super::html::{esc, num, Mark, Page};
 use crate::atomic;
-use crate::calibrate::Calibration;
 use crate::calibrate::CONFOUNDING_RATIO;
+use crate::calibrate::{Calibration, SmcRecord};
 use crate::data::{current_tag, Campaign};
 use crate::error::{Error, Result};
 use crate::model::PARAM_NAMES;
@@ -91,6 +91,9 @@ pub fn write(r: &CalibrationReport) -> Result<PathBuf> {
         .chain(&r.cal.record.confounding)
     {
         page.note(w);
+    }
+    if let Some(smc) = &r.cal.record.smc {
+        smc_section(&mut page, smc);
     }
     coverage_section(&mut page, r);
     adequacy::section(
@@ -395,6 +398,39 @@ fn posterior_section(page: &mut Page, cal: &Calibration) {
         })
         .collect();
     page.table(&["parameter", "sd", "q05", "q50", "q95", "widened ×"], &rows);
+}
+
+/// What sequential Monte Carlo did (`--sampler smc`): its ladder per
+/// population and the log evidence each population estimated.
+fn smc_section(page: &mut Page, smc: &SmcRecord) {
+    page.section("smc", "Sequential Monte Carlo and the log evidence");
+    page.para(&format!("{}.", upper_first(&smc.summary())));
+    page.para("Each population climbed its own ladder of temperatures from the reference (β = 0) to the posterior (β = 1), moved by the ensemble sampler at each; the evidence is the mean of the populations' estimates, and its standard error the larger of what the weights and what the populations' spread say. The ensemble sampler then continued from the final particles (the posterior summary above).");
+    let offset = smc.log_evidence - smc.log_integral;
+    let rows: Vec<Vec<String>> = smc
+        .temperatures
+        .iter()
+        .zip(&smc.mutation_steps)
+        .zip(&smc.per_population)
+        .enumerate()
+        .map(|(i, ((betas, steps), log_z))| {
+            let ladder: Vec<String> = betas.iter().map(|b| format!("{b:.3}")).collect();
+            vec![
+                format!("{}", i + 1),
+                betas.len().to_string(),
+                esc(&ladder.join(", ")),
+                steps.iter().sum::<usize>().to_string(),
+                format!("{:.2}", log_z + offset),
+            ]
+        })
+        .collect();
+    page.table(&["population", "temperatures", "β", "mutation steps", "its log evidence"], &rows);
+}
+
+/// `text` with its first letter in upper case.
+fn upper_first(text: &str) -> String {
+    let mut chars = text.chars();
+    chars.next().map_or(String::new(), |c| c.to_uppercase().chain(chars).collect())
 }
 
 fn coverage_section(page: &mut Page, r: &CalibrationReport) {

@@ -197,6 +197,9 @@ pub fn calibration(cal: &Calibration) -> String {
     for w in rec.warnings.iter().chain(&rec.model_warnings).chain(&rec.confounding) {
         row!(out, "warning: {w}");
     }
+    if let Some(smc) = &rec.smc {
+        row!(out, "{}", smc.summary());
+    }
     row!(out, "wall time: {seconds:.1} s (identification, MAP, step rule and walkers' start {:.1} s, sampling {:.1} s)", rec.seconds_start, rec.seconds_sampling);
     out
 }

@@ -32,7 +32,7 @@ pub fn write(
     if let Some(e) = evidence {
         t = t
             .meta(LOG_EVIDENCE, &e.log_evidence.to_string())
-            .meta(LOG_EVIDENCE_SE, &e.se_weights.max(e.se_spread).to_string())
+            .meta(LOG_EVIDENCE_SE, &e.se().to_string())
             .meta(EVIDENCE_OF, &e.evidence_of);
     }
     let mut t = t.str("parameter", rows.iter().map(|r| r.parameter.clone()).collect());

@@ -500,7 +500,8 @@ fn sample_afresh(
     let mut refs: Vec<&mut dyn Observer> =
         observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
     let mut sampler =
-        Sampler::new(posterior, s.sampler(s.walkers, seed), &init)?.with_reference(laplace.clone());
+        Sampler::from_state(posterior, s.sampler(s.walkers, seed), init.positions, init.log_prob)?
+            .with_reference(laplace.clone());
     let control = RunControl {
         max_steps: loo.steps,
         until_converged: true,

@@ -374,6 +374,13 @@ fn sample_with_smc_writes_the_evidence_into_both_files() {
     let meta = parquet_meta(&summary, mrbp::store::summary::LOG_EVIDENCE).unwrap().unwrap();
     assert_eq!(meta.parse::<f64>().unwrap(), evidence);
     assert!(parquet_meta(&summary, mrbp::store::summary::EVIDENCE_OF).unwrap().is_some());
+    // the printed summary and the report say it, with the same digits
+    let line = format!("log evidence {evidence:.2} ± ");
+    assert!(said(&o).contains(&line), "{line} in {}", said(&o));
+    ok(&["report", arg(&out)]);
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains("Sequential Monte Carlo and the log evidence"));
+    assert!(page.contains(&line), "{line} in the report");
     let plain = dir.path().join("ensemble");
     ok(&["sample", arg(&manifest), "--out", arg(&plain)]);
     let record = std::fs::read_to_string(plain.join("calibration.toml")).unwrap();
