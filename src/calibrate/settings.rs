@@ -19,7 +19,8 @@ use crate::noise::{NoiseKind, NoiseModel};
 use crate::posterior::parameters::law_priors;
 use crate::posterior::prior::default_priors;
 use crate::posterior::{
-    Coordinates, LikelihoodSettings, ModelKind, ModelTerms, ParameterModel, Posterior, Prior,
+    Coordinates, LikelihoodSettings, Memory, ModelKind, ModelTerms, ParameterModel, Posterior,
+    Prior,
 };
 use crate::sampler::{Move, RunControl, SamplerSettings};
 
@@ -468,6 +469,43 @@ impl CalibrationSettings {
             self.anchor_currents_a,
             self.coil_lag.unwrap_or(false),
         )
+    }
+
+    /// Whether a calibration whose settings resolved to `done` (its
+    /// config.toml) is the one these settings ask for: where these leave a
+    /// choice to the start — the scheme and its sub-steps, the walkers, the
+    /// residuals' memory and what was measured of it, a law's anchors and
+    /// coil lag, the moves of a start far from its Laplace approximation —
+    /// `done`'s choice is taken; every other setting must be equal.
+    pub fn asks_for(&self, done: &CalibrationSettings) -> bool {
+        let mut asked = self.clone();
+        let (integ, lik) = (&mut asked.integrator, &mut asked.likelihood);
+        if integ.scheme == SchemeChoice::Auto {
+            integ.scheme = done.integrator.scheme;
+        }
+        if integ.substeps == 0 {
+            integ.substeps = done.integrator.substeps;
+        }
+        if asked.sampler.walkers == 0 {
+            asked.sampler.walkers = done.sampler.walkers;
+        }
+        if lik.memory == Memory::Auto {
+            lik.memory = done.likelihood.memory;
+        }
+        if lik.memory_times.is_empty() {
+            lik.memory_times = done.likelihood.memory_times.clone();
+        }
+        if lik.memory_adjustment.is_none() {
+            lik.memory_adjustment = done.likelihood.memory_adjustment.clone();
+        }
+        asked.anchor_currents_a = asked.anchor_currents_a.or(done.anchor_currents_a);
+        asked.coil_lag = asked.coil_lag.or(done.coil_lag);
+        if super::probe::moves_far_from_laplace(&asked.sampler.moves).as_ref()
+            == Some(&done.sampler.moves)
+        {
+            asked.sampler.moves = done.sampler.moves.clone();
+        }
+        asked == *done
     }
 
     /// The curves' anchors, where unset, from the currents calibrated: the

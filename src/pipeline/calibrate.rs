@@ -322,10 +322,15 @@ impl Pipeline<'_> {
         )?;
         if request.resume {
             check_resumable(&checkpoint, settings)?;
+            if let Some(cal) = self.kept(campaign, dir, settings, &checkpoint) {
+                self.emit(Event::Calibrated { cal: &cal, alone });
+                return Ok(cal);
+            }
         }
         let resume = request.resume && {
             let found = checkpoint.exists();
-            if !found {
+            // a complete calibration of other settings was said above
+            if !found && !dir.join(store::folder::RECORD).exists() {
                 self.note(&format!(
                     "--resume: no {} in {} (stopped before sampling began?): starting from scratch",
                     store::folder::CHECKPOINT,
@@ -361,6 +366,40 @@ impl Pipeline<'_> {
         let _ = std::fs::remove_file(&checkpoint);
         self.emit(Event::Calibrated { cal: &cal, alone });
         Ok(cal)
+    }
+
+    /// With `--resume`, the calibration `dir` already holds, complete (no
+    /// checkpoint beside it), where it is the one asked for: of the same
+    /// runs, its settings those `settings` resolve to
+    /// ([`CalibrationSettings::asks_for`]). A long study stopped half-way
+    /// (`run --law A,B,…`, say) goes on from the calibrations it finished.
+    fn kept(
+        &mut self,
+        campaign: &Campaign,
+        dir: &Path,
+        settings: &CalibrationSettings,
+        checkpoint: &Path,
+    ) -> Option<Calibration> {
+        if checkpoint.exists() || !dir.join(store::folder::RECORD).exists() {
+            return None;
+        }
+        let runs: Vec<&str> = campaign.runs.iter().map(|r| r.id()).collect();
+        let cal = store::folder::read(dir)
+            .ok()
+            .filter(|cal| cal.record.runs == runs && settings.asks_for(&cal.settings));
+        let Some(cal) = cal else {
+            self.note(&format!(
+                "--resume: {} holds a calibration of other runs or settings: calibrating afresh",
+                dir.display()
+            ));
+            return None;
+        };
+        self.note(&format!(
+            "--resume: {} already holds this calibration, complete: kept ({})",
+            dir.display(),
+            cal.record.calibration_id
+        ));
+        Some(cal)
     }
 
     /// Writes `cal`, a calibration of `campaign` made in memory (from the

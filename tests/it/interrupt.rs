@@ -115,3 +115,31 @@ fn read_steps(path: &Path) -> usize {
     let (_, chains) = mrbp::sampler::checkpoint::read(path).unwrap();
     chains.steps() - 1
 }
+
+/// `run --resume` after a job that finished (or a long study stopped
+/// between calibrations) keeps each calibration that is complete and of the
+/// settings asked for, and calibrates afresh where the settings differ.
+#[test]
+fn resume_keeps_finished_calibrations_of_the_same_settings() {
+    use crate::common::{arg, ok, synth_small};
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = synth_small(dir.path(), "0.5,1.0");
+    let out = dir.path().join("out");
+    let id = |c: &str| {
+        let record = std::fs::read_to_string(out.join(c).join("calibration.toml")).unwrap();
+        let record: toml::Value = toml::from_str(&record).unwrap();
+        record["calibration_id"].as_str().unwrap().to_string()
+    };
+    ok(&["run", arg(&manifest), "--out", arg(&out)]);
+    let before = (id("I0.5A"), id("I1.0A"));
+    let o = ok(&["run", arg(&manifest), "--out", arg(&out), "--resume"]);
+    assert_eq!(said(&o).matches("already holds this calibration, complete: kept").count(), 2);
+    assert!(!said(&o).contains("calibrating 1 run(s)"), "{}", said(&o));
+    assert_eq!((id("I0.5A"), id("I1.0A")), before, "kept calibrations keep their ids");
+    // the reports and the comparison are made again from them
+    assert!(out.join("comparison/report.html").exists());
+    let o = ok(&["run", arg(&manifest), "--out", arg(&out), "--resume", "--seed", "2"]);
+    assert_eq!(said(&o).matches("other runs or settings: calibrating afresh").count(), 2);
+    assert_ne!(id("I0.5A"), before.0);
+    assert_ne!(id("I1.0A"), before.1);
+}
