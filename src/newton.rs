@@ -352,6 +352,19 @@ fn covariance(hess: &DMatrix<f64>) -> DMatrix<f64> {
 /// their mode given it. `None` where the log-density is not finite at the
 /// start: the caller keeps the surrogate.
 pub fn newton(target: &impl LogDensity, start: &Elliptical) -> Option<Mode> {
+    search(target, start, true)
+}
+
+/// The mode alone: [`newton`] without the Hessian it measures at the mode
+/// where the last was measured on the way (2d² log-densities). The same
+/// point, bit for bit; its `laplace` holds the curvature last measured.
+pub fn mode_only(target: &impl LogDensity, start: &Elliptical) -> Option<Mode> {
+    search(target, start, false)
+}
+
+/// [`newton`], measuring the curvature at the mode reached where
+/// `curvature_at_mode`.
+fn search(target: &impl LogDensity, start: &Elliptical, curvature_at_mode: bool) -> Option<Mode> {
     let w = Whitened::new(target, start);
     let d = start.dim();
     let mut z = DVector::zeros(d);
@@ -395,7 +408,7 @@ pub fn newton(target: &impl LogDensity, start: &Elliptical) -> Option<Mode> {
             }
         }
     }
-    if !fresh {
+    if !fresh && curvature_at_mode {
         cov = covariance(&w.hessian(&z, f, &mut held));
     }
     let l = start.factor();

@@ -82,14 +82,14 @@ def test_sequential_monte_carlo_as_the_command_line(campaign, tmp_path, calibrat
     chains = pd.read_parquet(tmp_path / "chains.parquet")
     pd.testing.assert_frame_equal(cal.draws, chains, check_exact=True, check_dtype=False)
     import pyarrow.parquet as pq
-    meta = pq.read_schema(tmp_path / "summary.parquet").metadata
+    meta = pq.read_metadata(tmp_path / "summary.parquet").metadata
     evidence = cal.log_evidence
     assert evidence["log_evidence"] == float(meta[b"mrbp.log_evidence"])
     assert evidence["se"] == float(meta[b"mrbp.log_evidence_se"])
     assert evidence["of"] == meta[b"mrbp.evidence_of"].decode()
     assert evidence["pseudo"] is False
     assert calibration.log_evidence is None
-    with pytest.raises(ValueError, match="sampler 'nuts': one of 'ensemble', 'smc'"):
+    with pytest.raises(ValueError, match="sampler \"nuts\": one of 'ensemble', 'smc'"):
         mrbp.calibrate(campaign, current=1.0, steps=10, sampler="nuts")
 
 

@@ -23,7 +23,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::map::MapEstimate;
 use super::Posterior;
-use crate::newton::{newton, Mode};
+use crate::newton::{mode_only, newton, Mode};
 use crate::sampler::{Elliptical, LogDensity};
 
 /// The Laplace approximation of `post` at its mode, reached by Newton's
@@ -37,6 +37,12 @@ pub fn at_mode(post: &Posterior, map: &MapEstimate) -> Elliptical {
 /// surrogate; `None` where the differences cannot be taken.
 pub fn mode(post: &Posterior, map: &MapEstimate) -> Option<Mode> {
     newton(post, &surrogate(post, map))
+}
+
+/// [`mode`]'s point and log-density without the curvature there (one
+/// Hessian fewer): where only the mode is wanted.
+pub fn mode_point(post: &Posterior, map: &MapEstimate) -> Option<(Vec<f64>, f64)> {
+    mode_only(post, &surrogate(post, map)).map(|m| (m.x, m.log_density))
 }
 
 /// The Laplace approximation of the MAP search's surrogate: a Gaussian around the
