@@ -10,7 +10,7 @@
 use crate::error::Result;
 use crate::posterior::{laplace, map, Posterior};
 use crate::sampler::{
-    Chains, Elliptical, LogDensity, Move, Observer, RunControl, Sampler, SamplerSettings,
+    Chains, Elliptical, LogDensity, Observer, RunControl, Sampler, SamplerSettings,
 };
 
 /// The walkers' start, judged.
@@ -48,7 +48,7 @@ fn far(spread: f64) -> Option<f64> {
 /// the walkers start afresh about its mode (at most [`MAX_SEARCHES`]
 /// times). Where the posterior is far from the Laplace approximation there
 /// and `settings` has the default moves, the sampler walks with the curved
-/// move instead ([`moves_far_from_laplace`]). The probe's steps are the run's first
+/// move instead ([`super::settings::moves_far_from_laplace`]). The probe's steps are the run's first
 /// (at most `control`'s length), told to `observers`. A function of the
 /// start and the seed alone.
 pub(super) fn walkers_start<'t>(
@@ -70,7 +70,9 @@ pub(super) fn walkers_start<'t>(
             Sampler::from_state(posterior, settings.clone(), init.positions, init.log_prob)?
                 .with_reference(laplace.clone());
         let spread = misfit(posterior, &sampler.chains, &laplace);
-        if let Some(moves) = far(spread).and_then(|_| moves_far_from_laplace(&settings.moves)) {
+        if let Some(moves) =
+            far(spread).and_then(|_| super::settings::moves_far_from_laplace(&settings.moves))
+        {
             sampler.settings.moves = moves;
         }
         let done = |sampler, laplace, new_map, higher, stepping_seconds| {
@@ -100,15 +102,6 @@ pub(super) fn walkers_start<'t>(
             None => return done(sampler, laplace, new_map, higher, stepping),
         }
     }
-}
-
-/// The moves a sampler set to `moves` walks with where the posterior is far
-/// from its Laplace approximation: with the default moves, the curved move
-/// in the anchored move's place (docs/performance.md, "A start far from
-/// equilibrium"); other moves, a user's choice, are kept (`None`).
-pub fn moves_far_from_laplace(moves: &[(Move, f64)]) -> Option<Vec<(Move, f64)>> {
-    (moves == super::settings::SamplingSettings::default().moves.as_slice())
-        .then(|| vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)])
 }
 
 /// What the start's judgement tells the user.

@@ -113,6 +113,15 @@ pub enum SamplerMethod {
     Smc,
 }
 
+/// The moves a sampler set to `moves` walks with where the posterior is far
+/// from its Laplace approximation: with the default moves, the curved move
+/// in the anchored move's place (docs/performance.md, "A start far from
+/// equilibrium"); other moves, a user's choice, are kept (`None`).
+pub fn moves_far_from_laplace(moves: &[(Move, f64)]) -> Option<Vec<(Move, f64)>> {
+    (moves == SamplingSettings::default().moves.as_slice())
+        .then(|| vec![(Move::curved(), 0.9), (Move::differential_evolution(), 0.1)])
+}
+
 /// Degrees of freedom of the Student-t about the Laplace approximation
 /// that sequential Monte Carlo starts from: tails heavy enough to reach a
 /// basin or a ridge the approximation misses.
@@ -500,9 +509,7 @@ impl CalibrationSettings {
         }
         asked.anchor_currents_a = asked.anchor_currents_a.or(done.anchor_currents_a);
         asked.coil_lag = asked.coil_lag.or(done.coil_lag);
-        if super::probe::moves_far_from_laplace(&asked.sampler.moves).as_ref()
-            == Some(&done.sampler.moves)
-        {
+        if moves_far_from_laplace(&asked.sampler.moves).as_ref() == Some(&done.sampler.moves) {
             asked.sampler.moves = done.sampler.moves.clone();
         }
         asked == *done

@@ -44,7 +44,7 @@ pub fn check_resumable(checkpoint: &Path, settings: &CalibrationSettings) -> Res
     // the moves asked for, or those a start far from its Laplace
     // approximation walks with instead (docs/calibration.md, "The start")
     if saved.moves != s.moves
-        && crate::calibrate::probe::moves_far_from_laplace(&s.moves)
+        && crate::calibrate::settings::moves_far_from_laplace(&s.moves)
             .is_none_or(|m| m != saved.moves)
     {
         return mismatch("moves", format!("{:?}", saved.moves), format!("{:?}", s.moves));
