@@ -46,37 +46,9 @@ import numpy as np
 import pandas as pd
 from scipy.special import logsumexp, ndtr
 
-D0 = 1.0e4
+from bp_numba import bp_path
+
 NAMES = ["G", "R0", "R1", "D1", "m1", "m2", "n"]
-
-
-@numba.njit(cache=False)
-def bp_path(theta, t, gamma, substeps):
-    """The B-P stress for shear at every sample: explicit Euler with
-    `substeps` equal sub-steps per sample interval (strain linear between
-    samples), from rest."""
-    g, r0, r1, d1, m1, m2, n = theta
-    out = np.empty(len(t))
-    tau, w = 0.0, 0.0
-    out[0] = tau
-    c = 0.5 * (n + 1.0) / n
-    for k in range(len(t) - 1):
-        h = (t[k + 1] - t[k]) / substeps
-        rate = (gamma[k + 1] - gamma[k]) / (t[k + 1] - t[k])
-        for _ in range(substeps):
-            z = r1 + (r0 - r1) * math.exp(-m1 * w) + d1 * (1.0 - math.exp(-m2 * w))
-            a = abs(tau)
-            gi = 0.0
-            if a > 0.0:
-                q = (z / (math.sqrt(3.0) * a)) ** (2.0 * n)
-                gi = 2.0 * D0 * math.exp(-c * q)
-                if tau < 0.0:
-                    gi = -gi
-            tau_new = tau + h * g * (rate - gi)
-            w += h * tau * gi
-            tau = tau_new
-        out[k + 1] = tau
-    return out
 
 
 @numba.njit(cache=False)

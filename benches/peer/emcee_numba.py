@@ -28,8 +28,9 @@ import numpy as np
 import pandas as pd
 from scipy.signal import savgol_filter
 
+from bp_numba import bp_path
+
 NAMES = ["G", "R0", "R1", "D1", "m1", "m2", "n"]
-D0 = 1.0e4
 # the default priors of mrbp: log-normal on ln θ whose ±1 sd spans the
 # plausible range, truncated to the physical range (docs/calibration.md)
 PLAUSIBLE = [(1e4, 1e6), (5e4, 3e5), (5e4, 5e5), (1e4, 1e5), (1e-6, 1e-4), (1e-4, 1e-2), (0.5, 3.0)]
@@ -42,29 +43,13 @@ HI = np.log([b for _, b in PHYSICAL])
 
 @numba.njit(cache=False, fastmath=False)
 def residual_ss(theta, t, gamma, tau_obs, substeps):
-    g, r0, r1, d1, m1, m2, n = theta
-    tau, w = 0.0, 0.0
+    path = bp_path(theta, t, gamma, substeps)
     ss = 0.0
-    c = 0.5 * (n + 1.0) / n
-    for k in range(len(t) - 1):
-        h = (t[k + 1] - t[k]) / substeps
-        rate = (gamma[k + 1] - gamma[k]) / (t[k + 1] - t[k])
-        for _ in range(substeps):
-            z = r1 + (r0 - r1) * math.exp(-m1 * w) + d1 * (1.0 - math.exp(-m2 * w))
-            a = abs(tau)
-            gi = 0.0
-            if a > 0.0:
-                q = (z / (math.sqrt(3.0) * a)) ** (2.0 * n)
-                gi = 2.0 * D0 * math.exp(-c * q)
-                if tau < 0.0:
-                    gi = -gi
-            tau_new = tau + h * g * (rate - gi)
-            w += h * tau * gi
-            tau = tau_new
-            if not math.isfinite(tau):
-                return math.inf
-        r = tau_obs[k + 1] - tau
+    for k in range(1, len(t)):
+        r = tau_obs[k] - path[k]
         ss += r * r
+    if not math.isfinite(ss):
+        return math.inf
     return ss
 
 
