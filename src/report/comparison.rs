@@ -95,7 +95,7 @@ pub fn write(
 
 fn calibrations_section(page: &mut Page, entries: &[Entry]) {
     page.section("calibrations", "Calibrations");
-    let rows_html: Vec<Vec<String>> = entries
+    let mut rows_html: Vec<Vec<String>> = entries
         .iter()
         .map(|e| {
             let (rhat, ess) = (e.cal.max_rhat(), e.cal.min_ess());
@@ -135,10 +135,55 @@ fn calibrations_section(page: &mut Page, entries: &[Entry]) {
             ]
         })
         .collect();
-    page.table(
-        &["calibration", "model", "current (A)", "runs", "max R̂", "min ESS", "converged; warnings"],
-        &rows_html,
-    );
+    let mut header = vec![
+        "calibration", "model", "current (A)", "runs", "max R̂", "min ESS", "converged; warnings",
+    ];
+    if entries.iter().any(|e| e.cal.record.smc.is_some()) {
+        header.insert(6, "log evidence");
+        for (row, e) in rows_html.iter_mut().zip(entries) {
+            let shown = e.cal.record.smc.as_ref().map_or("–".to_string(), |smc| {
+                let pseudo = if smc.pseudo_evidence { " (pseudo)" } else { "" };
+                format!("{:.2} ± {:.2}{pseudo}", smc.log_evidence, smc.se())
+            });
+            row.insert(6, shown);
+        }
+        for line in bayes_factors(entries) {
+            page.para(&line);
+        }
+    }
+    page.table(&header, &rows_html);
+}
+
+/// A sentence for each pair of calibrations sampled by sequential Monte
+/// Carlo that calibrate the same runs with evidences of their records' own
+/// likelihood: the log Bayes factor between them. Evidences of different
+/// records, or pseudo-evidences of a likelihood adjusted or tempered for
+/// the residuals' memory, do not compare, and the sentence says why.
+fn bayes_factors(entries: &[Entry]) -> Vec<String> {
+    let mut out = vec!["Log evidence (sequential Monte Carlo, `--sampler smc`): ln p(records | law, priors, noise model) ± its standard error. Two calibrations' evidences compare only where they calibrate the same runs, each with its records' own likelihood; their difference is then the log Bayes factor.".to_string()];
+    for (i, a) in entries.iter().enumerate() {
+        for b in &entries[i + 1..] {
+            let (Some(ea), Some(eb)) = (&a.cal.record.smc, &b.cal.record.smc) else { continue };
+            if a.cal.record.runs != b.cal.record.runs {
+                continue;
+            }
+            if ea.pseudo_evidence || eb.pseudo_evidence {
+                out.push(format!("{} and {} calibrate the same runs, but at least one evidence is of a likelihood that allowed for the residuals' memory (a pseudo-evidence): they do not compare.", esc(&a.label), esc(&b.label)));
+                continue;
+            }
+            let d = ea.log_evidence - eb.log_evidence;
+            let se = ea.se().hypot(eb.se());
+            let (hi, lo) = if d >= 0.0 { (a, b) } else { (b, a) };
+            out.push(format!(
+                "{} over {} (the same runs): log Bayes factor {:.2} ± {:.2}.",
+                esc(&hi.label),
+                esc(&lo.label),
+                d.abs(),
+                se
+            ));
+        }
+    }
+    out
 }
 
 fn parameters_section(page: &mut Page, entries: &[Entry]) {

@@ -389,3 +389,36 @@ fn sample_with_smc_writes_the_evidence_into_both_files() {
         .unwrap()
         .is_none());
 }
+
+/// `compare` of two calibrations of the same runs by sequential Monte
+/// Carlo, Gaussian and Student-t noise: each one's log evidence, and the
+/// log Bayes factor between them, equal to the difference of their
+/// calibration.toml's.
+#[test]
+fn compare_shows_the_log_bayes_factor_of_the_same_runs() {
+    use crate::common::{arg, ok, synth_small};
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = synth_small(dir.path(), "1.0");
+    let evidence = |name: &str| {
+        let record = std::fs::read_to_string(dir.path().join(name).join("calibration.toml"));
+        let record: toml::Value = toml::from_str(&record.unwrap()).unwrap();
+        record["smc"]["log_evidence"].as_float().unwrap()
+    };
+    for noise in ["gaussian", "student-t"] {
+        let out = dir.path().join(noise);
+        ok(&["sample", arg(&manifest), "--sampler", "smc", "--noise", noise, "--out", arg(&out)]);
+    }
+    let out = dir.path().join("both");
+    ok(&[
+        "compare",
+        arg(&dir.path().join("gaussian")),
+        arg(&dir.path().join("student-t")),
+        "--out",
+        arg(&out),
+    ]);
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let d = evidence("gaussian") - evidence("student-t");
+    let line = format!("(the same runs): log Bayes factor {:.2} ± ", d.abs());
+    assert!(page.contains(&line), "{line} not in the comparison report");
+    assert!(page.contains(&format!("{:.2} ± ", evidence("gaussian"))));
+}
