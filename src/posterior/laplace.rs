@@ -39,10 +39,10 @@ pub fn mode(post: &Posterior, map: &MapEstimate) -> Option<Mode> {
     newton(post, &surrogate(post, map))
 }
 
-/// [`mode`]'s point and log-density without the curvature there (one
-/// Hessian fewer): where only the mode is wanted.
-pub fn mode_point(post: &Posterior, map: &MapEstimate) -> Option<(Vec<f64>, f64)> {
-    mode_only(post, &surrogate(post, map)).map(|m| (m.x, m.log_density))
+/// [`mode`]'s point without the curvature there (one Hessian fewer):
+/// where only the mode is wanted.
+pub fn mode_point(post: &Posterior, map: &MapEstimate) -> Option<Vec<f64>> {
+    mode_only(post, &surrogate(post, map))
 }
 
 /// The Laplace approximation of the MAP search's surrogate: a Gaussian around the

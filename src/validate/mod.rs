@@ -393,7 +393,7 @@ const HOPELESS_K: f64 = 1.5;
 fn recentred(post: &Posterior, start: &[f64]) -> Option<(Posterior, Vec<f64>)> {
     let plain = post.without_adjustment();
     let map = map::basin(&plain, start)?;
-    let (mode, _) = laplace::mode_point(&plain, &map)?;
+    let mode = laplace::mode_point(&plain, &map)?;
     Some((post.recentred(&mode), mode))
 }
 
