@@ -395,7 +395,7 @@ def calibrate(
     the same seed gives the same chains, bit for bit.
 
     law: the damper law, as ``--law``: 'bodner-partom' (default),
-        'bp-viscous', 'bouc-wen', 'spencer', 'bingham' (docs/calibration.md,
+        'bp-viscous', 'bouc-wen', 'spencer', 'bingham', 'bp-spencer' (docs/calibration.md,
         "Damper laws");
     noise: 'gaussian' (default), 'student-t', 'ar1', 'discrepancy';
     sampler: 'ensemble' (default) or 'smc', as ``--sampler``: tempered

@@ -66,18 +66,21 @@ pub fn start(
     settings.fill_coil_lag(!campaign.varying_runs().is_empty());
     let model = settings.parameter_model();
     let current_a = model.identification_current(&campaign.currents())?;
-    // the paper's identification starts the B-P law
-    let identification = model
-        .law()
-        .is_bodner_partom()
+    // the paper's identification starts the B-P law and a law built on
+    // its element
+    let law = model.law();
+    let identification = (law.is_bodner_partom() || law.law().builds_on_bodner_partom())
         .then(|| identify_current(campaign, current_a, &settings.identify));
     let integ = settings.integrator.clone();
     // the MAP search runs on the linearly implicit scheme unless told
-    // otherwise: its likelihood is smooth on any record
-    let search_scheme = if integ.scheme == SchemeChoice::Auto {
-        Scheme::LinearlyImplicit
-    } else {
-        integ.scheme.scheme()
+    // otherwise: its likelihood is smooth on any record; a law with a
+    // scheme of its own is the same under either, and is recorded as
+    // explicit (the step rule's first)
+    let follows_scheme = law.law().follows_scheme();
+    let search_scheme = match integ.scheme {
+        SchemeChoice::Auto if follows_scheme => Scheme::LinearlyImplicit,
+        SchemeChoice::Auto => Scheme::Explicit,
+        chosen => chosen.scheme(),
     };
     let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
     let mut stages = Stages { campaign, settings, base, independent: Vec::new() };
@@ -102,12 +105,16 @@ pub fn start(
     // (docs/identification.md): also from the prior medians, and the best
     // optimum is kept
     let mut from_records: Vec<Vec<f64>> = match &identification {
-        Some(id) => vec![model.start(&id.params, current_a).iter().map(|v| v.ln()).collect()],
-        None => {
-            let law = model.law().law();
+        Some(id) if law.is_bodner_partom() => {
+            vec![model.start(&id.params, current_a).iter().map(|v| v.ln()).collect()]
+        }
+        _ => {
+            let law = law.law();
             let n = law.parameters().len();
-            law.starts(&posterior.runs)
-                .iter()
+            let around =
+                identification.iter().flat_map(|id| law.starts_around(&id.params, &posterior.runs));
+            around
+                .chain(law.starts(&posterior.runs))
                 .map(|v| v[..n].iter().map(|v| v.ln()).collect())
                 .collect()
         }
@@ -164,8 +171,8 @@ pub fn start(
         clock.elapsed().as_secs_f64()
     ));
     let schemes: Vec<Scheme> = match integ.scheme {
-        SchemeChoice::Auto => vec![Scheme::Explicit, Scheme::LinearlyImplicit],
-        chosen => vec![chosen.scheme()],
+        SchemeChoice::Auto if follows_scheme => vec![Scheme::Explicit, Scheme::LinearlyImplicit],
+        _ => vec![search_scheme],
     };
     let names = posterior.layout.coordinate_names();
     // each scheme's step, and the Euler steps a log-density costs with it at the MAP

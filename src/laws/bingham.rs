@@ -8,8 +8,9 @@
 //! offset are the model terms. No state: the force at each sample follows
 //! from its velocity.
 
-use super::ode::{tanh, StateLaw};
+use super::ode::{tanh, Jacobian, State, StateLaw, MAX_STATES};
 use super::{bouc_wen, LawKind, LawParameter, LawValues, LANES, MAX_LAW_PARAMETERS};
+use crate::data::RunData;
 use crate::model::simd::F64xN;
 
 const FC: LawParameter =
@@ -42,7 +43,7 @@ impl StateLaw for Bingham {
     type Lanes<S: F64xN> = Lanes<S>;
 
     #[inline(always)]
-    fn lanes<S: F64xN>(p: &[LawValues; LANES]) -> Lanes<S> {
+    fn lanes<S: F64xN>(p: &[LawValues; LANES], _run: &RunData) -> Lanes<S> {
         Lanes {
             c0: S::from_array(p.each_ref().map(|v| v[0])),
             fc: S::from_array(p.each_ref().map(|v| v[1])),
@@ -51,21 +52,21 @@ impl StateLaw for Bingham {
     }
 
     #[inline(always)]
-    fn rate<S: F64xN>(_c: &Lanes<S>, _x: S, _v: S, _state: [S; 2]) -> [S; 2] {
-        [S::splat(0.0); 2]
+    fn rate<S: F64xN>(_c: &Lanes<S>, _x: S, _v: S, _state: State<S>) -> State<S> {
+        [S::splat(0.0); MAX_STATES]
     }
 
     #[inline(always)]
-    fn jacobian<S: F64xN>(_c: &Lanes<S>, _x: S, _v: S, _state: [S; 2]) -> [[S; 2]; 2] {
-        [[S::splat(0.0); 2]; 2]
+    fn jacobian<S: F64xN>(_c: &Lanes<S>, _x: S, _v: S, _state: State<S>) -> Jacobian<S> {
+        [[S::splat(0.0); MAX_STATES]; MAX_STATES]
     }
 
     #[inline(always)]
-    fn force<S: F64xN>(c: &Lanes<S>, _x: S, v: S, _state: [S; 2]) -> S {
+    fn force<S: F64xN>(c: &Lanes<S>, _x: S, v: S, _state: State<S>) -> S {
         c.c0 * v + c.fc * tanh(v * c.inv_v0)
     }
 
-    fn force_stiffness_bound(_p: &LawValues) -> f64 {
+    fn force_stiffness_bound(_p: &LawValues, _run: &RunData) -> f64 {
         0.0
     }
 
@@ -91,7 +92,7 @@ mod tests {
         let p = values(800.0, 500.0, 0.01);
         let run = testing::crank_run(1000.0, 1.0);
         let reference = testing::reference_path(&run, |_x, v, _s| {
-            ([0.0; 2], 800.0 * v + 500.0 * (v / 0.01).tanh())
+            ([0.0; 1], 800.0 * v + 500.0 * (v / 0.01).tanh())
         });
         testing::close_to(&Ode::<Bingham>::new(), &p, &run, &reference, 1e-12);
     }

@@ -13,8 +13,9 @@
 //! The parallel spring k0 (x − x0) of some writings is the model terms'
 //! gas spring and force offset.
 
-use super::ode::{bouc_wen_derivatives, bouc_wen_rate, StateLaw};
+use super::ode::{bouc_wen_derivatives, bouc_wen_rate, Jacobian, State, StateLaw, MAX_STATES};
 use super::{LawKind, LawParameter, LawValues, LANES, MAX_LAW_PARAMETERS};
+use crate::data::RunData;
 use crate::model::simd::F64xN;
 
 pub(super) const C0: LawParameter =
@@ -56,29 +57,29 @@ impl StateLaw for BoucWen {
     type Lanes<S: F64xN> = Lanes<S>;
 
     #[inline(always)]
-    fn lanes<S: F64xN>(p: &[LawValues; LANES]) -> Lanes<S> {
+    fn lanes<S: F64xN>(p: &[LawValues; LANES], _run: &RunData) -> Lanes<S> {
         let at = |i: usize| S::from_array(p.each_ref().map(|v| v[i]));
         Lanes { c0: at(0), fz: at(1), rho: at(2), sigma: at(3), n: at(4) }
     }
 
     #[inline(always)]
-    fn rate<S: F64xN>(c: &Lanes<S>, _x: S, v: S, state: [S; 2]) -> [S; 2] {
-        [bouc_wen_rate(c.rho, c.sigma, c.n, v, state[0]), S::splat(0.0)]
+    fn rate<S: F64xN>(c: &Lanes<S>, _x: S, v: S, state: State<S>) -> State<S> {
+        [bouc_wen_rate(c.rho, c.sigma, c.n, v, state[0]), S::splat(0.0), S::splat(0.0)]
     }
 
     #[inline(always)]
-    fn jacobian<S: F64xN>(c: &Lanes<S>, _x: S, v: S, state: [S; 2]) -> [[S; 2]; 2] {
+    fn jacobian<S: F64xN>(c: &Lanes<S>, _x: S, v: S, state: State<S>) -> Jacobian<S> {
         let zero = S::splat(0.0);
         let (_, dw) = bouc_wen_derivatives(c.rho, c.sigma, c.n, v, state[0]);
-        [[dw, zero], [zero, zero]]
+        [[dw, zero, zero], [zero; MAX_STATES], [zero; MAX_STATES]]
     }
 
     #[inline(always)]
-    fn force<S: F64xN>(c: &Lanes<S>, _x: S, v: S, state: [S; 2]) -> S {
+    fn force<S: F64xN>(c: &Lanes<S>, _x: S, v: S, state: State<S>) -> S {
         c.c0 * v + c.fz * state[0]
     }
 
-    fn force_stiffness_bound(p: &LawValues) -> f64 {
+    fn force_stiffness_bound(p: &LawValues, _run: &RunData) -> f64 {
         p[1] * p[2] * (2.0 * p[3]).max(1.0)
     }
 

@@ -32,6 +32,7 @@
 pub mod bingham;
 pub mod bodner_partom;
 pub mod bouc_wen;
+pub mod bp_spencer;
 pub mod bp_viscous;
 pub mod ode;
 pub mod spencer;
@@ -39,10 +40,10 @@ pub mod spencer;
 use serde::{Deserialize, Serialize};
 
 use crate::data::RunData;
-use crate::model::{IntegrationError, Integrator, LANES};
+use crate::model::{IntegrationError, Integrator, Params, LANES};
 
 /// The most parameters a law has.
-pub const MAX_LAW_PARAMETERS: usize = 8;
+pub const MAX_LAW_PARAMETERS: usize = 10;
 
 /// One parameter set of a law, in the order of [`DamperLaw::parameters`]
 /// (SI); unused places are 0.
@@ -84,6 +85,14 @@ pub trait DamperLaw: Send + Sync + std::fmt::Debug {
         visit: &mut dyn FnMut(usize, &[f64; LANES]),
     ) -> [Result<(), IntegrationError>; LANES];
 
+    /// Whether its integration follows the integrator's scheme (explicit
+    /// or linearly implicit Euler, the B-P integrators'); a law with its
+    /// own scheme (ROS2, [`ode`]) gives the same bits under either, so the
+    /// step rule need not study both.
+    fn follows_scheme(&self) -> bool {
+        true
+    }
+
     /// The order of its integrator's error in the sub-step (1: Euler).
     fn order(&self) -> u32 {
         1
@@ -107,6 +116,20 @@ pub trait DamperLaw: Send + Sync + std::fmt::Debug {
     fn starts(&self, runs: &[RunData]) -> Vec<LawValues> {
         let (force, velocity, stroke) = scales(runs);
         self.starts_at(force.max(1e-3), velocity.max(1e-6), stroke.max(1e-6))
+    }
+
+    /// Whether the law is built on the B-P element (other than the B-P
+    /// law itself), so that the paper's identification also starts it
+    /// ([`Self::starts_around`]).
+    fn builds_on_bodner_partom(&self) -> bool {
+        false
+    }
+
+    /// Parameter sets a MAP search may start from around the B-P
+    /// parameters `bp` the paper's identification found on `runs`: for a
+    /// law built on the B-P element; none for another.
+    fn starts_around(&self, _bp: &Params, _runs: &[RunData]) -> Vec<LawValues> {
+        Vec::new()
     }
 
     /// A parameter set typical of an RD-1005-3-class damper at 1 A (peak
@@ -196,6 +219,10 @@ registry! {
     /// the Bouc-Wen element and a dashpot c0 and spring k0 moving an
     /// internal displacement y, in series with a dashpot c1.
     Spencer => ode::Ode<spencer::Spencer>,
+    /// The B-P law in Spencer et al.'s frame: the fluid's viscoplastic
+    /// element in place of the Bouc-Wen element, beside a dashpot c0 and a
+    /// spring k0, in series with a dashpot c1.
+    BpSpencer => ode::Ode<bp_spencer::BpSpencer>,
     /// Bingham: a dashpot and a yield force of smooth sign (tanh of the
     /// velocity over a smoothing velocity).
     Bingham => ode::Ode<bingham::Bingham>,

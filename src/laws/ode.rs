@@ -27,37 +27,63 @@
 use super::{DamperLaw, LawKind, LawParameter, LawValues, LANES};
 use crate::data::RunData;
 use crate::model::simd::{F64xN, Portable};
-use crate::model::{uses_avx2, IntegrationError, Integrator};
+use crate::model::{uses_avx2, IntegrationError, Integrator, Params};
 
-/// A law whose force follows from a state of up to two variables, driven by
-/// the displacement x (m) and its velocity v (m/s). Every method is
+/// The most variables a law's state has.
+pub const MAX_STATES: usize = 3;
+
+/// A law's state (unused places stay 0).
+pub type State<S> = [S; MAX_STATES];
+
+/// ∂rate/∂state: `j[r][s]` = ∂(rate r)/∂(state s), 0 for an unused state.
+pub type Jacobian<S> = [[S; MAX_STATES]; MAX_STATES];
+
+/// A law whose force follows from a state of up to [`MAX_STATES`]
+/// variables, driven by the displacement x (m) and its velocity v (m/s). Every method is
 /// evaluated in lanes, for [`Portable`] and for AVX2 alike: write them with
 /// the [`F64xN`] operations only, and `#[inline(always)]`.
 pub trait StateLaw: Send + Sync + std::fmt::Debug + Default + 'static {
     const KIND: LawKind;
     const PARAMETERS: &'static [LawParameter];
 
-    /// The lanes' constants, read off their parameter sets.
+    /// How many variables its state has (the first of [`State`]); up to
+    /// two use a 2 × 2 solve, three the 3 × 3.
+    const STATES: usize = 2;
+
+    /// The lanes' constants, read off their parameter sets and the run's
+    /// geometry (a law written in stress, as the B-P element, needs it).
     type Lanes<S: F64xN>: Copy;
 
-    fn lanes<S: F64xN>(params: &[LawValues; LANES]) -> Self::Lanes<S>;
+    fn lanes<S: F64xN>(params: &[LawValues; LANES], run: &RunData) -> Self::Lanes<S>;
 
     /// d(state)/dt at displacement `x`, velocity `v` and `state`.
-    fn rate<S: F64xN>(c: &Self::Lanes<S>, x: S, v: S, state: [S; 2]) -> [S; 2];
+    fn rate<S: F64xN>(c: &Self::Lanes<S>, x: S, v: S, state: State<S>) -> State<S>;
 
-    /// ∂rate/∂state at displacement `x`, velocity `v` and `state`:
-    /// `[[∂r0/∂s0, ∂r0/∂s1], [∂r1/∂s0, ∂r1/∂s1]]` (0 for an unused state).
-    fn jacobian<S: F64xN>(c: &Self::Lanes<S>, x: S, v: S, state: [S; 2]) -> [[S; 2]; 2];
+    /// ∂rate/∂state at displacement `x`, velocity `v` and `state`.
+    fn jacobian<S: F64xN>(c: &Self::Lanes<S>, x: S, v: S, state: State<S>) -> Jacobian<S>;
 
     /// The force (N) at displacement `x`, velocity `v` and `state`.
-    fn force<S: F64xN>(c: &Self::Lanes<S>, x: S, v: S, state: [S; 2]) -> S;
+    fn force<S: F64xN>(c: &Self::Lanes<S>, x: S, v: S, state: State<S>) -> S;
 
-    /// The largest quasi-static stiffness dF/dx (N/m) of one parameter set.
-    fn force_stiffness_bound(p: &LawValues) -> f64;
+    /// The largest quasi-static stiffness dF/dx (N/m) of one parameter set
+    /// on `run`'s geometry.
+    fn force_stiffness_bound(p: &LawValues, run: &RunData) -> f64;
 
     /// Parameter sets a MAP search may start from, given the records' peak
     /// force (N), velocity (m/s) and stroke (m).
     fn starts(force: f64, velocity: f64, stroke: f64) -> Vec<LawValues>;
+
+    /// Whether the law is built on the B-P element, so that the paper's
+    /// identification gives it a start ([`Self::around`]).
+    fn builds_on_bodner_partom() -> bool {
+        false
+    }
+
+    /// Starts around the B-P parameters `bp` of an identification, given
+    /// the records' scales as [`Self::starts`] takes them.
+    fn around(_bp: &Params, _force: f64, _velocity: f64, _stroke: f64) -> Vec<LawValues> {
+        Vec::new()
+    }
 }
 
 /// A [`StateLaw`] as a [`DamperLaw`]: the registry's entry of such a law.
@@ -81,6 +107,10 @@ impl<L: StateLaw> DamperLaw for Ode<L> {
 
     fn order(&self) -> u32 {
         2
+    }
+
+    fn follows_scheme(&self) -> bool {
+        false
     }
 
     fn run_lanes(
@@ -119,11 +149,23 @@ impl<L: StateLaw> DamperLaw for Ode<L> {
     }
 
     fn stiffness_bound(&self, params: &LawValues, run: &RunData) -> f64 {
-        L::force_stiffness_bound(params) * run.gap_m / run.area_m2
+        L::force_stiffness_bound(params, run) * run.gap_m / run.area_m2
     }
 
     fn starts_at(&self, force: f64, velocity: f64, stroke: f64) -> Vec<LawValues> {
         L::starts(force, velocity, stroke).into_iter().map(|v| super::clamped(self, v)).collect()
+    }
+
+    fn builds_on_bodner_partom(&self) -> bool {
+        L::builds_on_bodner_partom()
+    }
+
+    fn starts_around(&self, bp: &Params, runs: &[RunData]) -> Vec<LawValues> {
+        let (force, velocity, stroke) = super::scales(runs);
+        L::around(bp, force.max(1e-3), velocity.max(1e-6), stroke.max(1e-6))
+            .into_iter()
+            .map(|v| super::clamped(self, v))
+            .collect()
     }
 }
 
@@ -143,7 +185,7 @@ unsafe fn integrate_avx2<L: StateLaw>(
 /// One Euler track of every lane: its state.
 #[derive(Clone, Copy)]
 struct Track<S> {
-    state: [S; 2],
+    state: State<S>,
 }
 
 /// The loop over the samples of `run` in the lanes of `S`; returns lane
@@ -157,10 +199,10 @@ fn integrate<L: StateLaw, S: F64xN>(
     visit: &mut dyn FnMut(usize, &[f64; LANES]),
 ) -> u64 {
     let (t, gamma) = (&run.time, &run.gamma);
-    let c = L::lanes::<S>(params);
+    let c = L::lanes::<S>(params, run);
     let (h_gap, inv_area) = (run.gap_m, 1.0 / run.area_m2);
     let zero = S::splat(0.0);
-    let mut coarse = Track { state: [zero; 2] };
+    let mut coarse = Track { state: [zero; MAX_STATES] };
     let mut finer = coarse;
     let fine = Integrator { substeps: 2 * integrator.substeps, ..*integrator };
     let rates = super::strain_rates(run);
@@ -228,6 +270,14 @@ fn interval<L: StateLaw, S: F64xN>(
     let (gh, two, one) = (S::splat(GAMMA * h), S::splat(2.0), S::splat(1.0));
     let (three_half, half) = (S::splat(1.5 * h), S::splat(0.5 * h));
     let mut s = track.state;
+    if L::STATES > 2 {
+        for i in 0..m {
+            let x = S::splat(x0 + v * h * i as f64);
+            s = rosenbrock_3::<L, S>(c, x, vs, hs, gh, s);
+        }
+        track.state = s;
+        return 3 * m as u64;
+    }
     for i in 0..m {
         let x = S::splat(x0 + v * h * i as f64);
         // W = I − γ h J and its inverse (2 × 2), written out (no closures:
@@ -238,13 +288,63 @@ fn interval<L: StateLaw, S: F64xN>(
         let inv_det = one / (a * d - b * cc);
         let f1 = L::rate(c, x, vs, s);
         let k1 = [(d * f1[0] - b * f1[1]) * inv_det, (a * f1[1] - cc * f1[0]) * inv_det];
-        let f2 = L::rate(c, x + vs * hs, vs, [s[0] + hs * k1[0], s[1] + hs * k1[1]]);
+        let f2 = L::rate(c, x + vs * hs, vs, [s[0] + hs * k1[0], s[1] + hs * k1[1], s[2]]);
         let g = [f2[0] - two * k1[0], f2[1] - two * k1[1]];
         let k2 = [(d * g[0] - b * g[1]) * inv_det, (a * g[1] - cc * g[0]) * inv_det];
-        s = [s[0] + three_half * k1[0] + half * k2[0], s[1] + three_half * k1[1] + half * k2[1]];
+        s = [
+            s[0] + three_half * k1[0] + half * k2[0],
+            s[1] + three_half * k1[1] + half * k2[1],
+            s[2],
+        ];
     }
     track.state = s;
     3 * m as u64
+}
+
+/// One ROS2 sub-step of length `h` (`gh` = γ h) of a three-variable
+/// state: W = I − γ h J inverted by its adjugate, once for both stages.
+#[inline(always)]
+fn rosenbrock_3<L: StateLaw, S: F64xN>(
+    c: &L::Lanes<S>,
+    x: S,
+    v: S,
+    h: S,
+    gh: S,
+    s: State<S>,
+) -> State<S> {
+    let (zero, one, two) = (S::splat(0.0), S::splat(1.0), S::splat(2.0));
+    // W = I − γ h J and its adjugate, written out (no closures: see
+    // `integrate`)
+    let j = L::jacobian(c, x, v, s);
+    let (a, b, cc) = (one - gh * j[0][0], zero - gh * j[0][1], zero - gh * j[0][2]);
+    let (d, e, f) = (zero - gh * j[1][0], one - gh * j[1][1], zero - gh * j[1][2]);
+    let (g, hh, k) = (zero - gh * j[2][0], zero - gh * j[2][1], one - gh * j[2][2]);
+    let adj = [
+        [e * k - f * hh, cc * hh - b * k, b * f - cc * e],
+        [f * g - d * k, a * k - cc * g, cc * d - a * f],
+        [d * hh - e * g, b * g - a * hh, a * e - b * d],
+    ];
+    let inv_det = one / (a * adj[0][0] + b * adj[1][0] + cc * adj[2][0]);
+    let k1 = solve_3(&adj, inv_det, L::rate(c, x, v, s));
+    let f2 = L::rate(c, x + v * h, v, [s[0] + h * k1[0], s[1] + h * k1[1], s[2] + h * k1[2]]);
+    let k2 =
+        solve_3(&adj, inv_det, [f2[0] - two * k1[0], f2[1] - two * k1[1], f2[2] - two * k1[2]]);
+    let (three_half, half) = (S::splat(1.5) * h, S::splat(0.5) * h);
+    [
+        s[0] + three_half * k1[0] + half * k2[0],
+        s[1] + three_half * k1[1] + half * k2[1],
+        s[2] + three_half * k1[2] + half * k2[2],
+    ]
+}
+
+/// W⁻¹ r from W's adjugate and the inverse of its determinant.
+#[inline(always)]
+fn solve_3<S: F64xN>(adj: &Jacobian<S>, inv_det: S, r: State<S>) -> State<S> {
+    [
+        (adj[0][0] * r[0] + adj[0][1] * r[1] + adj[0][2] * r[2]) * inv_det,
+        (adj[1][0] * r[0] + adj[1][1] * r[1] + adj[1][2] * r[2]) * inv_det,
+        (adj[2][0] * r[0] + adj[2][1] * r[1] + adj[2][2] * r[2]) * inv_det,
+    ]
 }
 
 /// |w|ⁿ for n ≥ 1 (0 at w = 0), in lanes.
@@ -290,7 +390,7 @@ pub fn bouc_wen_derivatives<S: F64xN>(rho: S, sigma: S, n: S, u: S, w: S) -> (S,
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::laws::{bingham, bouc_wen, spencer, testing};
+    use crate::laws::{bingham, bouc_wen, bp_spencer, spencer, testing};
 
     /// The AVX2 build gives the portable build's bits, for every state law
     /// (where the CPU has AVX2), with and without extrapolation.
@@ -327,5 +427,11 @@ mod tests {
         both::<bouc_wen::BoucWen>(&bouc_wen::values(1500.0, 600.0, 4000.0, 0.6, 2.3));
         both::<spencer::Spencer>(&spencer::values(3000.0, 4.0e4, 3000.0, 600.0, 1.0e4, 0.5, 2.0));
         both::<bingham::Bingham>(&bingham::values(800.0, 500.0, 0.01));
+        both::<bp_spencer::BpSpencer>(&bp_spencer::values(
+            &crate::model::Params::reference_1a(),
+            2000.0,
+            3.0e4,
+            5.0e3,
+        ));
     }
 }

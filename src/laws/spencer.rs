@@ -12,8 +12,9 @@
 //! force offset. The internal displacement starts at the record's first
 //! displacement, the hysteresis at rest.
 
-use super::ode::{bouc_wen_derivatives, bouc_wen_rate, StateLaw};
+use super::ode::{bouc_wen_derivatives, bouc_wen_rate, Jacobian, State, StateLaw, MAX_STATES};
 use super::{bouc_wen, LawKind, LawParameter, LawValues, LANES, MAX_LAW_PARAMETERS};
+use crate::data::RunData;
 use crate::model::simd::F64xN;
 
 const C1: LawParameter =
@@ -50,7 +51,7 @@ pub fn values(c0: f64, c1: f64, k0: f64, fz: f64, rho: f64, sigma: f64, n: f64) 
 
 /// ẏ at (x, v, state).
 #[inline(always)]
-fn y_rate<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: [S; 2]) -> S {
+fn y_rate<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: State<S>) -> S {
     (c.fz * state[1] + c.c0 * v + c.k0 * (x - state[0])) * c.inv_c
 }
 
@@ -60,7 +61,7 @@ impl StateLaw for Spencer {
     type Lanes<S: F64xN> = Lanes<S>;
 
     #[inline(always)]
-    fn lanes<S: F64xN>(p: &[LawValues; LANES]) -> Lanes<S> {
+    fn lanes<S: F64xN>(p: &[LawValues; LANES], _run: &RunData) -> Lanes<S> {
         let at = |i: usize| S::from_array(p.each_ref().map(|v| v[i]));
         Lanes {
             c0: at(0),
@@ -75,27 +76,32 @@ impl StateLaw for Spencer {
     }
 
     #[inline(always)]
-    fn rate<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: [S; 2]) -> [S; 2] {
+    fn rate<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: State<S>) -> State<S> {
         let y_dot = y_rate(c, x, v, state);
-        [y_dot, bouc_wen_rate(c.rho, c.sigma, c.n, v - y_dot, state[1])]
+        [y_dot, bouc_wen_rate(c.rho, c.sigma, c.n, v - y_dot, state[1]), S::splat(0.0)]
     }
 
     /// ∂ẏ/∂y = −k0/(c0 + c1), ∂ẏ/∂w = fz/(c0 + c1); ẇ through u = ẋ − ẏ
     /// and directly.
     #[inline(always)]
-    fn jacobian<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: [S; 2]) -> [[S; 2]; 2] {
+    fn jacobian<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: State<S>) -> Jacobian<S> {
         let (dy_dy, dy_dw) = (S::splat(0.0) - c.k0 * c.inv_c, c.fz * c.inv_c);
         let u = v - y_rate(c, x, v, state);
         let (dw_du, dw_dw) = bouc_wen_derivatives(c.rho, c.sigma, c.n, u, state[1]);
-        [[dy_dy, dy_dw], [S::splat(0.0) - dw_du * dy_dy, dw_dw - dw_du * dy_dw]]
+        let zero = S::splat(0.0);
+        [
+            [dy_dy, dy_dw, zero],
+            [zero - dw_du * dy_dy, dw_dw - dw_du * dy_dw, zero],
+            [zero; MAX_STATES],
+        ]
     }
 
     #[inline(always)]
-    fn force<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: [S; 2]) -> S {
+    fn force<S: F64xN>(c: &Lanes<S>, x: S, v: S, state: State<S>) -> S {
         c.c1 * y_rate(c, x, v, state)
     }
 
-    fn force_stiffness_bound(p: &LawValues) -> f64 {
+    fn force_stiffness_bound(p: &LawValues, _run: &RunData) -> f64 {
         p[2] + p[3] * p[4] * (2.0 * p[5]).max(1.0)
     }
 

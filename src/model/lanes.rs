@@ -74,6 +74,15 @@ impl<S: F64xN> LaneLaw<S> {
         self.r1 + (self.r0 - self.r1) * e1 + self.d1 * (S::splat(1.0) - e2)
     }
 
+    /// d(R + D)/dW after inelastic work `w` (eq. 4):
+    /// m1 (R1 − R0) e^(−m1 W) + m2 D1 e^(−m2 W).
+    #[inline(always)]
+    pub fn hardening_slope(&self, w: S) -> S {
+        let e1 = exp_of_finite(-self.m1 * w);
+        let e2 = exp_of_finite(-self.m2 * w);
+        self.m1 * (self.r1 - self.r0) * e1 + self.m2 * self.d1 * e2
+    }
+
     /// γ̇ᴵ (with the sign of τ) and ∂γ̇ᴵ/∂τ at stress `tau` under hardening
     /// `z` (eq. 3); both 0 at τ = 0 and far below yield.
     #[inline(always)]

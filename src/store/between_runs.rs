@@ -67,7 +67,12 @@ pub fn write(dir: &Path, layer: &BetweenRuns, group: usize, id: &str, runs: &str
         .meta("mrbp.layer_max_r_hat", &layer.max_rhat.to_string())
         .meta("mrbp.layer_min_ess", &layer.min_ess.to_string())
         .i64("draw", picks.iter().map(|&i| i as i64).collect());
-    let theta = |z: &[f64]| layer.theta(z).filter(|t| layer.in_support(t)).unwrap_or([f64::NAN; 8]);
+    let theta = |z: &[f64]| {
+        layer
+            .theta(z)
+            .filter(|t| layer.in_support(t))
+            .unwrap_or([f64::NAN; crate::laws::MAX_LAW_PARAMETERS])
+    };
     let names = layer.names();
     for (k, name) in names.iter().enumerate() {
         table = table

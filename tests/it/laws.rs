@@ -90,8 +90,24 @@ fn each_law_recovers_its_own_truth_and_its_band_follows_its_equations() {
 
 /// A force law as the docs write it (docs/calibration.md, "Damper laws"):
 /// `(parameters by name, x, ẋ, state) -> (state rate, force)`, state
-/// `[w, y]` (the hysteretic variable, Spencer's internal displacement).
-type Force = fn(&dyn Fn(&str) -> f64, f64, f64, [f64; 2]) -> ([f64; 2], f64);
+/// `[w, y, W]` (the hysteretic variable or the B-P element's stress,
+/// Spencer's internal displacement, the B-P element's inelastic work).
+type Force = fn(&dyn Fn(&str) -> f64, f64, f64, [f64; 3]) -> ([f64; 3], f64);
+
+/// The B-P flow rule (eq. 3) with the hardening of eq. 4 after the
+/// inelastic work `w`, with the paper's fixed D0 = 1e4 1/s.
+fn bp_flow(p: &dyn Fn(&str) -> f64, tau: f64, w: f64) -> f64 {
+    if tau == 0.0 {
+        return 0.0;
+    }
+    let (r, d) = (
+        p("R1") + (p("R0") - p("R1")) * (-p("m1") * w).exp(),
+        p("D1") * (1.0 - (-p("m2") * w).exp()),
+    );
+    let n = p("n");
+    let q = ((r + d) / (3f64.sqrt() * tau.abs())).powf(2.0 * n);
+    2.0e4 * (-0.5 * q * (n + 1.0) / n).exp() * tau.signum()
+}
 
 /// Wen's normalised hysteresis driven by the velocity `u`.
 fn wen(p: &dyn Fn(&str) -> f64, u: f64, w: f64) -> f64 {
@@ -105,12 +121,22 @@ fn wen(p: &dyn Fn(&str) -> f64, u: f64, w: f64) -> f64 {
 /// reference in its unit tests).
 fn independent_force(law: &str) -> Option<Force> {
     match law {
-        "bingham" => Some(|p, _x, v, _s| ([0.0; 2], p("c0") * v + p("fc") * (v / p("v0")).tanh())),
-        "bouc-wen" => Some(|p, _x, v, s| ([wen(p, v, s[0]), 0.0], p("c0") * v + p("fz") * s[0])),
+        "bingham" => Some(|p, _x, v, _s| ([0.0; 3], p("c0") * v + p("fc") * (v / p("v0")).tanh())),
+        "bouc-wen" => {
+            Some(|p, _x, v, s| ([wen(p, v, s[0]), 0.0, 0.0], p("c0") * v + p("fz") * s[0]))
+        }
         "spencer" => Some(|p, x, v, s| {
             let (c0, c1) = (p("c0"), p("c1"));
             let y_dot = (p("fz") * s[0] + c0 * v + p("k0") * (x - s[1])) / (c0 + c1);
-            ([wen(p, v - y_dot, s[0]), y_dot], c1 * y_dot)
+            ([wen(p, v - y_dot, s[0]), y_dot, 0.0], c1 * y_dot)
+        }),
+        // the B-P element's stress τ = s[0] on the virtual campaign's
+        // area and gap (0.05 m², 1 mm), its work W = s[2]
+        "bp-spencer" => Some(|p, x, v, s| {
+            let (c0, c1, area, gap) = (p("c0"), p("c1"), 0.05, 0.001);
+            let y_dot = (area * s[0] + c0 * v + p("k0") * (x - s[1])) / (c0 + c1);
+            let flow = bp_flow(p, s[0], s[2]);
+            ([p("G") * ((v - y_dot) / gap - flow), y_dot, s[0] * flow], c1 * y_dot)
         }),
         _ => None,
     }
@@ -122,13 +148,18 @@ fn independent_force(law: &str) -> Option<Force> {
 /// Runge-Kutta with 200 steps per sample interval along the strain that
 /// drives the model (the displacement linear between samples), the force
 /// at each sample at the central-difference velocity. The median of the
-/// draws' paths and the path of the medians differ by the posterior's
-/// spread in the path (about 1 N here, 15 N of noise over 600–2400
-/// samples a run) and the calibration's step (the step rule keeps it
-/// below 0.1 posterior sd). Measured: RMS 0.04–0.14 N, largest 0.09–0.62
-/// N over the three laws' nine runs; asserted: RMS within 0.4 N and every
-/// sample within 1.5 N (a tenth of the force noise) of the independent
-/// path.
+/// draws' paths and the path of the medians differ by a share of the
+/// posterior's spread in the path (its interquartile width 0.8–2.2 N
+/// here, 15 N of noise over 600–2400 samples a run; the more parameters,
+/// the larger the share) and the calibration's step (the step rule keeps
+/// it below 0.1 posterior sd). Measured: RMS 0.04–0.14 N, largest
+/// 0.09–0.62 N over Bouc-Wen's, Spencer's and Bingham's nine runs;
+/// `bp-spencer` (ten parameters) RMS 0.09–0.44 N, largest 0.38–0.83 N
+/// (with 8 sub-steps, another chain: RMS up to 0.88 N, where the mean
+/// interquartile width is 2.2 N). Asserted: RMS within 0.4 N or 0.6 of
+/// the run's mean interquartile width, and every sample within 1.5 N (a
+/// tenth of the force noise) of the independent path; a wrong equation
+/// misses by tens of newtons.
 fn band_median_follows(out: &std::path::Path, names: &[String], q50: &[f64], force: Force) {
     ok(&["predict", arg(out), "--draws", "100"]);
     let value = |name: &str| q50[names.iter().position(|n| n == name).unwrap()];
@@ -138,6 +169,8 @@ fn band_median_follows(out: &std::path::Path, names: &[String], q50: &[f64], for
     let time = f64_column(&bands, "time_s", &path).unwrap();
     let gamma = f64_column(&bands, "gamma", &path).unwrap();
     let median = f64_column(&bands, "q50", &path).unwrap();
+    let (q25, q75) =
+        (f64_column(&bands, "q25", &path).unwrap(), f64_column(&bands, "q75", &path).unwrap());
     let (area, gap) = (0.05, 0.001); // the virtual campaign's geometry
     let mut start = 0;
     while start < runs.len() {
@@ -149,20 +182,22 @@ fn band_median_follows(out: &std::path::Path, names: &[String], q50: &[f64], for
             let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
             (x[b] - x[a]) / (t[b] - t[a])
         };
-        let mut state = [0.0; 2];
+        let mut state = [0.0; 3];
         let mut path = vec![force(&value, x[0], central(0), state).1];
         for k in 0..n - 1 {
             let v = (x[k + 1] - x[k]) / (t[k + 1] - t[k]);
             let h = (t[k + 1] - t[k]) / 200.0;
             for i in 0..200 {
                 let xi = x[k] + v * h * i as f64;
-                let rate = |dx: f64, s: [f64; 2]| force(&value, xi + dx, v, s).0;
-                let at = |s: [f64; 2], r: [f64; 2], c: f64| [s[0] + c * r[0], s[1] + c * r[1]];
+                let rate = |dx: f64, s: [f64; 3]| force(&value, xi + dx, v, s).0;
+                let at = |s: [f64; 3], r: [f64; 3], c: f64| -> [f64; 3] {
+                    std::array::from_fn(|j| s[j] + c * r[j])
+                };
                 let k1 = rate(0.0, state);
                 let k2 = rate(0.5 * h * v, at(state, k1, 0.5 * h));
                 let k3 = rate(0.5 * h * v, at(state, k2, 0.5 * h));
                 let k4 = rate(h * v, at(state, k3, h));
-                for j in 0..2 {
+                for j in 0..3 {
                     state[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
                 }
             }
@@ -172,11 +207,16 @@ fn band_median_follows(out: &std::path::Path, names: &[String], q50: &[f64], for
             path.iter().zip(&median[start..end]).map(|(f, q)| (q * area - f).abs()).collect();
         let rms = (gaps.iter().map(|g| g * g).sum::<f64>() / n as f64).sqrt();
         let worst = gaps.iter().fold(0.0_f64, |a, b| a.max(*b));
+        let iqr = (start..end).map(|k| (q75[k] - q25[k]) * area).sum::<f64>() / n as f64;
         eprintln!(
-            "{}: band median − independent path: RMS {rms:.2} N, largest {worst:.2} N",
+            "{}: band median − independent path: RMS {rms:.2} N, largest {worst:.2} N (interquartile width {iqr:.2} N)",
             runs[start]
         );
-        assert!(rms < 0.4 && worst < 1.5, "{}: RMS {rms:.2} N, largest {worst:.2} N", runs[start]);
+        assert!(
+            rms < 0.4f64.max(0.6 * iqr) && worst < 1.5,
+            "{}: RMS {rms:.2} N, largest {worst:.2} N, interquartile width {iqr:.2} N",
+            runs[start]
+        );
         start = end;
     }
 }
