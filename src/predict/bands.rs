@@ -55,7 +55,23 @@ pub struct Bands {
     /// (q50) at the draws' median noise, where it models a force of its
     /// own (the discrepancy model).
     pub explained: Option<Explained>,
+    /// The share of the draws whose own path misses the record by more
+    /// than [`FAR`] times the median path's RMS (NaN without a measured
+    /// force): a posterior that reaches where its likelihood does not score
+    /// the path itself (the adjusted likelihood along a parameter the
+    /// records do not fix, docs/calibration.md) widens the bands past what
+    /// the records warrant.
+    pub far_draws: f64,
 }
+
+/// How many times the median path's RMS miss a draw's path may miss the
+/// record by before it counts as far: a posterior of the records puts its
+/// draws' paths within a small share of the noise of each other, so their
+/// misses are the median's within a few per cent.
+pub const FAR: f64 = 1.5;
+
+/// The share of draws far from the record ([`Bands::far_draws`]).
+pub const FAR_DRAWS_WARN: f64 = 0.025;
 
 /// How well the bands hold the observations of one run (samples after the
 /// first, which is the fixed initial state).
@@ -169,6 +185,7 @@ pub fn bands_of(
     let mut noise_k = vec![0.0; kept.len() * reps];
     let mut pred_k = vec![0.0; kept.len() * reps];
     let mut log_p = vec![0.0; kept.len()];
+    let mut miss = vec![0.0; kept.len()];
     let mut lppd = 0.0;
     for k in 0..n {
         let dg = if k > 0 { run.gamma[k] - run.gamma[k - 1] } else { 0.0 };
@@ -184,6 +201,9 @@ pub fn bands_of(
                 g
             };
             log_p[i] = noise.marginal_ln_pdf(run, run.tau[k] - at_k[i], stiffness[i], &d.noise);
+            if k > 0 {
+                miss[i] += (run.tau[k] - at_k[i]).powi(2);
+            }
         }
         simulator.next(&stiffness, &mut rng, &mut noise_k);
         for (i, model) in at_k.iter().enumerate() {
@@ -206,7 +226,23 @@ pub fn bands_of(
     // no measured force (a simulated excitation): nothing to explain
     let measured = run.tau.iter().all(|t| t.is_finite());
     let explained = if measured { explain_median(run, kept, &model[2], noise) } else { None };
-    Ok(Bands { run: run.id.clone(), model, predictive, draws: kept.len(), failed, lppd, explained })
+    let far_draws = if measured && n > 1 {
+        let median: f64 = (1..n).map(|k| (run.tau[k] - model[2][k]).powi(2)).sum();
+        let far = miss.iter().filter(|m| **m > FAR * FAR * median).count();
+        far as f64 / kept.len() as f64
+    } else {
+        f64::NAN
+    };
+    Ok(Bands {
+        run: run.id.clone(),
+        model,
+        predictive,
+        draws: kept.len(),
+        failed,
+        lppd,
+        explained,
+        far_draws,
+    })
 }
 
 /// The quantiles `probs` (increasing) of `v`, as [`crate::sampler::quantile_sorted`] of
@@ -321,6 +357,10 @@ pub struct CoverageRow {
     /// Log pointwise predictive density of the record (nat; see [`Bands`]).
     #[serde(default = "not_known")]
     pub lppd: f64,
+    /// The share of draws whose path misses the record by more than 1.5
+    /// times the median path's RMS ([`Bands::far_draws`]; NaN: not known).
+    #[serde(default = "not_known")]
+    pub far_draws: f64,
 }
 
 fn not_known() -> f64 {
@@ -344,6 +384,7 @@ impl CoverageRow {
             failed_draws: bands.failed,
             calibrated,
             lppd: coverage.lppd,
+            far_draws: bands.far_draws,
         }
     }
 
@@ -453,6 +494,64 @@ mod tests {
         assert!((b.lppd - by_hand).abs() < 1e-9 * by_hand.abs(), "{} vs {by_hand}", b.lppd);
     }
 
+    /// Draws whose own path misses the record far more than the median
+    /// path's are counted, and only they: a record of the reference path
+    /// plus a ±300 Pa wave (the median path's RMS miss 212 Pa); 34 draws
+    /// at the reference, 2 with G 0.1 % higher (their paths within a few
+    /// pascals of it), 4 with twice the yield stresses (missing by about
+    /// the stress itself, ~1e5 Pa): 4 of 40 far.
+    #[test]
+    fn draws_far_from_the_record_are_counted() {
+        let ramp = ramp_run();
+        let integ = Integrator { scheme: Scheme::Explicit, substeps: 2, ..Integrator::default() };
+        let p = Params::reference_1a();
+        let truth = integ.run(&p, &ramp.time, &ramp.gamma).unwrap().tau;
+        let tau: Vec<f64> =
+            truth.iter().enumerate().map(|(k, t)| t + 300.0 * (0.3 * k as f64).sin()).collect();
+        let run = RunData::new(
+            "r".into(),
+            ramp.time.clone(),
+            ramp.gamma.clone(),
+            tau,
+            0.0,
+            1.0,
+            (0.05, 1e-3),
+            (0.0, 1.0),
+        );
+        let near = Params { g: p.g * 1.001, ..p };
+        let far = Params { r0: 2.0 * p.r0, r1: 2.0 * p.r1, ..p };
+        let mut draws = vec![Draw::of_law(p, [300.0, 0.0, 0.0, 0.0]); 34];
+        draws.extend(vec![Draw::of_law(near, [300.0, 0.0, 0.0, 0.0]); 2]);
+        draws.extend(vec![Draw::of_law(far, [300.0, 0.0, 0.0, 0.0]); 4]);
+        let b =
+            bands(&run, 0, &draws, &settings(integ, NoiseKind::Gaussian, 4, 3), &|| {}).unwrap();
+        assert_eq!(b.far_draws, 0.1);
+        // a record without a measured force has nothing to miss
+        let b = bands(
+            &ramp_run_unmeasured(),
+            0,
+            &draws,
+            &settings(integ, NoiseKind::Gaussian, 4, 3),
+            &|| {},
+        )
+        .unwrap();
+        assert!(b.far_draws.is_nan());
+    }
+
+    fn ramp_run_unmeasured() -> RunData {
+        let r = ramp_run();
+        RunData::new(
+            "r".into(),
+            r.time.clone(),
+            r.gamma.clone(),
+            vec![f64::NAN; r.time.len()],
+            0.0,
+            1.0,
+            (0.05, 1e-3),
+            (0.0, 1.0),
+        )
+    }
+
     /// AR(1) noise keeps its stationary variance σ²/(1 − ρ²) along the record.
     #[test]
     fn ar1_noise_has_the_stationary_spread() {
@@ -479,6 +578,7 @@ mod tests {
             failed: 0,
             lppd: 0.0,
             explained: None,
+            far_draws: 0.0,
         };
         let c = b.coverage(&[9.0, 0.5, 2.0, -0.5, -3.0]);
         assert_eq!(c.samples, 4);

@@ -13,8 +13,8 @@ use crate::error::Result;
 use crate::posterior::Draw;
 pub use adequacy::{AdequacyRow, Excitation};
 pub use bands::{
-    bands, bands_of, model_paths, Bands, Coverage, CoverageRow, PredictSettings, RunBands,
-    MODEL_PROBS, PREDICTIVE_PROBS,
+    bands, bands_of, model_paths, Bands, Coverage, CoverageRow, PredictSettings, RunBands, FAR,
+    FAR_DRAWS_WARN, MODEL_PROBS, PREDICTIVE_PROBS,
 };
 
 /// How posterior draws are propagated into bands (`mrbp predict`, `run`,

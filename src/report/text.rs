@@ -325,6 +325,19 @@ pub fn prediction(record: &PredictionRecord) -> String {
             if r.calibrated { "" } else { "held out" }
         );
     }
+    let far: Vec<String> = rows
+        .iter()
+        .filter(|r| r.far_draws > crate::predict::FAR_DRAWS_WARN)
+        .map(|r| format!("{} {:.0} %", r.run, 100.0 * r.far_draws))
+        .collect();
+    if !far.is_empty() {
+        row!(
+            out,
+            "warning: draws whose own path misses the record by more than {}× the median path's RMS: {} — the posterior reaches where its likelihood does not score the path itself (the adjusted likelihood along a parameter the records do not fix), so the bands are wider than the records warrant; `--memory tempered` scores each draw by its own path (docs/calibration.md, \"Which likelihood for measured records\")",
+            crate::predict::FAR,
+            far.join(", ")
+        );
+    }
     out
 }
 

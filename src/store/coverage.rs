@@ -58,6 +58,7 @@ pub fn table(rows: &[CoverageRow]) -> Table {
         .i64("failed_draws", rows.iter().map(|r| r.failed_draws as i64).collect())
         .bool("calibrated", rows.iter().map(|r| r.calibrated).collect())
         .f64("lppd", rows.iter().map(|r| r.lppd).collect())
+        .f64("far_draws", rows.iter().map(|r| r.far_draws).collect())
 }
 
 fn write_loo(path: &Path, rows: &[LooRow], id: &str) -> Result<()> {
@@ -110,6 +111,7 @@ pub fn read(path: &Path) -> Result<Vec<CoverageRow>> {
     let col = |n: &str| f64_column(&df, n, path);
     let calibrated = f64_column(&df, "calibrated", path).unwrap_or_else(|_| vec![1.0; run.len()]);
     let lppd = f64_column(&df, "lppd", path).unwrap_or_else(|_| vec![f64::NAN; run.len()]);
+    let far = f64_column(&df, "far_draws", path).unwrap_or_else(|_| vec![f64::NAN; run.len()]);
     let (cur, samples, p, q, rmse, draws, failed) = (
         col("current_a")?,
         col("samples")?,
@@ -131,6 +133,7 @@ pub fn read(path: &Path) -> Result<Vec<CoverageRow>> {
             failed_draws: failed[i] as usize,
             calibrated: calibrated[i] != 0.0,
             lppd: lppd[i],
+            far_draws: far[i],
         })
         .collect())
 }
