@@ -346,25 +346,12 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
             true => recentred(&posterior, &start).ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the mode of the independent likelihood was not found", left_out.id())))?,
             false => (posterior, start),
         };
-        let Some(map) = map::basin(&posterior, &start) else {
-            // no mode with a curvature (a parameter the records do not fix
-            // left at its bound, where the Gauss-Newton curvature is
-            // singular): the held-out posterior is sampled, its walkers
-            // started on the full posterior's draws' spread
-            let points = draws_theta(full, &posterior, &positions);
-            let d = posterior.layout.dim();
-            let laplace = Elliptical::or_diagonal(
-                Moments::weighted(points.iter().map(|p| (p.as_slice(), 1.0)), d),
-                points.len(),
-            )
-            .ok_or_else(|| {
-                Error::Compute(format!(
-                    "leave-one-out without {}: the MAP search failed, and the full posterior's draws have no spread to start from",
-                    left_out.id()
-                ))
-            })?;
-            return Ok(Weighed::ToSample(Box::new(Pending { target, posterior, laplace, row })));
-        };
+        let map = map::basin(&posterior, &start).ok_or_else(|| {
+            Error::Compute(format!(
+                "leave-one-out without {}: the MAP search failed",
+                left_out.id()
+            ))
+        })?;
         let laplace = laplace::at_mode(&posterior, &map);
         let (k_hat, by_laplace) =
             laplace_importance(&target, &posterior, &laplace, settings.sampler.seed, loo)?;
@@ -537,36 +524,18 @@ fn weighted_mean_theta(
     positions: &[(usize, usize)],
     weights: &[f64],
 ) -> Vec<f64> {
-    let mut mean = vec![0.0; posterior.layout.fitted.len()];
-    for (point, w) in draws_theta(full, posterior, positions).iter().zip(weights) {
-        for (m, v) in mean.iter_mut().zip(point) {
+    let layout = &posterior.layout;
+    let mut mean = vec![0.0; layout.fitted.len()];
+    let sample = &full.cal.sample;
+    for (&(step, chain), w) in positions.iter().zip(weights) {
+        let point = sample.chains.point(step, chain);
+        let si: Vec<f64> =
+            layout.names.iter().map(|n| sample.layout.index(n).map_or(1.0, |k| point[k])).collect();
+        for (m, v) in mean.iter_mut().zip(layout.from_si(&si)) {
             *m += w * v;
         }
     }
     mean
-}
-
-/// The full posterior's draws at `positions`, in the held-out posterior's
-/// coordinates, every one (those of the held-out run left out).
-fn draws_theta(
-    full: &Full,
-    posterior: &Posterior,
-    positions: &[(usize, usize)],
-) -> Vec<Vec<f64>> {
-    let layout = &posterior.layout;
-    let sample = &full.cal.sample;
-    positions
-        .iter()
-        .map(|&(step, chain)| {
-            let point = sample.chains.point(step, chain);
-            let si: Vec<f64> = layout
-                .names
-                .iter()
-                .map(|n| sample.layout.index(n).map_or(1.0, |k| point[k]))
-                .collect();
-            layout.from_si(&si)
-        })
-        .collect()
 }
 
 /// Log-densities of `points`, in parallel batches.
