@@ -101,10 +101,10 @@ impl StateLaw for BpSpencer {
         let zero = S::splat(0.0);
         let tau = state[1];
         let (a, b) = (zero - c.k0 * c.inv_c, c.area * c.inv_c);
-        let z = c.law.hardening_sum(state[2]);
+        let (z, z_w) = c.law.hardening_with_slope(state[2]);
         let (flow, slope) = c.law.flow(tau, z);
         // ∂γ̇ᴵ/∂W = −s τ/z · z'
-        let flow_w = zero - slope * tau / z * c.law.hardening_slope(state[2]);
+        let flow_w = zero - slope * tau / z * z_w;
         let g_h = c.law.g * c.inv_gap;
         [
             [a, b, zero],

@@ -273,7 +273,7 @@ fn interval<L: StateLaw, S: F64xN>(
     if L::STATES > 2 {
         for i in 0..m {
             let x = S::splat(x0 + v * h * i as f64);
-            s = rosenbrock_3::<L, S>(c, x, vs, hs, gh, s);
+            s = rosenbrock_3::<L, S>(c, x, vs, [hs, gh, three_half, half], s);
         }
         track.state = s;
         return 3 * m as u64;
@@ -301,17 +301,18 @@ fn interval<L: StateLaw, S: F64xN>(
     3 * m as u64
 }
 
-/// One ROS2 sub-step of length `h` (`gh` = γ h) of a three-variable
-/// state: W = I − γ h J inverted by its adjugate, once for both stages.
+/// One ROS2 sub-step of a three-variable state, with `steps` = [h, γ h,
+/// 1.5 h, 0.5 h] as [`interval`] computes them: W = I − γ h J inverted by
+/// its adjugate, once for both stages.
 #[inline(always)]
 fn rosenbrock_3<L: StateLaw, S: F64xN>(
     c: &L::Lanes<S>,
     x: S,
     v: S,
-    h: S,
-    gh: S,
+    steps: [S; 4],
     s: State<S>,
 ) -> State<S> {
+    let [h, gh, three_half, half] = steps;
     let (zero, one, two) = (S::splat(0.0), S::splat(1.0), S::splat(2.0));
     // W = I − γ h J and its adjugate, written out (no closures: see
     // `integrate`)
@@ -329,7 +330,6 @@ fn rosenbrock_3<L: StateLaw, S: F64xN>(
     let f2 = L::rate(c, x + v * h, v, [s[0] + h * k1[0], s[1] + h * k1[1], s[2] + h * k1[2]]);
     let k2 =
         solve_3(&adj, inv_det, [f2[0] - two * k1[0], f2[1] - two * k1[1], f2[2] - two * k1[2]]);
-    let (three_half, half) = (S::splat(1.5) * h, S::splat(0.5) * h);
     [
         s[0] + three_half * k1[0] + half * k2[0],
         s[1] + three_half * k1[1] + half * k2[1],

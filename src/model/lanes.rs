@@ -65,22 +65,31 @@ impl<S: F64xN> LaneLaw<S> {
         }
     }
 
-    /// R + D after inelastic work `w` (eq. 4).
+    /// e^(−m1 W) and e^(−m2 W), the decays of eq. 4.
     #[inline(always)]
-    pub fn hardening_sum(&self, w: S) -> S {
+    fn decays(&self, w: S) -> (S, S) {
         // the state carries a NaN on by itself: the checked exp is not needed
-        let e1 = exp_of_finite(-self.m1 * w);
-        let e2 = exp_of_finite(-self.m2 * w);
+        (exp_of_finite(-self.m1 * w), exp_of_finite(-self.m2 * w))
+    }
+
+    /// R + D from the decays `(e1, e2)` (eq. 4).
+    #[inline(always)]
+    fn sum_of(&self, (e1, e2): (S, S)) -> S {
         self.r1 + (self.r0 - self.r1) * e1 + self.d1 * (S::splat(1.0) - e2)
     }
 
-    /// d(R + D)/dW after inelastic work `w` (eq. 4):
-    /// m1 (R1 − R0) e^(−m1 W) + m2 D1 e^(−m2 W).
+    /// R + D after inelastic work `w` (eq. 4).
     #[inline(always)]
-    pub fn hardening_slope(&self, w: S) -> S {
-        let e1 = exp_of_finite(-self.m1 * w);
-        let e2 = exp_of_finite(-self.m2 * w);
-        self.m1 * (self.r1 - self.r0) * e1 + self.m2 * self.d1 * e2
+    pub fn hardening_sum(&self, w: S) -> S {
+        self.sum_of(self.decays(w))
+    }
+
+    /// R + D after inelastic work `w` and its slope d(R + D)/dW =
+    /// m1 (R1 − R0) e^(−m1 W) + m2 D1 e^(−m2 W), from one pair of decays.
+    #[inline(always)]
+    pub fn hardening_with_slope(&self, w: S) -> (S, S) {
+        let (e1, e2) = self.decays(w);
+        (self.sum_of((e1, e2)), self.m1 * (self.r1 - self.r0) * e1 + self.m2 * self.d1 * e2)
     }
 
     /// γ̇ᴵ (with the sign of τ) and ∂γ̇ᴵ/∂τ at stress `tau` under hardening

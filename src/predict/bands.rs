@@ -421,12 +421,17 @@ mod tests {
     }
 
     fn ramp_run() -> RunData {
+        ramp_run_with(vec![0.0; 400])
+    }
+
+    /// The ramp's 400 samples with the stress record `tau`.
+    fn ramp_run_with(tau: Vec<f64>) -> RunData {
         let time: Vec<f64> = (0..400).map(|k| k as f64 * 5e-4).collect();
         let gamma: Vec<f64> = time
             .iter()
             .map(|t| 0.5 * (1.0 - (2.0 * std::f64::consts::PI * 2.5 * t).cos()))
             .collect();
-        RunData::new("r".into(), time, gamma, vec![0.0; 400], 0.0, 1.0, (0.05, 1e-3), (0.0, 1.0))
+        RunData::new("r".into(), time, gamma, tau, 0.0, 1.0, (0.05, 1e-3), (0.0, 1.0))
     }
 
     fn settings(
@@ -508,16 +513,7 @@ mod tests {
         let truth = integ.run(&p, &ramp.time, &ramp.gamma).unwrap().tau;
         let tau: Vec<f64> =
             truth.iter().enumerate().map(|(k, t)| t + 300.0 * (0.3 * k as f64).sin()).collect();
-        let run = RunData::new(
-            "r".into(),
-            ramp.time.clone(),
-            ramp.gamma.clone(),
-            tau,
-            0.0,
-            1.0,
-            (0.05, 1e-3),
-            (0.0, 1.0),
-        );
+        let run = ramp_run_with(tau);
         let near = Params { g: p.g * 1.001, ..p };
         let far = Params { r0: 2.0 * p.r0, r1: 2.0 * p.r1, ..p };
         let mut draws = vec![Draw::of_law(p, [300.0, 0.0, 0.0, 0.0]); 34];
@@ -528,7 +524,7 @@ mod tests {
         assert_eq!(b.far_draws, 0.1);
         // a record without a measured force has nothing to miss
         let b = bands(
-            &ramp_run_unmeasured(),
+            &ramp_run_with(vec![f64::NAN; 400]),
             0,
             &draws,
             &settings(integ, NoiseKind::Gaussian, 4, 3),
@@ -536,20 +532,6 @@ mod tests {
         )
         .unwrap();
         assert!(b.far_draws.is_nan());
-    }
-
-    fn ramp_run_unmeasured() -> RunData {
-        let r = ramp_run();
-        RunData::new(
-            "r".into(),
-            r.time.clone(),
-            r.gamma.clone(),
-            vec![f64::NAN; r.time.len()],
-            0.0,
-            1.0,
-            (0.05, 1e-3),
-            (0.0, 1.0),
-        )
     }
 
     /// AR(1) noise keeps its stationary variance σ²/(1 − ρ²) along the record.
