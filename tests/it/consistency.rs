@@ -186,7 +186,7 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
         column_names(&table),
         [
             "run", "current_a", "samples", "inside_p95", "inside_q95", "rmse_q50_pa", "draws",
-            "failed_draws", "calibrated", "lppd", "left_out", "max_r_hat"
+            "failed_draws", "calibrated", "lppd", "far_draws", "left_out", "max_r_hat"
         ]
     );
     let joint = mrbp::store::record::read(&folder.join("calibration.toml")).unwrap();
