@@ -90,8 +90,14 @@ impl Pipeline<'_> {
                             .ok_or_else(|| {
                                 Error::Compute(format!("{}: no leave-one-out study", dir.display()))
                             })?;
-                    for (b, r) in loo.bands.iter().zip(&loo.rows) {
-                        rows.push(row(law, c, b, Kind::HeldOut, r.coverage.lppd, seconds, area));
+                    // bands only for the runs that could be held out
+                    for b in &loo.bands {
+                        let lppd = loo
+                            .rows
+                            .iter()
+                            .find(|r| r.coverage.run == b.run)
+                            .map_or(f64::NAN, |r| r.coverage.lppd);
+                        rows.push(row(law, c, b, Kind::HeldOut, lppd, seconds, area));
                     }
                     shown.extend(loo.bands);
                 } else {

@@ -270,9 +270,17 @@ impl Pipeline<'_> {
             listener(Event::Note(&format!("  leave-one-out: no importance weights can be trusted for {run} (k̂ > 0.7): sampling without it")));
             Pipeline::observers_for(progress)
         };
-        let held = leave_one_out(cal, &campaign, loo, &mut observe)?;
-        let (bands, rows): (Vec<RunBands>, Vec<LooRow>) =
-            held.into_iter().map(|h| (h.prediction.bands, h.row)).unzip();
+        let mut failures = Vec::new();
+        let mut failed = |run: &str, why: &str| failures.push((run.to_string(), why.to_string()));
+        let held = leave_one_out(cal, &campaign, loo, &mut observe, &mut failed)?;
+        for (run, why) in &failures {
+            self.note(&format!(
+                "  leave-one-out: {run} could not be held out ({why}): loo.parquet marks it \"failed\", without bands; the other runs are held out"
+            ));
+        }
+        let (bands, rows): (Vec<Option<RunBands>>, Vec<LooRow>) =
+            held.into_iter().map(|h| (h.prediction.map(|p| p.bands), h.row)).unzip();
+        let bands: Vec<RunBands> = bands.into_iter().flatten().collect();
         let study = LeaveOneOut { rows, bands };
         store::coverage::write_leave_one_out(&cal.dir, &study, &cal.record.calibration_id)?;
         self.emit(Event::LeftOneOut { rows: &study.rows, seconds: clock.elapsed().as_secs_f64() });

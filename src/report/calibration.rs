@@ -451,7 +451,8 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
     match r.loo {
         Some(LeaveOneOut { rows, .. }) => {
             page.para("Each run predicted by the posterior of the other runs of this calibration only (its noise level taken as the root-mean-square σ of those runs): the honest test of the bands on data the fit has not seen. That posterior is reached by the cheapest way that can be trusted: the full posterior's draws reweighted by Pareto-smoothed importance sampling where the Pareto k̂ of the weights is at most 0.7; else importance sampling from the Laplace approximation of the held-out posterior, if its k̂ is at most 0.7; else ensemble MCMC of the held-out posterior. The log predictive density (mean over the run's samples of ln p(τ_obs | other runs)) scores the held-out prediction as a whole: compare it between model variants (terms, noise models) on the same records; higher is better.");
-            let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
+            let coverage: Vec<CoverageRow> =
+                rows.iter().filter(|r| r.failure.is_none()).map(|r| r.coverage.clone()).collect();
             coverage_table(page, &coverage, true);
             let how: Vec<Vec<String>> = rows
                 .iter()
@@ -460,7 +461,7 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
                     vec![
                         esc(&r.coverage.run),
                         or_dash(r.coverage.lppd / r.coverage.samples.max(1) as f64, 3),
-                        format!("{:.2}", r.pareto_k),
+                        or_dash(r.pareto_k, 2),
                         or_dash(r.pareto_k_laplace, 2),
                         r.by.label().into(),
                         or_dash(r.max_rhat, 4),
@@ -468,6 +469,11 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
                 })
                 .collect();
             page.table(&["held out", "log predictive density per sample (nat)", "Pareto k̂ (reweighting)", "Pareto k̂ (Laplace)", "held-out posterior by", "largest R̂"], &how);
+            for r in rows {
+                if let Some(why) = &r.failure {
+                    page.para(&format!("{} could not be held out ({}): it has no held-out bands and no numbers above; the other runs were held out as usual.", r.coverage.run, why));
+                }
+            }
             for (stem, caption) in &loo_figs.items {
                 page.figure(&r.cal.dir.join("loo").join(format!("{stem}.png")), &format!("Held out: {caption}"))?;
             }
@@ -529,7 +535,8 @@ fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut
     page.para("Each run predicted as a new test of this damper: the between-run layer fitted to every other run calibrated alone, at every current, draws the run's parameters and noise, which the integrator carries along its record. Beside it, where the leave-one-out study was run, the same run predicted by the joint calibration of the other runs at its current. Pooled over many tests, a right band for a new test holds about 95 % of the samples; one test is inside nearly everywhere or, if its parameters lie in the population's tails, outside over much of its record, since tests differ by more than the noise. So a run near 100 % is a typical test, a run far below is unlike the others, and the pooled share under the tables judges the band (docs/calibration.md); the log predictive density per sample scores sharpness and honesty together (higher is better).");
     let per_sample = |c: &CoverageRow| c.lppd / c.samples.max(1) as f64;
     let joint = |run: &str| {
-        loo.and_then(|l| l.rows.iter().find(|r| r.coverage.run == run)).map(|r| &r.coverage)
+        loo.and_then(|l| l.rows.iter().find(|r| r.coverage.run == run && r.failure.is_none()))
+            .map(|r| &r.coverage)
     };
     let table: Vec<Vec<String>> = rows
         .iter()

@@ -358,6 +358,10 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
     );
     for r in rows {
         let c = &r.coverage;
+        if let Some(why) = &r.failure {
+            row!(out, "{:<16} not held out: {why}", c.run);
+            continue;
+        }
         let or_dash = |v: f64, digits: usize| {
             if v.is_finite() {
                 format!("{v:.digits$}")

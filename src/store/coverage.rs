@@ -68,7 +68,8 @@ fn write_loo(path: &Path, rows: &[LooRow], id: &str) -> Result<()> {
         .f64("pareto_k", rows.iter().map(|r| r.pareto_k).collect())
         .f64("pareto_k_laplace", rows.iter().map(|r| r.pareto_k_laplace).collect())
         .str("held_out_by", rows.iter().map(|r| r.by.label().to_string()).collect())
-        .f64("max_r_hat", rows.iter().map(|r| r.max_rhat).collect());
+        .f64("max_r_hat", rows.iter().map(|r| r.max_rhat).collect())
+        .str("failure", rows.iter().map(|r| r.failure.clone().unwrap_or_default()).collect());
     write_parquet(path, t)
 }
 
@@ -79,27 +80,22 @@ fn read_loo(path: &Path) -> Result<Vec<LooRow>> {
     let k_laplace = f64_column(&df, "pareto_k_laplace", path)?;
     let by = str_column(&df, "held_out_by", path)?;
     let rhat = f64_column(&df, "max_r_hat", path)?;
+    // files written before a held-out run could fail have no column
+    let failure = str_column(&df, "failure", path).unwrap_or_else(|_| vec![String::new(); k.len()]);
     coverage
         .into_iter()
         .enumerate()
         .map(|(i, c)| {
-            let by = match by[i].as_str() {
-                "reweighting" => HeldOutBy::Reweighting,
-                "laplace-importance" => HeldOutBy::LaplaceImportance,
-                "sampling" => HeldOutBy::Sampling,
-                other => {
-                    return Err(Error::input(
-                        path,
-                        format!("row {}: unknown held_out_by '{other}'", i + 1),
-                    ))
-                }
-            };
+            let by = HeldOutBy::from_label(&by[i]).ok_or_else(|| {
+                Error::input(path, format!("row {}: unknown held_out_by '{}'", i + 1, by[i]))
+            })?;
             Ok(LooRow {
                 coverage: c,
                 pareto_k: k[i],
                 pareto_k_laplace: k_laplace[i],
                 by,
                 max_rhat: rhat[i],
+                failure: Some(failure[i].clone()).filter(|f| !f.is_empty()),
             })
         })
         .collect()
@@ -136,4 +132,31 @@ pub fn read(path: &Path) -> Result<Vec<CoverageRow>> {
             far_draws: far[i],
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A held-out run that failed reads back as written: its route, its
+    /// reason and its missing numbers; a run held out beside it keeps its
+    /// own (an empty `failure`).
+    #[test]
+    fn a_failed_held_out_run_reads_back_with_its_reason() {
+        let dir = std::env::temp_dir().join(format!("mrbp-loo-failed-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(LOO);
+        let mut ok = LooRow::failed("t1", 1.0, String::new());
+        (ok.by, ok.failure, ok.pareto_k) = (HeldOutBy::Reweighting, None, 0.4);
+        (ok.coverage.samples, ok.coverage.inside_p95, ok.coverage.lppd) = (99, 0.96, -120.5);
+        let failed = LooRow::failed("t2", 1.0, "the MAP search failed".into());
+        write_loo(&path, &[ok.clone(), failed.clone()], "cal-id").unwrap();
+        let back = read_loo(&path).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(back[0].by, HeldOutBy::Reweighting);
+        assert_eq!((back[0].failure.as_deref(), back[0].coverage.lppd), (None, -120.5));
+        assert_eq!(back[1].by, HeldOutBy::Failed);
+        assert_eq!(back[1].failure.as_deref(), Some("the MAP search failed"));
+        assert!(back[1].coverage.lppd.is_nan() && back[1].pareto_k.is_nan());
+    }
 }

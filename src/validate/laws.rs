@@ -154,6 +154,10 @@ pub struct Standing {
     /// tempered or adjusted for the residuals' memory); where it was
     /// sampled by sequential Monte Carlo (`--sampler smc`).
     pub evidence: Option<LawEvidence>,
+    /// Tests some law at this current could not be held out on (its
+    /// leave-one-out row `failed`): left out of every law's held-out
+    /// numbers here, so that the laws are compared on the same tests.
+    pub set_aside: Vec<String>,
 }
 
 /// A law's log evidence at one current.
@@ -165,8 +169,9 @@ pub struct LawEvidence {
 }
 
 /// The laws' standings, current by current (rank 1 the best held-out
-/// elpd); the laws whose held-out rows miss a test another law has are
-/// refused (they were not compared on the same tests).
+/// elpd), on the tests every law was held out on: a test some law could
+/// not be held out on is set aside for all of them
+/// ([`Standing::set_aside`]).
 pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
     let mut currents: Vec<f64> = rows.iter().map(|r| r.current_a).collect();
     currents.sort_by(f64::total_cmp);
@@ -178,23 +183,31 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
         laws.dedup();
         laws.sort_by_key(|l| LawKind::ALL.iter().position(|k| k == l));
         laws.dedup();
+        // the tests every law was held out on (a law whose held-out
+        // posterior could not be reached for a test has no row for it)
+        let held_on = |law: LawKind, run: &str| {
+            at.iter().any(|r| r.law == law && r.kind == Kind::HeldOut && r.run == run)
+        };
+        let mut every: Vec<String> =
+            at.iter().filter(|r| r.kind == Kind::HeldOut).map(|r| r.run.clone()).collect();
+        every.sort();
+        every.dedup();
+        let (tests, set_aside): (Vec<String>, Vec<String>) =
+            every.into_iter().partition(|run| laws.iter().all(|&law| held_on(law, run)));
+        if tests.is_empty() && !set_aside.is_empty() {
+            return Err(Error::Compute(format!(
+                "at {c} A no test was held out by every law ({set_aside:?}): the laws cannot be compared"
+            )));
+        }
         let held = |law: LawKind| -> Vec<&LawRow> {
-            let mut v: Vec<&LawRow> =
-                at.iter().copied().filter(|r| r.law == law && r.kind == Kind::HeldOut).collect();
+            let mut v: Vec<&LawRow> = at
+                .iter()
+                .copied()
+                .filter(|r| r.law == law && r.kind == Kind::HeldOut && tests.contains(&r.run))
+                .collect();
             v.sort_by(|a, b| a.run.cmp(&b.run));
             v
         };
-        let tests: Vec<String> = held(laws[0]).iter().map(|r| r.run.clone()).collect();
-        for &law in &laws {
-            let runs: Vec<String> = held(law).iter().map(|r| r.run.clone()).collect();
-            if runs != tests {
-                return Err(Error::Compute(format!(
-                    "at {c} A the laws were held out on different tests ({} on {runs:?}, {} on {tests:?})",
-                    law.name(),
-                    laws[0].name()
-                )));
-            }
-        }
         let elpd = |law: LawKind| held(law).iter().map(|r| r.lppd).sum::<f64>();
         let best = laws
             .iter()
@@ -235,6 +248,7 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     seconds: ins.first().or(h.first()).map_or(0.0, |r| r.seconds),
                     rank: 0,
                     evidence: None,
+                    set_aside: set_aside.clone(),
                 }
             })
             .collect();
@@ -278,6 +292,13 @@ pub fn verdict(standings: &[Standing]) -> Vec<String> {
                         100.0 * first.inside_p95_out
                     )
                 }
+            };
+            let line = match first.set_aside.as_slice() {
+                [] => line,
+                aside => format!(
+                    "{line} (on the tests every law was held out on: {} set aside, some law's held-out posterior could not be reached there — loo.parquet says why)",
+                    aside.join(", ")
+                ),
             };
             match evidence_sentence(&at) {
                 Some(sentence) => format!("{line}. {sentence}"),
@@ -423,9 +444,17 @@ mod tests {
             "{v:?}"
         );
         assert!(v[0].contains("not decisive"), "{v:?}");
-        // a law held out on other tests is refused
+        // a test some law could not be held out on is set aside for every
+        // law: Spencer on t1 and t3, Bouc-Wen on t1 and t2 compare on t1
+        // alone (−100 against −110: Bouc-Wen first)
         let mut other = rows.clone();
         other[3].run = "t3".into();
+        let s = standings(&other).unwrap();
+        assert_eq!((s[0].law, s[0].elpd, s[1].elpd), (LawKind::BoucWen, -100.0, -110.0));
+        assert_eq!(s[0].set_aside, ["t2", "t3"]);
+        assert!(verdict(&s)[0].contains("t2, t3 set aside"), "{:?}", verdict(&s));
+        // no test that every law was held out on: refused
+        other[2].run = "t4".into();
         assert!(standings(&other).is_err());
     }
 

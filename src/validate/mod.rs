@@ -72,9 +72,10 @@ pub struct LeaveOneOut {
     pub bands: Vec<RunBands>,
 }
 
-/// One held-out run: how its posterior was reached and what it predicts.
+/// One held-out run: how its posterior was reached and what it predicts
+/// (nothing where it could not be reached: [`HeldOutBy::Failed`]).
 pub struct HeldOut {
-    pub prediction: RunPrediction,
+    pub prediction: Option<RunPrediction>,
     pub row: LooRow,
 }
 
@@ -90,6 +91,9 @@ pub enum HeldOutBy {
     LaplaceImportance,
     /// Ensemble MCMC of the held-out posterior.
     Sampling,
+    /// Not reached: a computation without the run failed (the row's
+    /// `failure` says which); the other runs are held out all the same.
+    Failed,
 }
 
 impl HeldOutBy {
@@ -98,7 +102,20 @@ impl HeldOutBy {
             HeldOutBy::Reweighting => "reweighting",
             HeldOutBy::LaplaceImportance => "laplace-importance",
             HeldOutBy::Sampling => "sampling",
+            HeldOutBy::Failed => "failed",
         }
+    }
+
+    /// The held-out route named `label` ([`HeldOutBy::label`]).
+    pub fn from_label(label: &str) -> Option<HeldOutBy> {
+        [
+            HeldOutBy::Reweighting,
+            HeldOutBy::LaplaceImportance,
+            HeldOutBy::Sampling,
+            HeldOutBy::Failed,
+        ]
+        .into_iter()
+        .find(|b| b.label() == label)
     }
 }
 
@@ -116,6 +133,36 @@ pub struct LooRow {
     pub by: HeldOutBy,
     /// Largest R̂ of the held-out sampling (NaN if not needed).
     pub max_rhat: f64,
+    /// Why the held-out posterior could not be reached ([`HeldOutBy::Failed`]).
+    pub failure: Option<String>,
+}
+
+impl LooRow {
+    /// The row of run `run` (at `current_a`) whose held-out posterior could
+    /// not be reached, for `why`: no coverage (NaN), no bands.
+    pub fn failed(run: &str, current_a: f64, why: String) -> LooRow {
+        let coverage = CoverageRow {
+            run: run.to_string(),
+            current_a,
+            samples: 0,
+            inside_p95: f64::NAN,
+            inside_q95: f64::NAN,
+            rmse_q50_pa: f64::NAN,
+            draws: 0,
+            failed_draws: 0,
+            calibrated: false,
+            lppd: f64::NAN,
+            far_draws: f64::NAN,
+        };
+        LooRow {
+            coverage,
+            pareto_k: f64::NAN,
+            pareto_k_laplace: f64::NAN,
+            by: HeldOutBy::Failed,
+            max_rhat: f64::NAN,
+            failure: Some(why),
+        }
+    }
 }
 
 /// The full calibration a leave-one-out study starts from, with its runs.
@@ -131,12 +178,18 @@ struct Full<'a> {
 /// The held-out runs are weighed side by side (reweighting, MAP, Laplace
 /// importance: each on random streams of its own, so the results do not
 /// depend on the threads); those that still need sampling are then sampled
-/// one after the other, each sampler using every thread.
+/// one after the other, each sampler using every thread. A run whose
+/// held-out posterior cannot be reached (a computation without it fails:
+/// [`Error::Compute`]) gets a [`HeldOutBy::Failed`] row with the reason
+/// and no prediction, and `failed` is told; the others are held out all
+/// the same. Any other error (an interruption, a usage error) stops the
+/// study.
 pub fn leave_one_out(
     cal: &Calibration,
     campaign: &Campaign,
     loo: &LooSettings,
     observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>,
+    failed: &mut dyn FnMut(&str, &str),
 ) -> Result<Vec<HeldOut>> {
     if campaign.runs.len() < 2 {
         return Err(Error::Usage("leave-one-out needs a calibration of at least two runs".into()));
@@ -146,11 +199,32 @@ pub fn leave_one_out(
         campaign.runs.par_iter().enumerate().map(|(j, run)| weigh(&full, j, run, loo)).collect();
     weighed
         .into_iter()
-        .map(|w| match w? {
-            Weighed::Done(held) => Ok(*held),
-            Weighed::ToSample(pending) => pending.sample(&full.cal.settings, loo, observe),
+        .zip(&campaign.runs)
+        .map(|(w, run)| {
+            let held = w.and_then(|w| match w {
+                Weighed::Done(held) => Ok(*held),
+                Weighed::ToSample(pending) => pending.sample(&full.cal.settings, loo, observe),
+            });
+            held_or_failed(run.id(), run.spec.current_a, held, failed)
         })
         .collect()
+}
+
+/// A held-out run, or the row of one whose held-out posterior could not be
+/// reached (a failed computation: `failed` is told); other errors pass.
+fn held_or_failed(
+    run: &str,
+    current_a: f64,
+    held: Result<HeldOut>,
+    failed: &mut dyn FnMut(&str, &str),
+) -> Result<HeldOut> {
+    match held {
+        Err(Error::Compute(why)) => {
+            failed(run, &why);
+            Ok(HeldOut { prediction: None, row: LooRow::failed(run, current_a, why) })
+        }
+        other => other,
+    }
 }
 
 /// Proposals of the importance sampling from the Laplace approximation:
@@ -274,7 +348,7 @@ impl Pending<'_> {
             sample_afresh(&self.target, &self.posterior, &self.laplace, settings, loo, observe)?;
         (self.row.by, self.row.max_rhat) = (HeldOutBy::Sampling, max_rhat);
         self.row.coverage = prediction.coverage.clone();
-        Ok(HeldOut { prediction, row: self.row })
+        Ok(HeldOut { prediction: Some(prediction), row: self.row })
     }
 }
 
@@ -320,6 +394,7 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         pareto_k_laplace: f64::NAN,
         by: HeldOutBy::Reweighting,
         max_rhat: f64::NAN,
+        failure: None,
     };
     // an adjusted held-out posterior is centred on its own likelihood's peak
     // (below), which the full posterior's draws do not weigh: there these
@@ -367,7 +442,7 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         }
     };
     row.coverage = prediction.coverage.clone();
-    Ok(Weighed::Done(Box::new(HeldOut { prediction, row })))
+    Ok(Weighed::Done(Box::new(HeldOut { prediction: Some(prediction), row })))
 }
 
 /// The full posterior's draws are reweighted one in [`FIRST_SHARE`] first:
@@ -599,6 +674,34 @@ mod tests {
         fn log_density(&self, x: &[f64]) -> f64 {
             -0.5 * x.iter().map(|v| v * v).sum::<f64>()
         }
+    }
+
+    /// A held-out posterior that cannot be reached gives a `failed` row
+    /// with the reason and no prediction, and is told; an interruption
+    /// stops the study.
+    #[test]
+    fn a_run_that_cannot_be_held_out_is_marked_and_the_study_goes_on() {
+        let mut told = Vec::new();
+        let why = "leave-one-out without t2: the MAP search failed";
+        let held = held_or_failed("t2", 0.5, Err(Error::Compute(why.into())), &mut |run, w| {
+            told.push(format!("{run}|{w}"))
+        })
+        .expect("a failed computation is a row, not an error");
+        assert!(held.prediction.is_none());
+        assert_eq!(held.row.by, HeldOutBy::Failed);
+        assert_eq!(held.row.failure.as_deref(), Some(why));
+        assert_eq!((held.row.coverage.run.as_str(), held.row.coverage.current_a), ("t2", 0.5));
+        assert!(held.row.coverage.lppd.is_nan() && held.row.coverage.inside_p95.is_nan());
+        assert!(!held.row.coverage.calibrated);
+        assert_eq!(told, [format!("t2|{why}")]);
+        let stopped =
+            held_or_failed("t3", 0.5, Err(Error::Interrupted("Ctrl-C".into())), &mut |_, _| {
+                panic!("an interruption is not a failed run")
+            });
+        assert!(matches!(stopped, Err(Error::Interrupted(_))));
+        assert_eq!(HeldOutBy::from_label("failed"), Some(HeldOutBy::Failed));
+        assert_eq!(HeldOutBy::from_label("sampling"), Some(HeldOutBy::Sampling));
+        assert_eq!(HeldOutBy::from_label("guess"), None);
     }
 
     /// Moment matching needs more effective points than d + 1: (0, 0),
