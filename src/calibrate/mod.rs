@@ -184,7 +184,12 @@ impl Calibration {
 
     /// The largest R̂ and the smallest bulk or tail ESS of the summary.
     pub fn max_rhat(&self) -> f64 {
-        self.summary.iter().map(|r| r.r_hat).fold(f64::NAN, f64::max)
+        match self.summary.is_empty() {
+            true => f64::NAN,
+            false => {
+                crate::sampler::diagnostics::largest_rhat(self.summary.iter().map(|r| r.r_hat))
+            }
+        }
     }
 
     pub fn min_ess(&self) -> f64 {

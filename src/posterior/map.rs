@@ -143,6 +143,15 @@ pub fn residual_rms(post: &Posterior, x: &[f64]) -> Option<Vec<(f64, usize)>> {
     Some(res.iter().map(|r| (crate::noise::rms(r), r.len())).collect())
 }
 
+/// [`residual_rms`] at each of `xs`, integrated together (`None` where a
+/// point's paths fail).
+pub fn residual_rms_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<f64>>> {
+    residuals_many(post, xs)
+        .into_iter()
+        .map(|res| Some(res?.iter().map(|r| crate::noise::rms(r)).collect()))
+        .collect()
+}
+
 /// The noise model's whitening of each run's residuals.
 type Whitening = [Arc<dyn Whiten>];
 

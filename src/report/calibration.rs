@@ -464,7 +464,7 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
                         or_dash(r.pareto_k, 2),
                         or_dash(r.pareto_k_laplace, 2),
                         r.by.label().into(),
-                        or_dash(r.max_rhat, 4),
+                        r.rhat_shown(),
                     ]
                 })
                 .collect();

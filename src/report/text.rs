@@ -379,7 +379,7 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
             r.pareto_k,
             or_dash(r.pareto_k_laplace, 2),
             r.by.label(),
-            or_dash(r.max_rhat, 4)
+            r.rhat_shown()
         );
     }
     out

@@ -386,7 +386,14 @@ fn stuck_walkers(acceptance: &[f64], median: f64, steps: usize) -> Vec<usize> {
 }
 
 fn max_rhat(coordinates: &[ParameterDiagnostics]) -> f64 {
-    coordinates.iter().map(|c| c.r_hat).fold(0.0, f64::max)
+    largest_rhat(coordinates.iter().map(|c| c.r_hat))
+}
+
+/// The largest of some R̂s; NaN where any is NaN (a coordinate whose draws
+/// do not spread: stuck walkers), as the stopping rule counts it — not the
+/// largest of the others, which would hide it. 0 for none.
+pub fn largest_rhat(rhats: impl IntoIterator<Item = f64>) -> f64 {
+    rhats.into_iter().fold(0.0, |m, r| if m.is_nan() || r.is_nan() { f64::NAN } else { m.max(r) })
 }
 
 /// Diagnostics of a whole run.

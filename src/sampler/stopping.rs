@@ -91,6 +91,10 @@ impl fmt::Display for Waiting {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Waiting::Draws => write!(f, "too few draws after burn-in to estimate an ESS"),
+            Waiting::RHat { coordinate, value } if value.is_nan() => write!(
+                f,
+                "R̂ of {coordinate} cannot be computed: its draws do not spread (walkers stuck; target < {RHAT_THRESHOLD})"
+            ),
             Waiting::RHat { coordinate, value } => {
                 write!(f, "R̂ of {coordinate} is {value:.4} (target < {RHAT_THRESHOLD})")
             }
@@ -237,6 +241,24 @@ mod tests {
             names: vec!["ln G".into(), "ln n".into()],
             ..RunControl::fixed(5000)
         }
+    }
+
+    /// A coordinate whose draws do not spread has no R̂ (NaN): the rule
+    /// waits on it and says so, and the largest R̂ is NaN, not the largest
+    /// of the others (which read 0.0000 where every coordinate was stuck).
+    #[test]
+    fn a_coordinate_without_spread_is_named_not_hidden() {
+        let stuck = diagnostics(100, vec![coordinate(1.002, 900.0), coordinate(f64::NAN, 900.0)]);
+        let w = unmet(&stuck, 400.0, 50.0, &control(false).names).expect("waits");
+        assert!(
+            w.to_string().contains("R̂ of ln n cannot be computed: its draws do not spread"),
+            "{w}"
+        );
+        assert!(stuck.max_rhat().is_nan());
+        use crate::sampler::diagnostics::largest_rhat;
+        assert_eq!(largest_rhat([1.002, 1.03]), 1.03);
+        assert!(largest_rhat([f64::NAN, 1.03]).is_nan() && largest_rhat([1.03, f64::NAN]).is_nan());
+        assert_eq!(largest_rhat([]), 0.0);
     }
 
     /// Each condition is named with its coordinate, value and target, in

@@ -138,6 +138,16 @@ pub struct LooRow {
 }
 
 impl LooRow {
+    /// The held-out sampling's largest R̂ as a table shows it: "–" where
+    /// there was none, "no spread" where a coordinate's draws did not move.
+    pub fn rhat_shown(&self) -> String {
+        match (self.by, self.max_rhat) {
+            (HeldOutBy::Sampling, r) if r.is_nan() => "no spread".into(),
+            (_, r) if r.is_finite() => format!("{r:.4}"),
+            _ => "–".into(),
+        }
+    }
+
     /// The row of run `run` (at `current_a`) whose held-out posterior could
     /// not be reached, for `why`: no coverage (NaN), no bands.
     pub fn failed(run: &str, current_a: f64, why: String) -> LooRow {

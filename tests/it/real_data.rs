@@ -286,6 +286,50 @@ fn the_tempered_likelihood_widens_the_measured_intervals() {
     assert!(sd > 0.02 * mean, "G {mean} ± {sd}: not widened");
 }
 
+/// Where the adjusted likelihood would spread draws whose own paths miss
+/// the records, `memory = "auto"` takes the tempered one and says why. The
+/// B-P element in Spencer's frame on the 1 A records: along its spring k0
+/// the adjusted likelihood scores a draw by the fit at another point, and
+/// 25–37 % of its posterior's draws missed a record by more than 1.5× the
+/// median path's RMS (bands 120–420 % of the peak force wide); the start's
+/// check found 17 of 64 draws of the adjusted Laplace approximation far
+/// (2026-11-29). B-P on the same records stays adjusted
+/// ([`measured_records_calibrate_and_the_report_says_where_the_law_misses`]:
+/// none far). Ten steps: the choice is the start's.
+#[test]
+#[ignore = "slow tier: a calibration of the measured records (about 80 s)"]
+fn auto_leaves_the_adjusted_likelihood_where_its_draws_miss_the_records() {
+    let out = tempfile::tempdir().unwrap();
+    let dir = out.path().join("cal");
+    let d = dir.to_str().unwrap().to_string();
+    let o = ok(&[
+        "sample",
+        manifest().to_str().unwrap(),
+        "--current",
+        "1.0",
+        "--law",
+        "bp-spencer",
+        "--steps",
+        "10",
+        "--out",
+        &d,
+    ]);
+    let printed = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        printed.contains(
+            "so the tempered likelihood allows for it (the adjusted likelihood failed here: "
+        ),
+        "{printed}"
+    );
+    assert!(printed.contains("draws of its Laplace approximation have paths that miss a record"));
+    let config: toml::Table =
+        std::fs::read_to_string(dir.join("config.toml")).unwrap().parse().unwrap();
+    assert_eq!(config["likelihood"]["memory"].as_str(), Some("tempered"), "{config:?}");
+    let record: toml::Table =
+        std::fs::read_to_string(dir.join("calibration.toml")).unwrap().parse().unwrap();
+    assert!(record["memory_found"].as_str().unwrap().contains("miss a record"), "{record:?}");
+}
+
 /// Where the discrepancy model's smooth force takes over force the law
 /// alone carries, the calibration says so. At 0.25 A the law fitted alone
 /// (independent noise) leaves an RMS of 0.4–0.75 kPa a run; under the
