@@ -231,7 +231,9 @@ pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings) -> Result<
 }
 
 /// Samples the posterior from `start`: from walkers around the MAP, or from
-/// the checkpoint at `resume_from`. `observers` watch the sampler.
+/// the checkpoint at `resume_from` (with `--sampler smc`, also from the
+/// populations saved beside it, where a run was stopped before its
+/// sampler's first checkpoint). `observers` watch the sampler.
 pub fn sample(
     campaign: &Campaign,
     mut start: Start,
@@ -249,6 +251,11 @@ pub fn sample(
     // with sequential Monte Carlo, its particles replace the walkers placed
     // about the Laplace approximation (and the probe's steps)
     let smc = s.method == SamplerMethod::Smc;
+    // populations of sequential Monte Carlo saved beside the sampler's
+    // checkpoint: where a run was stopped during them, or after
+    let smc_saved = resume_from
+        .map(|p| crate::sampler::smc::checkpoint::beside(p))
+        .filter(|p| smc && p.exists());
     let fresh =
         |observers: &mut [&mut dyn Observer]| -> Result<(probe::Probed, Option<SmcRecord>)> {
             let probed = probe::walkers_start(
@@ -263,11 +270,15 @@ pub fn sample(
                 return Ok((probed, None));
             }
             let (sampler, record) = sequential::from_laplace(
-                posterior, &probed.laplace, &probed.sampler.settings, observers,
+                posterior,
+                &probed.laplace,
+                &probed.sampler.settings,
+                smc_saved.as_deref(),
+                observers,
             )?;
             Ok((probe::Probed { sampler, stepping_seconds: 0.0, ..probed }, Some(record)))
         };
-    let (probed, smc_record) = match resume_from {
+    let (probed, smc_record) = match resume_from.filter(|p| p.exists()) {
         Some(path) => {
             // the start judged again, unobserved: a checkpoint saved before
             // the walkers started afresh about a higher mode is of a start

@@ -4,6 +4,7 @@
 //! population of its walkers; the ensemble sampler then continues from the
 //! final particles, whose basins hold walkers in proportion to their mass.
 
+use std::path::Path;
 use std::time::Instant;
 
 use super::record::SmcRecord;
@@ -11,7 +12,7 @@ use super::settings::SMC_REFERENCE_DF;
 use crate::error::Result;
 use crate::posterior::Posterior;
 use crate::sampler::smc::{self, Reference, SmcSettings};
-use crate::sampler::{Elliptical, Observer, Sampler, SamplerSettings};
+use crate::sampler::{Elliptical, LogDensity, Observer, Sampler, SamplerSettings};
 
 /// What an evidence of the records' own likelihood is of.
 const RECORDS_OWN: &str = "the records given the law, its priors and the noise model";
@@ -28,13 +29,30 @@ fn evidence_of(posterior: &Posterior) -> &'static str {
     }
 }
 
+/// Forwards what sequential Monte Carlo tells to the sampler's observers.
+struct Told<'a, 'b>(&'a mut [&'b mut dyn Observer]);
+
+impl smc::SmcObserver for Told<'_, '_> {
+    fn tempered(&mut self, population: usize, stage: &smc::Stage) {
+        for o in self.0.iter_mut() {
+            o.tempered(population, stage);
+        }
+    }
+    fn populated(&mut self, key: &smc::checkpoint::Key, done: &[smc::Population]) -> Result<()> {
+        self.0.iter_mut().try_for_each(|o| o.populated(key, done))
+    }
+}
+
 /// The sampler that continues from sequential Monte Carlo's particles on
 /// `posterior`, started from `laplace` with the walkers, ensembles, moves
-/// and seed of `settings`; and what it did.
+/// and seed of `settings`; and what it did. The populations saved at
+/// `saved` (a checkpoint of the same run, [`smc::checkpoint`]) are taken
+/// as they are and the run goes on from the first one missing.
 pub(super) fn from_laplace<'t>(
     posterior: &'t Posterior,
     laplace: &Elliptical,
     settings: &SamplerSettings,
+    saved: Option<&Path>,
     observers: &mut [&mut dyn Observer],
 ) -> Result<(Sampler<'t, Posterior>, SmcRecord)> {
     let clock = Instant::now();
@@ -46,15 +64,17 @@ pub(super) fn from_laplace<'t>(
         seed: settings.seed,
         ..SmcSettings::default()
     };
+    let key = smc::checkpoint::Key::of(posterior.dim(), &reference, &smc_settings);
+    let done = match saved {
+        Some(path) => smc::checkpoint::load(path, &key)?,
+        None => Vec::new(),
+    };
     let run = smc::run(
         posterior,
         &reference,
         &smc_settings,
-        &mut |population, stage| {
-            for o in observers.iter_mut() {
-                o.tempered(population, stage);
-            }
-        },
+        done,
+        &mut Told(observers),
         &crate::interrupt::requested,
     )?;
     let chains = run.chains();

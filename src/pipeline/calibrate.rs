@@ -327,8 +327,9 @@ impl Pipeline<'_> {
                 return Ok(cal);
             }
         }
+        let smc_checkpoint = dir.join(store::folder::SMC_CHECKPOINT);
         let resume = request.resume && {
-            let found = checkpoint.exists();
+            let found = checkpoint.exists() || smc_checkpoint.exists();
             // a complete calibration of other settings was said above
             if !found && !dir.join(store::folder::RECORD).exists() {
                 self.note(&format!(
@@ -354,7 +355,17 @@ impl Pipeline<'_> {
         let mut refs: Vec<&mut dyn Observer> =
             observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
         refs.push(&mut checkpointer);
-        let made = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)?;
+        let made = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)
+            .map_err(|e| match e {
+                // stopped during sequential Monte Carlo's populations
+                Error::Interrupted(m) if smc_checkpoint.exists() && !checkpoint.exists() => {
+                    Error::Interrupted(format!(
+                        "{m}: the populations finished before it are in {}; the same command with --resume goes on from the next",
+                        smc_checkpoint.display()
+                    ))
+                }
+                e => e,
+            })?;
 
         let cal = self.write_calibration(
             campaign,
@@ -362,8 +373,9 @@ impl Pipeline<'_> {
             made.calibration,
             made.start.identification.as_ref(),
         )?;
-        // the chains are complete in chains.parquet: the checkpoint has done its job
+        // the chains are complete in chains.parquet: the checkpoints have done their job
         let _ = std::fs::remove_file(&checkpoint);
+        let _ = std::fs::remove_file(&smc_checkpoint);
         self.emit(Event::Calibrated { cal: &cal, alone });
         Ok(cal)
     }

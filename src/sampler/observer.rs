@@ -9,6 +9,7 @@ use super::chains::Chains;
 use super::checkpoint;
 use super::diagnostics::Diagnostics;
 use super::settings::SamplerSettings;
+use super::smc;
 use super::stopping::Waiting;
 use crate::error::{Error, Result};
 
@@ -68,6 +69,11 @@ pub trait Observer {
     /// After each temperature of sequential Monte Carlo before the run
     /// (population `population`, from 0).
     fn tempered(&mut self, _population: usize, _stage: &Stage) {}
+    /// After each population of sequential Monte Carlo, with every
+    /// population finished so far and what they were made from.
+    fn populated(&mut self, _key: &smc::checkpoint::Key, _done: &[smc::Population]) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// Saves the sampler's state every `every` steps and at the end; when
@@ -96,6 +102,11 @@ impl Observer for Checkpointer {
     }
     fn finished(&mut self, state: &RunState) -> Result<()> {
         checkpoint::save(&self.path, state.settings, state.chains)
+    }
+    /// Sequential Monte Carlo's populations, beside the sampler's
+    /// checkpoint ([`smc::checkpoint::beside`]).
+    fn populated(&mut self, key: &smc::checkpoint::Key, done: &[smc::Population]) -> Result<()> {
+        smc::checkpoint::save(&smc::checkpoint::beside(&self.path), key, done)
     }
 }
 

@@ -17,6 +17,9 @@ pub const RECORD: &str = "calibration.toml";
 pub const CONFIG: &str = "config.toml";
 /// The sampler's checkpoint, while a calibration runs or after it was stopped.
 pub const CHECKPOINT: &str = "sampler.checkpoint";
+/// Sequential Monte Carlo's finished populations, while its populations
+/// run or after they were stopped (`--sampler smc`).
+pub const SMC_CHECKPOINT: &str = crate::sampler::smc::checkpoint::FILE;
 
 /// Posterior draws behind a law's `against_current.parquet`.
 pub const CURRENT_DRAWS: usize = 4000;

@@ -121,7 +121,9 @@ fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<
         Source::Campaign { manifest } => pipeline.load(manifest)?,
     };
     let out = folder.join("calibration");
-    let resume = out.join(crate::store::folder::CHECKPOINT).exists();
+    let resume = [crate::store::folder::CHECKPOINT, crate::store::folder::SMC_CHECKPOINT]
+        .iter()
+        .any(|f| out.join(f).exists());
     let request = SampleRequest {
         settings: spec.settings.clone(),
         laws: vec![],

@@ -31,7 +31,7 @@ fn run(
     populations: usize,
 ) -> SmcRun {
     let settings = SmcSettings { particles, populations, seed: 11, ..SmcSettings::default() };
-    smc::run(target, reference, &settings, &mut |_, _| {}, &|| false).unwrap()
+    smc::run(target, reference, &settings, Vec::new(), &mut (), &|| false).unwrap()
 }
 
 /// Each population's mean of `f` over its particles.
@@ -367,6 +367,8 @@ fn sample_with_smc_writes_the_evidence_into_both_files() {
     assert!(said(&o).contains("sequential Monte Carlo, population 4: β = 1.0000"), "{}", said(&o));
     let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
     assert!(config.contains("method = \"smc\""), "{config}");
+    // the populations' checkpoint has done its job with the calibration
+    assert!(!out.join("smc.checkpoint").exists() && !out.join("sampler.checkpoint").exists());
     let record: toml::Value =
         toml::from_str(&std::fs::read_to_string(out.join("calibration.toml")).unwrap()).unwrap();
     let evidence = record["smc"]["log_evidence"].as_float().unwrap();
@@ -421,4 +423,95 @@ fn compare_shows_the_log_bayes_factor_of_the_same_runs() {
     let line = format!("(the same runs): log Bayes factor {:.2} ± ", d.abs());
     assert!(page.contains(&line), "{line} not in the comparison report");
     assert!(page.contains(&format!("{:.2} ± ", evidence("gaussian"))));
+}
+
+/// Stops a run after its first population, as Ctrl-C between populations
+/// does (the observers before it have been told the population).
+struct StopAfterFirst;
+
+impl mrbp::sampler::Observer for StopAfterFirst {
+    fn populated(
+        &mut self,
+        _key: &smc::checkpoint::Key,
+        done: &[smc::Population],
+    ) -> mrbp::error::Result<()> {
+        match done.len() {
+            1 => Err(mrbp::error::Error::Interrupted("stopped after population 1".into())),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// A run stopped after its first population and given that population
+/// back goes on to the run never stopped, bit for bit (a population is a
+/// function of the target, reference, settings and its index alone); the
+/// checkpoint file is refused for a run of another seed or reference.
+#[test]
+fn an_smc_run_stopped_after_a_population_goes_on_to_the_same_run() {
+    struct Saved(Vec<smc::Population>, Option<smc::checkpoint::Key>);
+    impl smc::SmcObserver for Saved {
+        fn populated(
+            &mut self,
+            key: &smc::checkpoint::Key,
+            done: &[smc::Population],
+        ) -> mrbp::error::Result<()> {
+            (self.0, self.1) = (done.to_vec(), Some(key.clone()));
+            match done.len() {
+                1 => Err(mrbp::error::Error::Interrupted("stop".into())),
+                _ => Ok(()),
+            }
+        }
+    }
+    let (target, reference) = (Banana { c: 0.5 }, reference(4, 0.0, 5.0));
+    let settings = SmcSettings { particles: 64, populations: 3, seed: 5, ..SmcSettings::default() };
+    let whole = smc::run(&target, &reference, &settings, Vec::new(), &mut (), &|| false).unwrap();
+    let mut saved = Saved(Vec::new(), None);
+    let stopped = smc::run(&target, &reference, &settings, Vec::new(), &mut saved, &|| false);
+    assert!(matches!(stopped, Err(mrbp::error::Error::Interrupted(_))));
+    assert_eq!(saved.0.len(), 1);
+    // through the file, as a resumed calibration reads it
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(smc::checkpoint::FILE);
+    let key = saved.1.unwrap();
+    smc::checkpoint::save(&path, &key, &saved.0).unwrap();
+    let back = smc::checkpoint::load(&path, &key).unwrap();
+    let resumed = smc::run(&target, &reference, &settings, back, &mut (), &|| false).unwrap();
+    assert_eq!(resumed, whole);
+    let other_seed =
+        smc::checkpoint::Key::of(4, &reference, &SmcSettings { seed: 6, ..settings.clone() });
+    assert!(smc::checkpoint::load(&path, &other_seed).is_err());
+    let other_start = smc::checkpoint::Key::of(4, &self::reference(4, 0.1, 5.0), &settings);
+    let refused = smc::checkpoint::load(&path, &other_start).unwrap_err().to_string();
+    assert!(refused.contains("another start or other settings"), "{refused}");
+}
+
+/// `--sampler smc` stopped after its first population (the sampler's
+/// checkpointer saves the populations beside its own file) and resumed
+/// from that folder gives the chains of a calibration never stopped.
+#[test]
+fn a_calibration_stopped_during_smc_resumes_to_the_same_chains() {
+    use mrbp::calibrate::{calibrate, sample, start, CalibrationSettings, SamplerMethod};
+    use mrbp::sampler::Checkpointer;
+    let (_dir, campaign) = crate::common::virtual_campaign(&crate::common::one_revolution());
+    let mut s = CalibrationSettings::default();
+    s.sampler.method = SamplerMethod::Smc;
+    (s.sampler.walkers, s.sampler.seed, s.sampler.steps) = (64, 3, 20);
+    let whole = calibrate(&campaign, &s).unwrap().chains;
+    let folder = tempfile::tempdir().unwrap();
+    let path = folder.path().join("sampler.checkpoint");
+    let mut saver = Checkpointer { path: path.clone(), every: 10, stop: || false };
+    let stopped = sample(
+        &campaign,
+        start(&campaign, &s, &mut |_| {}).unwrap(),
+        None,
+        &mut [&mut saver, &mut StopAfterFirst],
+    );
+    assert!(matches!(stopped, Err(mrbp::error::Error::Interrupted(_))));
+    assert!(!path.exists(), "stopped before the sampler's first step");
+    assert!(smc::checkpoint::beside(&path).exists());
+    let resumed =
+        sample(&campaign, start(&campaign, &s, &mut |_| {}).unwrap(), Some(&path), &mut [])
+            .unwrap()
+            .chains;
+    assert_eq!(resumed, whole);
 }

@@ -18,6 +18,7 @@
 //! population, temperature, …): the same seed gives the same particles
 //! whatever the number of threads.
 
+pub mod checkpoint;
 pub mod evidence;
 pub mod resample;
 pub mod tempering;
@@ -181,15 +182,31 @@ impl SmcRun {
     }
 }
 
+/// What a run tells its observer: each temperature of a population, and
+/// the populations finished so far after each one (with what they were
+/// made from, for a checkpoint).
+pub trait SmcObserver {
+    fn tempered(&mut self, _population: usize, _stage: &Stage) {}
+    fn populated(&mut self, _key: &checkpoint::Key, _done: &[Population]) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// An observer that is told nothing.
+impl SmcObserver for () {}
+
 /// Runs every population of `settings` from `reference` to `target`,
-/// telling `observer` (population, stage) after each temperature. `stop`
-/// is asked between temperatures: where it says so, the run ends with
+/// after the populations `saved` (of a checkpoint of the same run: the
+/// first ones, as the run makes them), telling `observer` each
+/// temperature and each finished population. `stop` is asked between
+/// temperatures: where it says so, the run ends with
 /// [`Error::Interrupted`].
 pub fn run<T: LogDensity>(
     target: &T,
     reference: &Reference,
     settings: &SmcSettings,
-    observer: &mut dyn FnMut(usize, &Stage),
+    saved: Vec<Population>,
+    observer: &mut dyn SmcObserver,
     stop: &dyn Fn() -> bool,
 ) -> Result<SmcRun> {
     let d = target.dim();
@@ -200,9 +217,14 @@ pub fn run<T: LogDensity>(
             reference.dist.dim()
         )));
     }
-    let mut populations = Vec::with_capacity(settings.populations);
-    for p in 0..settings.populations {
-        populations.push(population(target, reference, settings, p as u64, observer, stop)?);
+    let key = checkpoint::Key::of(d, reference, settings);
+    let mut populations = saved;
+    populations.truncate(settings.populations);
+    for p in populations.len()..settings.populations {
+        let mut told = |population: usize, stage: &Stage| observer.tempered(population, stage);
+        let made = population(target, reference, settings, p as u64, &mut told, stop)?;
+        populations.push(made);
+        observer.populated(&key, &populations)?;
     }
     let log_z: Vec<f64> = populations.iter().map(|p| p.log_z).collect();
     let variances: Vec<f64> = populations.iter().map(|p| p.variance).collect();
@@ -258,7 +280,8 @@ fn population<T: LogDensity>(
     while beta < 1.0 {
         if stop() {
             return Err(Error::Interrupted(format!(
-                "sequential Monte Carlo stopped in population {p} at β = {beta:.3e}"
+                "sequential Monte Carlo stopped in population {} at β = {beta:.3e}",
+                p + 1
             )));
         }
         let delta: Vec<f64> = log_p
