@@ -106,9 +106,19 @@ impl Pipeline<'_> {
         record.check_limits(input, &map, &Limits::default())?;
         let (current_a, range) = self.simulated_current(cal, input, &record, current)?;
         let varies = range.is_some();
-        let extrapolated = match range {
-            Some((lo, hi)) => self.check_current(cal, lo)? | self.check_current(cal, hi)?,
-            None => self.check_current(cal, current_a)?,
+        // a new test at a current the folder's calibration is not at: the
+        // layer fitted again to the same runs alone, its centres' curve in
+        // the current read at this one
+        let refit = match (source, range) {
+            (Source::NewTest, None) if !same_current(current_a, cal.record.current_a) => {
+                Some(self.layer_at(cal, current_a)?)
+            }
+            _ => None,
+        };
+        let extrapolated = match (&refit, range) {
+            (Some((_, outside)), _) => *outside,
+            (None, Some((lo, hi))) => self.check_current(cal, lo)? | self.check_current(cal, hi)?,
+            (None, None) => self.check_current(cal, current_a)?,
         };
         let geometry = match cal.record.geometry {
             Some(g) => g,
@@ -145,14 +155,24 @@ impl Pipeline<'_> {
             RecordPart::WholeRecord,
             cal.settings.likelihood.smooth_strain_ms,
         );
-        let mut draws: Vec<_> = match &layer {
+        let mut draws: Vec<_> = match (&refit, &layer) {
+            // new tests at the current asked for, from the layer fitted again
+            (Some((fitted, _)), _) => {
+                let group = fitted.group(current_a).expect("predicted there");
+                let (tests, outside) =
+                    fitted.new_tests(group, cal, &data, options.draws, options.seed);
+                if tests.is_empty() {
+                    return Err(Error::Compute(format!("no new test of the between-run layer at {current_a} A lies inside the calibrations' prior ({outside} draws tried)")));
+                }
+                tests
+            }
             // new tests of the damper, spread evenly over the layer's draws
-            Some((tests, _)) => crate::posterior::evenly_spaced(tests.len(), options.draws)
+            (None, Some((tests, _))) => crate::posterior::evenly_spaced(tests.len(), options.draws)
                 .into_iter()
                 .map(|i| tests[i])
                 .collect(),
             // the posterior with the typical noise level and force offset of the runs seen
-            None => cal
+            (None, None) => cal
                 .draw_positions(options.draws)
                 .iter()
                 .map(|&(s, c)| cal.sample.draw_without(s, c, &id, current_a))
@@ -273,6 +293,83 @@ impl Pipeline<'_> {
 
     /// Refuses a current the calibration does not cover; returns whether a
     /// current law extrapolates to it (with a note).
+    /// The between-run layer of `cal`'s folder fitted again to the same runs
+    /// alone (their folders as `between_runs.parquet` names them), with the
+    /// same Gibbs settings and seed, predicting `current_a` too; and whether
+    /// that current lies outside the calibrated ones. Refused where the
+    /// runs are at one current only, or `current_a` is further from them
+    /// than [`EXTRAPOLATION_LIMIT`] of their span.
+    fn layer_at(
+        &mut self,
+        cal: &Calibration,
+        current_a: f64,
+    ) -> Result<(crate::validate::between_runs::BetweenRuns, bool)> {
+        use crate::validate::between_runs::{BetweenRuns, GibbsSettings, LayerRun};
+        if !(current_a.is_finite() && current_a >= 0.0) {
+            return Err(Error::Usage(format!(
+                "the current must be a finite number ≥ 0 A, got {current_a}"
+            )));
+        }
+        let folders =
+            crate::store::between_runs::layer_folders(&cal.dir, &cal.record.calibration_id)?;
+        let alone: Vec<Calibration> =
+            folders.iter().map(|f| crate::store::folder::read(f)).collect::<Result<_>>()?;
+        let mut runs = Vec::with_capacity(alone.len());
+        for one in &alone {
+            let campaign = one.used_runs(&one.full_campaign()?);
+            let run = campaign.runs.first().cloned().ok_or_else(|| {
+                Error::input(&one.dir, "a calibration alone without its run".to_string())
+            })?;
+            let lik = &one.settings.likelihood;
+            runs.push((lik.run_data(&run, lik.part), run));
+        }
+        let layer_runs: Vec<LayerRun> = alone
+            .iter()
+            .zip(&runs)
+            .map(|(one, (data, run))| LayerRun {
+                id: run.id(),
+                current_a: run.spec.current_a,
+                cal: one,
+                data,
+            })
+            .collect();
+        let (lo, hi) = layer_runs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), r| {
+            (l.min(r.current_a), h.max(r.current_a))
+        });
+        if !(hi > lo) {
+            return Err(Error::Usage(format!(
+                "the between-run layer in {} has runs at {lo} A only: a new test at {current_a} A needs runs at two currents or more (its curve in the current)",
+                cal.dir.display()
+            )));
+        }
+        let reach = EXTRAPOLATION_LIMIT * (hi - lo);
+        if current_a < lo - reach || current_a > hi + reach {
+            return Err(Error::Usage(format!(
+                "{current_a} A is far outside the currents the runs were calibrated at ({lo}–{hi} A; a new test may reach {:.3}–{:.3} A): calibrate at currents around it",
+                (lo - reach).max(0.0),
+                hi + reach
+            )));
+        }
+        let clock = Instant::now();
+        let layer = BetweenRuns::fit(
+            &layer_runs,
+            &[current_a],
+            GibbsSettings::default(),
+            cal.settings.sampler.seed,
+        )?;
+        let outside = current_a < lo - 1e-9 || current_a > hi + 1e-9;
+        self.note(&format!(
+            "a new test at {current_a} A, {} the calibrated currents {lo}–{hi} A: the between-run layer fitted again to its {} runs alone, its centres read off their curve in the current ({:.1} s; largest R̂ {:.4}, smallest ESS {:.0}){}",
+            if outside { "outside" } else { "between" },
+            layer_runs.len(),
+            clock.elapsed().as_secs_f64(),
+            layer.max_rhat,
+            layer.min_ess,
+            if layer.max_rhat < 1.01 && layer.min_ess >= 400.0 { "" } else { " — not converged: the band is not to be trusted" }
+        ));
+        Ok((layer, outside))
+    }
+
     fn check_current(&mut self, cal: &Calibration, current_a: f64) -> Result<bool> {
         if !(current_a.is_finite() && current_a >= 0.0) {
             return Err(Error::Usage(format!(

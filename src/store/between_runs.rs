@@ -176,6 +176,26 @@ pub fn new_tests(
     Ok((draws, parquet_meta(&path, LAYER_RUNS)?.unwrap_or_default()))
 }
 
+/// The folders of the calibrations alone the layer in `dir` (derived from
+/// calibration `id`) was fitted to, as its `between_runs.parquet` names
+/// them; refused where the file is missing or stale.
+pub fn layer_folders(dir: &Path, id: &str) -> Result<Vec<PathBuf>> {
+    let path = dir.join(FILE);
+    if !path.exists() {
+        return Err(Error::Usage(format!(
+            "{} has no between-run layer ({FILE}): calibrate each run alone too, `mrbp run MANIFEST --out DIR --per-run` (docs/calibration.md)",
+            dir.display()
+        )));
+    }
+    check(&path, dir, id)?;
+    let runs = parquet_meta(&path, LAYER_RUNS)?.unwrap_or_default();
+    Ok(runs
+        .split(',')
+        .filter(|p| !p.is_empty())
+        .map(|pair| dir.join(pair.rsplit_once('=').map_or(pair, |(folder, _)| folder)))
+        .collect())
+}
+
 /// Writes the typical test against the current into the folder `dir` of
 /// the joint calibration `id`.
 pub fn write_typical(dir: &Path, rows: &[TypicalRow], id: &str, runs: &str) -> Result<()> {
