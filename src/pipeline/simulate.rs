@@ -158,7 +158,11 @@ impl Pipeline<'_> {
         let mut draws: Vec<_> = match (&refit, &layer) {
             // new tests at the current asked for, from the layer fitted again
             (Some((fitted, _)), _) => {
-                let group = fitted.group(current_a).expect("predicted there");
+                let group = fitted.group(current_a).ok_or_else(|| {
+                    Error::Compute(format!(
+                        "the between-run layer fitted again has no group at {current_a} A"
+                    ))
+                })?;
                 let (tests, outside) =
                     fitted.new_tests(group, cal, &data, options.draws, options.seed);
                 if tests.is_empty() {
@@ -360,7 +364,13 @@ impl Pipeline<'_> {
         let outside = current_a < lo - 1e-9 || current_a > hi + 1e-9;
         self.note(&format!(
             "a new test at {current_a} A, {} the calibrated currents {lo}–{hi} A: the between-run layer fitted again to its {} runs alone, its centres read off their curve in the current ({:.1} s; largest R̂ {:.4}, smallest ESS {:.0}){}",
-            if outside { "outside" } else { "between" },
+            if outside {
+                "outside"
+            } else if layer_runs.iter().any(|r| same_current(r.current_a, current_a)) {
+                "at one of"
+            } else {
+                "between"
+            },
             layer_runs.len(),
             clock.elapsed().as_secs_f64(),
             layer.max_rhat,
