@@ -425,8 +425,8 @@ impl MemoryFound {
 /// which the adjusted likelihood is not taken. The approximation is the
 /// MAP search's, taken before the walkers look further: a few of its draws
 /// can miss where the posterior's own do not (Spencer at 1 A on the
-/// measured records: 2 of 64 far, its posterior's draws none; at 0.25 A 5
-/// of 64), while where the adjustment misleads a quarter or more are far
+/// measured records: 2 of 64 far at 1 A and 5 of 64 at 0.25 A, its
+/// posterior's draws under the adjusted likelihood none at either), while where the adjustment misleads a quarter or more are far
 /// (bp-spencer: 17 and 22 of 64 at 1 and 0.25 A, its posterior's draws
 /// 25–37 %). A tenth parts the two: with 64 draws (7 or more far) a true
 /// share of 3 % passes it by chance 0.3 % of the time, one of 5 % 4 %, and
