@@ -254,7 +254,7 @@ pub fn sample(
     // populations of sequential Monte Carlo saved beside the sampler's
     // checkpoint: where a run was stopped during them, or after
     let smc_saved = resume_from
-        .map(|p| crate::sampler::smc::checkpoint::beside(p))
+        .map(|p| crate::sampler::checkpoint::smc_beside(p))
         .filter(|p| smc && p.exists());
     let fresh =
         |observers: &mut [&mut dyn Observer]| -> Result<(probe::Probed, Option<SmcRecord>)> {

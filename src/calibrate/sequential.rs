@@ -39,7 +39,8 @@ impl smc::SmcObserver for Told<'_, '_> {
         }
     }
     fn populated(&mut self, key: &smc::checkpoint::Key, done: &[smc::Population]) -> Result<()> {
-        self.0.iter_mut().try_for_each(|o| o.populated(key, done))
+        let write = |path: &Path| smc::checkpoint::save(path, key, done);
+        self.0.iter_mut().try_for_each(|o| o.populated(done.len(), &write))
     }
 }
 

@@ -1,7 +1,7 @@
 //! The sampler's state on disk: enough to continue a run exactly where it
 //! stopped, so that a resumed run equals an uninterrupted one.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
@@ -11,6 +11,16 @@ use crate::atomic;
 use crate::error::{Error, Result};
 
 const FORMAT: &str = "mrbp-sampler-checkpoint-1";
+
+/// The file of sequential Monte Carlo's finished populations
+/// ([`super::smc::checkpoint`]), beside the sampler's in a calibration
+/// folder.
+pub const SMC_FILE: &str = "smc.checkpoint";
+
+/// The populations' checkpoint beside the sampler's at `sampler_checkpoint`.
+pub fn smc_beside(sampler_checkpoint: &Path) -> PathBuf {
+    sampler_checkpoint.with_file_name(SMC_FILE)
+}
 
 #[derive(Serialize, Deserialize)]
 struct Checkpoint {

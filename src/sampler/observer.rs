@@ -1,7 +1,7 @@
 //! Observers of a sampler run: what happens beside the stepping (a progress
 //! bar, diagnostics lines, checkpoints), kept out of the sampler's loop.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
@@ -9,7 +9,6 @@ use super::chains::Chains;
 use super::checkpoint;
 use super::diagnostics::Diagnostics;
 use super::settings::SamplerSettings;
-use super::smc;
 use super::stopping::Waiting;
 use crate::error::{Error, Result};
 
@@ -69,9 +68,10 @@ pub trait Observer {
     /// After each temperature of sequential Monte Carlo before the run
     /// (population `population`, from 0).
     fn tempered(&mut self, _population: usize, _stage: &Stage) {}
-    /// After each population of sequential Monte Carlo, with every
-    /// population finished so far and what they were made from.
-    fn populated(&mut self, _key: &smc::checkpoint::Key, _done: &[smc::Population]) -> Result<()> {
+    /// After each population of sequential Monte Carlo: how many are
+    /// finished, and `write`, which saves them (with what they were made
+    /// from) at the path it is given.
+    fn populated(&mut self, _done: usize, _write: &dyn Fn(&Path) -> Result<()>) -> Result<()> {
         Ok(())
     }
 }
@@ -104,9 +104,9 @@ impl Observer for Checkpointer {
         checkpoint::save(&self.path, state.settings, state.chains)
     }
     /// Sequential Monte Carlo's populations, beside the sampler's
-    /// checkpoint ([`smc::checkpoint::beside`]).
-    fn populated(&mut self, key: &smc::checkpoint::Key, done: &[smc::Population]) -> Result<()> {
-        smc::checkpoint::save(&smc::checkpoint::beside(&self.path), key, done)
+    /// checkpoint ([`checkpoint::smc_beside`]).
+    fn populated(&mut self, _done: usize, write: &dyn Fn(&Path) -> Result<()>) -> Result<()> {
+        write(&checkpoint::smc_beside(&self.path))
     }
 }
 

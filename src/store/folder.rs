@@ -19,7 +19,7 @@ pub const CONFIG: &str = "config.toml";
 pub const CHECKPOINT: &str = "sampler.checkpoint";
 /// Sequential Monte Carlo's finished populations, while its populations
 /// run or after they were stopped (`--sampler smc`).
-pub const SMC_CHECKPOINT: &str = crate::sampler::smc::checkpoint::FILE;
+pub const SMC_CHECKPOINT: &str = crate::sampler::checkpoint::SMC_FILE;
 
 /// Posterior draws behind a law's `against_current.parquet`.
 pub const CURRENT_DRAWS: usize = 4000;

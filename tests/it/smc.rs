@@ -432,10 +432,10 @@ struct StopAfterFirst;
 impl mrbp::sampler::Observer for StopAfterFirst {
     fn populated(
         &mut self,
-        _key: &smc::checkpoint::Key,
-        done: &[smc::Population],
+        done: usize,
+        _write: &dyn Fn(&std::path::Path) -> mrbp::error::Result<()>,
     ) -> mrbp::error::Result<()> {
-        match done.len() {
+        match done {
             1 => Err(mrbp::error::Error::Interrupted("stopped after population 1".into())),
             _ => Ok(()),
         }
@@ -471,7 +471,7 @@ fn an_smc_run_stopped_after_a_population_goes_on_to_the_same_run() {
     assert_eq!(saved.0.len(), 1);
     // through the file, as a resumed calibration reads it
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join(smc::checkpoint::FILE);
+    let path = dir.path().join(mrbp::sampler::checkpoint::SMC_FILE);
     let key = saved.1.unwrap();
     smc::checkpoint::save(&path, &key, &saved.0).unwrap();
     let back = smc::checkpoint::load(&path, &key).unwrap();
@@ -508,7 +508,7 @@ fn a_calibration_stopped_during_smc_resumes_to_the_same_chains() {
     );
     assert!(matches!(stopped, Err(mrbp::error::Error::Interrupted(_))));
     assert!(!path.exists(), "stopped before the sampler's first step");
-    assert!(smc::checkpoint::beside(&path).exists());
+    assert!(mrbp::sampler::checkpoint::smc_beside(&path).exists());
     let resumed =
         sample(&campaign, start(&campaign, &s, &mut |_| {}).unwrap(), Some(&path), &mut [])
             .unwrap()

@@ -4,9 +4,10 @@
 //! and its index alone (its random streams are keyed by them), so the
 //! populations read back are those a run without the interruption makes,
 //! bit for bit; the file says what they were made from ([`Key`]) and is
-//! refused for anything else.
+//! refused for anything else. Its file lies beside the sampler's
+//! checkpoint ([`crate::sampler::checkpoint::smc_beside`]).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
@@ -15,14 +16,6 @@ use crate::atomic;
 use crate::error::{Error, Result};
 
 const FORMAT: &str = "mrbp-smc-checkpoint-1";
-
-/// The file's name, beside the sampler's checkpoint in a calibration folder.
-pub const FILE: &str = "smc.checkpoint";
-
-/// The populations' checkpoint beside the sampler's at `sampler_checkpoint`.
-pub fn beside(sampler_checkpoint: &Path) -> PathBuf {
-    sampler_checkpoint.with_file_name(FILE)
-}
 
 /// What the populations were made from: the target's dimension, the
 /// reference (its mean, scale factor and degrees of freedom: the start's
