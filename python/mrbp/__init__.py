@@ -414,7 +414,9 @@ def calibrate(
         called at "started", every "step" and "finished" (ess and r_hat are
         None until the first convergence check);
     checkpoint: a file for the sampler's state, saved every 100 steps and
-        at Ctrl-C (and removed when the calibration is done);
+        at Ctrl-C (and removed when the calibration is done); with
+        ``sampler="smc"`` the finished populations go beside it, in
+        ``smc.checkpoint`` of the same folder;
     resume: continue from ``checkpoint`` (with the same options): the
         chains equal an uninterrupted run's, bit for bit.
 

@@ -222,7 +222,9 @@ pub(crate) fn calibrate(
                 "resume: say which checkpoint to continue (checkpoint='the file')",
             ))
         }
-        (Some(path), true) if !path.exists() => {
+        (Some(path), true)
+            if !path.exists() && !mrbp::sampler::checkpoint::smc_beside(path).exists() =>
+        {
             return Err(PyValueError::new_err(format!(
                 "resume: no checkpoint at {}",
                 path.display()
@@ -252,8 +254,11 @@ pub(crate) fn calibrate(
             let made =
                 mrbp::calibrate::sample(&group, start, resume_from.as_ref(), &mut observers)?;
             if let Some(path) = &checkpoint {
-                // the chains are whole in the calibration returned: the checkpoint has done its job
+                // the chains are whole in the calibration returned: the
+                // checkpoints (the sampler's, and the populations' of
+                // sequential Monte Carlo beside it) have done their job
                 let _ = std::fs::remove_file(path);
+                let _ = std::fs::remove_file(mrbp::sampler::checkpoint::smc_beside(path));
             }
             Ok::<_, Error>((made, Arc::new(group)))
         })
