@@ -267,6 +267,7 @@ class Calibration:
         draws: int = 400,
         replicates: int = 10,
         seed: int = 1,
+        new_test: bool = False,
     ) -> "pd.DataFrame":
         """The force of the calibrated damper along an excitation of your own
         (``mrbp simulate``): time (s) and displacement (m) as arrays; the
@@ -276,7 +277,14 @@ class Calibration:
         ``simulation.parquet``: the model band of the stress (q025 … q975,
         Pa), the 95 % band of a measured stress (p025, p975) and the same as
         force (force_q025_n … force_p975_n, N). Notes (an extrapolating
-        current law, draws that failed) come as warnings."""
+        current law, draws that failed) come as warnings.
+
+        ``new_test=True`` is ``simulate --new-test``: new tests of the
+        damper from the between-run layer of a calibration read from a
+        folder made with ``--per-run``, in place of its posterior — the
+        band a test not yet run would fall in; with ``current`` between
+        the calibrated currents (runs alone at two currents or more) the
+        layer is fitted again predicting that current."""
         column = None
         if current is not None and np.ndim(current) > 0:
             column, current = np.ascontiguousarray(current, dtype=np.float64), None
@@ -288,11 +296,13 @@ class Calibration:
             draws=int(draws),
             replicates=int(replicates),
             seed=int(seed),
+            new_test=bool(new_test),
         )
         for note in notes:
             warnings.warn(note, stacklevel=2)
         frame = pd.DataFrame(dict(columns), copy=False)
-        # the posterior draws propagated: (draw, chain) rows of .draws
+        # the posterior draws propagated: (draw, chain) rows of .draws (none
+        # for new tests)
         frame.attrs["draws"] = [(int(s), int(c)) for s, c in positions]
         return frame
 

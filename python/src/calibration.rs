@@ -164,8 +164,9 @@ impl Calibration {
     /// The force of the calibrated damper along an excitation of your own
     /// (`mrbp simulate`): columns of `simulation.parquet`, the notes
     /// (extrapolation, draws that failed), and the (step, chain) of the
-    /// posterior draws it propagated.
-    #[pyo3(signature = (time, displacement, current = None, current_column = None, draws = 400, replicates = 10, seed = 1))]
+    /// posterior draws it propagated (none for new tests of the between-run
+    /// layer, `new_test`: `simulate --new-test`).
+    #[pyo3(signature = (time, displacement, current = None, current_column = None, draws = 400, replicates = 10, seed = 1, new_test = false))]
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn simulate<'py>(
         &self,
@@ -177,6 +178,7 @@ impl Calibration {
         draws: usize,
         replicates: usize,
         seed: u64,
+        new_test: bool,
     ) -> PyResult<(Arrays<'py>, Vec<String>, Vec<(usize, usize)>)> {
         let cal = self.inner.clone();
         let (time, displacement) = (values(&time)?, values(&displacement)?);
@@ -198,15 +200,14 @@ impl Calibration {
                         current,
                         &options,
                         None,
+                        new_test,
                     )
                 })
             })
             .map_err(raise)?;
-        Ok((
-            arrays(py, mrbp::store::simulation::columns(&made)),
-            notes,
-            self.inner.draw_positions(draws),
-        ))
+        // the posterior draws propagated; new tests are the layer's, not these
+        let positions = if new_test { Vec::new() } else { self.inner.draw_positions(draws) };
+        Ok((arrays(py, mrbp::store::simulation::columns(&made)), notes, positions))
     }
 
     /// The bands of the calibration's runs (`mrbp predict`): the bytes of

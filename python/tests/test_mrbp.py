@@ -218,6 +218,30 @@ def test_simulate_equals_the_command_line(calibration, tmp_path):
         calibration.simulate(t[::-1], x)
 
 
+def test_simulate_a_new_test_equals_the_command_line(tmp_path):
+    # new_test=True is simulate --new-test: new tests of the damper from a
+    # --per-run folder's between-run layer, bit for bit, also at a current
+    # between the calibrated ones (the layer fitted again predicting it);
+    # a calibration without the layer is refused
+    cli("synth", "--out", tmp_path / "data", "--law", "bingham", "--currents", "0.5,1.0", "--cycles", 1, "--rate", 2000, "--noise-displacement", 0)
+    folder = tmp_path / "cal"
+    cli("sample", tmp_path / "data" / "campaign.toml", "--law", "bingham", "--per-run", "--out", folder)
+    t = np.arange(0, 701) / 1000.0
+    x = 0.005 * np.sin(2 * np.pi * 3.0 * t)
+    pd.DataFrame({"time_s": t, "displacement_m": x}).to_csv(tmp_path / "sine.csv", index=False)
+    cal = mrbp.load(folder / "I1.0A")
+    for current in ("1.0", "0.75"):
+        out = tmp_path / f"sim{current}"
+        cli("simulate", folder / "I1.0A", "--input", tmp_path / "sine.csv", "--new-test", "--current", current, "--out", out, "--draws", 50)
+        expected = pd.read_parquet(out / "simulation.parquet")
+        got = cal.simulate(t, x, current=float(current), draws=50, new_test=True)
+        pd.testing.assert_frame_equal(got, expected, check_exact=True)
+        assert got.attrs["draws"] == []
+    plain = mrbp.calibrate(mrbp.Campaign.load(tmp_path / "data" / "campaign.toml"), current=1.0, steps=10, law="bingham")
+    with pytest.raises(ValueError, match="between-run layer"):
+        plain.simulate(t, x, new_test=True)
+
+
 def reference_stress(p, time, displacement, gap, h=1e-6):
     """Eqs. 3–4 of docs (the B-P law in shear) by explicit Euler with a step
     of about 1 µs along the strain of ``displacement`` (linear between

@@ -66,7 +66,10 @@ impl Pipeline<'_> {
 
     /// [`Pipeline::simulate`] of a record in memory (time, displacement and
     /// optionally current; its force is ignored) named by `input` in
-    /// messages, without writing anything but holding `out` if given.
+    /// messages, without writing anything but holding `out` if given; with
+    /// `new_test`, new tests of the damper from the folder's between-run
+    /// layer, as `simulate --new-test`.
+    #[allow(clippy::too_many_arguments)]
     pub fn simulation(
         &mut self,
         cal: &Calibration,
@@ -75,8 +78,10 @@ impl Pipeline<'_> {
         current: Option<f64>,
         options: &PredictOptions,
         out: Option<&Path>,
+        new_test: bool,
     ) -> Result<Simulation> {
-        self.simulation_from(cal, input, record, current, options, out, Source::Posterior)
+        let source = if new_test { Source::NewTest } else { Source::Posterior };
+        self.simulation_from(cal, input, record, current, options, out, source)
     }
 
     /// [`Pipeline::simulation`] with the draws from `source`.
