@@ -457,12 +457,7 @@ fn blind_spot(post: &Posterior, map: &MapEstimate, seed: u64) -> Result<()> {
     let mut rng = crate::rng::stream(seed, &[0xB1D5]);
     let in_support = |x: &[f64]| {
         let log_theta = post.layout.log_theta(x);
-        log_theta.iter().all(|v| v.is_finite())
-            && post
-                .priors
-                .iter()
-                .zip(&log_theta)
-                .all(|(p, v)| p.log_density(*v) > f64::NEG_INFINITY)
+        log_theta.iter().all(|v| v.is_finite()) && post.inside_priors(&log_theta)
     };
     let mut points = Vec::with_capacity(BLIND_SPOT_DRAWS);
     for _ in 0..20 * BLIND_SPOT_DRAWS {

@@ -300,8 +300,6 @@ impl Pipeline<'_> {
         one.map(|c| (c, None))
     }
 
-    /// Refuses a current the calibration does not cover; returns whether a
-    /// current law extrapolates to it (with a note).
     /// The between-run layer of `cal`'s folder fitted again to the same runs
     /// alone (their folders as `between_runs.parquet` names them), with the
     /// same Gibbs settings and seed, predicting `current_a` too; and whether
@@ -314,11 +312,6 @@ impl Pipeline<'_> {
         current_a: f64,
     ) -> Result<(crate::validate::between_runs::BetweenRuns, bool)> {
         use crate::validate::between_runs::{BetweenRuns, GibbsSettings, LayerRun};
-        if !(current_a.is_finite() && current_a >= 0.0) {
-            return Err(Error::Usage(format!(
-                "the current must be a finite number ≥ 0 A, got {current_a}"
-            )));
-        }
         let folders =
             crate::store::between_runs::layer_folders(&cal.dir, &cal.record.calibration_id)?;
         let alone: Vec<Calibration> =
@@ -351,14 +344,7 @@ impl Pipeline<'_> {
                 cal.dir.display()
             )));
         }
-        let reach = EXTRAPOLATION_LIMIT * (hi - lo);
-        if current_a < lo - reach || current_a > hi + reach {
-            return Err(Error::Usage(format!(
-                "{current_a} A is far outside the currents the runs were calibrated at ({lo}–{hi} A; a new test may reach {:.3}–{:.3} A): calibrate at currents around it",
-                (lo - reach).max(0.0),
-                hi + reach
-            )));
-        }
+        let outside = within_reach(current_a, (lo, hi), "the runs were", "a new test")?;
         let clock = Instant::now();
         let layer = BetweenRuns::fit(
             &layer_runs,
@@ -366,7 +352,6 @@ impl Pipeline<'_> {
             GibbsSettings::default(),
             cal.settings.sampler.seed,
         )?;
-        let outside = current_a < lo - 1e-9 || current_a > hi + 1e-9;
         self.note(&format!(
             "a new test at {current_a} A, {} the calibrated currents {lo}–{hi} A: the between-run layer fitted again to its {} runs alone, its centres read off their curve in the current ({:.1} s; largest R̂ {:.4}, smallest ESS {:.0}){}",
             if outside {
@@ -385,13 +370,11 @@ impl Pipeline<'_> {
         Ok((layer, outside))
     }
 
+    /// Refuses a current the calibration does not cover; returns whether a
+    /// current law extrapolates to it (with a note).
     fn check_current(&mut self, cal: &Calibration, current_a: f64) -> Result<bool> {
-        if !(current_a.is_finite() && current_a >= 0.0) {
-            return Err(Error::Usage(format!(
-                "the current must be a finite number ≥ 0 A, got {current_a}"
-            )));
-        }
         if !cal.is_current_law() {
+            finite_current(current_a)?;
             let own = cal.record.current_a;
             if !same_current(current_a, own) {
                 return Err(Error::Usage(format!(
@@ -402,20 +385,39 @@ impl Pipeline<'_> {
             return Ok(false);
         }
         let (lo, hi) = cal.current_range();
-        let reach = EXTRAPOLATION_LIMIT * (hi - lo);
-        if current_a < lo - reach || current_a > hi + reach {
-            return Err(Error::Usage(format!(
-                "{current_a} A is far outside the currents the law was calibrated at ({lo}–{hi} A; it may reach {:.3}–{:.3} A): calibrate at currents around it",
-                (lo - reach).max(0.0),
-                hi + reach
-            )));
-        }
-        let outside = current_a < lo - 1e-9 || current_a > hi + 1e-9;
+        let outside = within_reach(current_a, (lo, hi), "the law was", "it")?;
         if outside {
             self.note(&format!("{current_a} A is outside the calibrated currents {lo}–{hi} A: the current law extrapolates (simulation.toml says so)"));
         }
         Ok(outside)
     }
+}
+
+/// Refuses a current that is not a finite number ≥ 0 A.
+fn finite_current(current_a: f64) -> Result<()> {
+    match current_a.is_finite() && current_a >= 0.0 {
+        true => Ok(()),
+        false => {
+            Err(Error::Usage(format!("the current must be a finite number ≥ 0 A, got {current_a}")))
+        }
+    }
+}
+
+/// Refuses a current that is not a finite number ≥ 0 A, or lies further
+/// from the calibrated currents `lo`–`hi` than [`EXTRAPOLATION_LIMIT`] of
+/// their span (the message says `who` … calibrated there and how far
+/// `what` may reach); returns whether it lies outside them.
+fn within_reach(current_a: f64, (lo, hi): (f64, f64), who: &str, what: &str) -> Result<bool> {
+    finite_current(current_a)?;
+    let reach = EXTRAPOLATION_LIMIT * (hi - lo);
+    if current_a < lo - reach || current_a > hi + reach {
+        return Err(Error::Usage(format!(
+            "{current_a} A is far outside the currents {who} calibrated at ({lo}–{hi} A; {what} may reach {:.3}–{:.3} A): calibrate at currents around it",
+            (lo - reach).max(0.0),
+            hi + reach
+        )));
+    }
+    Ok(current_a < lo - 1e-9 || current_a > hi + 1e-9)
 }
 
 /// Where a simulation's coil lag comes from ([`SimulationRecord::coil_lag`]).

@@ -191,9 +191,7 @@ fn whiten(
     if log_theta.iter().any(|v| !v.is_finite()) {
         return None;
     }
-    if support == Support::Truncated
-        && post.priors.iter().zip(&log_theta).any(|(p, v)| p.log_density(*v) == f64::NEG_INFINITY)
-    {
+    if support == Support::Truncated && !post.inside_priors(&log_theta) {
         return None;
     }
     let res = residuals?;

@@ -158,6 +158,12 @@ impl Posterior {
         Posterior { layout, adjusted_in, ..self.clone() }
     }
 
+    /// Whether `log_theta` (ln θ of the law's parameters) lies inside every
+    /// prior's support (their truncation bounds).
+    pub fn inside_priors(&self, log_theta: &[f64]) -> bool {
+        self.priors.iter().zip(log_theta).all(|(p, v)| p.log_density(*v) > f64::NEG_INFINITY)
+    }
+
     /// This posterior with the independent likelihood, in the same
     /// coordinates.
     pub fn without_adjustment(&self) -> Posterior {

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use super::chains::Chains;
@@ -22,19 +23,53 @@ pub fn smc_beside(sampler_checkpoint: &Path) -> PathBuf {
     sampler_checkpoint.with_file_name(SMC_FILE)
 }
 
-#[derive(Serialize, Deserialize)]
-struct Checkpoint {
+/// A checkpoint file as written: the name of its format, then its body,
+/// in postcard (the fields one after another, so the sampler's files of
+/// before this frame read back as they were).
+#[derive(Serialize)]
+struct Written<'a, T> {
+    format: &'a str,
+    body: &'a T,
+}
+
+/// A checkpoint file as read.
+#[derive(Deserialize)]
+struct Read<T> {
     format: String,
-    settings: SamplerSettings,
-    chains: Chains,
+    body: T,
+}
+
+/// Writes `body` at `path` after the name of its `format`, atomically.
+pub(super) fn write_framed<T: Serialize>(path: &Path, format: &str, body: &T) -> Result<()> {
+    let bytes =
+        postcard::to_allocvec(&Written { format, body }).map_err(|e| Error::output(path, e))?;
+    atomic::write(path, &bytes)
+}
+
+/// The body of the checkpoint at `path` written by [`write_framed`] in
+/// `format`; an error naming `what` where the file is not one, or of
+/// another format.
+pub(super) fn read_framed<T: DeserializeOwned>(path: &Path, format: &str, what: &str) -> Result<T> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| Error::input(path, format!("cannot read checkpoint: {e}")))?;
+    let read: Read<T> = postcard::from_bytes(&bytes).map_err(|_| {
+        Error::input(
+            path,
+            format!("not a {what} (damaged, or another file): remove it to start afresh"),
+        )
+    })?;
+    if read.format != format {
+        return Err(Error::input(
+            path,
+            format!("checkpoint format '{}', this mrbp reads '{format}'", read.format),
+        ));
+    }
+    Ok(read.body)
 }
 
 /// Saves the settings and chains at `path`, atomically.
 pub fn save(path: &Path, settings: &SamplerSettings, chains: &Chains) -> Result<()> {
-    let cp =
-        Checkpoint { format: FORMAT.into(), settings: settings.clone(), chains: chains.clone() };
-    let bytes = postcard::to_allocvec(&cp).map_err(|e| Error::output(path, e))?;
-    atomic::write(path, &bytes)
+    write_framed(path, FORMAT, &(settings, chains))
 }
 
 /// Reads a checkpoint written by [`save`] for a target of `dim` coordinates.
@@ -55,19 +90,5 @@ pub fn load(path: &Path, dim: usize) -> Result<(SamplerSettings, Chains)> {
 /// Reads a checkpoint written by [`save`], whatever its target: to check
 /// it against the options before any work.
 pub fn read(path: &Path) -> Result<(SamplerSettings, Chains)> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| Error::input(path, format!("cannot read checkpoint: {e}")))?;
-    let cp: Checkpoint = postcard::from_bytes(&bytes).map_err(|_| {
-        Error::input(
-            path,
-            "not a sampler checkpoint (damaged, or another file): remove it to start afresh",
-        )
-    })?;
-    if cp.format != FORMAT {
-        return Err(Error::input(
-            path,
-            format!("checkpoint format '{}', this mrbp reads '{FORMAT}'", cp.format),
-        ));
-    }
-    Ok((cp.settings, cp.chains))
+    read_framed(path, FORMAT, "sampler checkpoint")
 }

@@ -136,14 +136,7 @@ pub fn new_tests(
     law: crate::laws::LawKind,
     layout: &crate::posterior::Layout,
 ) -> Result<(Vec<crate::posterior::Draw>, String)> {
-    let path = dir.join(FILE);
-    if !path.exists() {
-        return Err(Error::Usage(format!(
-            "{} has no between-run layer ({FILE}): calibrate each run alone too, `mrbp run MANIFEST --out DIR --per-run` (docs/calibration.md)",
-            dir.display()
-        )));
-    }
-    check(&path, dir, id)?;
+    let path = layer_file(dir, id)?;
     let df = read_parquet(&path)?;
     let col = |n: &str| f64_column(&df, n, &path);
     let names = layout.theta_names();
@@ -180,6 +173,13 @@ pub fn new_tests(
 /// calibration `id`) was fitted to, as its `between_runs.parquet` names
 /// them; refused where the file is missing or stale.
 pub fn layer_folders(dir: &Path, id: &str) -> Result<Vec<PathBuf>> {
+    let runs = parquet_meta(&layer_file(dir, id)?, LAYER_RUNS)?.unwrap_or_default();
+    Ok(folder_ids(&runs).map(|(folder, _)| dir.join(folder)).collect())
+}
+
+/// `between_runs.parquet` of `dir`, checked ([`check`]); a usage error
+/// naming `--per-run` where the folder has none.
+fn layer_file(dir: &Path, id: &str) -> Result<PathBuf> {
     let path = dir.join(FILE);
     if !path.exists() {
         return Err(Error::Usage(format!(
@@ -188,12 +188,15 @@ pub fn layer_folders(dir: &Path, id: &str) -> Result<Vec<PathBuf>> {
         )));
     }
     check(&path, dir, id)?;
-    let runs = parquet_meta(&path, LAYER_RUNS)?.unwrap_or_default();
-    Ok(runs
-        .split(',')
+    Ok(path)
+}
+
+/// The (folder, calibration id) pairs of a layer's `mrbp.layer_runs`
+/// ([`layer_runs`]).
+fn folder_ids(runs: &str) -> impl Iterator<Item = (&str, &str)> {
+    runs.split(',')
         .filter(|p| !p.is_empty())
-        .map(|pair| dir.join(pair.rsplit_once('=').map_or(pair, |(folder, _)| folder)))
-        .collect())
+        .map(|pair| pair.rsplit_once('=').unwrap_or((pair, "")))
 }
 
 /// Writes the typical test against the current into the folder `dir` of
@@ -296,8 +299,7 @@ pub fn check(path: &Path, dir: &Path, id: &str) -> Result<()> {
     let Some(runs) = parquet_meta(path, LAYER_RUNS)? else {
         return Ok(());
     };
-    for pair in runs.split(',').filter(|p| !p.is_empty()) {
-        let (folder, made) = pair.rsplit_once('=').unwrap_or((pair, ""));
+    for (folder, made) in folder_ids(&runs) {
         let record = dir.join(folder).join(super::folder::RECORD);
         let now = super::record::read(&record).map(|r| r.calibration_id).unwrap_or_default();
         if now != made {

@@ -463,39 +463,31 @@ fn a_new_test_between_the_calibrated_currents_holds_its_records() {
             seed,
         ]);
     };
+    // each run calibrated alone too: the folder of the layer
+    let per_run = |name: &str| {
+        let out = dir.path().join(format!("{name}-out"));
+        let manifest = dir.path().join(name).join("campaign.toml");
+        ok(&["sample", arg(&manifest), "--law", "bingham", "--per-run", "--out", arg(&out)]);
+        out
+    };
+    let new_test = |folder: &std::path::Path, input: &std::path::Path, current: &str, out: &str| {
+        let out = dir.path().join(out);
+        let args = ["--new-test", "--current", current, "--out", arg(&out)];
+        mrbp(&[&["simulate", arg(folder), "--input", arg(input)][..], &args].concat())
+    };
     synth("cal", "0.5,1.0", "1");
     synth("check", "0.75", "9");
-    let out = dir.path().join("out");
-    ok(&[
-        "sample",
-        arg(&dir.path().join("cal/campaign.toml")),
-        "--law",
-        "bingham",
-        "--per-run",
-        "--out",
-        arg(&out),
-    ]);
-    let folder = out.join("I1.0A");
+    let folder = per_run("cal").join("I1.0A");
     let (mut inside, mut samples) = (0usize, 0usize);
     for rpm in [100, 200, 400] {
         let input = dir.path().join(format!("check/I0.8_{rpm}rpm.csv"));
-        let sim = dir.path().join(format!("sim{rpm}"));
-        let o = ok(&[
-            "simulate",
-            arg(&folder),
-            "--input",
-            arg(&input),
-            "--new-test",
-            "--current",
-            "0.75",
-            "--out",
-            arg(&sim),
-        ]);
+        let o = new_test(&folder, &input, "0.75", &format!("sim{rpm}"));
+        assert!(o.status.success(), "{}", said(&o));
         assert!(said(&o).contains("a new test at 0.75 A, between the calibrated currents"));
         let text = std::fs::read_to_string(&input).unwrap();
         let force: Vec<f64> =
             text.lines().skip(1).map(|l| l.split(',').nth(2).unwrap().parse().unwrap()).collect();
-        let path = sim.join("simulation.parquet");
+        let path = dir.path().join(format!("sim{rpm}/simulation.parquet"));
         let table = read_parquet(&path).unwrap();
         let lo = f64_column(&table, "force_p025_n", &path).unwrap();
         let hi = f64_column(&table, "force_p975_n", &path).unwrap();
@@ -514,42 +506,12 @@ fn a_new_test_between_the_calibrated_currents_holds_its_records() {
     let plain: Vec<String> =
         text.lines().map(|l| l.split(',').take(2).collect::<Vec<_>>().join(",")).collect();
     std::fs::write(&input, plain.join("\n") + "\n").unwrap();
-    let far = mrbp(&[
-        "simulate",
-        arg(&folder),
-        "--input",
-        arg(&input),
-        "--new-test",
-        "--current",
-        "3.0",
-        "--out",
-        arg(&dir.path().join("far")),
-    ]);
+    let far = new_test(&folder, &input, "3.0", "far");
     assert_eq!(far.status.code(), Some(2), "{}", said(&far));
     assert!(said(&far).contains("far outside the currents the runs were calibrated at"));
     // a layer of runs at one current has no curve to read another current off
     synth("one", "1.0", "1");
-    let single = dir.path().join("single");
-    ok(&[
-        "sample",
-        arg(&dir.path().join("one/campaign.toml")),
-        "--law",
-        "bingham",
-        "--per-run",
-        "--out",
-        arg(&single),
-    ]);
-    let o = mrbp(&[
-        "simulate",
-        arg(&single),
-        "--input",
-        arg(&input),
-        "--new-test",
-        "--current",
-        "0.75",
-        "--out",
-        arg(&dir.path().join("one-sim")),
-    ]);
+    let o = new_test(&per_run("one"), &input, "0.75", "one-sim");
     assert_eq!(o.status.code(), Some(2), "{}", said(&o));
     assert!(said(&o).contains("two currents or more"), "{}", said(&o));
 }

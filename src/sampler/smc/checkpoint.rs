@@ -12,8 +12,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::{Population, Reference, SmcSettings};
-use crate::atomic;
 use crate::error::{Error, Result};
+use crate::sampler::checkpoint::{read_framed, write_framed};
 
 const FORMAT: &str = "mrbp-smc-checkpoint-1";
 
@@ -42,53 +42,31 @@ impl Key {
     }
 }
 
-#[derive(Serialize, Deserialize)]
-struct Checkpoint {
-    format: String,
-    key: Key,
-    populations: Vec<Population>,
-}
-
 /// Saves the populations finished so far at `path`, atomically.
 pub fn save(path: &Path, key: &Key, populations: &[Population]) -> Result<()> {
-    let cp =
-        Checkpoint { format: FORMAT.into(), key: key.clone(), populations: populations.to_vec() };
-    let bytes = postcard::to_allocvec(&cp).map_err(|e| Error::output(path, e))?;
-    atomic::write(path, &bytes)
+    write_framed(path, FORMAT, &(key, populations))
 }
 
 /// The populations saved at `path` for a run of `key`; an error where the
 /// file is not such a checkpoint or was made from something else.
 pub fn load(path: &Path, key: &Key) -> Result<Vec<Population>> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| Error::input(path, format!("cannot read checkpoint: {e}")))?;
-    let cp: Checkpoint = postcard::from_bytes(&bytes).map_err(|_| {
-        Error::input(
-            path,
-            "not a sequential Monte Carlo checkpoint (damaged, or another file): remove it to start afresh",
-        )
-    })?;
-    if cp.format != FORMAT {
-        return Err(Error::input(
-            path,
-            format!("checkpoint format '{}', this mrbp reads '{FORMAT}'", cp.format),
-        ));
-    }
-    if cp.key != *key {
+    let (saved, populations): (Key, Vec<Population>) =
+        read_framed(path, FORMAT, "sequential Monte Carlo checkpoint")?;
+    if saved != *key {
         return Err(Error::input(
             path,
             "--resume: these populations were made from another start or other settings (records, priors, seed, particles or moves): use the same options, or start afresh with --force",
         ));
     }
-    if cp.populations.len() > key.settings.populations {
+    if populations.len() > key.settings.populations {
         return Err(Error::input(
             path,
             format!(
                 "{} populations saved, the run has {}",
-                cp.populations.len(),
+                populations.len(),
                 key.settings.populations
             ),
         ));
     }
-    Ok(cp.populations)
+    Ok(populations)
 }
