@@ -270,10 +270,10 @@ impl Pipeline<'_> {
             listener(Event::Note(&format!("  leave-one-out: no importance weights can be trusted for {run} (k̂ > 0.7): sampling without it")));
             Pipeline::observers_for(progress)
         };
-        let mut failures = Vec::new();
-        let mut failed = |run: &str, why: &str| failures.push((run.to_string(), why.to_string()));
-        let held = leave_one_out(cal, &campaign, loo, &mut observe, &mut failed)?;
-        for (run, why) in &failures {
+        let held = leave_one_out(cal, &campaign, loo, &mut observe)?;
+        for (run, why) in
+            held.iter().filter_map(|h| Some((&h.row.coverage.run, h.row.failure.as_ref()?)))
+        {
             self.note(&format!(
                 "  leave-one-out: {run} could not be held out ({why}): loo.parquet marks it \"failed\", without bands; the other runs are held out"
             ));

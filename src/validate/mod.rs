@@ -191,15 +191,13 @@ struct Full<'a> {
 /// one after the other, each sampler using every thread. A run whose
 /// held-out posterior cannot be reached (a computation without it fails:
 /// [`Error::Compute`]) gets a [`HeldOutBy::Failed`] row with the reason
-/// and no prediction, and `failed` is told; the others are held out all
-/// the same. Any other error (an interruption, a usage error) stops the
+/// and no prediction; the others are held out all the same. Any other error (an interruption, a usage error) stops the
 /// study.
 pub fn leave_one_out(
     cal: &Calibration,
     campaign: &Campaign,
     loo: &LooSettings,
     observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>,
-    failed: &mut dyn FnMut(&str, &str),
 ) -> Result<Vec<HeldOut>> {
     if campaign.runs.len() < 2 {
         return Err(Error::Usage("leave-one-out needs a calibration of at least two runs".into()));
@@ -215,22 +213,16 @@ pub fn leave_one_out(
                 Weighed::Done(held) => Ok(*held),
                 Weighed::ToSample(pending) => pending.sample(&full.cal.settings, loo, observe),
             });
-            held_or_failed(run.id(), run.spec.current_a, held, failed)
+            held_or_failed(run.id(), run.spec.current_a, held)
         })
         .collect()
 }
 
 /// A held-out run, or the row of one whose held-out posterior could not be
-/// reached (a failed computation: `failed` is told); other errors pass.
-fn held_or_failed(
-    run: &str,
-    current_a: f64,
-    held: Result<HeldOut>,
-    failed: &mut dyn FnMut(&str, &str),
-) -> Result<HeldOut> {
+/// reached (a failed computation); other errors pass.
+fn held_or_failed(run: &str, current_a: f64, held: Result<HeldOut>) -> Result<HeldOut> {
     match held {
         Err(Error::Compute(why)) => {
-            failed(run, &why);
             Ok(HeldOut { prediction: None, row: LooRow::failed(run, current_a, why) })
         }
         other => other,
@@ -687,27 +679,19 @@ mod tests {
     }
 
     /// A held-out posterior that cannot be reached gives a `failed` row
-    /// with the reason and no prediction, and is told; an interruption
-    /// stops the study.
+    /// with the reason and no prediction; an interruption stops the study.
     #[test]
     fn a_run_that_cannot_be_held_out_is_marked_and_the_study_goes_on() {
-        let mut told = Vec::new();
         let why = "leave-one-out without t2: the MAP search failed";
-        let held = held_or_failed("t2", 0.5, Err(Error::Compute(why.into())), &mut |run, w| {
-            told.push(format!("{run}|{w}"))
-        })
-        .expect("a failed computation is a row, not an error");
+        let held = held_or_failed("t2", 0.5, Err(Error::Compute(why.into())))
+            .expect("a failed computation is a row, not an error");
         assert!(held.prediction.is_none());
         assert_eq!(held.row.by, HeldOutBy::Failed);
         assert_eq!(held.row.failure.as_deref(), Some(why));
         assert_eq!((held.row.coverage.run.as_str(), held.row.coverage.current_a), ("t2", 0.5));
         assert!(held.row.coverage.lppd.is_nan() && held.row.coverage.inside_p95.is_nan());
         assert!(!held.row.coverage.calibrated);
-        assert_eq!(told, [format!("t2|{why}")]);
-        let stopped =
-            held_or_failed("t3", 0.5, Err(Error::Interrupted("Ctrl-C".into())), &mut |_, _| {
-                panic!("an interruption is not a failed run")
-            });
+        let stopped = held_or_failed("t3", 0.5, Err(Error::Interrupted("Ctrl-C".into())));
         assert!(matches!(stopped, Err(Error::Interrupted(_))));
         assert_eq!(HeldOutBy::from_label("failed"), Some(HeldOutBy::Failed));
         assert_eq!(HeldOutBy::from_label("sampling"), Some(HeldOutBy::Sampling));
