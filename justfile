@@ -66,3 +66,20 @@ layer-coverage:
 current-coverage:
     cargo build --release
     python3 scripts/current_coverage.py target/release/mrbp target/studies/current-coverage 12 2 200
+
+# a new test at currents nobody tested, on 12 virtual dampers whose
+# parameters follow curves of shapes mrbp does not assume (tanh, power,
+# logistic, piecewise-linear, exponential saturations; G rising or
+# falling): calibrated at four currents, tested at five others
+# (docs/comparison.md; needs numpy and pandas)
+curve-shapes:
+    cargo build --release
+    python3 scripts/curve_shapes.py target/release/mrbp target/studies/curve-shapes 12 2
+
+# through a switch: the same dampers with a coil lag of 5-30 ms, a run
+# switched every 0.1 s between two currents no constant run had,
+# predicted by the current curves calibrated without and with a switched
+# run (docs/comparison.md; needs numpy, pandas and scipy)
+switch-lag:
+    cargo build --release
+    python3 scripts/switch_lag.py target/release/mrbp target/studies/switch-lag 12 2

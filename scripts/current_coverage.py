@@ -29,10 +29,10 @@ A replicate whose folder already holds complete results (`mrbp status`) is
 not calibrated again. Writes OUT/coverage.parquet (replicate, run,
 current_a, band, inside_p95).
 """
-import concurrent.futures as cf, math, os, random, subprocess, sys
+import concurrent.futures as cf, os, random, subprocess, sys
 import numpy as np
 import polars as pl
-from virtual_tests import synth as write_record
+from virtual_tests import one_test, synth as write_record
 
 MRBP, OUT, N = sys.argv[1], sys.argv[2], int(sys.argv[3])
 JOBS = int(sys.argv[4]) if len(sys.argv) > 4 else 2
@@ -43,13 +43,7 @@ RPMS = [100.0, 200.0, 300.0, 400.0]
 
 def test_law(rng):
     """A test drawn from the population."""
-    law = dict(TRUTH)
-    law["G"] *= math.exp(0.3 * rng.gauss(0, 1))
-    law["n"] *= math.exp(0.1 * rng.gauss(0, 1))
-    s = math.exp(0.1 * rng.gauss(0, 1))
-    for k in ("R0", "R1", "D1"):
-        law[k] *= s
-    return law
+    return one_test(TRUTH, rng, 0.3, 0.1, 0.1)
 
 def force(csv):
     return pl.read_csv(csv)["force_n"].to_numpy()

@@ -89,6 +89,15 @@ def test_sequential_monte_carlo_as_the_command_line(campaign, tmp_path, calibrat
     assert evidence["of"] == meta[b"mrbp.evidence_of"].decode()
     assert evidence["pseudo"] is False
     assert calibration.log_evidence is None
+    # evidence(): SMC's own where it sampled; else bridge sampling from the
+    # chains, as `mrbp evidence` prints it (its digits)
+    assert cal.evidence() == dict(evidence, by="sequential Monte Carlo")
+    bridged = calibration.evidence()
+    assert bridged["by"] == "bridge sampling" and bridged["se"] > 0
+    out = tmp_path / "ensemble"
+    cli("sample", MANIFEST, "--out", out, "--current", 1.0, "--seed", 3, "--steps", 40)
+    printed = cli("evidence", out).stdout
+    assert f"log evidence {bridged['log_evidence']:.3f} ± {bridged['se']:.3f}" in printed, printed
     with pytest.raises(ValueError, match="sampler \"nuts\": one of 'ensemble', 'smc'"):
         mrbp.calibrate(campaign, current=1.0, steps=10, sampler="nuts")
 

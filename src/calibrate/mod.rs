@@ -12,8 +12,11 @@
 //! * [`sampling`]: one run of the sampler, for a calibration and for each
 //!   held-out calibration of leave-one-out alike;
 //! * `sequential`: sequential Monte Carlo before the ensemble sampler
-//!   (`--sampler smc`).
+//!   (`--sampler smc`);
+//! * [`evidence`]: what a log evidence is of, and a calibration's by
+//!   bridge sampling from its chains.
 
+pub mod evidence;
 pub mod probe;
 pub mod record;
 pub mod sampling;

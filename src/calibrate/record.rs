@@ -60,6 +60,12 @@ pub struct CalibrationRecord {
     pub walkers: usize,
     pub ensembles: usize,
     pub steps: usize,
+    /// The step at which R̂ < 1.01, ESS ≥ 400 and chains 10 τ long first
+    /// held: a run stopped later waited to confirm them (docs/calibration.md,
+    /// "Convergence"). Absent where they never held, or in folders written
+    /// before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first_converged_step: Option<usize>,
     pub burn_in: usize,
     pub seconds_start: f64,
     pub seconds_sampling: f64,
@@ -256,6 +262,7 @@ impl CalibrationRecord {
             walkers: start.settings.sampler.walkers,
             ensembles: start.settings.sampler.ensembles,
             steps: sampled.diagnostics.steps,
+            first_converged_step: sampled.first_held,
             burn_in: sampled.diagnostics.burn_in,
             seconds_start,
             seconds_sampling: sampled.seconds,

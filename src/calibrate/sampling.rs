@@ -19,6 +19,9 @@ pub struct Sampled {
     pub diagnostics: Diagnostics,
     /// Wall time of the sampling (s).
     pub seconds: f64,
+    /// The step at which R̂, ESS and the chains' length in τ first held
+    /// (`None`: they never did, or the run was not run to convergence).
+    pub first_held: Option<usize>,
 }
 
 impl Sampled {
@@ -63,5 +66,5 @@ pub fn run(
     diagnostics
         .warnings
         .extend(crate::sampler::stranded::history(&chains).iter().map(|r| r.message()));
-    Ok(Sampled { chains, sample, diagnostics, seconds })
+    Ok(Sampled { chains, sample, diagnostics, seconds, first_held: sampler.first_held() })
 }

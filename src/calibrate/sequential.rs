@@ -7,27 +7,13 @@
 use std::path::Path;
 use std::time::Instant;
 
+use super::evidence::{evidence_of, RECORDS_OWN};
 use super::record::SmcRecord;
 use super::settings::SMC_REFERENCE_DF;
 use crate::error::Result;
 use crate::posterior::Posterior;
 use crate::sampler::smc::{self, Reference, SmcSettings};
 use crate::sampler::{Elliptical, LogDensity, Observer, Sampler, SamplerSettings};
-
-/// What an evidence of the records' own likelihood is of.
-const RECORDS_OWN: &str = "the records given the law, its priors and the noise model";
-
-/// What the log evidence is of: the records' own likelihood, or the
-/// tempered or adjusted one that allowed for their memory.
-fn evidence_of(posterior: &Posterior) -> &'static str {
-    if posterior.likelihood.adjustment().is_some() {
-        "the adjusted likelihood (the residuals' memory allowed for): a pseudo-evidence, comparable only between calibrations adjusted alike"
-    } else if (0..posterior.runs.len()).any(|j| posterior.weight(j) != 1.0) {
-        "the tempered likelihood (each run's log-likelihood weighted by its residuals' memory): a pseudo-evidence, comparable only between calibrations tempered alike"
-    } else {
-        RECORDS_OWN
-    }
-}
 
 /// Forwards what sequential Monte Carlo tells to the sampler's observers.
 struct Told<'a, 'b>(&'a mut [&'b mut dyn Observer]);

@@ -155,6 +155,14 @@ pub enum Command {
         #[command(flatten)]
         validation: LooOptions,
     },
+    /// The log evidence (marginal likelihood) of calibrations: sequential
+    /// Monte Carlo's where they were sampled so, else by bridge sampling
+    /// from their chains; one line per folder
+    Evidence {
+        /// Calibration folders (of `mrbp sample` or `mrbp run`)
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+    },
     /// Studies of many calibrations: plan, run (here or on a cluster), collect
     #[command(subcommand)]
     Study(StudyCommand),

@@ -5,7 +5,7 @@
 mod args;
 mod print;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use clap::{CommandFactory, Parser};
 
@@ -112,11 +112,36 @@ fn dispatch(cli: Cli) -> Result<()> {
             let loo = validation.steps().map(|steps| pipeline.loo_settings(steps, &predict));
             pipeline.report(&dir, &predict, loo.as_ref()).map(drop)
         }
+        Some(Command::Evidence { dirs }) => evidence(&dirs),
         Some(Command::Study(command)) => study(&mut pipeline, command),
         Some(Command::Compare { dirs, out, rpm }) => pipeline
             .compare(&dirs, out.as_deref().unwrap_or(Path::new("comparison")), rpm)
             .map(drop),
     }
+}
+
+/// `mrbp evidence DIR…`: each calibration's log evidence, one line each.
+fn evidence(dirs: &[PathBuf]) -> Result<()> {
+    for dir in dirs {
+        let cal = crate::store::folder::read(dir)?;
+        let line = match &cal.record.smc {
+            Some(smc) => format!(
+                "log evidence {:.3} ± {:.3} (sequential Monte Carlo), of {}",
+                smc.log_evidence,
+                smc.se(),
+                smc.evidence_of
+            ),
+            None => {
+                let b = crate::calibrate::evidence::by_bridge(&cal, &cal.campaign()?)?;
+                format!(
+                    "log evidence {:.3} ± {:.3} (bridge sampling from {} draws of the chains), of {}",
+                    b.log_evidence, b.se, b.draws, b.of
+                )
+            }
+        };
+        println!("{}: {line}", dir.display());
+    }
+    Ok(())
 }
 
 /// `mrbp status DIR`: one line per results folder; an error if any is not

@@ -60,7 +60,7 @@ pub fn write(r: &LawsReport) -> Result<PathBuf> {
         for line in verdict(r.standings) {
             page.para(&line);
         }
-        page.note("Held-out log predictive density judges a law's whole predictive distribution (its path and its noise) on tests it did not see; with residuals that keep memory (the report of each law's calibration says how much) every law's noise is taken as more certain than it is, so differences of a few standard errors may not survive a likelihood that allows for the memory. The log evidence (marginal likelihood) of each law is shown where its calibrations were sampled by sequential Monte Carlo (run with --sampler smc).");
+        page.note("Held-out log predictive density judges a law's whole predictive distribution (its path and its noise) on tests it did not see; with residuals that keep memory (the report of each law's calibration says how much) every law's noise is taken as more certain than it is, so differences of a few standard errors may not survive a likelihood that allows for the memory. The log evidence (marginal likelihood) of each law: by sequential Monte Carlo where its calibrations were sampled so (--sampler smc), else by bridge sampling from the ensemble sampler's chains (marked b).");
     } else {
         page.para("No verdict without records held out.");
     }
@@ -90,9 +90,10 @@ pub fn write(r: &LawsReport) -> Result<PathBuf> {
                 format!("{:.0} %", 100.0 * s.band_width_out),
                 s.evidence.map_or("—".into(), |e| {
                     format!(
-                        "{} ± {}{}",
+                        "{} ± {}{}{}",
                         num(e.log_evidence, 7),
                         num(e.se, 2),
+                        if e.by == crate::validate::laws::BRIDGE { " b" } else { "" },
                         if e.pseudo { " (pseudo)" } else { "" }
                     )
                 }),

@@ -308,6 +308,11 @@ impl<'t, T: LogDensity> Sampler<'t, T> {
         waiting.is_none()
     }
 
+    /// The step at which the stopping rule's R̂, ESS and length first held.
+    pub fn first_held(&self) -> Option<usize> {
+        self.stopping.first_held()
+    }
+
     /// A run that confirms counts from the step at which the rule first
     /// held: where chains were taken before this run (a resumed run's),
     /// the checks an uninterrupted run made at those steps are made again

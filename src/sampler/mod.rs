@@ -15,13 +15,15 @@
 //! * [`diagnostics`]: autocorrelation time, R̂, ESS, MCSE, acceptance;
 //! * [`stranded`]: an ensemble left in a mode of negligible mass, drawn afresh;
 //! * [`smc`]: tempered sequential Monte Carlo from a reference density to the
-//!   target, its populations mutated by the same moves; the evidence.
+//!   target, its populations mutated by the same moves; the evidence;
+//! * [`bridge`]: the evidence from posterior draws by bridge sampling.
 //!
 //! Randomness is counter-based ([`crate::rng::stream`]): the draws of walker
 //! w of ensemble e at step s depend on (seed, e, s, w) only, so the chains are
 //! the same bit for bit whatever the number of threads, and a resumed run
 //! equals an uninterrupted one.
 
+pub mod bridge;
 pub mod chains;
 pub mod checkpoint;
 pub mod density;

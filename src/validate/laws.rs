@@ -166,7 +166,15 @@ pub struct LawEvidence {
     pub log_evidence: f64,
     pub se: f64,
     pub pseudo: bool,
+    /// How it was estimated: [`SMC`] or [`BRIDGE`].
+    pub by: &'static str,
 }
+
+/// [`LawEvidence::by`] of a calibration sampled by sequential Monte Carlo.
+pub const SMC: &str = "sequential Monte Carlo";
+/// [`LawEvidence::by`] of one the ensemble sampler made: bridge sampling
+/// from its chains ([`crate::calibrate::evidence::by_bridge`]).
+pub const BRIDGE: &str = "bridge sampling";
 
 /// The laws' standings, current by current (rank 1 the best held-out
 /// elpd), on the tests every law was held out on: a test some law could
@@ -472,22 +480,24 @@ mod tests {
         ];
         let mut s = standings(&rows).unwrap();
         assert!(!verdict(&s)[0].contains("log evidence"));
-        s[0].evidence = Some(LawEvidence { log_evidence: -1000.0, se: 0.3, pseudo: false });
+        s[0].evidence =
+            Some(LawEvidence { log_evidence: -1000.0, se: 0.3, pseudo: false, by: SMC });
         assert!(!verdict(&s)[0].contains("log evidence"), "one law alone has an evidence");
-        s[1].evidence = Some(LawEvidence { log_evidence: -1012.5, se: 0.4, pseudo: false });
+        s[1].evidence =
+            Some(LawEvidence { log_evidence: -1012.5, se: 0.4, pseudo: false, by: BRIDGE });
         let v = verdict(&s);
         assert!(
             v[0].contains("the spencer law leads the bouc-wen law by 12.5 ± 0.50 nats; the same law as the held-out ranking"),
             "{v:?}"
         );
-        s[1].evidence = Some(LawEvidence { log_evidence: -990.0, se: 0.4, pseudo: false });
+        s[1].evidence = Some(LawEvidence { log_evidence: -990.0, se: 0.4, pseudo: false, by: SMC });
         let v = verdict(&s);
         assert!(
             v[0].contains("the bouc-wen law leads the spencer law by 10.0 ± 0.50 nats"),
             "{v:?}"
         );
         assert!(v[0].contains("not the held-out ranking's law"), "{v:?}");
-        s[1].evidence = Some(LawEvidence { log_evidence: -990.0, se: 0.4, pseudo: true });
+        s[1].evidence = Some(LawEvidence { log_evidence: -990.0, se: 0.4, pseudo: true, by: SMC });
         let v = verdict(&s);
         assert!(
             v[0].contains("does not rank these laws: the likelihood of the bouc-wen law allowed"),

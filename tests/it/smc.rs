@@ -240,6 +240,73 @@ fn banana_evidence_and_moments() {
     assert!((v - 2.25).abs() <= 5.0 * se, "Var x₀ {v} ± {se}, truth 2.25");
 }
 
+/// Bridge sampling (`sampler::bridge`) on the same known targets, from
+/// exact draws (so that its error is the estimator's alone): 3 000 draws
+/// to fit the Gaussian proposal, 3 000 to bridge with, as many proposed.
+/// The evidence within 3 of its standard errors and 0.2 nat, as asked of
+/// sequential Monte Carlo; the two basins' proposal is one Gaussian over
+/// both, the banana's a Gaussian over a curved ridge: the cases where a
+/// bridge's proposal is furthest from its target.
+#[test]
+fn bridge_sampling_from_exact_draws_gives_the_known_evidence() {
+    use mrbp::sampler::bridge::log_evidence;
+    use rand::RngExt;
+    use rand_distr::StandardNormal;
+    let n = 3000;
+    let mut rng = mrbp::rng::stream(21, &[]);
+    let normal = |rng: &mut rand_chacha::ChaCha8Rng| -> f64 { rng.sample(StandardNormal) };
+    // the correlated Gaussian: μ + L z
+    let (target, cov) = correlated(10, -7.5);
+    let l = cov.clone().cholesky().unwrap().l();
+    let gaussian = |rng: &mut rand_chacha::ChaCha8Rng| -> Vec<f64> {
+        (0..2 * n)
+            .flat_map(|_| {
+                let z = DVector::from_fn(10, |_, _| normal(rng));
+                (&target.mu + &l * z).iter().copied().collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    let points = gaussian(&mut rng);
+    let (fit, draws) = points.split_at(n * 10);
+    let b = log_evidence(&target, fit, draws, n as f64, &mut rng).unwrap();
+    let truth = log_z_gaussian(-7.5, &cov);
+    eprintln!("Gaussian, d = 10: bridge {:.4} ± {:.4}, truth {truth:.4}", b.log_z, b.se);
+    assert!((b.log_z - truth).abs() <= (3.0 * b.se).min(0.2), "{b:?} against {truth}");
+    // two basins: the heavier with probability 0.7
+    let basins: Vec<f64> = (0..2 * n)
+        .flat_map(|_| {
+            let heavy = rng.random::<f64>() < 0.7;
+            (0..4)
+                .map(|_| {
+                    let z = normal(&mut rng);
+                    if heavy {
+                        3.0 + 0.5 * z
+                    } else {
+                        -3.0 + z
+                    }
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let (fit, draws) = basins.split_at(n * 4);
+    let b = log_evidence(&TwoBasins { c: 4.0 }, fit, draws, n as f64, &mut rng).unwrap();
+    eprintln!("two basins: bridge {:.4} ± {:.4}, truth 4", b.log_z, b.se);
+    assert!((b.log_z - 4.0).abs() <= (3.0 * b.se).min(0.2), "{b:?}");
+    // the banana: x₀ ~ N(0, 1.5²), x₁ = x₀² − 2.25 + 0.5 z
+    let banana: Vec<f64> = (0..2 * n)
+        .flat_map(|_| {
+            let x0 = 1.5 * normal(&mut rng);
+            vec![x0, x0 * x0 - 2.25 + 0.5 * normal(&mut rng), normal(&mut rng), normal(&mut rng)]
+        })
+        .collect();
+    let (fit, draws) = banana.split_at(n * 4);
+    let c = -3.0;
+    let b = log_evidence(&Banana { c }, fit, draws, n as f64, &mut rng).unwrap();
+    let truth = c + 2.0 * LN_2PI + (1.5f64 * 0.5).ln();
+    eprintln!("banana: bridge {:.4} ± {:.4}, truth {truth:.4}", b.log_z, b.se);
+    assert!((b.log_z - truth).abs() <= (3.0 * b.se).min(0.2), "{b:?} against {truth}");
+}
+
 /// The same seed gives the same particles and evidence bit for bit with
 /// one thread or two.
 #[test]
@@ -318,6 +385,22 @@ fn a_calibration_sampled_by_smc_agrees_with_the_ensemble_sampler_and_laplace() {
         "smc {} Laplace {by_laplace}",
         record.log_evidence
     );
+    // the ensemble sampler's chains give the same evidence by bridge
+    // sampling: within 3 combined standard errors
+    let bridge = mrbp::calibrate::evidence::by_bridge(ensemble, &campaign).unwrap();
+    let se = bridge.se.hypot(record.se_weights.max(record.se_spread));
+    eprintln!(
+        "bridge sampling from the ensemble's chains: {:.3} ± {:.3}",
+        bridge.log_evidence, bridge.se
+    );
+    assert!(
+        (bridge.log_evidence - record.log_evidence).abs() <= 3.0 * se,
+        "bridge {} ± {}, smc {}",
+        bridge.log_evidence,
+        bridge.se,
+        record.log_evidence
+    );
+    assert!(!bridge.pseudo);
 }
 
 /// ln p = c − ½|x|² where |x₀| < 4, and −1e80 (finite, astronomically
@@ -390,6 +473,26 @@ fn sample_with_smc_writes_the_evidence_into_both_files() {
     assert!(parquet_meta(&plain.join("summary.parquet"), mrbp::store::summary::LOG_EVIDENCE)
         .unwrap()
         .is_none());
+    // `mrbp evidence`: sequential Monte Carlo's where it sampled, else by
+    // bridge sampling from the chains, the two within 3 combined se
+    let o = ok(&["evidence", arg(&out), arg(&plain)]);
+    let printed = said(&o);
+    let lines: Vec<&str> = printed.lines().collect();
+    assert_eq!(lines.len(), 2, "{printed}");
+    assert!(lines[0].contains(&format!("log evidence {evidence:.3} ± ")), "{}", lines[0]);
+    assert!(
+        lines[0].contains("(sequential Monte Carlo)") && lines[1].contains("(bridge sampling from")
+    );
+    let number = |line: &str, after: &str| -> f64 {
+        let rest = &line[line.find(after).unwrap() + after.len()..];
+        rest.split_whitespace().next().unwrap().parse().unwrap()
+    };
+    let (smc, smc_se) = (number(lines[0], "log evidence "), number(lines[0], "± "));
+    let (bridged, bridged_se) = (number(lines[1], "log evidence "), number(lines[1], "± "));
+    assert!((smc - bridged).abs() <= 3.0 * smc_se.hypot(bridged_se), "{printed}");
+    // a folder that holds no calibration: a clear error, status 2
+    let o = crate::common::mrbp(&["evidence", arg(dir.path())]);
+    assert_eq!(o.status.code(), Some(2), "{}", said(&o));
 }
 
 /// `compare` of two calibrations of the same runs by sequential Monte

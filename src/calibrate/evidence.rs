@@ -1,0 +1,94 @@
+//! A calibration's log evidence: what it is of, and, for a calibration the
+//! ensemble sampler made, its estimate by bridge sampling from the chains
+//! ([`crate::sampler::bridge`]; sequential Monte Carlo gives its own,
+//! [`super::SmcRecord`]).
+
+use super::Calibration;
+use crate::data::Campaign;
+use crate::error::{Error, Result};
+use crate::posterior::Posterior;
+use crate::sampler::bridge;
+
+/// What an evidence of the records' own likelihood is of.
+pub const RECORDS_OWN: &str = "the records given the law, its priors and the noise model";
+
+/// What the log evidence of `posterior` is of: the records' own
+/// likelihood, or the tempered or adjusted one that allowed for their
+/// memory (a pseudo-evidence).
+pub fn evidence_of(posterior: &Posterior) -> &'static str {
+    if posterior.likelihood.adjustment().is_some() {
+        "the adjusted likelihood (the residuals' memory allowed for): a pseudo-evidence, comparable only between calibrations adjusted alike"
+    } else if (0..posterior.runs.len()).any(|j| posterior.weight(j) != 1.0) {
+        "the tempered likelihood (each run's log-likelihood weighted by its residuals' memory): a pseudo-evidence, comparable only between calibrations tempered alike"
+    } else {
+        RECORDS_OWN
+    }
+}
+
+/// A log evidence by bridge sampling.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BridgeEvidence {
+    pub log_evidence: f64,
+    pub se: f64,
+    /// Posterior draws bridged with (as many proposal draws were made).
+    pub draws: usize,
+    pub of: &'static str,
+    pub pseudo: bool,
+}
+
+/// Posterior draws at most on each side of the bridge (the proposal's fit,
+/// the bridge): the cost is twice this many log-densities.
+pub const BRIDGE_DRAWS: usize = 2000;
+
+/// The random stream of the proposal's draws (beside the sampler's).
+const BRIDGE_STREAM: u64 = 0xb71d6e;
+
+/// The log evidence of `cal` (made of runs of `campaign`) by bridge
+/// sampling from its chains: the draws after the burn-in, thinned by τ,
+/// alternately to fit a Gaussian proposal and to bridge with, their
+/// effective size at most half the smallest bulk ESS.
+pub fn by_bridge(cal: &Calibration, campaign: &Campaign) -> Result<BridgeEvidence> {
+    let runs = cal.used_runs(campaign);
+    let integrator = cal.predict_settings(0, 0).integrator;
+    let posterior = cal.settings.posterior(&runs, integrator);
+    let layout = &posterior.layout;
+    let sample = &cal.sample;
+    let positions = cal.draws().positions(&sample.chains, 2 * BRIDGE_DRAWS);
+    let mut points = Vec::with_capacity(positions.len() * layout.names.len());
+    for &(step, chain) in &positions {
+        let at = sample.chains.point(step, chain);
+        let si: Vec<f64> = layout
+            .names
+            .iter()
+            .map(|n| {
+                sample.layout.index(n).map(|k| at[k]).ok_or_else(|| {
+                    Error::Compute(format!(
+                        "{}: the chains have no coordinate {n}: the folder's calibration is not its settings'",
+                        cal.dir.display()
+                    ))
+                })
+            })
+            .collect::<Result<_>>()?;
+        points.push(layout.from_si(&si));
+    }
+    let (fit, bridged): (Vec<Vec<f64>>, Vec<Vec<f64>>) =
+        points.chunks(2).filter(|p| p.len() == 2).map(|p| (p[0].clone(), p[1].clone())).unzip();
+    let smallest_ess = cal
+        .summary
+        .iter()
+        .map(|r| r.ess_bulk)
+        .filter(|e| e.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    let effective = (smallest_ess / 2.0).min(bridged.len() as f64);
+    let mut rng = crate::rng::stream(cal.settings.sampler.seed, &[BRIDGE_STREAM]);
+    let b =
+        bridge::log_evidence(&posterior, &fit.concat(), &bridged.concat(), effective, &mut rng)?;
+    let of = evidence_of(&posterior);
+    Ok(BridgeEvidence {
+        log_evidence: b.log_z + posterior.log_evidence_offset(),
+        se: b.se,
+        draws: bridged.len(),
+        of,
+        pseudo: of != RECORDS_OWN,
+    })
+}
