@@ -8,7 +8,7 @@ use std::path::Path;
 use super::parquet::{f64_column, read_parquet, str_column, write_parquet, Table};
 use crate::error::{Error, Result};
 use crate::laws::LawKind;
-use crate::validate::laws::{Kind, LawRow, Measures};
+use crate::validate::laws::{Kind, LawEvidence, LawRow, Measures, BRIDGE, SMC};
 
 /// The study's table in its folder.
 pub const FILE: &str = "laws.parquet";
@@ -33,7 +33,19 @@ pub fn table(rows: &[LawRow], ids: &[(String, String)]) -> Table {
         .f64("band_width", rows.iter().map(|r| r.measures.band_width).collect())
         .f64("lppd", rows.iter().map(|r| r.lppd).collect())
         .f64("seconds", rows.iter().map(|r| r.seconds).collect())
+        .f64("log_evidence", evidence(rows, |e| e.log_evidence))
+        .f64("log_evidence_se", evidence(rows, |e| e.se))
+        .str("evidence_by", rows.iter().map(|r| r.evidence.map_or("", |e| e.by).into()).collect())
+        .bool(
+            "pseudo_evidence",
+            rows.iter().map(|r| r.evidence.is_some_and(|e| e.pseudo)).collect(),
+        )
         .meta(CALIBRATIONS, &named.join(","))
+}
+
+/// `value` of each row's evidence; NaN where it has none.
+fn evidence(rows: &[LawRow], value: impl Fn(&LawEvidence) -> f64) -> Vec<f64> {
+    rows.iter().map(|r| r.evidence.as_ref().map_or(f64::NAN, &value)).collect()
 }
 
 pub fn write(path: &Path, rows: &[LawRow], ids: &[(String, String)]) -> Result<()> {
@@ -58,6 +70,27 @@ pub fn read(path: &Path) -> Result<Vec<LawRow>> {
         col("lppd")?,
         col("seconds")?,
     );
+    // the evidence columns (absent in files written before 2026-11-30)
+    let names = super::parquet::column_names(&df);
+    let has = |n: &str| names.iter().any(|c| c == n);
+    let evidence = if has("log_evidence") {
+        let by = str_column(&df, "evidence_by", path)?;
+        let pseudo = col("pseudo_evidence")?;
+        let (value, se) = (col("log_evidence")?, col("log_evidence_se")?);
+        (0..law.len())
+            .map(|i| {
+                let by = [SMC, BRIDGE].into_iter().find(|b| *b == by[i])?;
+                Some(LawEvidence {
+                    log_evidence: value[i],
+                    se: se[i],
+                    pseudo: pseudo[i] != 0.0,
+                    by,
+                })
+            })
+            .collect()
+    } else {
+        vec![None; law.len()]
+    };
     (0..law.len())
         .map(|i| {
             let bad = |what: &str| Error::input(path, format!("row {}: {what}", i + 1));
@@ -82,6 +115,7 @@ pub fn read(path: &Path) -> Result<Vec<LawRow>> {
                 },
                 lppd: lppd[i],
                 seconds: seconds[i],
+                evidence: evidence[i],
             })
         })
         .collect()

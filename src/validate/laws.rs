@@ -60,6 +60,9 @@ pub struct LawRow {
     /// Wall time (s) of the law's calibration at this current (start and
     /// sampling), on its in-sample and held-out rows alike.
     pub seconds: f64,
+    /// The log evidence of the law's calibration at this current, on its
+    /// rows alike (none where it could not be estimated).
+    pub evidence: Option<LawEvidence>,
 }
 
 /// The error measures of `bands` (one record, its median path and bands in
@@ -423,6 +426,7 @@ mod tests {
                 band_width: 0.2,
             },
             lppd,
+            evidence: None,
             seconds: 1.0,
         }
     }

@@ -322,12 +322,26 @@ fn the_validation_study_ranks_the_generating_law_first() {
         mrbp::store::column_names(&t),
         [
             "law", "current_a", "run", "kind", "samples", "nrmse", "e_t", "e_x", "e_v",
-            "inside_p95", "band_width", "lppd", "seconds"
+            "inside_p95", "band_width", "lppd", "seconds", "log_evidence", "log_evidence_se",
+            "evidence_by", "pseudo_evidence"
         ]
     );
     // two laws × three records × in sample and held out
     assert_eq!(t.height(), 12);
     let rows = mrbp::store::laws::read(&path).unwrap();
+    // the ensemble sampler's calibrations: each law's log evidence by
+    // bridge sampling on every one of its rows; the generating law's of
+    // the records' own likelihood (its residuals are white), the other's
+    // a pseudo-evidence (its misfit has memory: adjusted likelihood), so
+    // the verdict declines to rank by them
+    for law in [LawKind::Bingham, LawKind::BoucWen] {
+        let of: Vec<_> = rows.iter().filter(|r| r.law == law).map(|r| r.evidence).collect();
+        let e = of[0].expect("an evidence");
+        assert!(of.iter().all(|x| *x == Some(e)), "{law:?}: {of:?}");
+        assert!(e.by == mrbp::validate::laws::BRIDGE && e.se < 1.0, "{e:?}");
+        assert_eq!(e.pseudo, law == LawKind::BoucWen, "{law:?}: {e:?}");
+    }
+    assert!(said.contains("The log evidence does not rank these laws"), "{said}");
     let held: Vec<_> = rows
         .iter()
         .filter(|r| r.law == LawKind::Bingham && r.kind == mrbp::validate::laws::Kind::HeldOut)
