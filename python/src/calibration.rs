@@ -112,17 +112,12 @@ impl Calibration {
     /// a pseudo-evidence and how it was estimated: sequential Monte
     /// Carlo's where it sampled, else by bridge sampling from the chains.
     fn evidence(&self, py: Python<'_>) -> PyResult<(f64, f64, String, bool, String)> {
-        if let Some(e) = &self.inner.record.smc {
-            let by = mrbp::validate::laws::SMC.to_string();
-            return Ok((e.log_evidence, e.se(), e.evidence_of.clone(), e.pseudo_evidence, by));
-        }
         let cal = self.inner.clone();
         let campaign = self.campaign()?;
-        let b = py
-            .detach(move || mrbp::calibrate::evidence::by_bridge(&cal, &campaign))
+        let e = py
+            .detach(move || mrbp::calibrate::evidence::estimate(&cal, &campaign))
             .map_err(raise)?;
-        let by = mrbp::validate::laws::BRIDGE.to_string();
-        Ok((b.log_evidence, b.se, b.of.to_string(), b.pseudo, by))
+        Ok((e.log_evidence, e.se, e.of, e.pseudo, e.by.to_string()))
     }
 
     /// The largest R̂ of the summary.

@@ -36,6 +36,51 @@ pub struct BridgeEvidence {
     pub pseudo: bool,
 }
 
+/// [`Estimate::by`] of a calibration sampled by sequential Monte Carlo.
+pub const SMC: &str = "sequential Monte Carlo";
+/// [`Estimate::by`] of one the ensemble sampler made: bridge sampling
+/// from its chains ([`by_bridge`]).
+pub const BRIDGE: &str = "bridge sampling";
+
+/// A calibration's log evidence, however it was estimated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Estimate {
+    pub log_evidence: f64,
+    pub se: f64,
+    /// What it is of ([`evidence_of`]).
+    pub of: String,
+    pub pseudo: bool,
+    /// [`SMC`] or [`BRIDGE`].
+    pub by: &'static str,
+    /// The posterior draws bridged with ([`BRIDGE`] only).
+    pub draws: Option<usize>,
+}
+
+/// The log evidence of `cal` (made of runs of `campaign`): sequential
+/// Monte Carlo's where it was sampled so, else by bridge sampling from
+/// its chains.
+pub fn estimate(cal: &Calibration, campaign: &Campaign) -> Result<Estimate> {
+    if let Some(smc) = &cal.record.smc {
+        return Ok(Estimate {
+            log_evidence: smc.log_evidence,
+            se: smc.se(),
+            of: smc.evidence_of.clone(),
+            pseudo: smc.pseudo_evidence,
+            by: SMC,
+            draws: None,
+        });
+    }
+    let b = by_bridge(cal, campaign)?;
+    Ok(Estimate {
+        log_evidence: b.log_evidence,
+        se: b.se,
+        of: b.of.to_string(),
+        pseudo: b.pseudo,
+        by: BRIDGE,
+        draws: Some(b.draws),
+    })
+}
+
 /// Posterior draws at most on each side of the bridge (the proposal's fit,
 /// the bridge): the cost is twice this many log-densities.
 pub const BRIDGE_DRAWS: usize = 2000;

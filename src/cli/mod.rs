@@ -124,22 +124,18 @@ fn dispatch(cli: Cli) -> Result<()> {
 fn evidence(dirs: &[PathBuf]) -> Result<()> {
     for dir in dirs {
         let cal = crate::store::folder::read(dir)?;
-        let line = match &cal.record.smc {
-            Some(smc) => format!(
-                "log evidence {:.3} ± {:.3} (sequential Monte Carlo), of {}",
-                smc.log_evidence,
-                smc.se(),
-                smc.evidence_of
-            ),
-            None => {
-                let b = crate::calibrate::evidence::by_bridge(&cal, &cal.campaign()?)?;
-                format!(
-                    "log evidence {:.3} ± {:.3} (bridge sampling from {} draws of the chains), of {}",
-                    b.log_evidence, b.se, b.draws, b.of
-                )
-            }
+        let e = crate::calibrate::evidence::estimate(&cal, &cal.campaign()?)?;
+        let how = match e.draws {
+            Some(n) => format!("{} from {n} draws of the chains", e.by),
+            None => e.by.to_string(),
         };
-        println!("{}: {line}", dir.display());
+        println!(
+            "{}: log evidence {:.3} ± {:.3} ({how}), of {}",
+            dir.display(),
+            e.log_evidence,
+            e.se,
+            e.of
+        );
     }
     Ok(())
 }

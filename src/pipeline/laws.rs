@@ -62,30 +62,11 @@ impl Pipeline<'_> {
                 let dir = out.join(law.name()).join(current_tag(c));
                 let cal = store::folder::read(&dir)?;
                 let seconds = cal.record.seconds_start + cal.record.seconds_sampling;
-                let estimate = match &cal.record.smc {
-                    Some(smc) => Some(LawEvidence {
-                        log_evidence: smc.log_evidence,
-                        se: smc.se(),
-                        pseudo: smc.pseudo_evidence,
-                        by: crate::validate::laws::SMC,
-                    }),
-                    None => match crate::calibrate::evidence::by_bridge(&cal, &campaign) {
-                        Ok(b) => Some(LawEvidence {
-                            log_evidence: b.log_evidence,
-                            se: b.se,
-                            pseudo: b.pseudo,
-                            by: crate::validate::laws::BRIDGE,
-                        }),
-                        Err(e) => {
-                            self.note(&format!(
-                                "the {} law at {c} A has no log evidence: {e}",
-                                law.name()
-                            ));
-                            None
-                        }
-                    },
-                };
-                evidence.extend(estimate.map(|e| (law, c, e)));
+                match crate::calibrate::evidence::estimate(&cal, &campaign) {
+                    Ok(e) => evidence.push((law, c, LawEvidence::from(&e))),
+                    Err(e) => self
+                        .note(&format!("the {} law at {c} A has no log evidence: {e}", law.name())),
+                }
                 ids.push((
                     format!("{}/{}", law.name(), current_tag(c)),
                     cal.record.calibration_id.clone(),

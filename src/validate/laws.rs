@@ -173,11 +173,13 @@ pub struct LawEvidence {
     pub by: &'static str,
 }
 
-/// [`LawEvidence::by`] of a calibration sampled by sequential Monte Carlo.
-pub const SMC: &str = "sequential Monte Carlo";
-/// [`LawEvidence::by`] of one the ensemble sampler made: bridge sampling
-/// from its chains ([`crate::calibrate::evidence::by_bridge`]).
-pub const BRIDGE: &str = "bridge sampling";
+pub use crate::calibrate::evidence::{BRIDGE, SMC};
+
+impl From<&crate::calibrate::evidence::Estimate> for LawEvidence {
+    fn from(e: &crate::calibrate::evidence::Estimate) -> Self {
+        LawEvidence { log_evidence: e.log_evidence, se: e.se, pseudo: e.pseudo, by: e.by }
+    }
+}
 
 /// The laws' standings, current by current (rank 1 the best held-out
 /// elpd), on the tests every law was held out on: a test some law could
