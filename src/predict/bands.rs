@@ -86,23 +86,29 @@ pub struct Coverage {
     pub rmse_median: f64,
     /// The bands' log pointwise predictive density (nat).
     pub lppd: f64,
+    /// The 95 % predictive band's mean width over the record's largest
+    /// |τ_obs|: how much a band says (as a share of the peak force).
+    pub band_width: f64,
 }
 
 impl Bands {
     pub fn coverage(&self, tau_obs: &[f64]) -> Coverage {
         let n = tau_obs.len().saturating_sub(1).max(1);
-        let (mut inside_p, mut inside_m, mut sq) = (0usize, 0usize, 0.0);
+        let (mut inside_p, mut inside_m, mut sq, mut width) = (0usize, 0usize, 0.0, 0.0);
         for (k, &y) in tau_obs.iter().enumerate().skip(1) {
             inside_p += (y >= self.predictive[0][k] && y <= self.predictive[1][k]) as usize;
             inside_m += (y >= self.model[0][k] && y <= self.model[4][k]) as usize;
             sq += (y - self.model[2][k]).powi(2);
+            width += self.predictive[1][k] - self.predictive[0][k];
         }
+        let peak = tau_obs.iter().skip(1).fold(0.0f64, |m, y| m.max(y.abs()));
         Coverage {
             samples: n,
             inside_predictive: inside_p as f64 / n as f64,
             inside_model: inside_m as f64 / n as f64,
             rmse_median: (sq / n as f64).sqrt(),
             lppd: self.lppd,
+            band_width: width / n as f64 / peak,
         }
     }
 }
@@ -361,6 +367,10 @@ pub struct CoverageRow {
     /// times the median path's RMS ([`Bands::far_draws`]; NaN: not known).
     #[serde(default = "not_known")]
     pub far_draws: f64,
+    /// The 95 % predictive band's mean width over the record's peak
+    /// ([`Coverage::band_width`]; NaN: not known).
+    #[serde(default = "not_known")]
+    pub band_width: f64,
 }
 
 fn not_known() -> f64 {
@@ -385,6 +395,7 @@ impl CoverageRow {
             calibrated,
             lppd: coverage.lppd,
             far_draws: bands.far_draws,
+            band_width: coverage.band_width,
         }
     }
 
@@ -565,5 +576,8 @@ mod tests {
         let c = b.coverage(&[9.0, 0.5, 2.0, -0.5, -3.0]);
         assert_eq!(c.samples, 4);
         assert_eq!(c.inside_predictive, 0.5);
+        // the band is 2 wide at every sample; the largest |τ| after the
+        // first sample (which is not compared) is 3
+        assert_eq!(c.band_width, 2.0 / 3.0);
     }
 }

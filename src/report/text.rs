@@ -436,8 +436,16 @@ pub fn new_test_pooled(rows: &[NewTestRow]) -> Vec<String> {
             let these: Vec<_> =
                 rows.iter().filter(|r| r.left_out == kind).map(|r| &r.coverage).collect();
             let share = CoverageRow::pooled_inside_p95(these.iter().copied())?;
+            let widths: Vec<f64> =
+                these.iter().map(|c| c.band_width).filter(|w| w.is_finite()).collect();
+            let width = if widths.is_empty() {
+                String::new()
+            } else {
+                let mean = widths.iter().sum::<f64>() / widths.len() as f64;
+                format!(" (bands {:.0} % of the peak force wide on average)", 100.0 * mean)
+            };
             Some(format!(
-                "{:.1} % of the samples of the {} run{} held out {without}",
+                "{:.1} % of the samples of the {} run{} held out {without}{width}",
                 100.0 * share,
                 these.len(),
                 if these.len() == 1 { "" } else { "s" }

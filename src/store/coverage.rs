@@ -59,6 +59,7 @@ pub fn table(rows: &[CoverageRow]) -> Table {
         .bool("calibrated", rows.iter().map(|r| r.calibrated).collect())
         .f64("lppd", rows.iter().map(|r| r.lppd).collect())
         .f64("far_draws", rows.iter().map(|r| r.far_draws).collect())
+        .f64("band_width", rows.iter().map(|r| r.band_width).collect())
 }
 
 fn write_loo(path: &Path, rows: &[LooRow], id: &str) -> Result<()> {
@@ -108,6 +109,7 @@ pub fn read(path: &Path) -> Result<Vec<CoverageRow>> {
     let calibrated = f64_column(&df, "calibrated", path).unwrap_or_else(|_| vec![1.0; run.len()]);
     let lppd = f64_column(&df, "lppd", path).unwrap_or_else(|_| vec![f64::NAN; run.len()]);
     let far = f64_column(&df, "far_draws", path).unwrap_or_else(|_| vec![f64::NAN; run.len()]);
+    let width = f64_column(&df, "band_width", path).unwrap_or_else(|_| vec![f64::NAN; run.len()]);
     let (cur, samples, p, q, rmse, draws, failed) = (
         col("current_a")?,
         col("samples")?,
@@ -130,6 +132,7 @@ pub fn read(path: &Path) -> Result<Vec<CoverageRow>> {
             calibrated: calibrated[i] != 0.0,
             lppd: lppd[i],
             far_draws: far[i],
+            band_width: width[i],
         })
         .collect())
 }

@@ -163,6 +163,7 @@ impl LooRow {
             calibrated: false,
             lppd: f64::NAN,
             far_draws: f64::NAN,
+            band_width: f64::NAN,
         };
         LooRow {
             coverage,

@@ -186,7 +186,8 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
         column_names(&table),
         [
             "run", "current_a", "samples", "inside_p95", "inside_q95", "rmse_q50_pa", "draws",
-            "failed_draws", "calibrated", "lppd", "far_draws", "left_out", "max_r_hat"
+            "failed_draws", "calibrated", "lppd", "far_draws", "band_width", "left_out",
+            "max_r_hat"
         ]
     );
     let joint = mrbp::store::record::read(&folder.join("calibration.toml")).unwrap();
@@ -212,9 +213,13 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
     let (inside, samples) = rows.iter().fold((0.0, 0), |(i, n), r| {
         (i + r.coverage.inside_p95 * r.coverage.samples as f64, n + r.coverage.samples)
     });
+    // with the mean of the rows' band widths (over each record's peak)
+    let width = rows.iter().map(|r| r.coverage.band_width).sum::<f64>() / rows.len() as f64;
+    assert!(width.is_finite() && width > 0.0, "{width}");
     let pooled = format!(
-        "{:.1} % of the samples of the 3 runs held out alone",
-        100.0 * inside / samples as f64
+        "{:.1} % of the samples of the 3 runs held out alone (bands {:.0} % of the peak force wide on average)",
+        100.0 * inside / samples as f64,
+        100.0 * width
     );
     assert!(printed.contains(&format!("pooled: {pooled}")), "{printed}");
     let html = std::fs::read_to_string(folder.join("report.html")).unwrap();
