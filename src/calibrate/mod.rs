@@ -20,7 +20,7 @@ pub mod evidence;
 pub mod probe;
 pub mod record;
 pub mod sampling;
-mod sequential;
+pub(crate) mod sequential;
 pub mod settings;
 pub mod start;
 

@@ -35,7 +35,7 @@ impl smc::SmcObserver for Told<'_, '_> {
 /// and seed of `settings`; and what it did. The populations saved at
 /// `saved` (a checkpoint of the same run, [`smc::checkpoint`]) are taken
 /// as they are and the run goes on from the first one missing.
-pub(super) fn from_laplace<'t>(
+pub(crate) fn from_laplace<'t>(
     posterior: &'t Posterior,
     laplace: &Elliptical,
     settings: &SamplerSettings,

@@ -66,7 +66,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             let options = RunOptions {
                 sample: options.request()?,
                 predict,
-                leave_one_out: validation.steps(),
+                leave_one_out: validation.request(),
                 current_law,
             };
             pipeline.run(&manifest, &out, &options).map(|reports| print::reports(&reports, clock))
@@ -109,7 +109,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             pipeline.simulate(&cal, &input, current, &out, &options, new_test).map(drop)
         }
         Some(Command::Report { dir, predict, validation }) => {
-            let loo = validation.steps().map(|steps| pipeline.loo_settings(steps, &predict));
+            let loo = validation.request().map(|r| pipeline.loo_settings(r, &predict));
             pipeline.report(&dir, &predict, loo.as_ref()).map(drop)
         }
         Some(Command::Evidence { dirs }) => evidence(&dirs),

@@ -39,8 +39,9 @@ impl Pipeline<'_> {
                 leave_one_out: LooOptions {
                     leave_one_out,
                     loo_steps: crate::validate::LooSettings::default().steps,
+                    loo_refit: false,
                 }
-                .steps(),
+                .request(),
                 current_law: false,
             })
         };

@@ -198,12 +198,26 @@ pub struct LooOptions {
     /// Sampler steps of each leave-one-out calibration
     #[arg(long, default_value_t = LooSettings::default().steps)]
     pub loo_steps: usize,
+    /// Refit every held-out run by sampling (exact leave-one-out: slower;
+    /// a check of the cheaper routes, which reweight the full posterior's
+    /// draws or its Laplace approximation where they can be trusted)
+    #[arg(long)]
+    pub loo_refit: bool,
+}
+
+/// Leave-one-out as asked for on the command line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LooRequest {
+    /// Most sampler steps of each held-out calibration sampled afresh.
+    pub steps: usize,
+    /// Every held-out run sampled afresh, none reweighted.
+    pub refit: bool,
 }
 
 impl LooOptions {
-    /// The sampler steps of each held-out run, if leave-one-out is asked for.
-    pub fn steps(&self) -> Option<usize> {
-        self.leave_one_out.then_some(self.loo_steps)
+    /// What leave-one-out is asked for, if it is.
+    pub fn request(&self) -> Option<LooRequest> {
+        self.leave_one_out.then_some(LooRequest { steps: self.loo_steps, refit: self.loo_refit })
     }
 }
 
@@ -212,8 +226,8 @@ impl LooOptions {
 pub struct RunOptions {
     pub sample: SampleRequest,
     pub predict: PredictOptions,
-    /// Leave-one-out validation with this many sampler steps per held-out run.
-    pub leave_one_out: Option<usize>,
+    /// Leave-one-out validation, as asked for.
+    pub leave_one_out: Option<LooRequest>,
     /// With several currents, also the current law, holding out the middle
     /// current when there are three or more.
     pub current_law: bool,
@@ -376,9 +390,10 @@ impl<'a> Pipeline<'a> {
 
     /// Leave-one-out settings with `steps` per held-out run and the bands'
     /// draws, replicates and seed.
-    pub fn loo_settings(&self, steps: usize, predict: &PredictOptions) -> LooSettings {
+    pub fn loo_settings(&self, request: LooRequest, predict: &PredictOptions) -> LooSettings {
         LooSettings {
-            steps,
+            steps: request.steps,
+            refit: request.refit,
             draws: predict.draws,
             replicates: predict.replicates,
             seed: predict.seed,

@@ -266,8 +266,14 @@ impl Pipeline<'_> {
         let clock = Instant::now();
         let progress = self.progress;
         let listener = &mut *self.listener;
+        let refit = loo.refit;
         let mut observe = |run: &str| {
-            listener(Event::Note(&format!("  leave-one-out: no importance weights can be trusted for {run} (k̂ > 0.7): sampling without it")));
+            let why = if refit {
+                "every held-out run refitted (--loo-refit)".to_string()
+            } else {
+                format!("no importance weights can be trusted for {run} (k̂ > 0.7)")
+            };
+            listener(Event::Note(&format!("  leave-one-out: {why}: sampling without {run}")));
             Pipeline::observers_for(progress)
         };
         let held = leave_one_out(cal, &campaign, loo, &mut observe)?;

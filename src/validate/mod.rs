@@ -20,7 +20,7 @@ pub mod psis;
 
 use serde::{Deserialize, Serialize};
 
-use crate::calibrate::{sampling, Calibration, CalibrationSettings};
+use crate::calibrate::{sampling, Calibration, CalibrationSettings, SamplerMethod};
 use crate::data::{Campaign, Run};
 use crate::error::{Error, Result};
 use rand::RngExt;
@@ -49,6 +49,9 @@ pub struct LooSettings {
     pub draws: usize,
     pub replicates: usize,
     pub seed: u64,
+    /// Every held-out run sampled afresh (exact leave-one-out), none
+    /// reached by reweighting.
+    pub refit: bool,
 }
 
 impl Default for LooSettings {
@@ -60,6 +63,7 @@ impl Default for LooSettings {
             draws: bands.draws,
             replicates: bands.replicates,
             seed: bands.seed,
+            refit: false,
         }
     }
 }
@@ -402,7 +406,7 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
     // an adjusted held-out posterior is centred on its own likelihood's peak
     // (below), which the full posterior's draws do not weigh: there these
     // weights only start the search for its mode
-    let prediction = if reweighted.k_hat <= psis::K_THRESHOLD && !adjusted {
+    let prediction = if reweighted.k_hat <= psis::K_THRESHOLD && !adjusted && !loo.refit {
         let draws: Vec<Draw> = positions
             .iter()
             .map(|&(s, c)| sample.draw_without(s, c, left_out.id(), current))
@@ -431,6 +435,9 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
             ))
         })?;
         let laplace = laplace::at_mode(&posterior, &map);
+        if loo.refit {
+            return Ok(Weighed::ToSample(Box::new(Pending { target, posterior, laplace, row })));
+        }
         let (k_hat, by_laplace) =
             laplace_importance(&target, &posterior, &laplace, settings.sampler.seed, loo)?;
         row.pareto_k_laplace = k_hat;
@@ -561,8 +568,10 @@ fn weighted_moments(points: &[Vec<f64>], weights: &[f64]) -> Option<Elliptical> 
     ))
 }
 
-/// The held-out posterior sampled afresh, from walkers around its mode, on
-/// a random stream of its own: the prediction and the largest R̂.
+/// The held-out posterior sampled afresh, from walkers around its mode (by
+/// sequential Monte Carlo from its Laplace approximation first, where the
+/// calibration was sampled so), on a random stream of its own: the
+/// prediction and the largest R̂.
 fn sample_afresh(
     target: &Target,
     posterior: &Posterior,
@@ -573,13 +582,31 @@ fn sample_afresh(
 ) -> Result<(RunPrediction, f64)> {
     let s = &settings.sampler;
     let seed = s.seed ^ (0x100 + target.j as u64);
-    let init = map::initial_walkers(posterior, laplace, s.walkers * s.ensembles, seed);
     let mut observers = observe(target.run.id());
     let mut refs: Vec<&mut dyn Observer> =
         observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
-    let mut sampler =
-        Sampler::from_state(posterior, s.sampler(s.walkers, seed), init.positions, init.log_prob)?
-            .with_reference(laplace.clone());
+    let mut sampler = match s.method {
+        SamplerMethod::Smc => {
+            crate::calibrate::sequential::from_laplace(
+                posterior,
+                laplace,
+                &s.sampler(s.walkers, seed),
+                None,
+                &mut refs,
+            )?
+            .0
+        }
+        SamplerMethod::Ensemble => {
+            let init = map::initial_walkers(posterior, laplace, s.walkers * s.ensembles, seed);
+            Sampler::from_state(
+                posterior,
+                s.sampler(s.walkers, seed),
+                init.positions,
+                init.log_prob,
+            )?
+            .with_reference(laplace.clone())
+        }
+    };
     let control = RunControl {
         max_steps: loo.steps,
         until_converged: true,
