@@ -23,13 +23,16 @@ Each damper (the first DAMPERS of curve_shapes.py's, same seeds):
 - current curves calibrated on the constant runs and one more switched run
   (250 rpm, another record of the same damper): does the coil lag's 90 %
   interval hold tau_c; and the first switched run simulated from them.
-- how many steps each calibration ran, and at which step R-hat < 1.01 and
-  ESS >= 400 first held (from its diagnostics).
+- how many steps each calibration ran, and at which step R-hat < 1.01,
+  ESS >= 400 and 10 tau first held (calibration.toml's
+  first_converged_step).
 
-    python scripts/switch_lag.py MRBP OUT DAMPERS [JOBS]
+    python scripts/switch_lag.py MRBP OUT DAMPERS [JOBS] [FIRST]
 
-Writes OUT/switch.parquet (damper, tau_c_ms, calibration, inside_p95,
-lag_q05_ms, lag_q50_ms, lag_q95_ms, steps, first_held).
+Dampers FIRST to FIRST + DAMPERS - 1 (FIRST 0 by default). Writes
+OUT/switch.parquet, or OUT/switch-FIRST.parquet where FIRST is given
+(damper, tau_c_ms, calibration, inside_p95, lag_q05_ms, lag_q50_ms,
+lag_q95_ms, steps, first_held).
 """
 import concurrent.futures as cf, math, os, random, subprocess, sys, tomllib
 import numpy as np
@@ -166,12 +169,13 @@ def one(r):
 if __name__ == "__main__":
     MRBP, OUT, N = sys.argv[1], sys.argv[2], int(sys.argv[3])
     JOBS = int(sys.argv[4]) if len(sys.argv) > 4 else 2
+    FIRST = int(sys.argv[5]) if len(sys.argv) > 5 else 0
     rng = random.Random(3000)
     curves, _ = shapes.damper(rng)
     print(f"this integration against mrbp synth at 0.75 A: RMS difference {check_against_synth(MRBP, os.path.join(OUT, 'check'), curves):.2f} N (synth's force noise 15 N)", flush=True)
     rows = []
     with cf.ThreadPoolExecutor(JOBS) as ex:
-        for r, got, err in ex.map(one, range(N)):
+        for r, got, err in ex.map(one, range(FIRST, FIRST + N)):
             if got is None:
                 print(f"damper {r} failed: {err}", flush=True)
                 continue
@@ -181,7 +185,7 @@ if __name__ == "__main__":
                       f"[{row[4]:.1f}, {row[6]:.1f}] ms; steps {row[7]}, first held {row[8]}", flush=True)
     t = pd.DataFrame(rows, columns=["damper", "tau_c_ms", "calibration", "inside_p95", "lag_q05_ms", "lag_q50_ms",
                                     "lag_q95_ms", "steps", "first_held"])
-    t.to_parquet(os.path.join(OUT, "switch.parquet"))
+    t.to_parquet(os.path.join(OUT, f"switch-{FIRST}.parquet" if len(sys.argv) > 5 else "switch.parquet"))
     for name in t["calibration"].unique():
         v = t[t["calibration"] == name]
         print(f"{name}: pooled {100 * v['inside_p95'].mean():.1f} % inside over {len(v)} switched runs "
