@@ -3,8 +3,8 @@ virtual dampers of curve_shapes.py (parameters on curves in the current of
 shapes mrbp does not assume) with a coil lag of their own.
 
 The switched records are made here, not by `mrbp synth`: the B-P shear law
-(docs/../bodner-partom equations: flow rule, hardening, tau' = G (gamma' -
-gamma_I'), W' = tau gamma_I') is integrated by scipy's Radau method with
+(the flow rule, the hardening, tau' = G (gamma' - gamma_I'),
+W' = tau gamma_I') is integrated by scipy's Radau method with
 tight tolerances, the parameters taken at the field current I_f, which
 trails the commanded current as dI_f/dt = (I - I_f) / tau_c; the state
 (tau, W) carries through every switch. At a constant current the same
