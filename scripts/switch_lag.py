@@ -9,7 +9,7 @@ tight tolerances, the parameters taken at the field current I_f, which
 trails the commanded current as dI_f/dt = (I - I_f) / tau_c; the state
 (tau, W) carries through every switch. At a constant current the same
 integration is checked against `mrbp synth` (printed: RMS difference of
-the noiseless stress, in N).
+the noiseless force, in N).
 
 Each damper (the first DAMPERS of curve_shapes.py's, same seeds):
 - tau_c uniform in 5-30 ms;
