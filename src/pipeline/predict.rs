@@ -263,6 +263,11 @@ impl Pipeline<'_> {
         }
         // the study goes into the calibration's folder: held before the work
         self.prepare(&cal.dir, "--out", &[], &[], true)?;
+        if loo.resume {
+            if let Some(kept) = self.kept_leave_one_out(cal, loo)? {
+                return Ok(Some(kept));
+            }
+        }
         let clock = Instant::now();
         let progress = self.progress;
         let listener = &mut *self.listener;
@@ -288,8 +293,40 @@ impl Pipeline<'_> {
             held.into_iter().map(|h| (h.prediction.map(|p| p.bands), h.row)).unzip();
         let bands: Vec<RunBands> = bands.into_iter().flatten().collect();
         let study = LeaveOneOut { rows, bands };
-        store::coverage::write_leave_one_out(&cal.dir, &study, &cal.record.calibration_id)?;
+        store::coverage::write_leave_one_out(
+            &cal.dir,
+            &study,
+            &cal.record.calibration_id,
+            &loo.described(),
+        )?;
         self.emit(Event::LeftOneOut { rows: &study.rows, seconds: clock.elapsed().as_secs_f64() });
+        Ok(Some(study))
+    }
+
+    /// With `--resume`, the leave-one-out study already in `cal`'s folder,
+    /// whole, where it was made from this calibration with the settings
+    /// `loo` describes: a long study stopped half-way goes on from the
+    /// held-out studies it finished as from its calibrations.
+    fn kept_leave_one_out(
+        &mut self,
+        cal: &Calibration,
+        loo: &LooSettings,
+    ) -> Result<Option<LeaveOneOut>> {
+        let made_with = store::coverage::leave_one_out_settings(&cal.dir)?;
+        if made_with.as_deref() != Some(loo.described().as_str()) {
+            return Ok(None);
+        }
+        // one derived from another calibration is not this one's
+        let Ok(Some(study)) =
+            store::coverage::read_leave_one_out(&cal.dir, &cal.record.calibration_id)
+        else {
+            return Ok(None);
+        };
+        self.note(&format!(
+            "--resume: {} already holds this calibration's leave-one-out, made with the same settings: kept",
+            cal.dir.display()
+        ));
+        self.emit(Event::LeftOneOut { rows: &study.rows, seconds: 0.0 });
         Ok(Some(study))
     }
 

@@ -35,7 +35,10 @@ impl Pipeline<'_> {
             Some(c) => vec![c],
             None => all.clone(),
         };
-        let loo = options.leave_one_out.map(|r| self.loo_settings(r, &options.predict));
+        let loo = options.leave_one_out.map(|r| crate::validate::LooSettings {
+            resume: options.sample.resume,
+            ..self.loo_settings(r, &options.predict)
+        });
         let several = options.sample.current.is_none() && all.len() >= 2;
         let held: Vec<f64> =
             if several && all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };

@@ -19,10 +19,32 @@ pub const REBUILD_LOO: &str = "mrbp report DIR --leave-one-out";
 /// Writes a leave-one-out study of calibration `id` into its folder `dir`:
 /// `loo.parquet`, which says the study is complete, goes first and comes
 /// back last.
-pub fn write_leave_one_out(dir: &Path, study: &LeaveOneOut, id: &str) -> Result<()> {
+/// The metadata key of `loo.parquet` that holds the settings the study
+/// was made with ([`crate::validate::LooSettings::described`]).
+pub const LOO_SETTINGS: &str = "mrbp.loo_settings";
+
+/// Writes the leave-one-out study of calibration `id`, made with the
+/// settings `described`, into `dir` (`loo.parquet` last: its presence
+/// means the study is whole).
+pub fn write_leave_one_out(
+    dir: &Path,
+    study: &LeaveOneOut,
+    id: &str,
+    described: &str,
+) -> Result<()> {
     crate::atomic::remove(&dir.join(LOO))?;
     super::bands::write(&dir.join(LOO_BANDS), &study.bands, id)?;
-    write_loo(&dir.join(LOO), &study.rows, id)
+    write_loo(&dir.join(LOO), &study.rows, id, described)
+}
+
+/// The settings the leave-one-out study in `dir` was made with; `None`
+/// without a study, or for one written before they were recorded.
+pub fn leave_one_out_settings(dir: &Path) -> Result<Option<String>> {
+    let path = dir.join(LOO);
+    if !path.exists() {
+        return Ok(None);
+    }
+    super::parquet::parquet_meta(&path, LOO_SETTINGS)
 }
 
 /// The leave-one-out study of calibration `id` in `dir`, if it has a
@@ -62,7 +84,7 @@ pub fn table(rows: &[CoverageRow]) -> Table {
         .f64("band_width", rows.iter().map(|r| r.band_width).collect())
 }
 
-fn write_loo(path: &Path, rows: &[LooRow], id: &str) -> Result<()> {
+fn write_loo(path: &Path, rows: &[LooRow], id: &str, described: &str) -> Result<()> {
     let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
     let t = table(&coverage)
         .derived_from(id)
@@ -70,7 +92,8 @@ fn write_loo(path: &Path, rows: &[LooRow], id: &str) -> Result<()> {
         .f64("pareto_k_laplace", rows.iter().map(|r| r.pareto_k_laplace).collect())
         .str("held_out_by", rows.iter().map(|r| r.by.label().to_string()).collect())
         .f64("max_r_hat", rows.iter().map(|r| r.max_rhat).collect())
-        .str("failure", rows.iter().map(|r| r.failure.clone().unwrap_or_default()).collect());
+        .str("failure", rows.iter().map(|r| r.failure.clone().unwrap_or_default()).collect())
+        .meta(LOO_SETTINGS, described);
     write_parquet(path, t)
 }
 
@@ -153,7 +176,7 @@ mod tests {
         (ok.by, ok.failure, ok.pareto_k) = (HeldOutBy::Reweighting, None, 0.4);
         (ok.coverage.samples, ok.coverage.inside_p95, ok.coverage.lppd) = (99, 0.96, -120.5);
         let failed = LooRow::failed("t2", 1.0, "the MAP search failed".into());
-        write_loo(&path, &[ok.clone(), failed.clone()], "cal-id").unwrap();
+        write_loo(&path, &[ok.clone(), failed.clone()], "cal-id", "steps=1").unwrap();
         let back = read_loo(&path).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
         assert_eq!(back[0].by, HeldOutBy::Reweighting);

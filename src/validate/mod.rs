@@ -52,6 +52,20 @@ pub struct LooSettings {
     /// Every held-out run sampled afresh (exact leave-one-out), none
     /// reached by reweighting.
     pub refit: bool,
+    /// A finished study of the same calibration with the same settings is
+    /// kept, not made again (`--resume`).
+    pub resume: bool,
+}
+
+impl LooSettings {
+    /// Every setting in one line: what a finished study records, so that
+    /// `--resume` keeps it only where the same settings are asked for.
+    pub fn described(&self) -> String {
+        let LooSettings { steps, weighted_draws, draws, replicates, seed, refit, resume: _ } = self;
+        format!(
+            "steps={steps},weighted_draws={weighted_draws},draws={draws},replicates={replicates},seed={seed},refit={refit}"
+        )
+    }
 }
 
 impl Default for LooSettings {
@@ -64,6 +78,7 @@ impl Default for LooSettings {
             replicates: bands.replicates,
             seed: bands.seed,
             refit: false,
+            resume: false,
         }
     }
 }

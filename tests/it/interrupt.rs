@@ -143,3 +143,46 @@ fn resume_keeps_finished_calibrations_of_the_same_settings() {
     assert_ne!(id("I0.5A"), before.0);
     assert_ne!(id("I1.0A"), before.1);
 }
+
+/// `run --leave-one-out --resume` keeps a finished leave-one-out study of
+/// the kept calibration made with the same settings (the held-out studies
+/// of a long laws study are its dearest part); with other settings
+/// (`--loo-steps`) it is made again.
+#[test]
+fn resume_keeps_a_finished_leave_one_out_of_the_same_settings() {
+    use crate::common::{arg, ok};
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    ok(&[
+        "synth",
+        "--out",
+        arg(&data),
+        "--currents",
+        "1.0",
+        "--rpm",
+        "100,200",
+        "--cycles",
+        "1",
+        "--rate",
+        "400",
+    ]);
+    let manifest = data.join("campaign.toml");
+    let out = dir.path().join("out");
+    let loo = out.join("I1.0A").join("loo.parquet");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", arg(&manifest), "--out", arg(&out), "--leave-one-out"];
+        args.extend_from_slice(extra);
+        said(&ok(&args))
+    };
+    run(&[]);
+    let first = std::fs::read(&loo).unwrap();
+    let kept = "leave-one-out, made with the same settings: kept";
+    let printed = run(&["--resume"]);
+    assert!(printed.contains(kept), "{printed}");
+    assert_eq!(std::fs::read(&loo).unwrap(), first, "the study is the one made before");
+    let printed = run(&["--resume", "--loo-steps", "300"]);
+    assert!(!printed.contains(kept), "{printed}");
+    assert!(printed.contains("already holds this calibration, complete: kept"), "{printed}");
+    let again = mrbp::store::parquet::parquet_meta(&loo, mrbp::store::coverage::LOO_SETTINGS);
+    assert!(again.unwrap().unwrap().starts_with("steps=300,"));
+}
