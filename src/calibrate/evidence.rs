@@ -60,15 +60,8 @@ pub struct Estimate {
 /// Monte Carlo's where it was sampled so, else by bridge sampling from
 /// its chains.
 pub fn estimate(cal: &Calibration, campaign: &Campaign) -> Result<Estimate> {
-    if let Some(smc) = &cal.record.smc {
-        return Ok(Estimate {
-            log_evidence: smc.log_evidence,
-            se: smc.se(),
-            of: smc.evidence_of.clone(),
-            pseudo: smc.pseudo_evidence,
-            by: SMC,
-            draws: None,
-        });
+    if let Some(recorded) = by_smc(cal) {
+        return Ok(recorded);
     }
     let b = by_bridge(cal, campaign)?;
     Ok(Estimate {
@@ -78,6 +71,19 @@ pub fn estimate(cal: &Calibration, campaign: &Campaign) -> Result<Estimate> {
         pseudo: b.pseudo,
         by: BRIDGE,
         draws: Some(b.draws),
+    })
+}
+
+/// The log evidence sequential Monte Carlo recorded, where it sampled `cal`.
+pub fn by_smc(cal: &Calibration) -> Option<Estimate> {
+    let smc = cal.record.smc.as_ref()?;
+    Some(Estimate {
+        log_evidence: smc.log_evidence,
+        se: smc.se(),
+        of: smc.evidence_of.clone(),
+        pseudo: smc.pseudo_evidence,
+        by: SMC,
+        draws: None,
     })
 }
 

@@ -16,7 +16,13 @@ const DRAWS: usize = 4000;
 
 /// A calibration as a comparison takes it, with its bands if it has them.
 pub(super) fn entry(cal: Calibration, prediction: Option<Prediction>) -> Entry {
-    Entry { label: cal.label(), positions: cal.draw_positions(DRAWS), cal, prediction }
+    Entry {
+        label: cal.label(),
+        positions: cal.draw_positions(DRAWS),
+        cal,
+        prediction,
+        evidence: None,
+    }
 }
 
 /// The between-run layer's centre in a calibration's folder, where it has
@@ -55,6 +61,31 @@ impl Pipeline<'_> {
         self.compare_entries(entries, out, rpm)
     }
 
+    /// Each entry's log evidence: sequential Monte Carlo's where it was
+    /// sampled so; by bridge sampling where another entry calibrates the
+    /// same runs (evidences of different runs do not compare: they are
+    /// not computed); where that fails, a note and none.
+    fn estimate_evidences(&mut self, entries: &mut [Entry]) {
+        let runs: Vec<Vec<String>> = entries.iter().map(|e| e.cal.record.runs.clone()).collect();
+        for (i, e) in entries.iter_mut().enumerate() {
+            if let Some(recorded) = crate::calibrate::evidence::by_smc(&e.cal) {
+                e.evidence = Some(recorded);
+                continue;
+            }
+            if !runs.iter().enumerate().any(|(j, r)| j != i && *r == runs[i]) {
+                continue;
+            }
+            let estimated = e
+                .cal
+                .campaign()
+                .and_then(|campaign| crate::calibrate::evidence::estimate(&e.cal, &campaign));
+            match estimated {
+                Ok(estimate) => e.evidence = Some(estimate),
+                Err(why) => self.note(&format!("{}: no log evidence ({why})", e.label)),
+            }
+        }
+    }
+
     /// [`Pipeline::compare`] of calibrations already at hand.
     pub(super) fn compare_entries(
         &mut self,
@@ -69,6 +100,7 @@ impl Pipeline<'_> {
             }
         }
         self.prepare(out, "--out", &[], &[], true)?;
+        self.estimate_evidences(&mut entries);
         let record = ComparisonRecord {
             mrbp_version: env!("CARGO_PKG_VERSION").to_string(),
             command: crate::calibrate::command_line(),

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use super::figures::{AtCurrent, Figures, LawCurves};
 use super::html::{esc, num, Mark, Page};
 use crate::atomic;
+use crate::calibrate::evidence::Estimate;
 use crate::calibrate::Calibration;
 use crate::compare::{self, Comparison, CurrentRow};
 use crate::data::{loading_branches, REVERSAL_SHARE};
@@ -25,6 +26,10 @@ pub struct Entry {
     pub positions: Vec<(usize, usize)>,
     /// Its bands, coverage and adequacy, where they were computed.
     pub prediction: Option<Prediction>,
+    /// Its log evidence: sequential Monte Carlo's where it was sampled so,
+    /// else by bridge sampling where another calibration of the comparison
+    /// is of the same runs (the only evidences that compare).
+    pub evidence: Option<Estimate>,
 }
 
 impl Entry {
@@ -138,12 +143,13 @@ fn calibrations_section(page: &mut Page, entries: &[Entry]) {
     let mut header = vec![
         "calibration", "model", "current (A)", "runs", "max R̂", "min ESS", "converged; warnings",
     ];
-    if entries.iter().any(|e| e.cal.record.smc.is_some()) {
+    if entries.iter().any(|e| e.evidence.is_some()) {
         header.insert(6, "log evidence");
         for (row, e) in rows_html.iter_mut().zip(entries) {
-            let shown = e.cal.record.smc.as_ref().map_or("–".to_string(), |smc| {
-                let pseudo = if smc.pseudo_evidence { " (pseudo)" } else { "" };
-                format!("{:.2} ± {:.2}{pseudo}", smc.log_evidence, smc.se())
+            let shown = e.evidence.as_ref().map_or("–".to_string(), |ev| {
+                let pseudo = if ev.pseudo { " (pseudo)" } else { "" };
+                let by = if ev.by == crate::calibrate::evidence::BRIDGE { " b" } else { "" };
+                format!("{:.2} ± {:.2}{by}{pseudo}", ev.log_evidence, ev.se)
             });
             row.insert(6, shown);
         }
@@ -154,25 +160,25 @@ fn calibrations_section(page: &mut Page, entries: &[Entry]) {
     page.table(&header, &rows_html);
 }
 
-/// A sentence for each pair of calibrations sampled by sequential Monte
-/// Carlo that calibrate the same runs with evidences of their records' own
-/// likelihood: the log Bayes factor between them. Evidences of different
-/// records, or pseudo-evidences of a likelihood adjusted or tempered for
-/// the residuals' memory, do not compare, and the sentence says why.
+/// A sentence for each pair of calibrations that calibrate the same runs
+/// with evidences of their records' own likelihood: the log Bayes factor
+/// between them. Evidences of different records, or pseudo-evidences of a
+/// likelihood adjusted or tempered for the residuals' memory, do not
+/// compare, and the sentence says why.
 fn bayes_factors(entries: &[Entry]) -> Vec<String> {
-    let mut out = vec!["Log evidence (sequential Monte Carlo, `--sampler smc`): ln p(records | law, priors, noise model) ± its standard error. Two calibrations' evidences compare only where they calibrate the same runs, each with its records' own likelihood; their difference is then the log Bayes factor.".to_string()];
+    let mut out = vec!["Log evidence: ln p(records | law, priors, noise model) ± its standard error, by sequential Monte Carlo where a calibration was sampled so (`--sampler smc`), else by bridge sampling from its chains (marked b; computed where another calibration here is of the same runs). Two calibrations' evidences compare only where they calibrate the same runs, each with its records' own likelihood; their difference is then the log Bayes factor.".to_string()];
     for (i, a) in entries.iter().enumerate() {
         for b in &entries[i + 1..] {
-            let (Some(ea), Some(eb)) = (&a.cal.record.smc, &b.cal.record.smc) else { continue };
+            let (Some(ea), Some(eb)) = (&a.evidence, &b.evidence) else { continue };
             if a.cal.record.runs != b.cal.record.runs {
                 continue;
             }
-            if ea.pseudo_evidence || eb.pseudo_evidence {
+            if ea.pseudo || eb.pseudo {
                 out.push(format!("{} and {} calibrate the same runs, but at least one evidence is of a likelihood that allowed for the residuals' memory (a pseudo-evidence): they do not compare.", esc(&a.label), esc(&b.label)));
                 continue;
             }
             let d = ea.log_evidence - eb.log_evidence;
-            let se = ea.se().hypot(eb.se());
+            let se = ea.se.hypot(eb.se);
             let (hi, lo) = if d >= 0.0 { (a, b) } else { (b, a) };
             out.push(format!(
                 "{} over {} (the same runs): log Bayes factor {:.2} ± {:.2}.",

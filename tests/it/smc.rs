@@ -526,6 +526,24 @@ fn compare_shows_the_log_bayes_factor_of_the_same_runs() {
     let line = format!("(the same runs): log Bayes factor {:.2} ± ", d.abs());
     assert!(page.contains(&line), "{line} not in the comparison report");
     assert!(page.contains(&format!("{:.2} ± ", evidence("gaussian"))));
+    // the same model sampled by the ensemble sampler: its evidence by
+    // bridge sampling (marked b), and a log Bayes factor against SMC's of
+    // the same model within 3 of its standard errors of 0
+    let plain = dir.path().join("ensemble");
+    ok(&["sample", arg(&manifest), "--noise", "gaussian", "--out", arg(&plain)]);
+    let out = dir.path().join("same");
+    ok(&["compare", arg(&dir.path().join("gaussian")), arg(&plain), "--out", arg(&out)]);
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains(" b</td>"), "the bridge's evidence is marked");
+    let at = page.find("(the same runs): log Bayes factor ").expect("a Bayes factor");
+    // "… log Bayes factor 0.01 ± 0.03.</p>"
+    let number = |w: &str| -> f64 {
+        let digits: String = w.chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
+        digits.trim_end_matches('.').parse().unwrap()
+    };
+    let words: Vec<&str> = page[at..].split_whitespace().skip(6).take(3).collect();
+    let numbers = [number(words[0]), number(words[2])];
+    assert!(numbers[0] <= 3.0 * numbers[1], "log Bayes factor {} ± {}", numbers[0], numbers[1]);
 }
 
 /// Stops a run after its first population, as Ctrl-C between populations
