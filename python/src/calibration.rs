@@ -112,11 +112,15 @@ impl Calibration {
     /// a pseudo-evidence and how it was estimated: sequential Monte
     /// Carlo's where it sampled, else by bridge sampling from the chains.
     fn evidence(&self, py: Python<'_>) -> PyResult<(f64, f64, String, bool, String)> {
-        let cal = self.inner.clone();
-        let campaign = self.campaign()?;
-        let e = py
-            .detach(move || mrbp::calibrate::evidence::estimate(&cal, &campaign))
-            .map_err(raise)?;
+        let e = match mrbp::calibrate::evidence::by_smc(&self.inner) {
+            Some(recorded) => recorded,
+            None => {
+                let cal = self.inner.clone();
+                let campaign = self.campaign()?;
+                py.detach(move || mrbp::calibrate::evidence::estimate(&cal, &campaign))
+                    .map_err(raise)?
+            }
+        };
         Ok((e.log_evidence, e.se, e.of, e.pseudo, e.by.to_string()))
     }
 
