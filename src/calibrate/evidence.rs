@@ -25,17 +25,6 @@ pub fn evidence_of(posterior: &Posterior) -> &'static str {
     }
 }
 
-/// A log evidence by bridge sampling.
-#[derive(Clone, Debug, PartialEq)]
-pub struct BridgeEvidence {
-    pub log_evidence: f64,
-    pub se: f64,
-    /// Posterior draws bridged with (as many proposal draws were made).
-    pub draws: usize,
-    pub of: &'static str,
-    pub pseudo: bool,
-}
-
 /// [`Estimate::by`] of a calibration sampled by sequential Monte Carlo.
 pub const SMC: &str = "sequential Monte Carlo";
 /// [`Estimate::by`] of one the ensemble sampler made: bridge sampling
@@ -60,18 +49,10 @@ pub struct Estimate {
 /// Monte Carlo's where it was sampled so, else by bridge sampling from
 /// its chains.
 pub fn estimate(cal: &Calibration, campaign: &Campaign) -> Result<Estimate> {
-    if let Some(recorded) = by_smc(cal) {
-        return Ok(recorded);
+    match by_smc(cal) {
+        Some(recorded) => Ok(recorded),
+        None => by_bridge(cal, campaign),
     }
-    let b = by_bridge(cal, campaign)?;
-    Ok(Estimate {
-        log_evidence: b.log_evidence,
-        se: b.se,
-        of: b.of.to_string(),
-        pseudo: b.pseudo,
-        by: BRIDGE,
-        draws: Some(b.draws),
-    })
 }
 
 /// The log evidence sequential Monte Carlo recorded, where it sampled `cal`.
@@ -98,15 +79,17 @@ const BRIDGE_STREAM: u64 = 0xb71d6e;
 /// sampling from its chains: the draws after the burn-in, thinned by τ,
 /// alternately to fit a Gaussian proposal and to bridge with, their
 /// effective size at most half the smallest bulk ESS.
-pub fn by_bridge(cal: &Calibration, campaign: &Campaign) -> Result<BridgeEvidence> {
+pub fn by_bridge(cal: &Calibration, campaign: &Campaign) -> Result<Estimate> {
     let runs = cal.used_runs(campaign);
     let integrator = cal.predict_settings(0, 0).integrator;
     let posterior = cal.settings.posterior(&runs, integrator);
     let layout = &posterior.layout;
     let sample = &cal.sample;
     let positions = cal.draws().positions(&sample.chains, 2 * BRIDGE_DRAWS);
-    let mut points = Vec::with_capacity(positions.len() * layout.names.len());
-    for &(step, chain) in &positions {
+    // alternately to fit the proposal and to bridge with (an odd last one
+    // left out: the two sets the same size)
+    let (mut fit, mut bridged) = (Vec::new(), Vec::new());
+    for (i, &(step, chain)) in positions.iter().enumerate().take(positions.len() / 2 * 2) {
         let at = sample.chains.point(step, chain);
         let si: Vec<f64> = layout
             .names
@@ -120,26 +103,26 @@ pub fn by_bridge(cal: &Calibration, campaign: &Campaign) -> Result<BridgeEvidenc
                 })
             })
             .collect::<Result<_>>()?;
-        points.push(layout.from_si(&si));
+        let into = if i % 2 == 0 { &mut fit } else { &mut bridged };
+        into.extend(layout.from_si(&si));
     }
-    let (fit, bridged): (Vec<Vec<f64>>, Vec<Vec<f64>>) =
-        points.chunks(2).filter(|p| p.len() == 2).map(|p| (p[0].clone(), p[1].clone())).unzip();
+    let draws = bridged.len() / layout.names.len().max(1);
     let smallest_ess = cal
         .summary
         .iter()
         .map(|r| r.ess_bulk)
         .filter(|e| e.is_finite())
         .fold(f64::INFINITY, f64::min);
-    let effective = (smallest_ess / 2.0).min(bridged.len() as f64);
+    let effective = (smallest_ess / 2.0).min(draws as f64);
     let mut rng = crate::rng::stream(cal.settings.sampler.seed, &[BRIDGE_STREAM]);
-    let b =
-        bridge::log_evidence(&posterior, &fit.concat(), &bridged.concat(), effective, &mut rng)?;
+    let b = bridge::log_evidence(&posterior, &fit, &bridged, effective, &mut rng)?;
     let of = evidence_of(&posterior);
-    Ok(BridgeEvidence {
+    Ok(Estimate {
         log_evidence: b.log_z + posterior.log_evidence_offset(),
         se: b.se,
-        draws: bridged.len(),
-        of,
+        of: of.to_string(),
         pseudo: of != RECORDS_OWN,
+        by: BRIDGE,
+        draws: Some(draws),
     })
 }

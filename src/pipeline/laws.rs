@@ -100,15 +100,15 @@ impl Pipeline<'_> {
             }
             predictions.push((law, shown));
         }
-        let evidence_of = |law: LawKind, c: f64| {
+        let evidence_at = |law: LawKind, c: f64| {
             evidence.iter().find(|(l, at, _)| *l == law && *at == c).map(|e| e.2)
         };
         for r in &mut rows {
-            r.evidence = evidence_of(r.law, r.current_a);
+            r.evidence = evidence_at(r.law, r.current_a);
         }
         let mut standings = if held_out { standings(&rows)? } else { Vec::new() };
         for s in &mut standings {
-            s.evidence = evidence_of(s.law, s.current_a);
+            s.evidence = evidence_at(s.law, s.current_a);
         }
         store::laws::write(&study.join(store::laws::FILE), &rows, &ids)?;
         for line in crate::validate::laws::verdict(&standings) {

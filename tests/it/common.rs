@@ -98,6 +98,13 @@ pub fn virtual_campaign(settings: &SynthSettings) -> (tempfile::TempDir, Campaig
 /// revolution at 400 Hz, at each of `currents`, e.g. "0.5,1.0"); its
 /// manifest.
 pub fn synth_small(dir: &Path, currents: &str) -> PathBuf {
+    synth_runs(dir, currents, "200")
+}
+
+/// As [`synth_small`], a run for each crank speed of `rpms` (comma
+/// separated) at each current: the smallest campaign a leave-one-out
+/// holds a run out of.
+pub fn synth_runs(dir: &Path, currents: &str, rpms: &str) -> PathBuf {
     let data = dir.join("data");
     ok(&[
         "synth",
@@ -106,7 +113,7 @@ pub fn synth_small(dir: &Path, currents: &str) -> PathBuf {
         "--currents",
         currents,
         "--rpm",
-        "200",
+        rpms,
         "--cycles",
         "1",
         "--rate",

@@ -152,21 +152,7 @@ fn resume_keeps_finished_calibrations_of_the_same_settings() {
 fn resume_keeps_a_finished_leave_one_out_of_the_same_settings() {
     use crate::common::{arg, ok};
     let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("data");
-    ok(&[
-        "synth",
-        "--out",
-        arg(&data),
-        "--currents",
-        "1.0",
-        "--rpm",
-        "100,200",
-        "--cycles",
-        "1",
-        "--rate",
-        "400",
-    ]);
-    let manifest = data.join("campaign.toml");
+    let manifest = crate::common::synth_runs(dir.path(), "1.0", "100,200");
     let out = dir.path().join("out");
     let loo = out.join("I1.0A").join("loo.parquet");
     let run = |extra: &[&str]| {

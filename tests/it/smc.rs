@@ -650,21 +650,7 @@ fn leave_one_out_refits_every_run_by_the_calibration_s_sampler() {
     use crate::common::{arg, ok, said};
     use mrbp::store::parquet::{f64_column, read_parquet, str_column};
     let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("data");
-    ok(&[
-        "synth",
-        "--out",
-        arg(&data),
-        "--currents",
-        "1.0",
-        "--rpm",
-        "100,200,400",
-        "--cycles",
-        "1",
-        "--rate",
-        "400",
-    ]);
-    let manifest = data.join("campaign.toml");
+    let manifest = crate::common::synth_runs(dir.path(), "1.0", "100,200,400");
     let held_out = |sampler: &str| {
         let out = dir.path().join(sampler);
         let o = ok(&[
