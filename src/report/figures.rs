@@ -193,7 +193,7 @@ pub fn bands(
             b.run, b.current_a, step
         );
         if let Some(current) = &b.coil_current_a {
-            panels.push(coil_current(b, current));
+            panels.push(coil_current(&format!("{}: coil current", b.run), &b.time, current));
             caption.push_str(" Its coil current changes within the record (the last panel): the law was driven along it.");
         }
         plot::save(&Figure::grid(panels, 3), &dir.join(&stem))?;
@@ -202,15 +202,15 @@ pub fn bands(
     Ok(())
 }
 
-/// The coil current of a run whose current changes, against time.
-fn coil_current(b: &RunBands, current: &[f64]) -> Chart {
-    let thin = every(b.time.len(), MAX_VERTICES);
-    let mut c = Chart::new(format!("{}: coil current", b.run), "time t (s)", "coil current I (A)");
+/// The coil current of a run whose current changes, against `time`.
+pub(super) fn coil_current(title: &str, time: &[f64], current: &[f64]) -> Chart {
+    let thin = every(time.len(), MAX_VERTICES);
+    let mut c = Chart::new(title, "time t (s)", "coil current I (A)");
     c.series.push(
         Series::line(
             Some("current".into()),
             PALETTE[2],
-            b.time.iter().step_by(thin).copied().collect(),
+            time.iter().step_by(thin).copied().collect(),
             current.iter().step_by(thin).copied().collect(),
         )
         .with_width(1),

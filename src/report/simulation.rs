@@ -1,10 +1,10 @@
 //! The figure of a simulation (`mrbp simulate`): the force of the
 //! calibrated damper along the user's excitation, against time and against
-//! displacement, with its bands.
+//! displacement, with its bands, and the coil current where it changes.
 
 use std::path::Path;
 
-use super::figures::{every, loop_band, MAX_VERTICES};
+use super::figures::{coil_current, every, loop_band, MAX_VERTICES};
 use crate::error::Result;
 use crate::plot::{self, Chart, Figure, LegendAt, Series, PALETTE};
 use crate::store::simulation::Simulation;
@@ -46,29 +46,37 @@ pub fn write(dir: &Path, s: &Simulation, calibration: &str) -> Result<()> {
         c.legend_at = legend_at;
         c
     };
+    // the posterior named over time, the current over displacement: each
+    // title fits its panel
     let extrapolated = if r.extrapolated { ", extrapolated" } else { "" };
-    let title = if r.current_varies {
+    let current = if r.current_varies {
         let (lo, hi) = s
             .current
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| (a.min(c), b.max(c)));
-        format!("{calibration}, current {lo}–{hi} A along the excitation{extrapolated}")
+        format!("{lo}–{hi} A{extrapolated}")
     } else {
-        format!("{calibration} at {} A{extrapolated}", r.current_a)
+        format!("{} A{extrapolated}", r.current_a)
     };
     let in_time = panel(
-        &format!("{title}: force against time"),
+        &format!("{calibration}: force against time"),
         "time t (s)",
         pick(&s.time, 1.0),
         false,
         LegendAt::UpperRight,
     );
     let in_x = panel(
-        &format!("{title}: force against displacement"),
+        &format!("force against displacement ({current})"),
         "displacement x (mm)",
         pick(&s.displacement, 1e3),
         true,
         LegendAt::Middle,
     );
-    plot::save(&Figure::grid(vec![in_time, in_x], 2), &dir.join(FIGURE))
+    let mut panels = vec![in_time, in_x];
+    // the current it was driven along, where it changes, under the force
+    // against time
+    if r.current_varies {
+        panels.push(coil_current("the coil current commanded", &s.time, &s.current));
+    }
+    plot::save(&Figure::grid(panels, 2), &dir.join(FIGURE))
 }
