@@ -506,7 +506,7 @@ fn consistency_section(page: &mut Page, r: &CalibrationReport) -> Result<()> {
                 Mark::of(!p.disagrees()).html().into(),
                 interval(&p.joint),
                 interval(&p.new_test),
-                format!("×{:.2}", p.spread_log.exp()),
+                p.spread_shown(),
             ]
         })
         .collect();

@@ -110,6 +110,19 @@ impl ParameterConsistency {
         self.runs.iter().filter(|r| self.new_test.holds(r.q50)).count()
     }
 
+    /// The between-test spread as a factor: ×1.37, say; beyond a
+    /// thousandfold in three significant digits (×1.70e47, where four
+    /// runs of Spencer's model lie modes apart: the layer does not bound
+    /// the spread, while its new-test interval keeps to the physical
+    /// range).
+    pub fn spread_shown(&self) -> String {
+        let factor = self.spread_log.exp();
+        match factor < 1e3 {
+            true => format!("×{factor:.2}"),
+            false => format!("×{}", short(factor)),
+        }
+    }
+
     /// One line in plain words.
     pub fn verdict(&self) -> String {
         let p = &self.parameter;
@@ -118,12 +131,12 @@ impl ParameterConsistency {
         let interval = |e: &Estimate| format!("[{}, {}]", short(e.q05), short(e.q95));
         if self.disagrees() {
             format!(
-                "{p}: the runs disagree (χ²/ν = {:.1}; {}): one {p} does not describe these tests. The joint 90 % interval {} is too narrow for a new test; the between-run layer gives {} (spread ×{:.2} between tests)",
+                "{p}: the runs disagree (χ²/ν = {:.1}; {}): one {p} does not describe these tests. The joint 90 % interval {} is too narrow for a new test; the between-run layer gives {} (spread {} between tests)",
                 self.chi2_nu,
                 values.join(", "),
                 interval(&self.joint),
                 interval(&self.new_test),
-                self.spread_log.exp()
+                self.spread_shown()
             )
         } else {
             format!(
@@ -209,5 +222,30 @@ mod tests {
         assert!((p - (-1.0f64).exp()).abs() < 1e-9, "{p}");
         let (c, p) = chi2_per_dof(&[-10.0, 0.0, 10.0], &[1.0, 1.0, 1.0]);
         assert!((c - 100.0).abs() < 1e-9 && p < 1e-40);
+    }
+
+    #[test]
+    fn a_spread_beyond_a_thousandfold_is_shown_in_powers_of_ten() {
+        let e = |label: &str| Estimate {
+            label: label.into(),
+            mean_log: 0.0,
+            sd_log: 1.0,
+            q05: 0.5,
+            q50: 1.0,
+            q95: 2.0,
+        };
+        let mut p = ParameterConsistency {
+            parameter: "c1".into(),
+            runs: vec![e("a"), e("b")],
+            joint: e(JOINT),
+            chi2_nu: 50.0,
+            p_value: 1e-20,
+            spread_log: 2.0f64.ln(),
+            new_test: e(NEW_TEST),
+        };
+        assert_eq!(p.spread_shown(), "×2.00");
+        p.spread_log = 109.0;
+        assert_eq!(p.spread_shown(), "×2.178e47");
+        assert!(p.verdict().contains("(spread ×2.178e47 between tests)"), "{}", p.verdict());
     }
 }
