@@ -424,11 +424,14 @@ impl MemoryFound {
 /// [`blind_spot`] checks, and the share of them far from a record above
 /// which the adjusted likelihood is not taken. The approximation is the
 /// MAP search's, taken before the walkers look further: a few of its draws
-/// can miss where the posterior's own do not (Spencer at 1 A on the
-/// measured records: 2 of 64 far at 1 A and 5 of 64 at 0.25 A, its
-/// posterior's draws under the adjusted likelihood none at either), while where the adjustment misleads a quarter or more are far
-/// (bp-spencer: 17 and 22 of 64 at 1 and 0.25 A, its posterior's draws
-/// 25–37 %). A tenth parts the two: with 64 draws (7 or more far) a true
+/// can miss where the posterior's own do not, while where the adjustment
+/// misleads a quarter or more are far (bp-spencer: 17 and 22 of 64 at 1
+/// and 0.25 A, its posterior's draws 25–37 %). It does not see every
+/// such case: Spencer's model at 1 A had 2 of 64 far (5 of 64 at 0.25 A),
+/// yet its posterior's draws were 24–36 % far, along an internal spring
+/// the records leave free near the MAP and rule out further on, a cliff
+/// the approximation does not reach (docs/real-data.md, "Spencer at 1 A";
+/// the run's bands say so with `far_draws`). A tenth parts the two: with 64 draws (7 or more far) a true
 /// share of 3 % passes it by chance 0.3 % of the time, one of 5 % 4 %, and
 /// one of 25 % falls under it 0.15 % of the time (binomial tails).
 const BLIND_SPOT_DRAWS: usize = 64;
