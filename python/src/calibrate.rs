@@ -253,6 +253,20 @@ pub(crate) fn calibrate(
             }
             let made =
                 mrbp::calibrate::sample(&group, start, resume_from.as_ref(), &mut observers)?;
+            // as the command line: the tempered likelihood where the
+            // adjusted one `auto` took showed its blind spot
+            let made = match mrbp::calibrate::far_from_records(&made) {
+                None => made,
+                Some(why) => {
+                    let start = mrbp::calibrate::start_refusing_adjusted(
+                        &group,
+                        &settings,
+                        &why,
+                        &mut |_| {},
+                    )?;
+                    mrbp::calibrate::sample(&group, start, None, &mut observers)?
+                }
+            };
             if let Some(path) = &checkpoint {
                 // the chains are whole in the calibration returned: the
                 // checkpoints (the sampler's, and the populations' of

@@ -39,7 +39,8 @@ pub use settings::{
     SMC_REFERENCE_DF,
 };
 pub use start::{
-    confounding_warning, start, Start, CONFOUNDING_RATIO, MEMORY_REMEDY, MEMORY_WARNING,
+    confounding_warning, far_from_records, start, start_refusing_adjusted, Start,
+    CONFOUNDING_RATIO, MEMORY_REMEDY, MEMORY_WARNING,
 };
 
 /// A calibration: its settings, what it did, its posterior sample and
@@ -230,7 +231,14 @@ impl Calibration {
 /// observers.
 pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings) -> Result<Calibrated> {
     let start = start(campaign, settings, &mut |_| {})?;
-    sample(campaign, start, None, &mut [])
+    let made = sample(campaign, start, None, &mut [])?;
+    match far_from_records(&made) {
+        None => Ok(made),
+        Some(why) => {
+            let start = start_refusing_adjusted(campaign, settings, &why, &mut |_| {})?;
+            sample(campaign, start, None, &mut [])
+        }
+    }
 }
 
 /// Samples the posterior from `start`: from walkers around the MAP, or from

@@ -355,17 +355,37 @@ impl Pipeline<'_> {
         let mut refs: Vec<&mut dyn Observer> =
             observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
         refs.push(&mut checkpointer);
+        let interrupted = |e| {
+            match e {
+            // stopped during sequential Monte Carlo's populations
+            Error::Interrupted(m) if smc_checkpoint.exists() && !checkpoint.exists() => {
+                Error::Interrupted(format!(
+                    "{m}: the populations finished before it are in {}; the same command with --resume goes on from the next",
+                    smc_checkpoint.display()
+                ))
+            }
+            e => e,
+        }
+        };
         let made = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)
-            .map_err(|e| match e {
-                // stopped during sequential Monte Carlo's populations
-                Error::Interrupted(m) if smc_checkpoint.exists() && !checkpoint.exists() => {
-                    Error::Interrupted(format!(
-                        "{m}: the populations finished before it are in {}; the same command with --resume goes on from the next",
-                        smc_checkpoint.display()
-                    ))
-                }
-                e => e,
-            })?;
+            .map_err(interrupted)?;
+        // the adjusted likelihood `auto` took, where its posterior reached
+        // past what the start could check: the tempered one instead
+        let made = match calibrate::far_from_records(&made) {
+            None => made,
+            Some(why) => {
+                (self.listener)(Event::Note(&format!(
+                    "  memory: under the adjusted likelihood {why}: calibrating again under the tempered likelihood"
+                )));
+                let _ = std::fs::remove_file(&checkpoint);
+                let _ = std::fs::remove_file(&smc_checkpoint);
+                let start =
+                    calibrate::start_refusing_adjusted(campaign, settings, &why, &mut |line| {
+                        (self.listener)(Event::Note(line))
+                    })?;
+                calibrate::sample(campaign, start, None, &mut refs).map_err(interrupted)?
+            }
+        };
 
         let cal = self.write_calibration(
             campaign,
