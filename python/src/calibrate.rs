@@ -251,22 +251,16 @@ pub(crate) fn calibrate(
             if let Some(c) = checkpointer.as_mut() {
                 observers.push(c);
             }
-            let made =
-                mrbp::calibrate::sample(&group, start, resume_from.as_ref(), &mut observers)?;
             // as the command line: the tempered likelihood where the
-            // adjusted one `auto` took showed its blind spot
-            let made = match mrbp::calibrate::far_from_records(&made) {
-                None => made,
-                Some(why) => {
-                    let start = mrbp::calibrate::start_refusing_adjusted(
-                        &group,
-                        &settings,
-                        &why,
-                        &mut |_| {},
-                    )?;
-                    mrbp::calibrate::sample(&group, start, None, &mut observers)?
-                }
-            };
+            // adjusted one `auto` took reaches past the records
+            let made = mrbp::calibrate::sample_watched(
+                &group,
+                &settings,
+                start,
+                resume_from.as_ref(),
+                &mut observers,
+                &mut |_| {},
+            )?;
             if let Some(path) = &checkpoint {
                 // the chains are whole in the calibration returned: the
                 // checkpoints (the sampler's, and the populations' of

@@ -13,9 +13,13 @@
 //!   held-out calibration of leave-one-out alike;
 //! * `sequential`: sequential Monte Carlo before the ensemble sampler
 //!   (`--sampler smc`);
+//! * [`edge`]: where `memory = "auto"` took the adjusted likelihood, the
+//!   walkers' own paths checked while sampling, and the tempered
+//!   likelihood taken instead where they miss the records;
 //! * [`evidence`]: what a log evidence is of, and a calibration's by
 //!   bridge sampling from its chains.
 
+pub mod edge;
 pub mod evidence;
 pub mod probe;
 pub mod record;
@@ -32,6 +36,7 @@ use crate::posterior::laplace::IntervalRow;
 use crate::posterior::{Draws, PosteriorSample, SummaryRow};
 use crate::predict::PredictSettings;
 use crate::sampler::{Chains, Diagnostics, Observer, Sampler};
+pub use edge::{far_from_records, sample_watched};
 pub use record::{command_line, CalibrationRecord, SmcRecord, StepRow};
 pub use sampling::Sampled;
 pub use settings::{
@@ -39,8 +44,8 @@ pub use settings::{
     SMC_REFERENCE_DF,
 };
 pub use start::{
-    confounding_warning, far_from_records, start, start_refusing_adjusted, Start,
-    CONFOUNDING_RATIO, MEMORY_REMEDY, MEMORY_WARNING,
+    confounding_warning, start, start_refusing_adjusted, Start, CONFOUNDING_RATIO, MEMORY_REMEDY,
+    MEMORY_WARNING,
 };
 
 /// A calibration: its settings, what it did, its posterior sample and
@@ -231,14 +236,7 @@ impl Calibration {
 /// observers.
 pub fn calibrate(campaign: &Campaign, settings: &CalibrationSettings) -> Result<Calibrated> {
     let start = start(campaign, settings, &mut |_| {})?;
-    let made = sample(campaign, start, None, &mut [])?;
-    match far_from_records(&made) {
-        None => Ok(made),
-        Some(why) => {
-            let start = start_refusing_adjusted(campaign, settings, &why, &mut |_| {})?;
-            sample(campaign, start, None, &mut [])
-        }
-    }
+    sample_watched(campaign, settings, start, None, &mut [], &mut |_| {})
 }
 
 /// Samples the posterior from `start`: from walkers around the MAP, or from

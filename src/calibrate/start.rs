@@ -55,7 +55,7 @@ pub fn start(
 
 /// [`start`] where `memory = "auto"` must not take the adjusted likelihood,
 /// for the reason `refused` (a sentence): a calibration under it showed
-/// its blind spot ([`super::far_from_records`]). Where auto finds memory
+/// its blind spot ([`super::edge`]). Where auto finds memory
 /// it takes the tempered likelihood and says why.
 pub fn start_refusing_adjusted(
     campaign: &Campaign,
@@ -458,10 +458,10 @@ impl MemoryFound {
 /// Spencer's model at 1 A had 2 of 64 far, yet its posterior's draws were
 /// 24–36 % far, along an internal spring the records leave free near the
 /// MAP and rule out further on, an edge the approximation does not reach
-/// (docs/real-data.md, "Spencer at 1 A"): [`far_from_records`] checks the
-/// posterior's own draws after sampling, by the same measure.
+/// (docs/real-data.md, "Spencer at 1 A"): [`super::edge`] checks the
+/// walkers' own draws while sampling, by the same measure.
 const BLIND_SPOT_DRAWS: usize = 64;
-const BLIND_SPOT_SHARE: f64 = 0.10;
+pub(super) const BLIND_SPOT_SHARE: f64 = 0.10;
 
 /// Whether the adjusted likelihood can be trusted for `post` (adjusted,
 /// its MAP `map`): it scores θ by the fit at θ* = θ̂ + C (θ − θ̂), so along
@@ -513,53 +513,6 @@ fn blind_spot(post: &Posterior, map: &MapEstimate, seed: u64) -> Result<()> {
         ))),
         false => Ok(()),
     }
-}
-
-/// Posterior draws [`far_from_records`] integrates along their own paths.
-const FAR_CHECK_DRAWS: usize = 200;
-
-/// Where `memory = "auto"` took the adjusted likelihood for `made` and
-/// more than [`BLIND_SPOT_SHARE`] of [`FAR_CHECK_DRAWS`] of its posterior's
-/// draws have paths of their own that miss some run by more than
-/// [`crate::predict::FAR`] times the MAP's residual RMS there: what was
-/// found, in a sentence (the reason [`start_refusing_adjusted`] gives).
-/// The start's [`blind_spot`] looks only as far as the Laplace
-/// approximation reaches; along a parameter the records leave free about
-/// the MAP and rule out further on, the adjustment's widening can carry
-/// the posterior past that edge, as Spencer's model on the measured 1 A
-/// records showed (its spring k0's posterior was its prior, 24–36 % of
-/// the draws far, the bands 230–540 % of the peak force wide; the tempered
-/// likelihood fixes k0 at 1–300 N/m: docs/real-data.md, "Spencer at 1
-/// A"). Costs [`FAR_CHECK_DRAWS`] integrations of every run.
-pub fn far_from_records(made: &super::Calibrated) -> Option<String> {
-    use crate::predict::FAR;
-    let start = &made.start;
-    if start.memory_found.is_none() || start.settings.likelihood.memory != Memory::Adjusted {
-        return None;
-    }
-    let plain = start.posterior.without_adjustment();
-    let at_map = map::residual_rms(&plain, &start.map.x)?;
-    let d = &made.diagnostics;
-    let points: Vec<Vec<f64>> = crate::posterior::Draws::after(d.burn_in, d.tau_max)
-        .positions(&made.chains, FAR_CHECK_DRAWS)
-        .into_iter()
-        .map(|(step, chain)| made.chains.point(step, chain).to_vec())
-        .collect();
-    let paths = map::residual_rms_many(&plain, &points);
-    let far = paths
-        .iter()
-        .filter(|rms| match rms {
-            Some(rms) => rms.iter().zip(&at_map).any(|(r, (at, _))| *r > FAR * at),
-            None => true,
-        })
-        .count();
-    let share = far as f64 / points.len().max(1) as f64;
-    (share > BLIND_SPOT_SHARE).then(|| {
-        format!(
-            "{far} of {} of its posterior's draws have paths that miss a record by more than {FAR}× the MAP's residual RMS (a parameter the records leave free about the MAP and rule out further on: the adjustment scored draws past that edge by the fit at the MAP)",
-            points.len()
-        )
-    })
 }
 
 /// Lag-1 autocorrelation of the MAP residuals above which independent noise

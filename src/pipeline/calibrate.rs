@@ -367,25 +367,18 @@ impl Pipeline<'_> {
             e => e,
         }
         };
-        let made = calibrate::sample(campaign, start, resume.then_some(&checkpoint), &mut refs)
-            .map_err(interrupted)?;
-        // the adjusted likelihood `auto` took, where its posterior reached
-        // past what the start could check: the tempered one instead
-        let made = match calibrate::far_from_records(&made) {
-            None => made,
-            Some(why) => {
-                (self.listener)(Event::Note(&format!(
-                    "  memory: under the adjusted likelihood {why}: calibrating again under the tempered likelihood"
-                )));
-                let _ = std::fs::remove_file(&checkpoint);
-                let _ = std::fs::remove_file(&smc_checkpoint);
-                let start =
-                    calibrate::start_refusing_adjusted(campaign, settings, &why, &mut |line| {
-                        (self.listener)(Event::Note(line))
-                    })?;
-                calibrate::sample(campaign, start, None, &mut refs).map_err(interrupted)?
-            }
-        };
+        // where `auto` took the adjusted likelihood and the walkers reach
+        // past the records, the tempered one instead (calibrate::edge)
+        let listener = &mut *self.listener;
+        let made = calibrate::sample_watched(
+            campaign,
+            settings,
+            start,
+            resume.then_some(&checkpoint),
+            &mut refs,
+            &mut |line| listener(Event::Note(line)),
+        )
+        .map_err(interrupted)?;
 
         let cal = self.write_calibration(
             campaign,

@@ -390,11 +390,14 @@ fn auto_memory_adjusts_records_with_memory_and_shows_the_independent_intervals_b
 /// and a law that fits them no draw is far; with every other draw's yield
 /// coordinate ln (R0 + D1) moved by ln 2 (paths about twice the stress
 /// off, far by any measure) half are, above the tenth that refuses the
-/// adjusted likelihood; and the start refusing it takes the tempered one
-/// and says why.
+/// adjusted likelihood, and the watch that checks the walkers while the
+/// run goes on stops it there; and the start refusing it takes the
+/// tempered one and says why.
 #[test]
 fn draws_that_reach_past_the_records_leave_the_adjusted_likelihood() {
+    use mrbp::calibrate::edge::EdgeWatch;
     use mrbp::calibrate::{calibrate, far_from_records, start_refusing_adjusted};
+    use mrbp::sampler::{Observer, RunState};
     let (_dir, campaign) = campaign(21, 80.0);
     let settings = CalibrationSettings::default();
     let mut made = calibrate(&campaign, &settings).unwrap();
@@ -412,6 +415,21 @@ fn draws_that_reach_past_the_records_leave_the_adjusted_likelihood() {
     let found = far_from_records(&made).expect("half the draws far");
     let far: usize = found.split(' ').next().unwrap().parse().unwrap();
     assert!((80..=120).contains(&far), "{found}");
+    // the watch sees the same in the walkers while the run goes on, and
+    // stops it
+    let mut watch = EdgeWatch::of(&made.start).expect("auto took the adjusted likelihood");
+    let s = &made.start.settings.sampler;
+    let settings_now = s.sampler(s.walkers, s.seed);
+    let state = RunState {
+        settings: &settings_now,
+        chains: &made.chains,
+        step: 10,
+        max_steps: 1000,
+        min_ess: None,
+        accepted: 0,
+    };
+    assert!(watch.stepped(&state).is_err());
+    assert!(watch.found().unwrap().contains("walkers at step 10"), "{:?}", watch.found());
 
     let start = start_refusing_adjusted(&campaign, &settings, &found, &mut |_| {}).unwrap();
     assert_eq!(start.settings.likelihood.memory, Memory::Tempered);
