@@ -37,7 +37,7 @@ const CHECKED_DRAWS: usize = 200;
 const FIRST_LOOK: usize = 10;
 
 /// Watches a run under the adjusted likelihood `auto` took for walkers
-/// past the records' edge ([`self`]); an error stops the run where it
+/// past the records' edge (the module's doc); an error stops the run where it
 /// finds them, and [`Self::found`] says what it found.
 pub struct EdgeWatch {
     plain: Posterior,
@@ -75,7 +75,7 @@ impl EdgeWatch {
             .count();
         (far as f64 > BLIND_SPOT_SHARE * points.len().max(1) as f64).then(|| {
             format!(
-                "{far} of {} {what} have paths that miss a record by more than {FAR}× the MAP's residual RMS (a parameter the records leave free about the MAP and rule out further on: the adjustment scored them by the fit at the MAP)",
+                "{far} of {} {what} have paths that miss a record by more than {FAR}× the MAP's residual RMS (a parameter the records leave free about the MAP and rule out further on: the adjustment scored them by the fit at points nearer the MAP)",
                 points.len()
             )
         })

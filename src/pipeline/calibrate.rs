@@ -355,18 +355,6 @@ impl Pipeline<'_> {
         let mut refs: Vec<&mut dyn Observer> =
             observers.iter_mut().map(|o| o.as_mut() as &mut dyn Observer).collect();
         refs.push(&mut checkpointer);
-        let interrupted = |e| {
-            match e {
-            // stopped during sequential Monte Carlo's populations
-            Error::Interrupted(m) if smc_checkpoint.exists() && !checkpoint.exists() => {
-                Error::Interrupted(format!(
-                    "{m}: the populations finished before it are in {}; the same command with --resume goes on from the next",
-                    smc_checkpoint.display()
-                ))
-            }
-            e => e,
-        }
-        };
         // where `auto` took the adjusted likelihood and the walkers reach
         // past the records, the tempered one instead (calibrate::edge)
         let listener = &mut *self.listener;
@@ -378,7 +366,16 @@ impl Pipeline<'_> {
             &mut refs,
             &mut |line| listener(Event::Note(line)),
         )
-        .map_err(interrupted)?;
+        .map_err(|e| match e {
+            // stopped during sequential Monte Carlo's populations
+            Error::Interrupted(m) if smc_checkpoint.exists() && !checkpoint.exists() => {
+                Error::Interrupted(format!(
+                    "{m}: the populations finished before it are in {}; the same command with --resume goes on from the next",
+                    smc_checkpoint.display()
+                ))
+            }
+            e => e,
+        })?;
 
         let cal = self.write_calibration(
             campaign,
