@@ -22,7 +22,7 @@
 
 use std::path::PathBuf;
 
-use super::start::{start_refusing_adjusted, Start, BLIND_SPOT_SHARE};
+use super::start::{far_paths, start_refusing_adjusted, Start, BLIND_SPOT_SHARE};
 use super::{sample, Calibrated, CalibrationSettings};
 use crate::data::Campaign;
 use crate::error::{Error, Result};
@@ -63,16 +63,11 @@ impl EdgeWatch {
         self.found.as_deref()
     }
 
-    /// The sentence for `points` where more than a tenth are far.
+    /// The sentence for `points` where more than a tenth are far (a path
+    /// that cannot be integrated counts as far).
     fn far(&self, points: &[Vec<f64>], what: &str) -> Option<String> {
-        let paths = map::residual_rms_many(&self.plain, points);
-        let far = paths
-            .iter()
-            .filter(|rms| match rms {
-                Some(rms) => rms.iter().zip(&self.at_map).any(|(r, (at, _))| *r > FAR * at),
-                None => true,
-            })
-            .count();
+        let (far, integrated) = far_paths(&self.plain, points, &self.at_map);
+        let far = far + (points.len() - integrated);
         (far as f64 > BLIND_SPOT_SHARE * points.len().max(1) as f64).then(|| {
             format!(
                 "{far} of {} {what} have paths that miss a record by more than {FAR}× the MAP's residual RMS (a parameter the records leave free about the MAP and rule out further on: the adjustment scored them by the fit at points nearer the MAP)",

@@ -167,11 +167,13 @@ fn start_with(
         // what `auto` chose must not fail where the tempered likelihood,
         // which takes any posterior, would do
         Some(_) => {
-            match refused.map(|why| Err(Error::Compute(why.to_string()))).unwrap_or_else(|| {
-                stages.adjust(posterior.clone(), map.clone(), log).and_then(|(p, m)| {
+            let adjusted = match refused {
+                Some(why) => Err(Error::Compute(why.to_string())),
+                None => stages.adjust(posterior.clone(), map.clone(), log).and_then(|(p, m)| {
                     blind_spot(&p, &m, stages.settings.sampler.seed).map(|()| (p, m))
-                })
-            }) {
+                }),
+            };
+            match adjusted {
                 Ok((posterior, map)) => (posterior, map, None),
                 Err(e) => {
                     stages.settings.likelihood.memory = Memory::Tempered;
@@ -499,20 +501,33 @@ fn blind_spot(post: &Posterior, map: &MapEstimate, seed: u64) -> Result<()> {
             points.push(x);
         }
     }
-    let paths: Vec<Vec<f64>> =
-        map::residual_rms_many(&plain, &points).into_iter().flatten().collect();
-    let far = paths
-        .iter()
-        .filter(|rms| rms.iter().zip(&at_map).any(|(r, (at, _))| *r > FAR * at))
-        .count();
-    let share = far as f64 / paths.len().max(1) as f64;
+    let (far, integrated) = far_paths(&plain, &points, &at_map);
+    let share = far as f64 / integrated.max(1) as f64;
     match share > BLIND_SPOT_SHARE {
         true => Err(Error::Compute(format!(
-            "{far} of {} draws of its Laplace approximation have paths that miss a record by more than {FAR}× the MAP's residual RMS; it scores each point by the fit at another, and some parameter is barely fixed by these records",
-            paths.len()
+            "{far} of {integrated} draws of its Laplace approximation have paths that miss a record by more than {FAR}× the MAP's residual RMS; it scores each point by the fit at another, and some parameter is barely fixed by these records"
         ))),
         false => Ok(()),
     }
+}
+
+/// How many of `points` have paths of their own (`plain`'s, the
+/// independent likelihood's) that miss some run by more than
+/// [`crate::predict::FAR`] times its MAP's residual RMS `at_map`, and how
+/// many could be integrated: the measure of [`blind_spot`] and of
+/// [`super::edge`]'s watch.
+pub(super) fn far_paths(
+    plain: &Posterior,
+    points: &[Vec<f64>],
+    at_map: &[(f64, usize)],
+) -> (usize, usize) {
+    let paths: Vec<Vec<f64>> =
+        map::residual_rms_many(plain, points).into_iter().flatten().collect();
+    let far = paths
+        .iter()
+        .filter(|rms| rms.iter().zip(at_map).any(|(r, (at, _))| *r > crate::predict::FAR * at))
+        .count();
+    (far, paths.len())
 }
 
 /// Lag-1 autocorrelation of the MAP residuals above which independent noise
