@@ -356,6 +356,50 @@ fn calibration() {
     println!();
 }
 
+/// One integration of each damper law along the measured 1 A records (four
+/// runs, 1 kHz), eight parameter sets a call (the lanes) about the law's
+/// first start, one thread: what a log-density of each law costs.
+fn laws() {
+    use mrbp::data::{Campaign, RecordPart, RunData};
+    use mrbp::laws::LawKind;
+    println!("## Damper laws along the measured 1 A records (eight lanes, one thread)\n");
+    println!("| law | sub-steps | extrapolated | ms per integration of the four runs (per lane) | evaluations (Euler-step equivalents) per lane | M per s |");
+    println!("|---|---|---|---|---|---|");
+    let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let campaign =
+        Campaign::load(&repo.join("data/utfsm-mts/campaign.toml")).unwrap().at_current(1.0);
+    let runs: Vec<RunData> =
+        campaign.runs.iter().map(|r| RunData::from_run(r, RecordPart::WholeRecord, 2.0)).collect();
+    for kind in LawKind::ALL {
+        let law = kind.law();
+        let start = law.starts(&runs)[0];
+        let lanes: [mrbp::laws::LawValues; mrbp::model::LANES] = std::array::from_fn(|lane| {
+            let mut q = start;
+            q[lane % law.parameters().len()] *= 1.0 + 0.01 * lane as f64;
+            mrbp::laws::clamped(law, q)
+        });
+        for substeps in [1, 4] {
+            let integ = Integrator { substeps, extrapolate: true, ..Integrator::default() };
+            let secs = best_of(3, || {
+                let mut acc = 0.0;
+                for run in &runs {
+                    let _ = law.run_lanes(&integ, &lanes, run, &mut |_, s| acc += s[0]);
+                }
+                black_box(acc);
+            });
+            let steps: u64 = runs.iter().map(|r| law.euler_steps(&integ, &start, r)).sum();
+            let per_lane = secs / mrbp::model::LANES as f64;
+            println!(
+                "| {} | {substeps} | yes | {:.2} | {steps} | {:.1} |",
+                kind.name(),
+                per_lane * 1e3,
+                steps as f64 * 1e-6 / per_lane
+            );
+        }
+    }
+    println!();
+}
+
 fn main() {
     let only = std::env::args().nth(1).filter(|a| !a.starts_with('-'));
     let want = |name: &str| only.as_deref().is_none_or(|o| name.contains(o));
@@ -373,6 +417,9 @@ fn main() {
     }
     if want("start") {
         likelihood_at_start();
+    }
+    if want("laws") {
+        laws();
     }
     if want("calibration") {
         calibration();

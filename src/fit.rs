@@ -1,7 +1,7 @@
 //! Nonlinear least squares by Levenberg-Marquardt (the `levenberg-marquardt`
 //! crate), for problems given as closures.
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
 
 /// The outcome of a fit.
@@ -13,6 +13,8 @@ pub struct Fit {
     /// Whether the solver reported success (not a numerical failure or the
     /// evaluation budget).
     pub converged: bool,
+    /// Whether it stopped on its budget of evaluations.
+    pub exhausted: bool,
     pub message: String,
 }
 
@@ -86,21 +88,30 @@ fn forward_difference(residuals: &Residuals, p: &[f64]) -> Option<DMatrix<f64>> 
 /// value marks the point as infeasible; the solver then backs off. Stops
 /// where the solver's own tolerances (30 ε, relative) are met.
 pub fn least_squares(start: &[f64], residuals: &Residuals, jacobian: Option<&Jacobian>) -> Fit {
-    solve(start, residuals, jacobian, LevenbergMarquardt::new())
+    solve(start, residuals, jacobian, LevenbergMarquardt::new().with_patience(PATIENCE))
 }
+
+/// The solver's budget: at most `PATIENCE` (n + 1) evaluations of the
+/// residuals for n parameters.
+pub const PATIENCE: usize = 200;
 
 /// [`least_squares`], stopping once a step lowers ½ Σ r² by a share of
 /// at most `ftol` and the model predicts no more (MINPACK's test; its
 /// recommended value is √ε ≈ 1.5e-8). For residuals that carry an
 /// integrator's rounding, tolerances near ε are never met by a real
-/// gain: the solver creeps on for hundreds of iterations.
+/// gain: the solver creeps on for hundreds of iterations. At most
+/// `patience` (n + 1) evaluations ([`PATIENCE`] unless a search screens
+/// its starts with less): a fit stopped by that budget is not
+/// [`Fit::converged`].
 pub fn least_squares_to(
     ftol: f64,
+    patience: usize,
     start: &[f64],
     residuals: &Residuals,
     jacobian: Option<&Jacobian>,
 ) -> Fit {
-    solve(start, residuals, jacobian, LevenbergMarquardt::new().with_ftol(ftol))
+    let solver = LevenbergMarquardt::new().with_ftol(ftol).with_patience(patience);
+    solve(start, residuals, jacobian, solver)
 }
 
 fn solve(
@@ -115,11 +126,12 @@ fn solve(
         jacobian,
         last: std::cell::Cell::new((0, 0.0)),
     };
-    let (problem, report) = solver.with_patience(200).minimize(problem);
+    let (problem, report) = solver.minimize(problem);
     Fit {
         params: problem.p.as_slice().to_vec(),
         cost: report.objective_function,
         converged: report.termination.was_successful(),
+        exhausted: matches!(report.termination, TerminationReason::LostPatience),
         message: format!("{:?}", report.termination),
     }
 }
@@ -142,6 +154,20 @@ pub fn golden_section(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64, iterations
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Rosenbrock's valley from (−1.2, 1): a budget of 2 × 3 evaluations
+    /// stops the fit far from (1, 1), says so, and does not call it
+    /// converged; the full budget reaches (1, 1).
+    #[test]
+    fn a_fit_stopped_by_its_budget_says_so() {
+        let res = |p: &[f64]| Some(vec![10.0 * (p[1] - p[0] * p[0]), 1.0 - p[0]]);
+        let short = least_squares_to(1.49e-8, 2, &[-1.2, 1.0], &res, None);
+        assert!(short.exhausted && !short.converged, "{}", short.message);
+        assert!((short.params[0] - 1.0).abs() > 0.1, "{:?}", short.params);
+        let full = least_squares_to(1.49e-8, PATIENCE, &[-1.2, 1.0], &res, None);
+        assert!(full.converged && !full.exhausted, "{}", full.message);
+        assert!((full.params[0] - 1.0).abs() < 1e-6 && (full.params[1] - 1.0).abs() < 1e-6);
+    }
 
     #[test]
     fn fits_an_exponential_with_and_without_jacobian() {
