@@ -171,6 +171,7 @@ pub fn sample_watched(
     let Some(mut watch) = EdgeWatch::of(&start) else {
         return sample(campaign, start, resume_from, observers);
     };
+    let searched = start.searched.clone();
     let made = {
         let mut beside = Beside { others: observers, watch: &mut watch };
         sample(campaign, start, resume_from, &mut [&mut beside])
@@ -191,6 +192,6 @@ pub fn sample_watched(
     log(&format!(
         "  memory: under the adjusted likelihood {why}: calibrating again under the tempered likelihood"
     ));
-    let start = start_refusing_adjusted(campaign, settings, &why, log)?;
+    let start = start_refusing_adjusted(campaign, settings, &why, &searched, log)?;
     sample(campaign, start, None, observers)
 }

@@ -23,6 +23,10 @@ pub struct Start {
     /// The paper's identification (the B-P law's start; none for another law).
     pub identification: Option<CurrentIdentification>,
     pub map: MapEstimate,
+    /// The best optimum of the MAP search over the starts, before the
+    /// likelihood allowed for any memory: what a start asked again
+    /// ([`start_refusing_adjusted`]) takes instead of searching again.
+    pub searched: MapEstimate,
     pub step_study: Vec<StepCheck>,
     pub posterior: Posterior,
     /// What the start found that the user should know (residuals with memory).
@@ -56,20 +60,23 @@ pub fn start(
 /// [`start`] where `memory = "auto"` must not take the adjusted likelihood,
 /// for the reason `refused` (a sentence): a calibration under it showed
 /// its blind spot ([`super::edge`]). Where auto finds memory
-/// it takes the tempered likelihood and says why.
+/// it takes the tempered likelihood and says why. `searched` is the first
+/// start's [`Start::searched`], of the same campaign and settings: the
+/// search over the starts is not repeated (it would give the same bits).
 pub fn start_refusing_adjusted(
     campaign: &Campaign,
     settings: &CalibrationSettings,
     refused: &str,
+    searched: &MapEstimate,
     log: &mut dyn FnMut(&str),
 ) -> Result<Start> {
-    start_with(campaign, settings, Some(refused), log)
+    start_with(campaign, settings, Some((refused, searched)), log)
 }
 
 fn start_with(
     campaign: &Campaign,
     settings: &CalibrationSettings,
-    refused: Option<&str>,
+    refused: Option<(&str, &MapEstimate)>,
     log: &mut dyn FnMut(&str),
 ) -> Result<Start> {
     let clock = Instant::now();
@@ -158,8 +165,12 @@ fn start_with(
             x
         })
         .collect();
-    let map = map::best_map(&posterior, &starts)
-        .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?;
+    let map = match refused {
+        Some((_, searched)) => searched.clone(),
+        None => map::best_map(&posterior, &starts)
+            .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?,
+    };
+    let searched = map.clone();
     let law_alone = stages.law_alone_rms(&posterior, &starts);
     let (posterior, found) = stages.choose_memory(posterior, &map);
     let (posterior, map) = stages.temper(posterior, map, log)?;
@@ -168,7 +179,7 @@ fn start_with(
         // which takes any posterior, would do
         Some(_) => {
             let adjusted = match refused {
-                Some(why) => Err(Error::Compute(why.to_string())),
+                Some((why, _)) => Err(Error::Compute(why.to_string())),
                 None => stages.adjust(posterior.clone(), map.clone(), log).and_then(|(p, m)| {
                     blind_spot(&p, &m, stages.settings.sampler.seed).map(|()| (p, m))
                 }),
@@ -259,6 +270,7 @@ fn start_with(
         settings,
         identification,
         map,
+        searched,
         step_study,
         posterior,
         warnings,

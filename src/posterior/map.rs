@@ -325,8 +325,7 @@ fn refine_fitting(
     let search = searched.as_ref().unwrap_or(post);
     let mut x: Vec<f64> = start[..nt].to_vec();
     carry(&mut x, &post.layout, &search.layout);
-    let Found { mut x, whitening, converged, exhausted } =
-        search_from(search, x, fits, patience)?;
+    let Found { mut x, whitening, converged, exhausted } = search_from(search, x, fits, patience)?;
     carry(&mut x, &search.layout, &post.layout);
     let jac = jacobian(post, &whitening, &x, Support::Truncated)?;
     let cov = (jac.transpose() * &jac).try_inverse()?;

@@ -392,7 +392,8 @@ fn auto_memory_adjusts_records_with_memory_and_shows_the_independent_intervals_b
 /// off, far by any measure) half are, above the tenth that refuses the
 /// adjusted likelihood, and the watch that checks the walkers while the
 /// run goes on stops it there; and the start refusing it takes the
-/// tempered one and says why.
+/// tempered one and says why, from the first start's search over its
+/// starts (searched again, the same bits).
 #[test]
 fn draws_that_reach_past_the_records_leave_the_adjusted_likelihood() {
     use mrbp::calibrate::edge::EdgeWatch;
@@ -431,7 +432,13 @@ fn draws_that_reach_past_the_records_leave_the_adjusted_likelihood() {
     assert!(watch.stepped(&state).is_err());
     assert!(watch.found().unwrap().contains("walkers at step 10"), "{:?}", watch.found());
 
-    let start = start_refusing_adjusted(&campaign, &settings, &found, &mut |_| {}).unwrap();
+    // the search over the starts is taken from the first start: it would
+    // give the same bits again
+    let again = mrbp::calibrate::start(&campaign, &settings, &mut |_| {}).unwrap();
+    assert_eq!(again.searched.x, made.start.searched.x);
+    let start =
+        start_refusing_adjusted(&campaign, &settings, &found, &made.start.searched, &mut |_| {})
+            .unwrap();
     assert_eq!(start.settings.likelihood.memory, Memory::Tempered);
     let said = start.memory_found.expect("memory found");
     assert!(said.contains("so the tempered likelihood allows for it"), "{said}");
