@@ -86,12 +86,11 @@ impl Pipeline<'_> {
                             })?;
                     // bands only for the runs that could be held out
                     for b in &loo.bands {
-                        let lppd = loo
-                            .rows
-                            .iter()
-                            .find(|r| r.coverage.run == b.run)
-                            .map_or(f64::NAN, |r| r.coverage.lppd);
-                        rows.push(row(law, c, b, Kind::HeldOut, lppd, seconds, area));
+                        let held = loo.rows.iter().find(|r| r.coverage.run == b.run);
+                        let lppd = held.map_or(f64::NAN, |r| r.coverage.lppd);
+                        let mut held_out = row(law, c, b, Kind::HeldOut, lppd, seconds, area);
+                        held_out.held_out_rhat = held.map_or(f64::NAN, |r| r.max_rhat);
+                        rows.push(held_out);
                     }
                     shown.extend(loo.bands);
                 } else {
@@ -163,5 +162,6 @@ fn row(
         lppd,
         seconds,
         evidence: None,
+        held_out_rhat: f64::NAN,
     }
 }

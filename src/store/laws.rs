@@ -40,6 +40,7 @@ pub fn table(rows: &[LawRow], ids: &[(String, String)]) -> Table {
             "pseudo_evidence",
             rows.iter().map(|r| r.evidence.is_some_and(|e| e.pseudo)).collect(),
         )
+        .f64("held_out_rhat", rows.iter().map(|r| r.held_out_rhat).collect())
         .meta(CALIBRATIONS, &named.join(","))
 }
 
@@ -91,6 +92,9 @@ pub fn read(path: &Path) -> Result<Vec<LawRow>> {
     } else {
         vec![None; law.len()]
     };
+    // the held-out refits' R̂ (absent in files written before 2026-11-30)
+    let held_out_rhat =
+        if has("held_out_rhat") { col("held_out_rhat")? } else { vec![f64::NAN; law.len()] };
     (0..law.len())
         .map(|i| {
             let bad = |what: &str| Error::input(path, format!("row {}: {what}", i + 1));
@@ -116,6 +120,7 @@ pub fn read(path: &Path) -> Result<Vec<LawRow>> {
                 lppd: lppd[i],
                 seconds: seconds[i],
                 evidence: evidence[i],
+                held_out_rhat: held_out_rhat[i],
             })
         })
         .collect()

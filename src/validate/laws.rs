@@ -63,6 +63,10 @@ pub struct LawRow {
     /// The log evidence of the law's calibration at this current, on its
     /// rows alike (none where it could not be estimated).
     pub evidence: Option<LawEvidence>,
+    /// A held-out row whose posterior was sampled afresh: the largest R̂
+    /// of that sampling (NaN in sample, and where the held-out posterior
+    /// was reached by reweighting or Laplace importance).
+    pub held_out_rhat: f64,
 }
 
 /// The error measures of `bands` (one record, its median path and bands in
@@ -161,6 +165,11 @@ pub struct Standing {
     /// leave-one-out row `failed`): left out of every law's held-out
     /// numbers here, so that the laws are compared on the same tests.
     pub set_aside: Vec<String>,
+    /// The tests whose held-out posterior, sampled afresh, did not
+    /// converge (R̂ ≥ 1.01 when the refit stopped), with that R̂: this
+    /// law's held-out numbers there are of draws from ensembles that did
+    /// not agree, not of a posterior.
+    pub unsettled: Vec<(String, f64)>,
 }
 
 /// A law's log evidence at one current.
@@ -262,6 +271,11 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     rank: 0,
                     evidence: None,
                     set_aside: set_aside.clone(),
+                    unsettled: h
+                        .iter()
+                        .filter(|r| r.held_out_rhat >= UNSETTLED_RHAT)
+                        .map(|r| (r.run.clone(), r.held_out_rhat))
+                        .collect(),
                 }
             })
             .collect();
@@ -273,6 +287,10 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
     }
     Ok(out)
 }
+
+/// The R̂ from which a held-out refit counts as not converged (the
+/// sampler's own target).
+pub const UNSETTLED_RHAT: f64 = 1.01;
 
 /// The verdict in plain words, current by current: the law that predicts
 /// tests it did not see best, by how much more than the next (in units of
@@ -313,6 +331,15 @@ pub fn verdict(standings: &[Standing]) -> Vec<String> {
                     aside.join(", ")
                 ),
             };
+            let line = at.iter().filter(|s| !s.unsettled.is_empty()).fold(line, |line, s| {
+                let tests: Vec<String> =
+                    s.unsettled.iter().map(|(run, rhat)| format!("{run} (R̂ {rhat:.2})")).collect();
+                format!(
+                    "{line}. The {} law's held-out posteriors without {} did not converge: its ensembles did not agree when the refit stopped (separate basins, or too few steps: `--loo-steps`), so its held-out numbers there are of draws, not of a posterior, and its rank here is not to be trusted",
+                    s.law.name(),
+                    tests.join(", ")
+                )
+            });
             match evidence_sentence(&at) {
                 Some(sentence) => format!("{line}. {sentence}"),
                 None => line,
@@ -429,6 +456,7 @@ mod tests {
             },
             lppd,
             evidence: None,
+            held_out_rhat: f64::NAN,
             seconds: 1.0,
         }
     }
@@ -470,6 +498,35 @@ mod tests {
         // no test that every law was held out on: refused
         other[2].run = "t4".into();
         assert!(standings(&other).is_err());
+    }
+
+    /// A held-out refit that stopped unconverged (R̂ 1.60 for Spencer
+    /// without t2) is named in the verdict with its R̂, the law's rank
+    /// called untrustworthy; a converged refit (R̂ 1.005) or a row reached
+    /// without sampling (NaN) is not.
+    #[test]
+    fn the_verdict_names_a_held_out_posterior_that_did_not_converge() {
+        let mut rows = vec![
+            row(LawKind::BoucWen, "t1", Kind::HeldOut, -100.0),
+            row(LawKind::BoucWen, "t2", Kind::HeldOut, -200.0),
+            row(LawKind::Spencer, "t1", Kind::HeldOut, -110.0),
+            row(LawKind::Spencer, "t2", Kind::HeldOut, -180.0),
+        ];
+        rows[0].held_out_rhat = 1.005;
+        let v = verdict(&standings(&rows).unwrap());
+        assert!(!v[0].contains("did not converge"), "{v:?}");
+        rows[3].held_out_rhat = 1.6;
+        let s = standings(&rows).unwrap();
+        assert_eq!(s[0].unsettled, [("t2".to_string(), 1.6)]);
+        assert!(s[1].unsettled.is_empty());
+        let v = verdict(&s);
+        assert!(
+            v[0].contains(
+                "The spencer law's held-out posteriors without t2 (R̂ 1.60) did not converge"
+            ),
+            "{v:?}"
+        );
+        assert!(v[0].contains("its rank here is not to be trusted"), "{v:?}");
     }
 
     /// The evidence sentence: only where every law has an evidence; the

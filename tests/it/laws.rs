@@ -323,7 +323,7 @@ fn the_validation_study_ranks_the_generating_law_first() {
         [
             "law", "current_a", "run", "kind", "samples", "nrmse", "e_t", "e_x", "e_v",
             "inside_p95", "band_width", "lppd", "seconds", "log_evidence", "log_evidence_se",
-            "evidence_by", "pseudo_evidence"
+            "evidence_by", "pseudo_evidence", "held_out_rhat"
         ]
     );
     // two laws × three records × in sample and held out
