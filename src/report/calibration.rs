@@ -474,6 +474,9 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
                     page.para(&format!("{} could not be held out ({}): it has no held-out bands and no numbers above; the other runs were held out as usual.", r.coverage.run, why));
                 }
             }
+            if let Some(warning) = super::text::refits_unsettled(rows) {
+                page.para(&format!("Not converged: {warning}."));
+            }
             for (stem, caption) in &loo_figs.items {
                 page.figure(&r.cal.dir.join("loo").join(format!("{stem}.png")), &format!("Held out: {caption}"))?;
             }

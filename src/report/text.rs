@@ -382,7 +382,27 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
             r.rhat_shown()
         );
     }
+    if let Some(warning) = refits_unsettled(rows) {
+        row!(out, "warning: {warning}");
+    }
     out
+}
+
+/// Where held-out posteriors sampled afresh did not converge (their
+/// ensembles still disagreeing when the refit stopped): which, with their
+/// R̂, and what their rows are, in a sentence.
+pub fn refits_unsettled(rows: &[LooRow]) -> Option<String> {
+    let unsettled: Vec<String> = rows
+        .iter()
+        .filter(|r| r.unsettled())
+        .map(|r| format!("{} (R̂ {:.2})", r.coverage.run, r.max_rhat))
+        .collect();
+    (!unsettled.is_empty()).then(|| {
+        format!(
+            "the held-out posteriors without {} did not converge: their ensembles still disagreed when the refit stopped (separate basins, or too few steps: `--loo-steps`; `--sampler smc` weighs basins by their mass), so those rows are of draws, not of a posterior",
+            unsettled.join(", ")
+        )
+    })
 }
 
 /// Each run predicted as a new test by the between-run layer fitted
@@ -515,6 +535,7 @@ pub fn consistency(parameters: &[ParameterConsistency]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::validate::HeldOutBy;
 
     fn row(run: &str, draws: usize, failed_draws: usize) -> NewTestRow {
         NewTestRow {
@@ -529,6 +550,33 @@ mod tests {
             left_out: LeftOut::Run,
             max_rhat: 1.001,
         }
+    }
+
+    /// A held-out posterior sampled afresh that stopped at R̂ 1.60 is
+    /// named with its R̂; one at 1.005, or one reached without sampling
+    /// (NaN), is not.
+    #[test]
+    fn unconverged_refits_are_named() {
+        let loo = |run: &str, by: HeldOutBy, max_rhat: f64| LooRow {
+            coverage: CoverageRow { run: run.into(), samples: 100, ..CoverageRow::default() },
+            pareto_k: 2.0,
+            pareto_k_laplace: f64::NAN,
+            by,
+            max_rhat,
+            failure: None,
+        };
+        let rows = [
+            loo("a", HeldOutBy::Sampling, 1.005),
+            loo("b", HeldOutBy::LaplaceImportance, f64::NAN),
+        ];
+        assert_eq!(refits_unsettled(&rows), None);
+        let rows = [rows[0].clone(), rows[1].clone(), loo("c", HeldOutBy::Sampling, 1.6)];
+        let said = refits_unsettled(&rows).unwrap();
+        assert!(
+            said.starts_with("the held-out posteriors without c (R̂ 1.60) did not converge"),
+            "{said}"
+        );
+        assert!(leave_one_out(&rows, 1.0).contains("\nwarning: the held-out posteriors without c"));
     }
 
     /// The layer's new tests for a held-out run mostly outside the

@@ -273,7 +273,7 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     set_aside: set_aside.clone(),
                     unsettled: h
                         .iter()
-                        .filter(|r| r.held_out_rhat >= UNSETTLED_RHAT)
+                        .filter(|r| r.held_out_rhat >= super::UNSETTLED_RHAT)
                         .map(|r| (r.run.clone(), r.held_out_rhat))
                         .collect(),
                 }
@@ -287,10 +287,6 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
     }
     Ok(out)
 }
-
-/// The R̂ from which a held-out refit counts as not converged (the
-/// sampler's own target).
-pub const UNSETTLED_RHAT: f64 = 1.01;
 
 /// The verdict in plain words, current by current: the law that predicts
 /// tests it did not see best, by how much more than the next (in units of

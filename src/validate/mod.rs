@@ -156,7 +156,17 @@ pub struct LooRow {
     pub failure: Option<String>,
 }
 
+/// The R̂ from which a held-out posterior sampled afresh counts as not
+/// converged when its refit stopped (the sampler's own target).
+pub const UNSETTLED_RHAT: f64 = 1.01;
+
 impl LooRow {
+    /// Whether its held-out posterior was sampled afresh and its ensembles
+    /// still disagreed when the refit stopped ([`UNSETTLED_RHAT`]).
+    pub fn unsettled(&self) -> bool {
+        self.max_rhat >= UNSETTLED_RHAT
+    }
+
     /// The held-out sampling's largest R̂ as a table shows it: "–" where
     /// there was none, "no spread" where a coordinate's draws did not move.
     pub fn rhat_shown(&self) -> String {
