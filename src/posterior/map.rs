@@ -36,7 +36,6 @@ pub struct MapEstimate {
     /// How each run's residuals are whitened at the profiled noise.
     whitening: Vec<Arc<dyn Whiten>>,
     pub log_density: f64,
-    pub converged: bool,
     /// Whether its search stopped on its budget of evaluations.
     pub exhausted: bool,
 }
@@ -325,13 +324,13 @@ fn refine_fitting(
     let search = searched.as_ref().unwrap_or(post);
     let mut x: Vec<f64> = start[..nt].to_vec();
     carry(&mut x, &post.layout, &search.layout);
-    let Found { mut x, whitening, converged, exhausted } = search_from(search, x, fits, patience)?;
+    let Found { mut x, whitening, exhausted } = search_from(search, x, fits, patience)?;
     carry(&mut x, &search.layout, &post.layout);
     let jac = jacobian(post, &whitening, &x, Support::Truncated)?;
     let cov = (jac.transpose() * &jac).try_inverse()?;
     let full = with_noise(post, &x)?;
     let log_density = post.log_density(&full);
-    Some(MapEstimate { x: full, cov, jacobian: jac, whitening, log_density, converged, exhausted })
+    Some(MapEstimate { x: full, cov, jacobian: jac, whitening, log_density, exhausted })
 }
 
 /// The θ block of `x` carried from the coordinates of `from` to those of `to`.
@@ -342,12 +341,11 @@ fn carry(x: &mut [f64], from: &Layout, to: &Layout) {
     }
 }
 
-/// The optimum of a Levenberg-Marquardt search, its runs' whitening,
-/// whether the last fit converged and whether a fit spent its budget.
+/// The optimum of a Levenberg-Marquardt search, its runs' whitening and
+/// whether a fit spent its budget.
 struct Found {
     x: Vec<f64>,
     whitening: Vec<Arc<dyn Whiten>>,
-    converged: bool,
     exhausted: bool,
 }
 
@@ -367,7 +365,7 @@ fn search_from(post: &Posterior, mut x: Vec<f64>, fits: usize, patience: usize) 
         profiles.into_iter().map(|p| (p.scale, p.whitening)).unzip()
     };
     let (mut scales, mut whitening) = whitening_of(profiles(post, &x)?);
-    let (mut converged, mut exhausted) = (false, false);
+    let mut exhausted = false;
     // the search crosses the box where it must; an optimum outside it is
     // brought to the box's edge and searched again inside
     for support in [Support::Open, Support::Truncated] {
@@ -386,7 +384,6 @@ fn search_from(post: &Posterior, mut x: Vec<f64>, fits: usize, patience: usize) 
             let fit = least_squares_to(SEARCH_FTOL, patience, &x, &f, Some(&j));
             let moved = fit.params.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
             x = fit.params;
-            converged = fit.converged;
             exhausted |= fit.exhausted;
             let (new_scales, new_whitening) = whitening_of(profiles(post, &x)?);
             let scale_change =
@@ -399,7 +396,7 @@ fn search_from(post: &Posterior, mut x: Vec<f64>, fits: usize, patience: usize) 
             }
         }
     }
-    Some(Found { x, whitening, converged, exhausted })
+    Some(Found { x, whitening, exhausted })
 }
 
 /// ln θ brought into the priors' truncation bounds, coordinate by

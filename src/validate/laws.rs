@@ -273,7 +273,7 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     set_aside: set_aside.clone(),
                     unsettled: h
                         .iter()
-                        .filter(|r| r.held_out_rhat >= super::UNSETTLED_RHAT)
+                        .filter(|r| super::unsettled(r.held_out_rhat))
                         .map(|r| (r.run.clone(), r.held_out_rhat))
                         .collect(),
                 }

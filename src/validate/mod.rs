@@ -156,15 +156,18 @@ pub struct LooRow {
     pub failure: Option<String>,
 }
 
-/// The R̂ from which a held-out posterior sampled afresh counts as not
-/// converged when its refit stopped (the sampler's own target).
-pub const UNSETTLED_RHAT: f64 = 1.01;
+/// Whether a held-out posterior sampled afresh whose refit stopped with
+/// largest R̂ `max_rhat` did not converge (the sampler's own target, 1.01;
+/// NaN, no sampling, is not).
+pub fn unsettled(max_rhat: f64) -> bool {
+    max_rhat >= 1.01
+}
 
 impl LooRow {
     /// Whether its held-out posterior was sampled afresh and its ensembles
-    /// still disagreed when the refit stopped ([`UNSETTLED_RHAT`]).
+    /// still disagreed when the refit stopped ([`unsettled`]).
     pub fn unsettled(&self) -> bool {
-        self.max_rhat >= UNSETTLED_RHAT
+        unsettled(self.max_rhat)
     }
 
     /// The held-out sampling's largest R̂ as a table shows it: "–" where
