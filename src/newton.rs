@@ -337,8 +337,8 @@ fn offset(z: &DVector<f64>, moves: &[(usize, f64)]) -> DVector<f64> {
 }
 
 /// The inverse of the negated Hessian `hess`, every eigenvalue of −hess
-/// held at [`MIN_CURVATURE`] or above.
-fn covariance(hess: &DMatrix<f64>) -> DMatrix<f64> {
+/// held at [`MIN_CURVATURE`] or above (whitened coordinates).
+pub fn covariance(hess: &DMatrix<f64>) -> DMatrix<f64> {
     let eig = SymmetricEigen::new(-hess.clone());
     let inv = eig.eigenvalues.map(|v| 1.0 / v.max(MIN_CURVATURE));
     &eig.eigenvectors * DMatrix::from_diagonal(&inv) * eig.eigenvectors.transpose()

@@ -270,6 +270,7 @@ pub fn sample(
             let probed = probe::walkers_start(
                 posterior,
                 &start.map,
+                start.laplace.clone(),
                 sampler_settings.clone(),
                 s.walkers * s.ensembles,
                 &control,

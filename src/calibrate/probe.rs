@@ -54,12 +54,13 @@ fn far(spread: f64) -> Option<f64> {
 pub(super) fn walkers_start<'t>(
     posterior: &'t Posterior,
     map: &map::MapEstimate,
+    laplace: Option<Elliptical>,
     settings: SamplerSettings,
     count: usize,
     control: &RunControl,
     observers: &mut [&mut dyn Observer],
 ) -> Result<Probed<'t>> {
-    let mut laplace = laplace::at_mode(posterior, map);
+    let mut laplace = laplace.unwrap_or_else(|| laplace::at_mode(posterior, map));
     // the log-density at the mode the walkers start about
     let mut top = posterior.log_density(laplace.mean.as_slice());
     let mut higher: Option<HigherGround> = None;

@@ -12,6 +12,7 @@ use crate::model::{Integrator, Scheme};
 use crate::posterior::laplace::IntervalRow;
 use crate::posterior::map::{self, MapEstimate, StepCheck};
 use crate::posterior::{laplace, memory, Memory, Posterior};
+use crate::sampler::Elliptical;
 
 /// Where sampling starts: the identification, the MAP, the step chosen and
 /// the posterior with it.
@@ -45,6 +46,11 @@ pub struct Start {
     /// posterior's Laplace approximation), what the narrow intervals of a
     /// calibration that ignored the memory would have said. Empty otherwise.
     pub independent: Vec<IntervalRow>,
+    /// The posterior's Laplace approximation at its mode where the start
+    /// has it already (the adjusted likelihood's,
+    /// [`laplace::adjusted_mode`]); `None`: the walkers' start reaches it
+    /// from [`Start::map`].
+    pub laplace: Option<Elliptical>,
     pub seconds: f64,
 }
 
@@ -112,7 +118,7 @@ fn start_with(
         chosen => chosen.scheme(),
     };
     let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
-    let mut stages = Stages { campaign, settings, base, independent: Vec::new() };
+    let mut stages = Stages { campaign, settings, base, independent: Vec::new(), unsettled: None };
     let posterior = stages.posterior();
     let settings = &stages.settings;
     if let Some(a) = posterior.likelihood.adjustment() {
@@ -180,7 +186,7 @@ fn start_with(
         Some(_) => {
             let adjusted = match refused {
                 Some((why, _)) => Err(Error::Compute(why.to_string())),
-                None => stages.adjust(posterior.clone(), map.clone(), log).and_then(|(p, m)| {
+                None => stages.adjust(posterior.clone(), map.clone()).and_then(|(p, m)| {
                     blind_spot(&p, &m, stages.settings.sampler.seed).map(|()| (p, m))
                 }),
             };
@@ -195,7 +201,7 @@ fn start_with(
             }
         }
         None => {
-            let (posterior, map) = stages.adjust(posterior, map, log)?;
+            let (posterior, map) = stages.adjust(posterior, map)?;
             (posterior, map, None)
         }
     };
@@ -204,8 +210,6 @@ fn start_with(
         log(&format!("  memory: {said}"));
         said
     });
-    let independent = std::mem::take(&mut stages.independent);
-    let mut settings = stages.settings;
     log(&format!(
         "  MAP: log-density {:.1} after {:.1} s; choosing the integrator step",
         map.log_density,
@@ -249,12 +253,11 @@ fn start_with(
     // one cut its steps (and its likelihood rugged)
     let (_, posterior, map, step_study) =
         candidates.into_iter().min_by_key(|c| c.0).expect("at least one scheme");
-    // the MAP with the chosen integrator, from the one found; the curvature
-    // stays the smooth search's
-    let map = match posterior.integrator != base {
-        true => map::refine(&posterior, &map.x).map(|moved| map.curvature_at(moved)).unwrap_or(map),
-        false => map,
-    };
+    // the MAP with the chosen integrator, from the one found (the curvature
+    // stays the smooth search's), and an adjustment measured with it
+    let (posterior, map, laplace) = stages.settle(posterior, map, log);
+    let independent = std::mem::take(&mut stages.independent);
+    let mut settings = stages.settings;
     settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
     settings.integrator.substeps = posterior.integrator.substeps;
     if settings.sampler.walkers == 0 {
@@ -277,6 +280,7 @@ fn start_with(
         law_alone_rms: law_alone,
         memory_found,
         independent,
+        laplace,
         seconds: clock.elapsed().as_secs_f64(),
     })
 }
@@ -291,6 +295,10 @@ struct Stages<'a> {
     base: Integrator,
     /// [`Start::independent`], once a stage has measured it.
     independent: Vec<IntervalRow>,
+    /// The independent likelihood's MAP where [`Stages::adjust`] measured
+    /// an adjustment with the search's integrator, which
+    /// [`Stages::settle`] measures again with the integrator chosen.
+    unsettled: Option<MapEstimate>,
 }
 
 impl Stages<'_> {
@@ -382,13 +390,13 @@ impl Stages<'_> {
     /// With the adjusted likelihood ([`Memory::Adjusted`]): the curvature
     /// adjustment measured at `map`, the MAP of the independent likelihood
     /// (where not set already), written into the settings, and the MAP
-    /// searched again on the adjusted posterior. Otherwise `posterior` and
-    /// `map` as they are.
+    /// searched again on the adjusted posterior: what the step rule needs;
+    /// [`Stages::settle`] measures it again with the integrator chosen.
+    /// Otherwise `posterior` and `map` as they are.
     fn adjust(
         &mut self,
         posterior: Posterior,
         map: MapEstimate,
-        log: &mut dyn FnMut(&str),
     ) -> Result<(Posterior, MapEstimate)> {
         let lik = &self.settings.likelihood;
         if lik.memory != Memory::Adjusted || lik.memory_adjustment.is_some() {
@@ -397,22 +405,73 @@ impl Stages<'_> {
         if self.settings.parameter_model().is_current_law() {
             return Err(Error::Usage("`--memory adjusted` takes one parameter set per current (not the current law); `--memory tempered` takes any".into()));
         }
-        // centred on the mode of the independent posterior, not the
-        // surrogate's optimum; its Laplace approximation there says what
-        // the independent residuals' intervals would be
-        let (centre, independent) = match laplace::mode(&posterior, &map) {
-            Some(m) => (m.x, m.laplace),
-            None => (map.x.clone(), laplace::surrogate(&posterior, &map)),
-        };
-        self.independent =
-            laplace::si_intervals(&posterior, &independent, self.settings.sampler.seed);
-        let adjustment = memory::adjustment(&posterior, &map, &centre).ok_or_else(|| {
+        // C measured at this MAP and centred on it, for the step rule (the
+        // posterior's spread under the adjusted likelihood); the centre, C
+        // and the independent posterior's intervals are measured again with
+        // the integrator chosen ([`Stages::settle`])
+        let adjustment = memory::adjustment(&posterior, &map, &map.x).ok_or_else(|| {
             Error::Compute("the memory adjustment could not be measured at the MAP".into())
         })?;
-        let (lo, hi) = adjustment.inflation_range();
-        log(&format!("  memory: the likelihood's curvature adjusted to its score's covariance given the residuals' memory: variance inflation {lo:.1}–{hi:.1} by direction"));
         self.settings.likelihood.memory_adjustment = Some(adjustment);
+        self.unsettled = Some(map.clone());
         self.searched_again(&map, "the adjusted likelihood")
+    }
+
+    /// The MAP `map` of `posterior` (the integrator chosen; the search's
+    /// curvature kept) moved to that integrator, where it differs from the
+    /// search's. Where [`Stages::adjust`] measured the adjustment here with
+    /// the search's integrator, it is measured again with the chosen one:
+    /// centred on the independent posterior's mode (Newton's method from
+    /// its MAP), whose Laplace approximation gives the intervals the
+    /// records would have if their residuals were independent, and the
+    /// adjusted posterior's own ([`laplace::adjusted`]). A step rule that
+    /// asks for a finer step than the search's moves that mode, and the
+    /// adjusted posterior C⁻¹ times as far: at 0.25 A on the measured
+    /// records, centred with the search's step its mean lay 0.3–0.9 sd from
+    /// where this puts it (docs/calibration.md).
+    fn settle(
+        &mut self,
+        posterior: Posterior,
+        map: MapEstimate,
+        log: &mut dyn FnMut(&str),
+    ) -> (Posterior, MapEstimate, Option<Elliptical>) {
+        let Some(searched) = self.unsettled.take() else {
+            let map = match posterior.integrator != self.base {
+                true => map::refine(&posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map),
+                false => map,
+            };
+            return (posterior, map, None);
+        };
+        let plain = posterior.without_adjustment();
+        // Newton's method from the search's MAP: one step reaches the
+        // chosen integrator's mode where the step rule moved it by a sd or two
+        let independent_map = searched;
+        let (centre, independent) = match laplace::mode(&plain, &independent_map) {
+            Some(m) => (m.x, m.laplace),
+            None => (independent_map.x.clone(), laplace::surrogate(&plain, &independent_map)),
+        };
+        self.independent = laplace::si_intervals(&plain, &independent, self.settings.sampler.seed);
+        if let Some(adjustment) = memory::adjustment(&plain, &independent_map, &centre) {
+            self.settings.likelihood.memory_adjustment = Some(adjustment);
+        }
+        let a = self.settings.likelihood.adjustment().expect("measured by `adjust`");
+        let (lo, hi) = a.inflation_range();
+        log(&format!("  memory: the likelihood's curvature adjusted to its score's covariance given the residuals' memory: variance inflation {lo:.1}–{hi:.1} by direction"));
+        let posterior = self.settings.posterior(self.campaign, posterior.integrator);
+        // the adjusted posterior's mode from the independent one's (on the
+        // measured records 1.4–10 nats above where a search from the step
+        // rule's MAP stops); searched where it cannot be derived
+        match laplace::adjusted_mode(&posterior, &independent) {
+            Some(mode) => {
+                let map = map.moved_to(mode.x, mode.log_density);
+                (posterior, map, Some(mode.laplace))
+            }
+            None => {
+                let map =
+                    map::refine(&posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map);
+                (posterior, map, None)
+            }
+        }
     }
 
     /// Each run's residual RMS at the MAP of the same posterior with

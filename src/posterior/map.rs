@@ -49,6 +49,13 @@ impl MapEstimate {
         MapEstimate { cov: self.cov.clone(), jacobian: self.jacobian.clone(), ..moved }
     }
 
+    /// This estimate moved to `x` (every coordinate), where the posterior's
+    /// log-density is `log_density`: a mode reached otherwise than by the
+    /// search ([`super::laplace::adjusted`]); the search's curvature kept.
+    pub fn moved_to(&self, x: Vec<f64>, log_density: f64) -> MapEstimate {
+        MapEstimate { x, log_density, ..self.clone() }
+    }
+
     /// The Jacobian of the whitened residuals at the MAP: each run's
     /// residuals in order, then the runs' log-variance terms (if any), then
     /// the priors' pseudo-residuals; a column per fitted coordinate.

@@ -452,17 +452,26 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         // itself (from the weighted draws' mean its point x* = c + C (x − c)
         // can lie where the law cannot be integrated: B-P on Spencer's
         // records without their 200 rpm run)
-        let (posterior, start) = match adjusted {
-            true => recentred(&posterior, &start).ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the mode of the independent likelihood was not found", left_out.id())))?,
-            false => (posterior, start),
+        // adjusted: its mode and Laplace approximation from the independent
+        // posterior's at the centre (laplace::adjusted_mode); otherwise by
+        // Newton's method from the basin of its mode
+        let (posterior, laplace) = match adjusted {
+            true => {
+                let (posterior, independent) = recentred(&posterior, &start).ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the mode of the independent likelihood was not found", left_out.id())))?;
+                match laplace::adjusted_mode(&posterior, &independent) {
+                    Some(mode) => (posterior, mode.laplace),
+                    None => {
+                        let at = independent.mean.as_slice().to_vec();
+                        let laplace = at_mode_from(&posterior, &at, left_out.id())?;
+                        (posterior, laplace)
+                    }
+                }
+            }
+            false => {
+                let laplace = at_mode_from(&posterior, &start, left_out.id())?;
+                (posterior, laplace)
+            }
         };
-        let map = map::basin(&posterior, &start).ok_or_else(|| {
-            Error::Compute(format!(
-                "leave-one-out without {}: the MAP search failed",
-                left_out.id()
-            ))
-        })?;
-        let laplace = laplace::at_mode(&posterior, &map);
         if loo.refit {
             return Ok(Weighed::ToSample(Box::new(Pending { target, posterior, laplace, row })));
         }
@@ -499,15 +508,25 @@ const FIRST_SHARE: usize = 4;
 const HOPELESS_K: f64 = 1.5;
 
 /// The adjusted posterior `post` of the runs kept, its adjustment centred
-/// on the mode of their independent posterior (searched from `start`):
-/// the adjusted likelihood's peak lies C⁻¹ times as far from the centre as
-/// the likelihood's own, so a held-out posterior centred on the full
-/// calibration's mode would be pushed away by the run left out's pull.
-fn recentred(post: &Posterior, start: &[f64]) -> Option<(Posterior, Vec<f64>)> {
+/// on the mode of their independent posterior (searched from `start`), and
+/// that posterior's Laplace approximation there: the adjusted likelihood's
+/// peak lies C⁻¹ times as far from the centre as the likelihood's own, so
+/// a held-out posterior centred on the full calibration's mode would be
+/// pushed away by the run left out's pull.
+fn recentred(post: &Posterior, start: &[f64]) -> Option<(Posterior, Elliptical)> {
     let plain = post.without_adjustment();
     let map = map::basin(&plain, start)?;
-    let mode = laplace::mode_point(&plain, &map)?;
-    Some((post.recentred(&mode), mode))
+    let mode = laplace::mode(&plain, &map)?;
+    Some((post.recentred(&mode.x), mode.laplace))
+}
+
+/// The Laplace approximation at the mode of `posterior`, by Newton's method
+/// from the basin its search from `start` reaches.
+fn at_mode_from(posterior: &Posterior, start: &[f64], run: &str) -> Result<Elliptical> {
+    let map = map::basin(posterior, start).ok_or_else(|| {
+        Error::Compute(format!("leave-one-out without {run}: the MAP search failed"))
+    })?;
+    Ok(laplace::at_mode(posterior, &map))
 }
 
 /// Importance sampling from the held-out posterior's Laplace approximation
