@@ -195,6 +195,7 @@ fn start_with(
                 Err(e) => {
                     stages.settings.likelihood.memory = Memory::Tempered;
                     stages.settings.likelihood.memory_adjustment = None;
+                    stages.unsettled = None;
                     let (posterior, map) = stages.temper(posterior, map, log)?;
                     (posterior, map, Some(e))
                 }
@@ -435,7 +436,8 @@ impl Stages<'_> {
         map: MapEstimate,
         log: &mut dyn FnMut(&str),
     ) -> (Posterior, MapEstimate, Option<Elliptical>) {
-        let Some(searched) = self.unsettled.take() else {
+        let adjusted = self.settings.likelihood.adjustment().is_some();
+        let Some(searched) = self.unsettled.take().filter(|_| adjusted) else {
             let map = match posterior.integrator != self.base {
                 true => map::refine(&posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map),
                 false => map,
@@ -454,8 +456,8 @@ impl Stages<'_> {
         if let Some(adjustment) = memory::adjustment(&plain, &independent_map, &centre) {
             self.settings.likelihood.memory_adjustment = Some(adjustment);
         }
-        let a = self.settings.likelihood.adjustment().expect("measured by `adjust`");
-        let (lo, hi) = a.inflation_range();
+        let (lo, hi) =
+            self.settings.likelihood.adjustment().map_or((1.0, 1.0), |a| a.inflation_range());
         log(&format!("  memory: the likelihood's curvature adjusted to its score's covariance given the residuals' memory: variance inflation {lo:.1}–{hi:.1} by direction"));
         let posterior = self.settings.posterior(self.campaign, posterior.integrator);
         // the adjusted posterior's mode from the independent one's (on the

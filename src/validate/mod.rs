@@ -447,14 +447,13 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         let kept = full.campaign.filtered(|r| r.id() != left_out.id());
         let posterior = settings.posterior(&kept, target.predict.integrator);
         let start = weighted_mean_theta(full, &posterior, &positions, &reweighted.weights);
-        // adjusted: searched from the centre, the independent likelihood's
-        // mode, where the adjusted likelihood is evaluated at the point
-        // itself (from the weighted draws' mean its point x* = c + C (x − c)
-        // can lie where the law cannot be integrated: B-P on Spencer's
-        // records without their 200 rpm run)
-        // adjusted: its mode and Laplace approximation from the independent
-        // posterior's at the centre (laplace::adjusted_mode); otherwise by
-        // Newton's method from the basin of its mode
+        // adjusted: the adjusted posterior's mode and Laplace approximation
+        // from the independent one's at its mode (laplace::adjusted_mode),
+        // or else by Newton's method from the basin its search reaches
+        // from that mode (where the adjusted likelihood is evaluated at
+        // the point itself: from the weighted draws' mean its point
+        // x* = c + C (x − c) can lie where the law cannot be integrated,
+        // B-P on Spencer's records without their 200 rpm run)
         let (posterior, laplace) = match adjusted {
             true => {
                 let (posterior, independent) = recentred(&posterior, &start).ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the mode of the independent likelihood was not found", left_out.id())))?;
