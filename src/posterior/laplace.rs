@@ -17,7 +17,10 @@
 //! [`mode`] therefore goes on from the surrogate by Newton's method on the
 //! log-density itself ([`crate::newton`]), and [`at_mode`] is the Laplace
 //! approximation there: where a calibration's walkers start and
-//! leave-one-out draws its importance samples.
+//! leave-one-out draws its importance samples. The adjusted likelihood's
+//! posterior ([`super::memory`]) has its own from the independent
+//! posterior's at the adjustment's centre ([`adjusted_mode`]), without a
+//! search.
 
 use nalgebra::{DMatrix, DVector};
 
