@@ -296,9 +296,11 @@ struct Stages<'a> {
     base: Integrator,
     /// [`Start::independent`], once a stage has measured it.
     independent: Vec<IntervalRow>,
-    /// The independent likelihood's MAP where [`Stages::adjust`] measured
-    /// an adjustment with the search's integrator, which
-    /// [`Stages::settle`] measures again with the integrator chosen.
+    /// The independent likelihood's MAP where a stage allowed for the
+    /// residuals' memory here ([`Stages::temper`], [`Stages::adjust`]):
+    /// [`Stages::settle`] measures the independent posterior's mode and
+    /// Laplace approximation with the integrator chosen from it (and an
+    /// adjustment again).
     unsettled: Option<MapEstimate>,
 }
 
@@ -368,11 +370,9 @@ impl Stages<'_> {
         {
             return Ok((posterior, map));
         }
-        self.independent = laplace::si_intervals(
-            &posterior,
-            &laplace::surrogate(&posterior, &map),
-            self.settings.sampler.seed,
-        );
+        // the independent posterior's intervals are measured with the
+        // integrator chosen ([`Stages::settle`])
+        self.unsettled = Some(map.clone());
         let times = map::memory_times(&posterior, &map).ok_or_else(|| {
             Error::Compute("the residuals at the MAP could not be integrated".into())
         })?;
@@ -420,8 +420,11 @@ impl Stages<'_> {
 
     /// The MAP `map` of `posterior` (the integrator chosen; the search's
     /// curvature kept) moved to that integrator, where it differs from the
-    /// search's. Where [`Stages::adjust`] measured the adjustment here with
-    /// the search's integrator, it is measured again with the chosen one:
+    /// search's. Where a stage allowed for memory here, the independent
+    /// posterior's intervals ([`Start::independent`]) are its Laplace
+    /// approximation at its mode with the chosen integrator. Where
+    /// [`Stages::adjust`] measured the adjustment here with the search's
+    /// integrator, it is measured again with the chosen one:
     /// centred on the independent posterior's mode (Newton's method from
     /// its MAP), whose Laplace approximation gives the intervals the
     /// records would have if their residuals were independent, and the
@@ -436,23 +439,32 @@ impl Stages<'_> {
         map: MapEstimate,
         log: &mut dyn FnMut(&str),
     ) -> (Posterior, MapEstimate, Option<Elliptical>) {
+        let unsettled = self.unsettled.take();
+        // the independent posterior's mode and Laplace approximation with
+        // the chosen integrator, by Newton's method from the search's MAP
+        // (one step reaches it where the step rule moved it by a sd or
+        // two); its intervals are what the records would say if their
+        // residuals were independent (the search's surrogate lies up to 4
+        // of its sds from that mode in G where the noise depends on θ)
+        let plain = posterior.without_adjustment();
+        let settled = unsettled.map(|searched| {
+            let mode = laplace::mode(&plain, &searched);
+            let independent = mode
+                .as_ref()
+                .map_or_else(|| laplace::surrogate(&plain, &searched), |m| m.laplace.clone());
+            self.independent =
+                laplace::si_intervals(&plain, &independent, self.settings.sampler.seed);
+            (searched, mode, independent)
+        });
         let adjusted = self.settings.likelihood.adjustment().is_some();
-        let Some(searched) = self.unsettled.take().filter(|_| adjusted) else {
+        let Some((independent_map, mode, independent)) = settled.filter(|_| adjusted) else {
             let map = match posterior.integrator != self.base {
                 true => map::refine(&posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map),
                 false => map,
             };
             return (posterior, map, None);
         };
-        let plain = posterior.without_adjustment();
-        // Newton's method from the search's MAP: one step reaches the
-        // chosen integrator's mode where the step rule moved it by a sd or two
-        let independent_map = searched;
-        let (centre, independent) = match laplace::mode(&plain, &independent_map) {
-            Some(m) => (m.x, m.laplace),
-            None => (independent_map.x.clone(), laplace::surrogate(&plain, &independent_map)),
-        };
-        self.independent = laplace::si_intervals(&plain, &independent, self.settings.sampler.seed);
+        let centre = mode.map_or_else(|| independent_map.x.clone(), |m| m.x);
         if let Some(adjustment) = memory::adjustment(&plain, &independent_map, &centre) {
             self.settings.likelihood.memory_adjustment = Some(adjustment);
         }
