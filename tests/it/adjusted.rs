@@ -535,7 +535,7 @@ fn the_derived_laplace_approximation_holds_on_every_measured_posterior() {
     }
     let mut worst = (0.0f64, 0.0f64);
     for campaign in &cases {
-        let s = start(&campaign, &CalibrationSettings::default(), &mut |_| {}).unwrap();
+        let s = start(campaign, &CalibrationSettings::default(), &mut |_| {}).unwrap();
         let Some(derived) = s.laplace.clone() else {
             assert_ne!(
                 s.settings.likelihood.memory,
