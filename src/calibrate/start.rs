@@ -428,11 +428,11 @@ impl Stages<'_> {
     /// centred on the independent posterior's mode (Newton's method from
     /// its MAP), whose Laplace approximation gives the intervals the
     /// records would have if their residuals were independent, and the
-    /// adjusted posterior's own ([`laplace::adjusted`]). A step rule that
-    /// asks for a finer step than the search's moves that mode, and the
-    /// adjusted posterior C⁻¹ times as far: at 0.25 A on the measured
-    /// records, centred with the search's step its mean lay 0.3–0.9 sd from
-    /// where this puts it (docs/calibration.md).
+    /// adjusted posterior's own ([`laplace::adjusted_mode`]). A step rule
+    /// that asks for a finer step than the search's moves that mode, and
+    /// the adjusted posterior C⁻¹ times as far: on the measured records,
+    /// centred with the search's step its parameters lay up to 0.3–1.1 sd
+    /// from where this puts them (docs/calibration.md).
     fn settle(
         &mut self,
         posterior: Posterior,

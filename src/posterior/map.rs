@@ -51,7 +51,7 @@ impl MapEstimate {
 
     /// This estimate moved to `x` (every coordinate), where the posterior's
     /// log-density is `log_density`: a mode reached otherwise than by the
-    /// search ([`super::laplace::adjusted`]); the search's curvature kept.
+    /// search ([`super::laplace::adjusted_mode`]); the search's curvature kept.
     pub fn moved_to(&self, x: Vec<f64>, log_density: f64) -> MapEstimate {
         MapEstimate { x, log_density, ..self.clone() }
     }

@@ -456,7 +456,13 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         // B-P on Spencer's records without their 200 rpm run)
         let (posterior, laplace) = match adjusted {
             true => {
-                let (posterior, independent) = recentred(&posterior, &start).ok_or_else(|| Error::Compute(format!("leave-one-out without {}: the mode of the independent likelihood was not found", left_out.id())))?;
+                let (posterior, independent) =
+                    recentred(&posterior, &start).ok_or_else(|| {
+                        Error::Compute(format!(
+                            "leave-one-out without {}: the mode of the independent likelihood was not found",
+                            left_out.id()
+                        ))
+                    })?;
                 match laplace::adjusted_mode(&posterior, &independent) {
                     Some(mode) => (posterior, mode.laplace),
                     None => {
