@@ -390,9 +390,8 @@ impl Stages<'_> {
 
     /// With the adjusted likelihood ([`Memory::Adjusted`]): the curvature
     /// adjustment measured at `map`, the MAP of the independent likelihood
-    /// (where not set already), written into the settings, and that MAP as
-    /// the adjusted posterior sees it ([`MapEstimate::adjusted`]; searched
-    /// again where it cannot be derived): what the step rule needs;
+    /// (where not set already), written into the settings, and the MAP
+    /// searched again on the adjusted posterior: what the step rule needs;
     /// [`Stages::settle`] measures it again with the integrator chosen.
     /// Otherwise `posterior` and `map` as they are.
     fn adjust(
@@ -416,11 +415,7 @@ impl Stages<'_> {
         })?;
         self.settings.likelihood.memory_adjustment = Some(adjustment);
         self.unsettled = Some(map.clone());
-        let posterior = self.posterior();
-        match map.adjusted(&posterior) {
-            Some(map) => Ok((posterior, map)),
-            None => self.searched_again(&map, "the adjusted likelihood"),
-        }
+        self.searched_again(&map, "the adjusted likelihood")
     }
 
     /// The MAP `map` of `posterior` (the integrator chosen; the search's

@@ -56,45 +56,6 @@ impl MapEstimate {
         MapEstimate { x, log_density, ..self.clone() }
     }
 
-    /// This estimate of the independent likelihood's posterior as the
-    /// adjusted one `post` sees it where the adjustment is centred on its
-    /// point (x* = x there): the same point, log-density and whitening, the
-    /// Jacobian's rows that the likelihood gives (each run's residuals and
-    /// log-variance terms, evaluated at x*) through T (C on θ, the identity
-    /// on the model terms), the priors' rows as they are (evaluated at x),
-    /// and the Gauss-Newton covariance of that Jacobian: what the step rule
-    /// reads, without a search (the adjusted optimum lies a Gauss-Newton
-    /// step away; the step rule's shift is local). `None` where `post` has
-    /// no adjustment in its own coordinates centred here, or the covariance
-    /// is singular.
-    pub fn adjusted(&self, post: &Posterior) -> Option<MapEstimate> {
-        let a = post.likelihood.adjustment()?;
-        let l = &post.layout;
-        let (nt, nf) = (l.theta.len(), l.fitted.len());
-        let centred = l.theta.start == 0
-            && a.centre.len() == nt
-            && a.centre.iter().zip(&self.x[..nt]).all(|(u, v)| u == v)
-            && a.coordinates == l.theta_names();
-        if !centred || self.jacobian.ncols() != nf {
-            return None;
-        }
-        let priors = post.priors.iter().filter(|p| p.centre().is_some()).count()
-            + l.spring.len()
-            + l.offset.len();
-        let rows = self.jacobian.nrows().checked_sub(priors)?;
-        let mut t = DMatrix::<f64>::identity(nf, nf);
-        for (i, row) in a.matrix.iter().enumerate() {
-            for (j, v) in row.iter().enumerate() {
-                t[(i, j)] = *v;
-            }
-        }
-        let mut jacobian = self.jacobian.clone();
-        let moved = self.jacobian.rows(0, rows) * &t;
-        jacobian.rows_mut(0, rows).copy_from(&moved);
-        let cov = (jacobian.transpose() * &jacobian).try_inverse()?;
-        Some(MapEstimate { cov, jacobian, ..self.clone() })
-    }
-
     /// The Jacobian of the whitened residuals at the MAP: each run's
     /// residuals in order, then the runs' log-variance terms (if any), then
     /// the priors' pseudo-residuals; a column per fitted coordinate.

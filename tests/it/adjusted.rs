@@ -566,32 +566,3 @@ fn the_derived_laplace_approximation_holds_on_every_measured_posterior() {
     println!("worst: means {:.3} sd apart, sds {:.3} off", worst.0, worst.1);
     assert!(worst.0 < 0.25 && worst.1 < 0.25, "{worst:?}");
 }
-
-/// What the step rule reads of the adjusted posterior, the MAP estimate's
-/// spread, is derived from the independent likelihood's MAP where the
-/// adjustment is centred on it (`MapEstimate::adjusted`: the likelihood's
-/// Jacobian rows through C) instead of searched again: on the measured
-/// 0.25 A records its sds are those of a Levenberg-Marquardt search on the
-/// adjusted posterior within 10 % (measured: 2.9 % at most, in m1); both
-/// measure the same Gauss-Newton curvature, a Gauss-Newton step apart.
-#[test]
-fn the_step_rules_view_of_the_adjusted_posterior_is_derived() {
-    use mrbp::posterior::{map, memory};
-    let manifest =
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/utfsm-mts/campaign.toml");
-    let campaign = Campaign::load(&manifest).unwrap().at_current(0.25);
-    let s = start(&campaign, &CalibrationSettings::default(), &mut |_| {}).unwrap();
-    let plain = s.posterior.without_adjustment();
-    let fitted = plain.layout.fitted.clone();
-    let found = map::refine(&plain, &s.searched.x[fitted.clone()]).expect("searched");
-    let mut settings = s.settings.clone();
-    settings.likelihood.memory_adjustment =
-        Some(memory::adjustment(&plain, &found, &found.x).expect("measured"));
-    let post = settings.posterior(&campaign, plain.integrator);
-    let derived = found.adjusted(&post).expect("derived");
-    let searched = map::refine(&post, &found.x[fitted]).expect("searched");
-    let (d, n) = (derived.sd(), searched.sd());
-    let worst = d.iter().zip(&n).map(|(a, b)| (a / b - 1.0).abs()).fold(0.0, f64::max);
-    println!("sds {d:?} against {n:?}: {worst:.3} apart at most");
-    assert!(worst < 0.1, "{worst}");
-}
