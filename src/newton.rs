@@ -336,6 +336,26 @@ fn offset(z: &DVector<f64>, moves: &[(usize, f64)]) -> DVector<f64> {
     y
 }
 
+/// The gradient and Hessian of `target` at `at`'s mean in the coordinates
+/// z it whitens (x = mean + L z), by the central differences Newton's
+/// method takes; `None` where the log-density there is not finite or a
+/// difference leaves the support.
+pub fn derivatives(
+    target: &impl LogDensity,
+    at: &Elliptical,
+) -> Option<(DVector<f64>, DMatrix<f64>)> {
+    let w = Whitened::new(target, at);
+    let z = DVector::zeros(at.dim());
+    let f = w.at(std::slice::from_ref(&z))[0];
+    if !f.is_finite() {
+        return None;
+    }
+    let mut held = vec![false; at.dim()];
+    let g = w.gradient(&z, &mut held);
+    let h = w.hessian(&z, f, &mut held);
+    (!held.contains(&true)).then_some((g, h))
+}
+
 /// The inverse of the negated Hessian `hess`, every eigenvalue of −hess
 /// held at [`MIN_CURVATURE`] or above (whitened coordinates).
 pub fn covariance(hess: &DMatrix<f64>) -> DMatrix<f64> {

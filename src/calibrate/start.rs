@@ -439,7 +439,16 @@ impl Stages<'_> {
         map: MapEstimate,
         log: &mut dyn FnMut(&str),
     ) -> (Posterior, MapEstimate, Option<Elliptical>) {
-        let unsettled = self.unsettled.take();
+        // the MAP with the chosen integrator, from the one found
+        let moved =
+            |posterior: &Posterior, map: MapEstimate| match posterior.integrator != self.base {
+                true => map::refine(posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map),
+                false => map,
+            };
+        let Some(independent_map) = self.unsettled.take() else {
+            let map = moved(&posterior, map);
+            return (posterior, map, None);
+        };
         // the independent posterior's mode and Laplace approximation with
         // the chosen integrator, by Newton's method from the search's MAP
         // (one step reaches it where the step rule moved it by a sd or
@@ -447,23 +456,15 @@ impl Stages<'_> {
         // residuals were independent (the search's surrogate lies up to 4
         // of its sds from that mode in G where the noise depends on θ)
         let plain = posterior.without_adjustment();
-        let settled = unsettled.map(|searched| {
-            let mode = laplace::mode(&plain, &searched);
-            let independent = mode
-                .as_ref()
-                .map_or_else(|| laplace::surrogate(&plain, &searched), |m| m.laplace.clone());
-            self.independent =
-                laplace::si_intervals(&plain, &independent, self.settings.sampler.seed);
-            (searched, mode, independent)
-        });
-        let adjusted = self.settings.likelihood.adjustment().is_some();
-        let Some((independent_map, mode, independent)) = settled.filter(|_| adjusted) else {
-            let map = match posterior.integrator != self.base {
-                true => map::refine(&posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map),
-                false => map,
-            };
+        let mode = laplace::mode(&plain, &independent_map);
+        let independent = mode
+            .as_ref()
+            .map_or_else(|| laplace::surrogate(&plain, &independent_map), |m| m.laplace.clone());
+        self.independent = laplace::si_intervals(&plain, &independent, self.settings.sampler.seed);
+        if self.settings.likelihood.adjustment().is_none() {
+            let map = moved(&posterior, map);
             return (posterior, map, None);
-        };
+        }
         let centre = mode.map_or_else(|| independent_map.x.clone(), |m| m.x);
         if let Some(adjustment) = memory::adjustment(&plain, &independent_map, &centre) {
             self.settings.likelihood.memory_adjustment = Some(adjustment);

@@ -111,9 +111,9 @@ fn bulk_spread(post: &Posterior, q: &Elliptical) -> Option<(Elliptical, f64)> {
 /// prior's, the adjusted likelihood's is TᵀHT (T is C on θ, the identity
 /// on the noise and the model terms), and the prior's is added back; the
 /// mode is one Newton step from c, where the likelihood's score balances
-/// the prior's. The prior's derivatives are central differences in the
-/// coordinates `independent` whitens (the steps Newton's method takes),
-/// which integrate nothing. `None` where `post` is not adjusted in its own
+/// the prior's. The prior's derivatives are Newton's method's central
+/// differences in the coordinates `independent` whitens
+/// ([`crate::newton::derivatives`]), which integrate nothing. `None` where `post` is not adjusted in its own
 /// coordinates about `independent`'s mean, or a difference leaves the
 /// prior's support: the caller goes on by Newton's method.
 fn adjusted(post: &Posterior, independent: &Elliptical) -> Option<Elliptical> {
@@ -129,7 +129,7 @@ fn adjusted(post: &Posterior, independent: &Elliptical) -> Option<Elliptical> {
         return None;
     }
     let l = independent.factor();
-    let (g, h) = prior_derivatives(post, independent)?;
+    let (g, h) = crate::newton::derivatives(&LogPrior(post), independent)?;
     let mut t = DMatrix::<f64>::identity(d, d);
     for (i, row) in a.matrix.iter().enumerate() {
         for (j, v) in row.iter().enumerate() {
@@ -151,38 +151,18 @@ fn adjusted(post: &Posterior, independent: &Elliptical) -> Option<Elliptical> {
     Some(Elliptical::from_factor(&independent.mean + l * step, factor))
 }
 
-/// Finite-difference steps of [`prior_derivatives`] in whitened
-/// coordinates, as [`crate::newton`] takes them.
-const PRIOR_GRADIENT_STEP: f64 = 0.05;
-const PRIOR_HESSIAN_STEP: f64 = 0.25;
+/// The log-prior of a posterior as a density of its own: what
+/// [`adjusted`] differentiates (no integration).
+struct LogPrior<'a>(&'a Posterior);
 
-/// The gradient and Hessian of `post`'s log-prior at `at`'s mean, in the
-/// coordinates z of x = mean + L z (L `at`'s factor), by central
-/// differences; `None` where one leaves the prior's support.
-fn prior_derivatives(post: &Posterior, at: &Elliptical) -> Option<(DVector<f64>, DMatrix<f64>)> {
-    let d = at.dim();
-    let f = |moves: &[(usize, f64)]| {
-        let mut z = vec![0.0; d];
-        for &(i, s) in moves {
-            z[i] += s;
-        }
-        post.log_prior(&at.point(&z, 1.0))
-    };
-    let f0 = f(&[]);
-    let (hg, hh) = (PRIOR_GRADIENT_STEP, PRIOR_HESSIAN_STEP);
-    let mut g = DVector::zeros(d);
-    let mut h = DMatrix::zeros(d, d);
-    for i in 0..d {
-        g[i] = (f(&[(i, hg)]) - f(&[(i, -hg)])) / (2.0 * hg);
-        h[(i, i)] = (f(&[(i, hh)]) - 2.0 * f0 + f(&[(i, -hh)])) / (hh * hh);
-        for j in 0..i {
-            let v = (f(&[(i, hh), (j, hh)]) - f(&[(i, hh), (j, -hh)]) - f(&[(i, -hh), (j, hh)])
-                + f(&[(i, -hh), (j, -hh)]))
-                / (4.0 * hh * hh);
-            (h[(i, j)], h[(j, i)]) = (v, v);
-        }
+impl LogDensity for LogPrior<'_> {
+    fn dim(&self) -> usize {
+        self.0.dim()
     }
-    (g.iter().chain(h.iter()).all(|v| v.is_finite())).then_some((g, h))
+
+    fn log_density(&self, x: &[f64]) -> f64 {
+        self.0.log_prior(x)
+    }
 }
 
 /// The Laplace approximation of the MAP search's surrogate: a Gaussian around the
