@@ -5,7 +5,8 @@
 //! [`ModelTerms`] that are on (the gas-spring stiffness, a force offset per
 //! run), then the noise model's parameters, one block per parameter with a
 //! coordinate per run (every σ, then every ρ, …). The sampler walks θ in its
-//! [`Coordinates`] (ln θ, with the stresses recombined), the terms as they are and each
+//! [`Coordinates`] (ln θ, with the stresses recombined; another law's
+//! parameters as ln(θ − floor), [`Layout::floors`]), the terms as they are and each
 //! noise parameter in its [`Transform`]; outputs use θ, the terms and the
 //! noise in SI units under the names `G` … (or a law's),
 //! `gas_spring_n_per_m`, `force_offset_n_<run>`, `sigma_<run>`, `rho_<run>`, ….
@@ -140,6 +141,12 @@ pub struct Layout {
     /// [`Self::harden`]); where set, `share` is not walked but kept for
     /// the MAP search ([`Self::searched`]).
     hardening: Option<Hardening>,
+    /// The θ coordinates walked as ln(θ − floor) (θ's position, the
+    /// floor: [`ParameterModel::floors`]), so that a posterior that presses
+    /// the lower end of a parameter's range (Bouc-Wen's n at 1, Spencer's
+    /// k0 at 0.01 N/m on the measured records at 0.25 and 0.5 A) meets a
+    /// tail that thins like e^u rather than a wall the walkers pile against.
+    floors: Vec<(usize, f64)>,
 }
 
 /// ln(1 + eᵛ), without overflow.
@@ -151,6 +158,24 @@ fn softplus(v: f64) -> f64 {
 /// share (Jacobian 1).
 fn sum_and_share(log_a: f64, log_b: f64) -> (f64, f64) {
     (log_a.max(log_b) + softplus(-(log_a - log_b).abs()), log_b - log_a)
+}
+
+/// ln θ of θ = floor + eᵘ, without overflow (u itself for a floor of 0).
+fn above_floor(u: f64, floor: f64) -> f64 {
+    match floor > 0.0 {
+        true => floor.ln() + softplus(u - floor.ln()),
+        false => u,
+    }
+}
+
+/// u = ln(θ − floor) of ln θ = `log` (inverse of [`above_floor`]); a θ at
+/// its floor, where a start may be clamped to its range, is placed a
+/// relative 1e-9 above it.
+fn below_floor(log: f64, floor: f64) -> f64 {
+    match floor > 0.0 {
+        true => floor.ln() + (log - floor.ln()).exp_m1().max(1e-9).ln(),
+        false => log,
+    }
 }
 
 /// ln a and ln b of their sum and share (inverse of [`sum_and_share`]).
@@ -193,6 +218,7 @@ impl Layout {
                 Coordinates::SaturationShare | Coordinates::Hardening => model.saturation_pairs(),
             },
             hardening: None,
+            floors: model.floors(),
         }
     }
 
@@ -232,7 +258,18 @@ impl Layout {
     /// the priors, densities of ln θ, need to be densities of the
     /// coordinates (0 but for [`Coordinates::Hardening`]).
     pub fn log_jacobian(&self, x: &[f64], log_theta: &[f64]) -> f64 {
-        self.hardening.map_or(0.0, |h| h.log_jacobian(x, log_theta))
+        let floors: f64 = self.floors.iter().map(|&(i, _)| x[i] - log_theta[i]).sum();
+        floors + self.hardening.map_or(0.0, |h| h.log_jacobian(x, log_theta))
+    }
+
+    /// Residuals whose squares add −2 × the floors' part of
+    /// [`Self::log_jacobian`] to a least-squares search's −2 ln p: √(2 (ln θ
+    /// − u)) for each coordinate walked above its floor (ln θ ≥ u there).
+    /// Without them the search would seek the mode of ln θ's density, at
+    /// the floor where the posterior presses it, not the coordinates' mode
+    /// the sampler and the Laplace approximation need.
+    pub fn floor_residuals(&self, x: &[f64], log_theta: &[f64]) -> Vec<f64> {
+        self.floors.iter().map(|&(i, _)| (2.0 * (log_theta[i] - x[i]).max(0.0)).sqrt()).collect()
     }
 
     /// The noise parameter at coordinate `i` (in the noise block), and its run.
@@ -326,6 +363,9 @@ impl Layout {
                 _ => format!("ln {n}"),
             })
             .collect();
+        for &(i, floor) in &self.floors {
+            names[i] = format!("ln ({} − {floor})", self.names[i]);
+        }
         match &self.hardening {
             Some(h) => {
                 names[h.r0] = "ln (R0 + D1)".to_string();
@@ -354,6 +394,9 @@ impl Layout {
                 }
             }
         }
+        for &(i, floor) in &self.floors {
+            log[i] = above_floor(x[i], floor);
+        }
         log
     }
 
@@ -367,6 +410,9 @@ impl Layout {
                     (x[r1], x[d1]) = sum_and_share(log_theta[r1], log_theta[d1]);
                 }
             }
+        }
+        for &(i, floor) in &self.floors {
+            x[i] = below_floor(log_theta[i], floor);
         }
         x
     }
@@ -597,5 +643,59 @@ mod tests {
         x[2] = (2.5e4f64).ln();
         assert_eq!(l.log_theta(&x)[2], f64::NEG_INFINITY);
         assert_eq!(l.coordinate_names()[2], "ln (R + D after 4.000e6 Pa of work)");
+    }
+
+    /// Another law's parameters walk ln(θ − floor), the floor the lower
+    /// end of each one's range: u = ln(θ − floor) computed here directly,
+    /// the map inverts (also a parameter a hair above its floor), its
+    /// log-Jacobian is ln |det ∂ ln θ / ∂u| by central differences, and a
+    /// θ clamped to its floor maps just above it, inside the support.
+    #[test]
+    fn a_laws_parameters_walk_above_their_floors() {
+        use crate::laws::LawKind;
+        let runs = vec!["a".to_string()];
+        let model = ParameterModel::Law { law: LawKind::BoucWen };
+        let l = Layout::new(
+            &model,
+            &runs,
+            NoiseKind::Gaussian.model(&NoiseOptions::default()).as_ref(),
+            Coordinates::Log,
+            &ModelTerms::default(),
+        );
+        let floors: Vec<f64> =
+            LawKind::BoucWen.law().parameters().iter().map(|p| p.range.0).collect();
+        assert_eq!(floors[4], 1.0, "n's floor");
+        for si in
+            [[4.9e3, 1.06e3, 2.8e3, 63.0, 2.4, 2e3], [3.3e3, 590.0, 8.3e3, 9.8, 1.0004, 900.0]]
+        {
+            let x = l.from_si(&si);
+            for k in 0..5 {
+                assert!((x[k] - (si[k] - floors[k]).ln()).abs() < 1e-9, "{k}: {}", x[k]);
+            }
+            for (a, b) in l.to_si(&x).iter().zip(&si) {
+                assert!((a / b - 1.0).abs() < 1e-12, "{a} vs {b}");
+            }
+            let h = 1e-5;
+            let jac = nalgebra::DMatrix::from_fn(5, 5, |i, j| {
+                let (mut up, mut down) = (x.clone(), x.clone());
+                up[j] += h;
+                down[j] -= h;
+                (l.log_theta(&up)[i] - l.log_theta(&down)[i]) / (2.0 * h)
+            });
+            let det = jac.determinant().abs().ln();
+            let lj = l.log_jacobian(&x, &l.log_theta(&x));
+            assert!((det - lj).abs() < 1e-6, "finite differences {det}, log_jacobian {lj}");
+        }
+        let x = l.from_si(&[4.9e3, 1.06e3, 2.8e3, 63.0, 1.0, 2e3]);
+        assert!(x[4].is_finite() && l.to_si(&x)[4] > 1.0);
+        assert_eq!(l.coordinate_names()[4], "ln (n − 1)");
+        let bp = Layout::new(
+            &ParameterModel::PerCurrent,
+            &runs,
+            NoiseKind::Gaussian.model(&NoiseOptions::default()).as_ref(),
+            Coordinates::Log,
+            &ModelTerms::default(),
+        );
+        assert_eq!(bp.from_si(&[2e5, 1e5, 2e5, 3e4, 1e-5, 1e-3, 0.6, 1e3])[6], 0.6f64.ln());
     }
 }

@@ -183,8 +183,9 @@ enum Support {
 /// optimum is not the likelihood's: with the discrepancy model on the
 /// measured 0.5 A records it stopped 105 nats below where it now does,
 /// docs/performance.md),
-/// then (ln θ − centre)/scale for every log-normal prior and value/sd for
-/// every term's: their squares sum to −2 ln p up to a constant, at the
+/// then (ln θ − centre)/scale for every log-normal prior, the coordinates'
+/// Jacobian where they walk above a floor ([`Layout::floor_residuals`]),
+/// and value/sd for every term's: their squares sum to −2 ln p up to a constant, at the
 /// noise the search holds. With [`Support::Truncated`], points outside
 /// the prior support are infeasible.
 fn whiten(
@@ -226,6 +227,7 @@ fn whiten(
         }
     }
     let l = &post.layout;
+    out.extend(l.floor_residuals(x, &log_theta));
     out.extend(x[l.spring.clone()].iter().map(|v| v / post.terms.gas_spring_sd_n_per_m));
     out.extend(x[l.offset.clone()].iter().map(|v| v / post.terms.force_offset_sd_n));
     Some(out)

@@ -171,6 +171,19 @@ impl ParameterModel {
         Ok(())
     }
 
+    /// Where θ's coordinates are walked above a floor (θ's position, the
+    /// floor): every parameter of a law other than B-P, at the lower end
+    /// of its physical range ([`super::Layout`] walks ln(θ − floor)). The
+    /// B-P law's models walk ln θ.
+    pub fn floors(&self) -> Vec<(usize, f64)> {
+        match self {
+            ParameterModel::Law { law } => {
+                law.law().parameters().iter().map(|p| p.range.0).enumerate().collect()
+            }
+            _ => Vec::new(),
+        }
+    }
+
     /// The damper law whose parameters θ gives.
     pub fn law(&self) -> LawKind {
         match self {

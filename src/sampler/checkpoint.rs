@@ -11,7 +11,9 @@ use super::settings::SamplerSettings;
 use crate::atomic;
 use crate::error::{Error, Result};
 
-const FORMAT: &str = "mrbp-sampler-checkpoint-1";
+/// 2: the parameters of a law other than B-P are walked above their
+/// floors (`posterior::Layout`), so the walkers of format 1 sit elsewhere.
+const FORMAT: &str = "mrbp-sampler-checkpoint-2";
 
 /// The file of sequential Monte Carlo's finished populations
 /// ([`super::smc::checkpoint`]), beside the sampler's in a calibration

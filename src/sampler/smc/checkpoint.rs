@@ -15,7 +15,8 @@ use super::{Population, Reference, SmcSettings};
 use crate::error::{Error, Result};
 use crate::sampler::checkpoint::{read_framed, write_framed};
 
-const FORMAT: &str = "mrbp-smc-checkpoint-1";
+/// 2: as the sampler's format 2, a law's parameters walk above their floors.
+const FORMAT: &str = "mrbp-smc-checkpoint-2";
 
 /// What the populations were made from: the target's dimension, the
 /// reference (its mean, scale factor and degrees of freedom: the start's
