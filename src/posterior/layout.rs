@@ -559,6 +559,22 @@ mod tests {
         assert_eq!((t.to_si(&x)[8], t.from_si(&t.to_si(&x))[9]), (5.0, 6.0));
     }
 
+    /// `log_jacobian` of `l` at `x` equals ln |det ∂ ln θ / ∂x| over the
+    /// first `n` coordinates (the θ block) by central differences (error
+    /// O(h²) ≈ 1e-8).
+    fn jacobian_by_differences(l: &Layout, x: &[f64], n: usize) {
+        let h = 1e-5;
+        let jac = nalgebra::DMatrix::from_fn(n, n, |i, j| {
+            let (mut up, mut down) = (x.to_vec(), x.to_vec());
+            up[j] += h;
+            down[j] -= h;
+            (l.log_theta(&up)[i] - l.log_theta(&down)[i]) / (2.0 * h)
+        });
+        let det = jac.determinant().abs().ln();
+        let lj = l.log_jacobian(x, &l.log_theta(x));
+        assert!((det - lj).abs() < 1e-6, "finite differences {det}, log_jacobian {lj}");
+    }
+
     /// Saturation-share coordinates: R1 + D1 and ln(D1/R1) at their places,
     /// the map inverts, and its Jacobian determinant is 1 (finite
     /// differences), so densities of ln θ need no correction.
@@ -628,16 +644,7 @@ mod tests {
             for (a, b) in l.to_si(&x).iter().zip(&si) {
                 assert!((a / b - 1.0).abs() < 1e-9, "{a} vs {b}");
             }
-            let h = 1e-5;
-            let jac = nalgebra::DMatrix::from_fn(7, 7, |i, j| {
-                let (mut up, mut down) = (x.clone(), x.clone());
-                up[j] += h;
-                down[j] -= h;
-                (l.log_theta(&up)[i] - l.log_theta(&down)[i]) / (2.0 * h)
-            });
-            let det = jac.determinant().abs().ln();
-            let lj = l.log_jacobian(&x, &l.log_theta(&x));
-            assert!((det - lj).abs() < 1e-6, "finite differences {det}, log_jacobian {lj}");
+            jacobian_by_differences(&l, &x, 7);
         }
         let mut x = l.from_si(&[2e5, 5e4, 1.3e5, 2.5e4, 1.2e-8, 2e-3, 0.33, 300.0]);
         x[2] = (2.5e4f64).ln();
@@ -675,16 +682,7 @@ mod tests {
             for (a, b) in l.to_si(&x).iter().zip(&si) {
                 assert!((a / b - 1.0).abs() < 1e-12, "{a} vs {b}");
             }
-            let h = 1e-5;
-            let jac = nalgebra::DMatrix::from_fn(5, 5, |i, j| {
-                let (mut up, mut down) = (x.clone(), x.clone());
-                up[j] += h;
-                down[j] -= h;
-                (l.log_theta(&up)[i] - l.log_theta(&down)[i]) / (2.0 * h)
-            });
-            let det = jac.determinant().abs().ln();
-            let lj = l.log_jacobian(&x, &l.log_theta(&x));
-            assert!((det - lj).abs() < 1e-6, "finite differences {det}, log_jacobian {lj}");
+            jacobian_by_differences(&l, &x, 5);
         }
         let x = l.from_si(&[4.9e3, 1.06e3, 2.8e3, 63.0, 1.0, 2e3]);
         assert!(x[4].is_finite() && l.to_si(&x)[4] > 1.0);
