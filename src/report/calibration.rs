@@ -599,6 +599,9 @@ fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut
     if let Some(warning) = super::text::new_tests_unfit(rows) {
         page.para(&format!("Not a band: {warning}."));
     }
+    if let Some(warning) = super::text::new_tests_too_wide(rows) {
+        page.para(&format!("Wider than the force: {warning}."));
+    }
 }
 
 fn figures_section(page: &mut Page, cal: &Calibration, figs: &Figures) -> Result<()> {
