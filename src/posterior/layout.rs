@@ -23,7 +23,7 @@ use crate::noise::{NoiseModel, NoiseValues, Parameter, Transform, MAX_PARAMETERS
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum Coordinates {
-    /// ln θ.
+    /// ln θ (another law's parameters: ln(θ − floor), see [`Layout`]).
     Log,
     /// ln θ, but R1 and D1 as ln(R1 + D1), the saturated stress the records
     /// pin down, and logit of D1's share of it, ln(D1/R1), which they may
@@ -143,8 +143,8 @@ pub struct Layout {
     hardening: Option<Hardening>,
     /// The θ coordinates walked as ln(θ − floor) (θ's position, the
     /// floor: [`ParameterModel::floors`]), so that a posterior that presses
-    /// the lower end of a parameter's range (Bouc-Wen's n at 1, Spencer's
-    /// k0 at 0.01 N/m on the measured records at 0.25 and 0.5 A) meets a
+    /// the lower end of a parameter's range (on the measured records
+    /// Bouc-Wen's n at 1 at 0.25 and 0.5 A, Spencer's k0 at 0.01 N/m) meets a
     /// tail that thins like e^u rather than a wall the walkers pile against.
     floors: Vec<(usize, f64)>,
 }
@@ -256,7 +256,8 @@ impl Layout {
 
     /// ln |∂ ln θ / ∂ coordinates| at the sampler's coordinates `x`: what
     /// the priors, densities of ln θ, need to be densities of the
-    /// coordinates (0 but for [`Coordinates::Hardening`]).
+    /// coordinates (0 but for [`Coordinates::Hardening`] and a law's
+    /// parameters walked above their floors).
     pub fn log_jacobian(&self, x: &[f64], log_theta: &[f64]) -> f64 {
         let floors: f64 = self.floors.iter().map(|&(i, _)| x[i] - log_theta[i]).sum();
         floors + self.hardening.map_or(0.0, |h| h.log_jacobian(x, log_theta))
