@@ -137,9 +137,10 @@ fn start_with(
     }
     // ln θ from the identification (the B-P law) or the starts another
     // law reads off the records; either may be far off
-    // (docs/identification.md): also from the prior medians, and the best
+    // (docs/identification.md): also from the prior medians (beside a
+    // single start, or where no start's search converges), and the best
     // optimum is kept
-    let mut from_records: Vec<Vec<f64>> = match &identification {
+    let from_records: Vec<Vec<f64>> = match &identification {
         Some(id) if law.is_bodner_partom() => {
             vec![model.start(&id.params, current_a).iter().map(|v| v.ln()).collect()]
         }
@@ -160,24 +161,22 @@ fn start_with(
         .zip(&from_records[0])
         .map(|(p, v)| p.centre().map(|(c, _)| c).unwrap_or(*v))
         .collect();
-    from_records.push(medians);
     // θ from each, the model terms (if any) from zero
     let fitted = posterior.layout.fitted.len();
-    let starts: Vec<Vec<f64>> = from_records
-        .into_iter()
-        .map(|log| {
-            let mut x = posterior.layout.theta_coordinates(&log);
-            x.resize(fitted, 0.0);
-            x
-        })
-        .collect();
+    let at = |log: &[f64]| {
+        let mut x = posterior.layout.theta_coordinates(log);
+        x.resize(fitted, 0.0);
+        x
+    };
+    let medians = at(&medians);
+    let starts: Vec<Vec<f64>> = from_records.iter().map(|log| at(log)).collect();
     let map = match refused {
         Some((_, searched)) => searched.clone(),
-        None => map::best_map(&posterior, &starts)
+        None => map::best_map_or(&posterior, &starts, &medians)
             .ok_or_else(|| Error::Compute("the MAP search failed from every start".into()))?,
     };
     let searched = map.clone();
-    let law_alone = stages.law_alone_rms(&posterior, &starts);
+    let law_alone = stages.law_alone_rms(&posterior, &starts, &medians);
     let (posterior, found) = stages.choose_memory(posterior, &map);
     let (posterior, map) = stages.temper(posterior, map, log)?;
     let (posterior, map, failed) = match found {
@@ -314,7 +313,7 @@ impl Stages<'_> {
     fn searched_again(&self, map: &MapEstimate, what: &str) -> Result<(Posterior, MapEstimate)> {
         let posterior = self.posterior();
         let x = map.x[..posterior.layout.fitted.len()].to_vec();
-        let map = map::refine(&posterior, &x)
+        let map = map::refine_near(&posterior, &x)
             .ok_or_else(|| Error::Compute(format!("the MAP search of {what} failed")))?;
         Ok((posterior, map))
     }
@@ -440,11 +439,12 @@ impl Stages<'_> {
         log: &mut dyn FnMut(&str),
     ) -> (Posterior, MapEstimate, Option<Elliptical>) {
         // the MAP with the chosen integrator, from the one found
-        let moved =
-            |posterior: &Posterior, map: MapEstimate| match posterior.integrator != self.base {
-                true => map::refine(posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map),
-                false => map,
-            };
+        let moved = |posterior: &Posterior, map: MapEstimate| match posterior.integrator
+            != self.base
+        {
+            true => map::refine_near(posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map),
+            false => map,
+        };
         let Some(independent_map) = self.unsettled.take() else {
             let map = moved(&posterior, map);
             return (posterior, map, None);
@@ -482,8 +482,9 @@ impl Stages<'_> {
                 (posterior, map, Some(mode.laplace))
             }
             None => {
-                let map =
-                    map::refine(&posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map);
+                let map = map::refine_near(&posterior, &map.x)
+                    .map(|m| map.curvature_at(m))
+                    .unwrap_or(map);
                 (posterior, map, None)
             }
         }
@@ -493,7 +494,12 @@ impl Stages<'_> {
     /// independent Gaussian noise (the law alone, no force of the noise's
     /// own), from the same `starts`; `None` where the noise model has no
     /// force of its own (it does not model memory) or the search fails.
-    fn law_alone_rms(&self, posterior: &Posterior, starts: &[Vec<f64>]) -> Option<Vec<f64>> {
+    fn law_alone_rms(
+        &self,
+        posterior: &Posterior,
+        starts: &[Vec<f64>],
+        medians: &[f64],
+    ) -> Option<Vec<f64>> {
         if !posterior.noise.models_memory() {
             return None;
         }
@@ -502,9 +508,9 @@ impl Stages<'_> {
         alone.likelihood.memory = Memory::Independent;
         let plain = alone.posterior(self.campaign, self.base);
         let fitted = plain.layout.fitted.len();
-        let starts: Vec<Vec<f64>> =
-            starts.iter().map(|s| s[..fitted.min(s.len())].to_vec()).collect();
-        let found = map::best_map(&plain, &starts)?;
+        let cut = |s: &[f64]| s[..fitted.min(s.len())].to_vec();
+        let starts: Vec<Vec<f64>> = starts.iter().map(|s| cut(s)).collect();
+        let found = map::best_map_or(&plain, &starts, &cut(medians))?;
         Some(map::residual_rms(&plain, &found.x)?.into_iter().map(|(rms, _)| rms).collect())
     }
 }
