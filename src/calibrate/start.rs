@@ -439,11 +439,11 @@ impl Stages<'_> {
         log: &mut dyn FnMut(&str),
     ) -> (Posterior, MapEstimate, Option<Elliptical>) {
         // the MAP with the chosen integrator, from the one found
-        let moved = |posterior: &Posterior, map: MapEstimate| match posterior.integrator
-            != self.base
-        {
-            true => map::refine_near(posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map),
-            false => map,
+        let moved = |posterior: &Posterior, map: MapEstimate| {
+            if posterior.integrator == self.base {
+                return map;
+            }
+            map::refine_near(posterior, &map.x).map(|m| map.curvature_at(m)).unwrap_or(map)
         };
         let Some(independent_map) = self.unsettled.take() else {
             let map = moved(&posterior, map);

@@ -466,21 +466,14 @@ fn discrepancy_block_terms_change_as_the_log_density_does() {
     }
 }
 
-/// The MAP search's starts are screened with a budget of evaluations
-/// (`map::best_map`), and the best one goes on from where its budget
-/// stopped it. With a budget of one (n + 1) evaluations a fit, which stops
-/// a start 10 Laplace sd off in every coordinate far short of its optimum
-/// (measured 1 A records, the B-P law: without the second stage it ends
-/// about 100 nats below, checked by removing it), the search must reach the optimum the
-/// unbudgeted search finds from the same start, to within 0.1 nat. The
-/// posterior searched is the independent likelihood's with the linearly
-/// implicit scheme, smooth on any record: the explicit scheme's step cuts
-/// make a likelihood rugged on the scale of a fit's last steps, where two
-/// searches from different points stop up to half a nat apart.
-#[test]
-fn a_screened_map_search_finishes_its_best_start() {
+/// The start of the measured 1 A records' calibration (the B-P law,
+/// defaults) and its posterior with independent residuals and the linearly
+/// implicit scheme at 4 sub-steps: smooth on any record, where the
+/// explicit scheme's step cuts make a likelihood rugged on the scale of a
+/// fit's last steps (two searches from different points stop up to half a
+/// nat apart).
+fn measured_1a_searched() -> (mrbp::calibrate::start::Start, mrbp::posterior::Posterior) {
     use mrbp::model::{Integrator, Scheme};
-    use mrbp::posterior::map;
     let campaign = Campaign::load(std::path::Path::new("data/utfsm-mts/campaign.toml"))
         .unwrap()
         .at_current(1.0);
@@ -488,7 +481,23 @@ fn a_screened_map_search_finishes_its_best_start() {
         .unwrap();
     let smooth =
         Integrator { scheme: Scheme::LinearlyImplicit, substeps: 4, ..s.posterior.integrator };
-    let post = &s.posterior.without_adjustment().with_integrator(smooth);
+    let post = s.posterior.without_adjustment().with_integrator(smooth);
+    (s, post)
+}
+
+/// The MAP search's starts are screened with a budget of evaluations
+/// (`map::best_map`), and the best one goes on from where its budget
+/// stopped it. With a budget of one (n + 1) evaluations a fit, which stops
+/// a start 10 Laplace sd off in every coordinate far short of its optimum
+/// (measured 1 A records, the B-P law: without the second stage it ends
+/// about 100 nats below, checked by removing it), the search must reach the optimum the
+/// unbudgeted search finds from the same start, to within 0.1 nat, on
+/// [`measured_1a_searched`]'s smooth posterior.
+#[test]
+fn a_screened_map_search_finishes_its_best_start() {
+    use mrbp::posterior::map;
+    let (s, post) = measured_1a_searched();
+    let post = &post;
     let (at, sd) = (&s.searched.x, s.searched.sd());
     let from: Vec<f64> = (0..post.layout.fitted.len()).map(|i| at[i] + 10.0 * sd[i]).collect();
     let full = map::refine(post, &from).unwrap();
@@ -512,16 +521,9 @@ fn a_screened_map_search_finishes_its_best_start() {
 /// search's tolerance above).
 #[test]
 fn the_prior_medians_are_searched_where_no_start_converges() {
-    use mrbp::model::{Integrator, Scheme};
     use mrbp::posterior::map;
-    let campaign = Campaign::load(std::path::Path::new("data/utfsm-mts/campaign.toml"))
-        .unwrap()
-        .at_current(1.0);
-    let s = mrbp::calibrate::start::start(&campaign, &CalibrationSettings::default(), &mut |_| {})
-        .unwrap();
-    let smooth =
-        Integrator { scheme: Scheme::LinearlyImplicit, substeps: 4, ..s.posterior.integrator };
-    let post = &s.posterior.without_adjustment().with_integrator(smooth);
+    let (s, post) = measured_1a_searched();
+    let post = &post;
     let n = post.layout.fitted.len();
     let (at, sd) = (&s.searched.x[..n], s.searched.sd());
     let off = |k: f64| -> Vec<f64> { (0..n).map(|i| at[i] + k * sd[i]).collect() };
