@@ -532,13 +532,9 @@ pub fn best_map(post: &Posterior, starts: &[Vec<f64>]) -> Option<MapEstimate> {
 /// to two fifths of the screen's wall time on two cores. One start and
 /// the fallback run side by side, as before.
 pub fn best_map_or(post: &Posterior, starts: &[Vec<f64>], fallback: &[f64]) -> Option<MapEstimate> {
-    let with_fallback = || {
-        let mut all = starts.to_vec();
-        all.push(fallback.to_vec());
-        all
-    };
     if starts.len() <= 1 {
-        return best_map(post, &with_fallback());
+        let beside: Vec<Vec<f64>> = starts.iter().cloned().chain([fallback.to_vec()]).collect();
+        return best_map(post, &beside);
     }
     let mut found = screen(post, starts, SCREEN_PATIENCE);
     if !found.iter().flatten().any(|m| m.log_density.is_finite() && !m.exhausted) {
