@@ -152,14 +152,20 @@ fn independent_force(law: &str) -> Option<Force> {
 /// posterior's spread in the path (its interquartile width 0.8–2.2 N
 /// here, 15 N of noise over 600–2400 samples a run; the more parameters,
 /// the larger the share) and the calibration's step (the step rule keeps
-/// it below 0.1 posterior sd). Measured: RMS 0.04–0.14 N, largest
-/// 0.09–0.62 N over Bouc-Wen's, Spencer's and Bingham's nine runs;
-/// `bp-spencer` (ten parameters) RMS 0.09–0.44 N, largest 0.38–0.83 N
-/// (with 8 sub-steps, another chain: RMS up to 0.88 N, where the mean
-/// interquartile width is 2.2 N). Asserted: RMS within 0.4 N or 0.6 of
-/// the run's mean interquartile width, and every sample within 1.5 N (a
-/// tenth of the force noise) of the independent path; a wrong equation
-/// misses by tens of newtons.
+/// it below 0.1 posterior sd). Measured: RMS 0.04–0.20 N, largest
+/// 0.09–0.68 N over Bouc-Wen's, Spencer's and Bingham's nine runs, at 20
+/// steps and at 200. `bp-spencer` (ten law parameters): at 200 steps RMS
+/// 0.13–0.46 N with either anchored move; at 20 steps 0.12–0.31 N with the
+/// former move and 0.41, 0.95, 1.23 N (largest 1.67 N; interquartile
+/// widths 0.83–2.13 N) with the shrunk one — whose ten medians lie within
+/// 0.05 posterior sd of its 200-step run's (the former move's within
+/// 0.10), and whose band medians agree with the 200-step band's within 0.2
+/// N: the path at the medians moves by about a newton for shifts of the
+/// medians inside their Monte Carlo error, so its gap from the median
+/// path is that noisy. Asserted: RMS within 0.4 N or 0.8 of the run's
+/// mean interquartile width, and every sample within 2 N (an eighth of
+/// the force noise) of the independent path; a wrong equation misses by
+/// tens of newtons.
 fn band_median_follows(out: &std::path::Path, names: &[String], q50: &[f64], force: Force) {
     ok(&["predict", arg(out), "--draws", "100"]);
     let value = |name: &str| q50[names.iter().position(|n| n == name).unwrap()];
@@ -213,7 +219,7 @@ fn band_median_follows(out: &std::path::Path, names: &[String], q50: &[f64], for
             runs[start]
         );
         assert!(
-            rms < 0.4f64.max(0.6 * iqr) && worst < 1.5,
+            rms < 0.4f64.max(0.8 * iqr) && worst < 2.0,
             "{}: RMS {rms:.2} N, largest {worst:.2} N, interquartile width {iqr:.2} N",
             runs[start]
         );

@@ -140,14 +140,6 @@ impl Mixture {
         Mixture { components }
     }
 
-    /// The equal-weight mixture of `parts`.
-    pub(super) fn equal(parts: Vec<Elliptical>) -> Mixture {
-        let log_weight = -(parts.len() as f64).ln();
-        Mixture {
-            components: parts.into_iter().map(|shape| Component { log_weight, shape }).collect(),
-        }
-    }
-
     /// One component: the mean and covariance of `points` (each of `d`
     /// coordinates), as the independence move fits the complementary half.
     pub(super) fn of_points(points: &[f64], d: usize) -> Option<Mixture> {

@@ -180,9 +180,12 @@ impl Move {
                 Fit::Points
             }
             Move::Independence { .. } => own(),
-            Move::Anchored { .. } => reference
-                .and_then(|r| anchored::proposal(others, d, r))
-                .map_or_else(own, Fit::Anchored),
+            Move::Anchored { .. } => {
+                match reference.and_then(|r| anchored::anchored_fit(others, d, r)) {
+                    Some(fit) => Fit::Single(Some(fit)),
+                    None => own(),
+                }
+            }
             Move::History { .. } => history
                 .mixture
                 .as_ref()
@@ -214,7 +217,6 @@ impl Move {
             (_, Fit::Single(f)) => {
                 independence::propose(self.df(), self.scale(), f.as_ref(), x, rng, y)
             }
-            (_, Fit::Anchored(q)) => q.propose(self.df(), x, rng, y),
             (_, Fit::History(h, current)) => {
                 mixture::propose(*h, current.as_ref(), self.df(), x, rng, y)
             }
@@ -263,10 +265,10 @@ pub trait Independent {
 pub enum Fit<'h> {
     /// Nothing: the move uses the half's points themselves.
     Points,
-    /// The half's Student-t (`None`: a degenerate half, the walker stays).
+    /// One Student-t: the half's own, or the anchored move's
+    /// ([`anchored::anchored_fit`]) (`None`: a degenerate half, the walker
+    /// stays).
     Single(Option<Elliptical>),
-    /// The anchored move's mixture ([`anchored::proposal`]).
-    Anchored(Mixture),
     /// The history's mixture and the half's own fit.
     History(&'h Mixture, Option<Mixture>),
     /// The curved move's mixture (`None`: a degenerate half) and the tube
