@@ -25,12 +25,12 @@
 //! coordinates), 0.31 → 0.59 (22), 0.24 → 0.53 (33); on the virtual 1 A
 //! campaign 0.41 → 0.66, the long-run τ_max 3.9 → 2.1 and the ESS of 20 steps
 //! 2.6 times the former move's. The equal mixture with the half's own fit
-//! that this move used to propose keeps a third of that (τ 3.1): the own
-//! fit's noise is what the shrinkage removes. With a poor reference (each
-//! variance off by a factor 4 or 1/4, the mean one sd off) it accepts a
-//! little less than the independence move (0.21 against 0.23 at 11
-//! coordinates): a real offset of the mean under the half's noise is
-//! partly shrunk away. The proposal depends on the
+//! that this move used to propose keeps under half of that (τ 3.1): the
+//! own fit's noise is what the shrinkage removes. With a poor reference (the
+//! variances off by factors 2, 1 and 1/2 in turn, the mean one sd off) it
+//! accepts a little less than the independence move (0.21 against 0.23
+//! at 11 coordinates): a real offset of the mean under the half's noise
+//! is partly shrunk away. The proposal depends on the
 //! complementary half and the fixed reference only, so the factor
 //! q(x)/q(y) keeps the chain exact. Without a reference, or where the half
 //! lies far from it (a Laplace approximation describes the posterior near

@@ -180,12 +180,9 @@ impl Move {
                 Fit::Points
             }
             Move::Independence { .. } => own(),
-            Move::Anchored { .. } => {
-                match reference.and_then(|r| anchored::anchored_fit(others, d, r)) {
-                    Some(fit) => Fit::Single(Some(fit)),
-                    None => own(),
-                }
-            }
+            Move::Anchored { .. } => reference
+                .and_then(|r| anchored::anchored_fit(others, d, r))
+                .map_or_else(own, |fit| Fit::Single(Some(fit))),
             Move::History { .. } => history
                 .mixture
                 .as_ref()
