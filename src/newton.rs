@@ -6,7 +6,7 @@
 //! derivatives by central differences, then measures the curvature at the
 //! mode it reached: the Laplace approximation of the density itself. It is
 //! generic over [`LogDensity`] and uses a target's blocks
-//! ([`LogDensity::blocks`]) where the guess keeps them apart: a point that
+//! ([`LogDensity::scored_blocks`]) where the guess keeps them apart: a point that
 //! differs from an evaluated one only in a block is scored from that
 //! point's memo. The posterior's use of it (from the MAP search's
 //! surrogate) is `posterior::laplace`.
@@ -71,7 +71,7 @@ pub struct Mode {
 struct Whitened<'a, T: LogDensity> {
     target: &'a T,
     start: &'a Elliptical,
-    /// The target's block ([`LogDensity::blocks`]) each axis of z moves
+    /// The target's block ([`LogDensity::scored_blocks`]) each axis of z moves
     /// alone, `None` for an axis that moves no block's coordinates; empty
     /// where the start's factor mixes a block with other coordinates.
     axis_block: Vec<Option<usize>>,
@@ -96,7 +96,7 @@ impl Point {
 
 impl<'a, T: LogDensity> Whitened<'a, T> {
     fn new(target: &'a T, start: &'a Elliptical) -> Self {
-        let axis_block = axis_blocks(&target.blocks(), start.factor()).unwrap_or_default();
+        let axis_block = axis_blocks(&target.scored_blocks(), start.factor()).unwrap_or_default();
         Whitened { target, start, axis_block }
     }
 
@@ -203,8 +203,8 @@ impl<'a, T: LogDensity> Whitened<'a, T> {
     /// walkers started far out, and a run of 800 steps instead of about 50
     /// (docs/performance.md, "The Hessian at half the points").
     ///
-    /// Where the target has blocks the start keeps apart (the discrepancy
-    /// model's noise of each run), a point that differs from an axis point
+    /// Where the target has blocks the start keeps apart (each run's
+    /// noise), a point that differs from an axis point
     /// (or z) only in one block's coordinates is taken from that point's
     /// memo, and two axes in different blocks have no mixed derivative at
     /// all (the log-density is a sum of a term per block given the rest):

@@ -29,12 +29,22 @@ pub trait LogDensity: Sync {
         Vec::new()
     }
 
+    /// Blocks whose terms a memo scores as [`LogDensity::blocks`]' do
+    /// (each run's noise parameters, given that run's residuals), whether
+    /// or not the sampler updates them on their own: Newton's differences
+    /// take a point that moves one such block from a memo, and no mixed
+    /// derivative of two blocks ([`crate::newton`]). [`LogDensity::blocks`]
+    /// by default.
+    fn scored_blocks(&self) -> Vec<Vec<usize>> {
+        self.blocks()
+    }
+
     /// [`LogDensity::log_density_batch`], also writing into `memos[i]`
     /// (cleared first) what [`LogDensity::block_log_density_batch`] needs
     /// of point i, after the values of block 0, 1, … 's terms there (as
     /// [`LogDensity::block_log_density_batch`] gives them; the sampler
     /// keeps them up to date). Only called where [`LogDensity::blocks`]
-    /// has some.
+    /// or [`LogDensity::scored_blocks`] has some.
     fn log_density_batch_memo(&self, xs: &[f64], out: &mut [f64], memos: &mut [Vec<f64>]) {
         self.log_density_batch(xs, out);
         memos.iter_mut().for_each(Vec::clear);
