@@ -650,6 +650,40 @@ fn cases() -> Vec<Case> {
             expect: &["--model current-law"],
         },
         Case {
+            name: "--current with a law across currents",
+            make: |r| {
+                s(&[
+                    "sample",
+                    &p(&good(r)),
+                    "--out",
+                    &p(&r.join("out")),
+                    "--model",
+                    "current-law",
+                    "--current",
+                    "1",
+                ])
+            },
+            code: 2,
+            expect: &["--current 1", "spans the campaign's currents", "--hold-out-current"],
+        },
+        Case {
+            name: "run --current with a law across currents",
+            make: |r| {
+                s(&[
+                    "run",
+                    &p(&good(r)),
+                    "--out",
+                    &p(&r.join("out")),
+                    "--model",
+                    "current-curves",
+                    "--current",
+                    "1",
+                ])
+            },
+            code: 2,
+            expect: &["--current 1", "needs them all"],
+        },
+        Case {
             name: "current curves from one current",
             make: |r| {
                 s(&[

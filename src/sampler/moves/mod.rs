@@ -44,10 +44,11 @@ pub enum Move {
     /// [`Move::Independence`].
     History { df: Option<f64> },
     /// The independence proposal anchored on a fixed reference (the
-    /// calibration's Laplace approximation at the mode): an equal mixture
-    /// of the complementary half's Student-t (`df`; Gaussian without) and
-    /// one with the half's covariance taken in the reference's whitened
-    /// coordinates, its off-diagonal part shrunk by the Ledoit–Wolf weight
+    /// calibration's Laplace approximation at the mode): a Student-t
+    /// (`df`; Gaussian without) with the complementary half's moments taken
+    /// in the reference's whitened coordinates, its covariance shrunk toward
+    /// its mean variance times the identity (one Ledoit–Wolf weight) and its
+    /// mean toward the reference's (positive-part James–Stein)
     /// ([`anchored`]); factor q(x)/q(y). Without a reference, or where the
     /// half lies far from it, [`Move::Independence`] with scale 1.
     Anchored { df: Option<f64> },
