@@ -87,19 +87,9 @@ impl Pipeline<'_> {
     ) -> Result<Vec<Calibration>> {
         let settings = &request.settings;
         campaign.require_usable("the calibration")?;
-        let law = settings.parameter_model().is_current_law();
-        if let (true, Some(c)) = (law, request.current) {
-            let what = match settings.model {
-                crate::posterior::ModelKind::CurrentCurves => "the current curves",
-                _ => "the current law",
-            };
-            return Err(Error::Usage(format!(
-                "--current {c} calibrates the runs of one current, {what} (`--model`, or `model` in the settings) spans the campaign's currents {:?}: leave --current out (--hold-out-current leaves a current out of it)",
-                campaign.currents()
-            )));
-        }
+        super::one_current_or_a_law(request.current, settings.model)?;
         self.prepare(out, "--out", &[campaign], &[], true)?;
-        if law {
+        if settings.parameter_model().is_current_law() {
             let held = &request.hold_out_current;
             if let Some(h) = held.iter().find(|h| !campaign.has_current(**h)) {
                 return Err(Error::Usage(format!(

@@ -25,6 +25,7 @@ use crate::data::Campaign;
 use crate::error::{Error, Result};
 use crate::identify::CurrentIdentification;
 use crate::laws::LawKind;
+use crate::posterior::ModelKind;
 use crate::predict::PredictionRecord;
 use crate::sampler::{Observer, Progress};
 use crate::validate::between_runs::NewTestRow;
@@ -187,6 +188,24 @@ pub struct SampleRequest {
 /// itself where their residuals have memory: the between-run layer needs
 /// a spread between tests, which two runs barely show.
 pub const PER_RUN_WHERE_MEMORY: usize = 3;
+
+/// Refuses `--current` beside a model across currents (`model`: the
+/// settings' choice): it would pick the runs of one current for a model
+/// that spans them all.
+pub(crate) fn one_current_or_a_law(current: Option<f64>, model: ModelKind) -> Result<()> {
+    match (current, model) {
+        (Some(c), ModelKind::CurrentLaw | ModelKind::CurrentCurves) => {
+            let what = match model {
+                ModelKind::CurrentCurves => "the current curves",
+                _ => "the current law",
+            };
+            Err(Error::Usage(format!(
+                "--current {c} picks the runs of one current, and {what} (`--model`, or `model` in the settings) spans every current: leave --current out (--hold-out-current leaves a current out of it)"
+            )))
+        }
+        _ => Ok(()),
+    }
+}
 
 /// Leave-one-out validation, as the command line asks for it.
 #[derive(clap::Args, Debug, Clone, Copy)]

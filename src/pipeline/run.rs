@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use super::calibrate::CurrentCalibrations;
 use super::{compare, Pipeline, RunOptions, SampleRequest};
 use crate::data::{current_tag, Campaign};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::posterior::ModelKind;
 use crate::predict::Prediction;
 use crate::report::comparison::Entry;
@@ -26,11 +26,7 @@ impl Pipeline<'_> {
         out: &Path,
         options: &RunOptions,
     ) -> Result<Vec<PathBuf>> {
-        if let (Some(c), true) = (options.sample.current, options.sample.settings.model.is_law()) {
-            return Err(Error::Usage(format!(
-                "--current {c} runs one current, and the model across currents asked for (`--model`, or `model` in the settings) needs them all: leave one of the two out"
-            )));
-        }
+        super::one_current_or_a_law(options.sample.current, options.sample.settings.model)?;
         if options.sample.laws.len() > 1 {
             return self.run_laws(manifest, out, options);
         }

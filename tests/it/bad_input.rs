@@ -664,7 +664,9 @@ fn cases() -> Vec<Case> {
                 ])
             },
             code: 2,
-            expect: &["--current 1", "spans the campaign's currents", "--hold-out-current"],
+            expect: &[
+                "--current 1", "the current law", "spans every current", "--hold-out-current",
+            ],
         },
         Case {
             name: "run --current with a law across currents",
@@ -681,7 +683,9 @@ fn cases() -> Vec<Case> {
                 ])
             },
             code: 2,
-            expect: &["--current 1", "needs them all"],
+            expect: &[
+                "--current 1", "the current curves", "spans every current", "--hold-out-current",
+            ],
         },
         Case {
             name: "current curves from one current",
