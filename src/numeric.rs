@@ -1,6 +1,7 @@
 //! Numerical building blocks that several modules share, one home each:
 //! a covariance's Cholesky factor with its fallback, a sample's mean and
-//! variance, and sums of exponentials in log space.
+//! variance, sums of exponentials in log space, and draws' rank-normal
+//! scores.
 
 use nalgebra::DMatrix;
 
@@ -57,6 +58,35 @@ pub fn log_mean_exp(v: &[f64]) -> f64 {
         return m;
     }
     m + (v.iter().map(|x| (x - m).exp()).sum::<f64>() / v.len() as f64).ln()
+}
+
+/// Ranks of all draws pooled (ties averaged), mapped to normal scores
+/// Φ⁻¹((r − 3/8)/(S + 1/4)).
+pub fn rank_normalize(chains: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let mut all: Vec<(f64, usize, usize)> = chains
+        .iter()
+        .enumerate()
+        .flat_map(|(c, v)| v.iter().enumerate().map(move |(i, x)| (*x, c, i)))
+        .collect();
+    all.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let s = all.len() as f64;
+    use statrs::distribution::{ContinuousCDF, Normal};
+    let normal = Normal::standard();
+    let mut out: Vec<Vec<f64>> = chains.iter().map(|c| vec![0.0; c.len()]).collect();
+    let mut i = 0;
+    while i < all.len() {
+        let mut j = i;
+        while j + 1 < all.len() && all[j + 1].0 == all[i].0 {
+            j += 1;
+        }
+        let rank = (i + j) as f64 / 2.0 + 1.0;
+        let z = normal.inverse_cdf((rank - 0.375) / (s + 0.25));
+        for &(_, c, k) in &all[i..=j] {
+            out[c][k] = z;
+        }
+        i = j + 1;
+    }
+    out
 }
 
 #[cfg(test)]

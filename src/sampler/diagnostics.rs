@@ -4,16 +4,18 @@
 //!   walker-averaged autocorrelation function (as emcee does);
 //! * rank-normalised split R̂, bulk and tail ESS (Vehtari, Gelman, Simpson,
 //!   Carpenter & Bürkner 2021), with Geyer's initial monotone sequence;
-//! * Monte Carlo standard error of the mean; acceptance and stuck walkers.
+//! * Monte Carlo standard error of the mean; acceptance and stuck walkers;
+//! * draws that still drift after burn-in ([`super::drift`]), which move
+//!   the burn-in past the drift.
 //!
 //! Every function takes chains as `[chain][draw]`.
 
 use rayon::prelude::*;
 use rustfft::{num_complex::Complex, FftPlanner};
-use statrs::distribution::{ContinuousCDF, Normal};
 
 use super::chains::Chains;
-use crate::numeric::{mean, variance};
+use super::drift::{drift, past_drift, Drift, DRIFT_Z};
+use crate::numeric::{mean, rank_normalize, variance};
 
 /// Sokal's window constant: the sum runs to the first lag M ≥ C τ(M).
 const SOKAL_C: f64 = 5.0;
@@ -125,34 +127,6 @@ fn rhat_basic(chains: &[Vec<f64>]) -> f64 {
     } else {
         f64::NAN
     }
-}
-
-/// Ranks of all draws pooled (ties averaged), mapped to normal scores
-/// Φ⁻¹((r − 3/8)/(S + 1/4)).
-fn rank_normalize(chains: &[Vec<f64>]) -> Vec<Vec<f64>> {
-    let mut all: Vec<(f64, usize, usize)> = chains
-        .iter()
-        .enumerate()
-        .flat_map(|(c, v)| v.iter().enumerate().map(move |(i, x)| (*x, c, i)))
-        .collect();
-    all.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let s = all.len() as f64;
-    let normal = Normal::standard();
-    let mut out: Vec<Vec<f64>> = chains.iter().map(|c| vec![0.0; c.len()]).collect();
-    let mut i = 0;
-    while i < all.len() {
-        let mut j = i;
-        while j + 1 < all.len() && all[j + 1].0 == all[i].0 {
-            j += 1;
-        }
-        let rank = (i + j) as f64 / 2.0 + 1.0;
-        let z = normal.inverse_cdf((rank - 0.375) / (s + 0.25));
-        for &(_, c, k) in &all[i..=j] {
-            out[c][k] = z;
-        }
-        i = j + 1;
-    }
-    out
 }
 
 /// |x − median of all draws|: the folded draws whose R̂ detects a
@@ -411,6 +385,10 @@ pub struct Diagnostics {
     pub acceptance: Vec<f64>,
     /// Chains whose acceptance is below a fifth of the median (or zero).
     pub stuck: Vec<usize>,
+    /// The coordinate whose draws still drift, if any: after the burn-in,
+    /// or after the first third of the chain where the burn-in is longer
+    /// ([`super::drift`]).
+    pub drift: Option<Drift>,
     pub warnings: Vec<String>,
 }
 
@@ -441,11 +419,12 @@ impl Diagnostics {
         // after an ensemble was drawn afresh, the rule counts from there
         let redrawn = super::stranded::last_step(chains);
         let rule = (taus.min(total / 2)).max(redrawn + taus.min(total.saturating_sub(redrawn) / 2));
-        if adaptive {
+        let rule = if adaptive {
             rule.max(super::moves::mixture::last_fit_step(total.saturating_sub(1)) / 2)
         } else {
             rule
-        }
+        };
+        past_drift(chains, rule)
     }
 
     /// Builds the run's diagnostics from per-coordinate ones (a caller may
@@ -463,6 +442,11 @@ impl Diagnostics {
         sorted.sort_by(f64::total_cmp);
         let median = quantile_sorted(&sorted, 0.5);
         let stuck = stuck_walkers(&acceptance, median, total.saturating_sub(burn_in.max(1)));
+        // the draws after the burn-in, or after the first third of the
+        // chain where the burn-in is longer: a transient longer than a
+        // third of the chain is not yet cut away reliably (the test's
+        // windows are short), so the run waits for it
+        let drift = drift(chains, burn_in.min(total / 3));
         let mut warnings = Vec::new();
         if (kept as f64) < MIN_TAU_MULTIPLE * tau_max {
             warnings.push(format!(
@@ -474,6 +458,12 @@ impl Diagnostics {
         if !(worst_rhat < RHAT_THRESHOLD) {
             warnings
                 .push(format!("largest R̂ is {worst_rhat:.3} ≥ {RHAT_THRESHOLD}: chains disagree"));
+        }
+        if let Some(d) = &drift {
+            warnings.push(format!(
+                "the draws still drift: a coordinate's mean moved by {:.1} standard errors from the first quarter of the draws after step {} to their last half (target within ±{DRIFT_Z}): the walkers have not forgotten their start, all ensembles alike, which R̂ does not see; run longer",
+                d.z, d.from
+            ));
         }
         if median < LOW_ACCEPTANCE {
             warnings.push(format!(
@@ -495,6 +485,7 @@ impl Diagnostics {
             tau_max,
             acceptance,
             stuck,
+            drift,
             warnings,
         }
     }

@@ -13,6 +13,7 @@
 //! * [`observer`]: progress, diagnostics lines and checkpoints beside the
 //!   loop; [`checkpoint`]: the state on disk;
 //! * [`diagnostics`]: autocorrelation time, R̂, ESS, MCSE, acceptance;
+//!   [`drift`]: draws that have not yet forgotten their start;
 //! * [`stranded`]: an ensemble left in a mode of negligible mass, drawn afresh;
 //! * [`smc`]: tempered sequential Monte Carlo from a reference density to the
 //!   target, its populations mutated by the same moves; the evidence;
@@ -28,6 +29,7 @@ pub mod chains;
 pub mod checkpoint;
 pub mod density;
 pub mod diagnostics;
+pub mod drift;
 pub mod elliptical;
 pub mod ensemble;
 pub mod moves;

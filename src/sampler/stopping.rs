@@ -3,8 +3,9 @@
 //! coordinate, its value and its target, said at every check.
 //!
 //! Converged (Vehtari et al. 2021, with emcee's length rule): every R̂
-//! below [`RHAT_THRESHOLD`], every bulk and tail ESS at least the target,
-//! and the chains at least `min_tau_multiple` τ_max long after burn-in.
+//! below [`RHAT_THRESHOLD`], no drift left after burn-in
+//! ([`super::drift`]), every bulk and tail ESS at least the target, and
+//! the chains at least `min_tau_multiple` τ_max long after burn-in.
 //! A run told to confirm ([`RunControl::confirm`]: a posterior far from its
 //! Laplace approximation) goes on to twice the step at which that first
 //! held, and stops at the first check from there at which it holds again.
@@ -12,6 +13,7 @@
 use std::fmt;
 
 use super::diagnostics::{Diagnostics, MIN_TAU_MULTIPLE, RHAT_THRESHOLD};
+use super::drift::DRIFT_Z;
 
 /// How long to run.
 #[derive(Clone, Debug)]
@@ -70,13 +72,18 @@ impl RunControl {
 }
 
 /// What a run that has not converged waits for: the first condition of
-/// the rule that fails, in the order R̂, ESS, length, confirmation.
+/// the rule that fails, in the order R̂, drift, ESS, length, confirmation.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Waiting {
     /// Too few draws after burn-in to estimate an ESS yet.
     Draws,
     /// The largest R̂, of `coordinate`.
     RHat { coordinate: String, value: f64 },
+    /// The draws still drift: `coordinate`'s mean moved by `z` standard
+    /// errors from the first quarter of the draws after step `from` (the
+    /// burn-in, or a third of the chain where that is shorter) to their
+    /// last half ([`super::drift`]).
+    Drift { coordinate: String, z: f64, from: usize },
     /// The smallest bulk or tail ESS, of `coordinate`.
     Ess { coordinate: String, value: f64, target: f64 },
     /// The chains are `kept` steps long after burn-in; the rule asks for
@@ -98,6 +105,10 @@ impl fmt::Display for Waiting {
             Waiting::RHat { coordinate, value } => {
                 write!(f, "R̂ of {coordinate} is {value:.4} (target < {RHAT_THRESHOLD})")
             }
+            Waiting::Drift { coordinate, z, from } => write!(
+                f,
+                "the draws of {coordinate} still drift: their mean moved by {z:.1} standard errors from the first quarter of the draws after step {from} to their last half (target within ±{DRIFT_Z}; the walkers have not forgotten their start)"
+            ),
             Waiting::Ess { coordinate, value, target } => {
                 write!(f, "ESS of {coordinate} is {value:.0} (target ≥ {target:.0})")
             }
@@ -132,6 +143,9 @@ pub fn unmet(
         .max_by(|a, b| a.1.r_hat.total_cmp(&b.1.r_hat));
     if let Some((i, c)) = rhat {
         return Some(Waiting::RHat { coordinate: name(i), value: c.r_hat });
+    }
+    if let Some(d) = &diag.drift {
+        return Some(Waiting::Drift { coordinate: name(d.coordinate), z: d.z, from: d.from });
     }
     if diag.coordinates.iter().any(|c| c.ess().is_nan()) {
         return Some(Waiting::Draws);
@@ -228,6 +242,7 @@ mod tests {
             tau_max: 5.0,
             acceptance: vec![0.3; 8],
             stuck: vec![],
+            drift: None,
             warnings: vec![],
         }
     }
@@ -259,6 +274,25 @@ mod tests {
         assert_eq!(largest_rhat([1.002, 1.03]), 1.03);
         assert!(largest_rhat([f64::NAN, 1.03]).is_nan() && largest_rhat([1.03, f64::NAN]).is_nan());
         assert_eq!(largest_rhat([]), 0.0);
+    }
+
+    /// Draws that still drift hold a run whose R̂ passes, and the rule
+    /// names the coordinate, z, the step the test counts from and the
+    /// target; after R̂, before ESS.
+    #[test]
+    fn a_drift_holds_the_run_and_is_named() {
+        use crate::sampler::drift::Drift;
+        let mut drifting =
+            diagnostics(100, vec![coordinate(1.002, 300.0), coordinate(1.003, 900.0)]);
+        drifting.drift = Some(Drift { coordinate: 1, z: -5.2, from: 33 });
+        let w = unmet(&drifting, 400.0, 10.0, &control(false).names).expect("waits");
+        assert_eq!(w, Waiting::Drift { coordinate: "ln n".into(), z: -5.2, from: 33 });
+        assert!(w.to_string().contains("the draws of ln n still drift: their mean moved by -5.2 standard errors from the first quarter of the draws after step 33"), "{w}");
+        drifting.coordinates[1].r_hat = 1.05;
+        assert!(matches!(
+            unmet(&drifting, 400.0, 10.0, &control(false).names),
+            Some(Waiting::RHat { .. })
+        ));
     }
 
     /// Each condition is named with its coordinate, value and target, in
