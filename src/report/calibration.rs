@@ -730,7 +730,7 @@ fn verdicts(cal: &Calibration, coverage: &[CoverageRow]) -> Vec<(String, Mark, S
             format!("{kept:.0} steps, τ_max {tau:.2} ({:.1} τ)", kept / tau),
         ),
         (
-            "no sampler warnings (stuck walkers …)".to_string(),
+            "no sampler warnings (draws that still drift, stuck walkers …)".to_string(),
             Mark::of(cal.record.warnings.is_empty()),
             format!("{} warning(s)", cal.record.warnings.len()),
         ),

@@ -189,7 +189,7 @@ pub fn calibration(cal: &Calibration) -> String {
     if rec.warnings.is_empty() {
         row!(
             out,
-            "diagnostics: R̂ < 1.01, ESS ≥ {:.0}, chains longer than {} τ, no stuck walkers",
+            "diagnostics: R̂ < 1.01, ESS ≥ {:.0}, chains longer than {} τ, no drift after burn-in, no stuck walkers",
             s.sampler.min_ess,
             crate::sampler::diagnostics::MIN_TAU_MULTIPLE
         );
