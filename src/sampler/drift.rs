@@ -23,6 +23,8 @@
 //! coordinates) give a largest |z| of 2.0 at the median and 3.7 at most,
 //! and every calibration of the main job at most 2.3.
 
+use rayon::prelude::*;
+
 use super::Chains;
 use crate::numeric::rank_normalize;
 
@@ -77,10 +79,12 @@ pub fn drift(chains: &Chains, burn_in: usize) -> Option<Drift> {
     if chains.steps().saturating_sub(burn_in) < MIN_STEPS {
         return None;
     }
-    (0..chains.dim)
+    // every coordinate's draws ranked, on every thread (as R̂'s are)
+    let found: Vec<Drift> = (0..chains.dim)
+        .into_par_iter()
         .map(|i| Drift { coordinate: i, z: z(&chains.traces(i, burn_in)), from: burn_in })
-        .filter(|d| d.z.abs() > DRIFT_Z)
-        .max_by(|a, b| a.z.abs().total_cmp(&b.z.abs()))
+        .collect();
+    found.into_iter().filter(|d| d.z.abs() > DRIFT_Z).max_by(|a, b| a.z.abs().total_cmp(&b.z.abs()))
 }
 
 /// The burn-in `rule` (steps), moved past a drift: where the draws after
