@@ -4,6 +4,7 @@
 //! scores.
 
 use nalgebra::DMatrix;
+use statrs::distribution::{ContinuousCDF, Normal};
 
 /// The lower Cholesky factor of the covariance `cov`; where rounding or too
 /// few points left it not positive definite, the factor of its diagonal
@@ -70,7 +71,6 @@ pub fn rank_normalize(chains: &[Vec<f64>]) -> Vec<Vec<f64>> {
         .collect();
     all.sort_by(|a, b| a.0.total_cmp(&b.0));
     let s = all.len() as f64;
-    use statrs::distribution::{ContinuousCDF, Normal};
     let normal = Normal::standard();
     let mut out: Vec<Vec<f64>> = chains.iter().map(|c| vec![0.0; c.len()]).collect();
     let mut i = 0;

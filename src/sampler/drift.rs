@@ -53,7 +53,7 @@ pub struct Drift {
 
 /// The drift statistic of one coordinate's traces (one per walker, all
 /// the same length): NaN where the traces are too short or do not spread.
-pub fn z(traces: &[Vec<f64>]) -> f64 {
+fn z(traces: &[Vec<f64>]) -> f64 {
     let steps = traces.first().map_or(0, Vec::len);
     if steps < MIN_STEPS || traces.len() < 2 {
         return f64::NAN;
@@ -96,7 +96,7 @@ pub fn past_drift(chains: &Chains, rule: usize) -> usize {
     if rule >= limit || drift(chains, rule).is_none() {
         return rule;
     }
-    let stride = (limit - rule).div_ceil(CANDIDATES).max(1);
+    let stride = (limit - rule).div_ceil(CANDIDATES);
     let mut burn_in = rule;
     while burn_in < limit {
         burn_in = (burn_in + stride).min(limit);
