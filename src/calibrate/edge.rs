@@ -15,7 +15,7 @@
 //! So where `memory = "auto"` took the adjusted likelihood, [`EdgeWatch`]
 //! integrates the walkers along their own paths at steps 10, 20, 40, … and
 //! stops the run where more than a tenth miss some run by more than
-//! [`crate::predict::FAR`] times the MAP's residual RMS (the measure of the
+//! [`crate::predict::FAR`] times the best fit's residual RMS (the measure of the
 //! bands' `far_draws`), [`far_from_records`] does the same with the
 //! finished chains' draws, and [`sample_watched`] then starts again under
 //! the tempered likelihood, saying why.
@@ -53,8 +53,10 @@ impl EdgeWatch {
         if start.memory_found.is_none() || start.settings.likelihood.memory != Memory::Adjusted {
             return None;
         }
+        // the independent likelihood's MAP: the best fit the records allow
+        // (the adjusted posterior's own may lie past their edge already)
         let plain = start.posterior.without_adjustment();
-        let at_map = map::residual_rms(&plain, &start.map.x)?;
+        let at_map = map::residual_rms(&plain, &start.searched.x)?;
         Some(EdgeWatch { plain, at_map, next: FIRST_LOOK, found: None })
     }
 
@@ -70,7 +72,7 @@ impl EdgeWatch {
         let far = far + (points.len() - integrated);
         (far as f64 > BLIND_SPOT_SHARE * points.len().max(1) as f64).then(|| {
             format!(
-                "{far} of {} {what} have paths that miss a record by more than {FAR}× the MAP's residual RMS (a parameter the records leave free about the MAP and rule out further on: the adjustment scored them by the fit at points nearer the MAP)",
+                "{far} of {} {what} have paths that miss a record by more than {FAR}× the best fit's residual RMS (the independent likelihood's MAP) (a parameter the records leave free about the MAP and rule out further on: the adjustment scored them by the fit at points nearer the MAP)",
                 points.len()
             )
         })

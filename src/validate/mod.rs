@@ -20,6 +20,7 @@ pub mod psis;
 
 use serde::{Deserialize, Serialize};
 
+use crate::calibrate::start::blind_spot;
 use crate::calibrate::{sampling, Calibration, CalibrationSettings, SamplerMethod};
 use crate::data::{Campaign, Run};
 use crate::error::{Error, Result};
@@ -463,14 +464,25 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
                             left_out.id()
                         ))
                     })?;
-                match laplace::adjusted_mode(&posterior, &independent) {
-                    Some(mode) => (posterior, mode.laplace),
+                let laplace = match laplace::adjusted_mode(&posterior, &independent) {
+                    Some(mode) => mode.laplace,
                     None => {
                         let at = independent.mean.as_slice().to_vec();
-                        let laplace = at_mode_from(&posterior, &at, left_out.id())?;
-                        (posterior, laplace)
+                        at_mode_from(&posterior, &at, left_out.id())?
                     }
-                }
+                };
+                // the held-out posterior's draws judged against the runs
+                // kept's best fit, as the start judges the calibration's:
+                // an adjustment measured on every run can carry the
+                // posterior of fewer past their records
+                blind_spot(&posterior, &laplace, independent.mean.as_slice(), settings.sampler.seed)
+                    .map_err(|e| {
+                        Error::Compute(format!(
+                            "leave-one-out without {}: the adjusted likelihood's held-out posterior reaches past the records kept ({e})",
+                            left_out.id()
+                        ))
+                    })?;
+                (posterior, laplace)
             }
             false => {
                 let laplace = at_mode_from(&posterior, &start, left_out.id())?;
