@@ -142,7 +142,8 @@ pub struct Standing {
     /// Held-out lppd summed over the tests (elpd of leaving one test out).
     pub elpd: f64,
     /// Its difference from the best law's at this current (0 for the best)
-    /// and the standard error of that difference.
+    /// and the standard error of that difference (NaN on a single test:
+    /// one difference has no spread).
     pub elpd_diff: f64,
     pub elpd_diff_se: f64,
     /// Means over the tests, in sample and held out.
@@ -256,7 +257,8 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     current_a: c,
                     elpd: elpd(law),
                     elpd_diff: d.iter().sum(),
-                    elpd_diff_se: (n * var).sqrt(),
+                    // one difference has no spread to measure
+                    elpd_diff_se: if n >= 2.0 { (n * var).sqrt() } else { f64::NAN },
                     nrmse_in: mean(&ins.iter().map(|r| r.measures.nrmse).collect::<Vec<_>>()),
                     nrmse_out: mean(&h.iter().map(|r| r.measures.nrmse).collect::<Vec<_>>()),
                     inside_p95_out: h
@@ -305,14 +307,20 @@ pub fn verdict(standings: &[Standing]) -> Vec<String> {
                 Some(second) => {
                     let gap = -second.elpd_diff;
                     let se = second.elpd_diff_se;
-                    let decisive = gap > 2.0 * se;
+                    let margin = match se.is_finite() {
+                        true if gap > 2.0 * se => format!(
+                            "± {se:.0}, more than two standard errors: decisive on these tests"
+                        ),
+                        true => format!(
+                            "± {se:.0}, within two standard errors: not decisive on these tests"
+                        ),
+                        false => "on one test: one difference has no standard error, so not decisive".into(),
+                    };
                     format!(
-                        "at {c} A the {} law predicts the held-out tests best: {:.0} nats of log predictive density ahead of the {} law (± {:.0}, {}); held-out nRMSE {:.1} % against {:.1} %, its 95 % band {:.0} % of the peak force wide and holding {:.1} % of the held-out samples",
+                        "at {c} A the {} law predicts the held-out tests best: {:.0} nats of log predictive density ahead of the {} law ({margin}); held-out nRMSE {:.1} % against {:.1} %, its 95 % band {:.0} % of the peak force wide and holding {:.1} % of the held-out samples",
                         first.law.name(),
                         gap,
                         second.law.name(),
-                        se,
-                        if decisive { "more than two standard errors: decisive on these tests" } else { "within two standard errors: not decisive on these tests" },
                         100.0 * first.nrmse_out,
                         100.0 * second.nrmse_out,
                         100.0 * first.band_width_out,
@@ -491,6 +499,16 @@ mod tests {
         assert_eq!((s[0].law, s[0].elpd, s[1].elpd), (LawKind::BoucWen, -100.0, -110.0));
         assert_eq!(s[0].set_aside, ["t2", "t3"]);
         assert!(verdict(&s)[0].contains("t2, t3 set aside"), "{:?}", verdict(&s));
+        // one test in common: its difference has no standard error, and a
+        // gap of 10 nats is not called decisive (it was: "± 0, more than
+        // two standard errors")
+        assert!(s[1].elpd_diff_se.is_nan(), "{}", s[1].elpd_diff_se);
+        assert!(
+            verdict(&s)[0]
+                .contains("on one test: one difference has no standard error, so not decisive"),
+            "{:?}",
+            verdict(&s)
+        );
         // no test that every law was held out on: refused
         other[2].run = "t4".into();
         assert!(standings(&other).is_err());
