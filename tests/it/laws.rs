@@ -16,22 +16,16 @@ use mrbp::store::{f64_column, read_parquet, str_column};
 /// comes out 4 sd off: errors in variables carry the strain's noise
 /// through the law's stiffness, not yet through its velocity).
 fn virtual_campaign(dir: &std::path::Path, law: &str) -> std::path::PathBuf {
+    synth_at_1a(dir, law, &["--cycles", "1", "--rate", "2000", "--noise-displacement", "0"])
+}
+
+/// `mrbp synth --law law --currents 1.0` and `options` into `dir/data`:
+/// its manifest.
+fn synth_at_1a(dir: &std::path::Path, law: &str, options: &[&str]) -> std::path::PathBuf {
     let data = dir.join("data");
-    ok(&[
-        "synth",
-        "--out",
-        arg(&data),
-        "--law",
-        law,
-        "--currents",
-        "1.0",
-        "--cycles",
-        "1",
-        "--rate",
-        "2000",
-        "--noise-displacement",
-        "0",
-    ]);
+    let mut args = vec!["synth", "--out", arg(&data), "--law", law, "--currents", "1.0"];
+    args.extend_from_slice(options);
+    ok(&args);
     data.join("campaign.toml")
 }
 
@@ -642,6 +636,13 @@ fn adjusted_leave_one_out_of_a_law_that_misses_completes() {
     assert_eq!(loo.height(), 3, "every run held out");
 }
 
+/// `mrbp synth` of a virtual Spencer damper at 1 A, a crank test at each
+/// of `rpms` (5 kHz, two revolutions), the sensor noise from `seed`, into
+/// `dir/data`: its manifest.
+fn spencer_damper(dir: &std::path::Path, rpms: &str, seed: &str) -> std::path::PathBuf {
+    synth_at_1a(dir, "spencer", &["--rpm", rpms, "--seed", seed])
+}
+
 /// Where the adjusted likelihood's own mode lies past the records' edge,
 /// `memory = "auto"` sees it and takes the tempered likelihood. Bouc-Wen
 /// on two crank tests (100 and 200 rpm, 1 A) of a virtual Spencer damper
@@ -663,31 +664,9 @@ fn adjusted_leave_one_out_of_a_law_that_misses_completes() {
 #[test]
 fn auto_judges_the_adjusted_draws_against_the_best_fit() {
     let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("data");
-    ok(&[
-        "synth",
-        "--out",
-        arg(&data),
-        "--law",
-        "spencer",
-        "--currents",
-        "1.0",
-        "--rpm",
-        "100,200",
-        "--seed",
-        "2",
-    ]);
+    let data = spencer_damper(dir.path(), "100,200", "2");
     let out = dir.path().join("cal");
-    let o = ok(&[
-        "sample",
-        arg(&data.join("campaign.toml")),
-        "--law",
-        "bouc-wen",
-        "--steps",
-        "10",
-        "--out",
-        arg(&out),
-    ]);
+    let o = ok(&["sample", arg(&data), "--law", "bouc-wen", "--steps", "10", "--out", arg(&out)]);
     let printed = said(&o);
     assert!(
         printed.contains(
@@ -717,24 +696,11 @@ fn auto_judges_the_adjusted_draws_against_the_best_fit() {
 #[test]
 fn leave_one_out_refuses_a_held_out_posterior_past_the_records() {
     let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("data");
-    ok(&[
-        "synth",
-        "--out",
-        arg(&data),
-        "--law",
-        "spencer",
-        "--currents",
-        "1.0",
-        "--rpm",
-        "100,200,400",
-        "--seed",
-        "7",
-    ]);
+    let data = spencer_damper(dir.path(), "100,200,400", "7");
     let out = dir.path().join("study");
     ok(&[
         "run",
-        arg(&data.join("campaign.toml")),
+        arg(&data),
         "--law",
         "bouc-wen",
         "--memory",
