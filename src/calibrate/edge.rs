@@ -72,7 +72,7 @@ impl EdgeWatch {
         let far = far + (points.len() - integrated);
         (far as f64 > BLIND_SPOT_SHARE * points.len().max(1) as f64).then(|| {
             format!(
-                "{far} of {} {what} have paths that miss a record by more than {FAR}× the best fit's residual RMS (the independent likelihood's MAP) (a parameter the records leave free about the MAP and rule out further on: the adjustment scored them by the fit at points nearer the MAP)",
+                "{far} of {} {what} have paths that miss a record by more than {FAR}× the residual RMS of the best fit, the independent likelihood's MAP (a parameter the records leave free about the MAP and rule out further on: the adjustment scored them by the fit at points nearer the MAP)",
                 points.len()
             )
         })

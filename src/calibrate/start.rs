@@ -613,7 +613,7 @@ pub(crate) fn blind_spot(
     let share = far as f64 / integrated.max(1) as f64;
     match share > BLIND_SPOT_SHARE {
         true => Err(Error::Compute(format!(
-            "{far} of {integrated} draws of its Laplace approximation have paths that miss a record by more than {FAR}× the best fit's residual RMS (the independent likelihood's MAP); it scores each point by the fit at another, and some parameter is barely fixed by these records"
+            "{far} of {integrated} draws of its Laplace approximation have paths that miss a record by more than {FAR}× the residual RMS of the best fit, the independent likelihood's MAP; it scores each point by the fit at another, and some parameter is barely fixed by these records"
         ))),
         false => Ok(()),
     }
