@@ -142,8 +142,8 @@ pub struct Standing {
     /// Held-out lppd summed over the tests (elpd of leaving one test out).
     pub elpd: f64,
     /// Its difference from the best law's at this current (0 for the best)
-    /// and the standard error of that difference (NaN on a single test:
-    /// one difference has no spread).
+    /// and the standard error of that difference (NaN on fewer than two
+    /// tests: one difference has no spread).
     pub elpd_diff: f64,
     pub elpd_diff_se: f64,
     /// Means over the tests, in sample and held out.
@@ -257,7 +257,7 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     current_a: c,
                     elpd: elpd(law),
                     elpd_diff: d.iter().sum(),
-                    // one difference has no spread to measure
+                    // fewer than two differences have no spread to measure
                     elpd_diff_se: if n >= 2.0 { (n * var).sqrt() } else { f64::NAN },
                     nrmse_in: mean(&ins.iter().map(|r| r.measures.nrmse).collect::<Vec<_>>()),
                     nrmse_out: mean(&h.iter().map(|r| r.measures.nrmse).collect::<Vec<_>>()),
@@ -307,14 +307,12 @@ pub fn verdict(standings: &[Standing]) -> Vec<String> {
                 Some(second) => {
                     let gap = -second.elpd_diff;
                     let se = second.elpd_diff_se;
-                    let margin = match se.is_finite() {
-                        true if gap > 2.0 * se => format!(
-                            "± {se:.0}, more than two standard errors: decisive on these tests"
-                        ),
-                        true => format!(
-                            "± {se:.0}, within two standard errors: not decisive on these tests"
-                        ),
-                        false => "on one test: one difference has no standard error, so not decisive".into(),
+                    let margin = if !se.is_finite() {
+                        "fewer than two tests in common: no standard error of the difference, so not decisive".to_string()
+                    } else if gap > 2.0 * se {
+                        format!("± {se:.0}, more than two standard errors: decisive on these tests")
+                    } else {
+                        format!("± {se:.0}, within two standard errors: not decisive on these tests")
                     };
                     format!(
                         "at {c} A the {} law predicts the held-out tests best: {:.0} nats of log predictive density ahead of the {} law ({margin}); held-out nRMSE {:.1} % against {:.1} %, its 95 % band {:.0} % of the peak force wide and holding {:.1} % of the held-out samples",
@@ -505,7 +503,7 @@ mod tests {
         assert!(s[1].elpd_diff_se.is_nan(), "{}", s[1].elpd_diff_se);
         assert!(
             verdict(&s)[0]
-                .contains("on one test: one difference has no standard error, so not decisive"),
+                .contains("fewer than two tests in common: no standard error of the difference, so not decisive"),
             "{:?}",
             verdict(&s)
         );
