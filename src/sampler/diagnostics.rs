@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use rustfft::{num_complex::Complex, FftPlanner};
 
 use super::chains::Chains;
-use super::drift::{drift, past_drift, Drift, DRIFT_Z};
+use super::drift::{drift, past_drift, Drift, Moment, DRIFT_Z};
 use crate::numeric::{mean, rank_normalize, variance};
 
 /// Sokal's window constant: the sum runs to the first lag M ≥ C τ(M).
@@ -461,8 +461,13 @@ impl Diagnostics {
         }
         if let Some(d) = &drift {
             warnings.push(format!(
-                "the draws still drift: a coordinate's mean moved by {:.1} standard errors from the first quarter of the draws after step {} to their last half (target within ±{DRIFT_Z}): the walkers have not forgotten their start, all ensembles alike, which R̂ does not see; run longer",
-                d.z, d.from
+                "the draws still drift: a coordinate's {} moved by {:.1} standard errors from the first quarter of the draws after step {} to their last half (target within ±{DRIFT_Z}): the walkers have not forgotten their start, all ensembles alike, which R̂ does not see; run longer",
+                match d.moment {
+                    Moment::Mean => "mean",
+                    Moment::Spread => "spread",
+                },
+                d.z,
+                d.from
             ));
         }
         if median < LOW_ACCEPTANCE {

@@ -3,7 +3,7 @@
 //! coordinate, its value and its target, said at every check.
 //!
 //! Converged (Vehtari et al. 2021, with emcee's length rule): every R̂
-//! below [`RHAT_THRESHOLD`], no drift left after burn-in
+//! below [`RHAT_THRESHOLD`], no drift of a mean or a spread left after burn-in
 //! ([`super::drift`]), every bulk and tail ESS at least the target, and
 //! the chains at least `min_tau_multiple` τ_max long after burn-in.
 //! A run told to confirm ([`RunControl::confirm`]: a posterior far from its
@@ -13,7 +13,7 @@
 use std::fmt;
 
 use super::diagnostics::{Diagnostics, MIN_TAU_MULTIPLE, RHAT_THRESHOLD};
-use super::drift::DRIFT_Z;
+use super::drift::{Moment, DRIFT_Z};
 
 /// How long to run.
 #[derive(Clone, Debug)]
@@ -79,11 +79,11 @@ pub enum Waiting {
     Draws,
     /// The largest R̂, of `coordinate`.
     RHat { coordinate: String, value: f64 },
-    /// The draws still drift: `coordinate`'s mean moved by `z` standard
-    /// errors from the first quarter of the draws after step `from` (the
-    /// burn-in, or a third of the chain where that is shorter) to their
-    /// last half ([`super::drift`]).
-    Drift { coordinate: String, z: f64, from: usize },
+    /// The draws still drift: `coordinate`'s mean (or spread) moved by
+    /// `z` standard errors from the first quarter of the draws after step
+    /// `from` (the burn-in, or a third of the chain where that is
+    /// shorter) to their last half ([`super::drift`]).
+    Drift { coordinate: String, moment: Moment, z: f64, from: usize },
     /// The smallest bulk or tail ESS, of `coordinate`.
     Ess { coordinate: String, value: f64, target: f64 },
     /// The chains are `kept` steps long after burn-in; the rule asks for
@@ -105,9 +105,15 @@ impl fmt::Display for Waiting {
             Waiting::RHat { coordinate, value } => {
                 write!(f, "R̂ of {coordinate} is {value:.4} (target < {RHAT_THRESHOLD})")
             }
-            Waiting::Drift { coordinate, z, from } => write!(
+            Waiting::Drift { coordinate, moment: Moment::Mean, z, from } => write!(
                 f,
                 "the draws of {coordinate} still drift: their mean moved by {z:.1} standard errors from the first quarter of the draws after step {from} to their last half (target within ±{DRIFT_Z}; the walkers have not forgotten their start)"
+            ),
+            Waiting::Drift { coordinate, moment: Moment::Spread, z, from } => write!(
+                f,
+                "the draws of {coordinate} still {}: their spread moved by {z:.1} standard errors from the first quarter of the draws after step {from} to their last half (target within ±{DRIFT_Z}; the walkers started {} than the posterior and have not yet filled it)",
+                if *z > 0.0 { "widen" } else { "narrow" },
+                if *z > 0.0 { "narrower" } else { "wider" }
             ),
             Waiting::Ess { coordinate, value, target } => {
                 write!(f, "ESS of {coordinate} is {value:.0} (target ≥ {target:.0})")
@@ -145,7 +151,12 @@ pub fn unmet(
         return Some(Waiting::RHat { coordinate: name(i), value: c.r_hat });
     }
     if let Some(d) = &diag.drift {
-        return Some(Waiting::Drift { coordinate: name(d.coordinate), z: d.z, from: d.from });
+        return Some(Waiting::Drift {
+            coordinate: name(d.coordinate),
+            moment: d.moment,
+            z: d.z,
+            from: d.from,
+        });
     }
     if diag.coordinates.iter().any(|c| c.ess().is_nan()) {
         return Some(Waiting::Draws);
@@ -284,10 +295,16 @@ mod tests {
         use crate::sampler::drift::Drift;
         let mut drifting =
             diagnostics(100, vec![coordinate(1.002, 300.0), coordinate(1.003, 900.0)]);
-        drifting.drift = Some(Drift { coordinate: 1, z: -5.2, from: 33 });
+        drifting.drift = Some(Drift { coordinate: 1, moment: Moment::Mean, z: -5.2, from: 33 });
         let w = unmet(&drifting, 400.0, 10.0, &control(false).names).expect("waits");
-        assert_eq!(w, Waiting::Drift { coordinate: "ln n".into(), z: -5.2, from: 33 });
+        assert_eq!(
+            w,
+            Waiting::Drift { coordinate: "ln n".into(), moment: Moment::Mean, z: -5.2, from: 33 }
+        );
         assert!(w.to_string().contains("the draws of ln n still drift: their mean moved by -5.2 standard errors from the first quarter of the draws after step 33"), "{w}");
+        drifting.drift = Some(Drift { coordinate: 0, moment: Moment::Spread, z: 5.7, from: 13 });
+        let w = unmet(&drifting, 400.0, 10.0, &control(false).names).expect("waits");
+        assert!(w.to_string().contains("the draws of ln G still widen: their spread moved by 5.7 standard errors from the first quarter of the draws after step 13"), "{w}");
         drifting.coordinates[1].r_hat = 1.05;
         assert!(matches!(
             unmet(&drifting, 400.0, 10.0, &control(false).names),
