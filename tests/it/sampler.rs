@@ -1028,15 +1028,9 @@ fn stationary_ensembles_show_no_drift() {
             .with_reference(reference(&vec![0.0; d], cov.clone()));
         s.run(&RunControl::fixed(300), &mut []).unwrap();
         let c = &s.chains;
-        let row = c.dim * c.ensembles * c.walkers;
         let mut largest = [0.0f64; 2];
         for end in (40..=300).step_by(20) {
-            let head = mrbp::sampler::Chains {
-                positions: c.positions[..end * row].to_vec(),
-                log_prob: c.log_prob[..end * c.ensembles * c.walkers].to_vec(),
-                accepted: c.accepted[..end * c.ensembles * c.walkers].to_vec(),
-                ..c.clone()
-            };
+            let head = c.first_steps(end);
             for burn_in in (0..=end / 2).step_by(10) {
                 windows += 1;
                 if let Some(found) = drift(&head, burn_in) {
