@@ -229,10 +229,12 @@ impl Layout {
     }
 
     /// Walks the drag stress after plastic work `work` (Pa) in place of
-    /// ln R1 ([`Coordinates::Hardening`]), for the per-current parameters;
-    /// other models, or no work, keep the saturation-share coordinates.
+    /// ln R1 ([`Coordinates::Hardening`]), for the per-current parameters
+    /// of the B-P law or of a law built around its element
+    /// ([`ParameterModel::has_bp_element`]); other models, or no work, keep
+    /// the saturation-share coordinates.
     pub fn harden(&mut self, model: &ParameterModel, work: Option<f64>) {
-        if let (ParameterModel::PerCurrent, Some(work)) = (model, work) {
+        if let (true, Some(work)) = (model.has_bp_element(), work) {
             let at = |n: &str| model.index(n);
             self.hardening = Some(Hardening {
                 r0: at("R0"),
@@ -651,6 +653,52 @@ mod tests {
         x[2] = (2.5e4f64).ln();
         assert_eq!(l.log_theta(&x)[2], f64::NEG_INFINITY);
         assert_eq!(l.coordinate_names()[2], "ln (R + D after 4.000e6 Pa of work)");
+    }
+
+    /// A law built around the B-P element (`bp-viscous`, `bp-spencer`)
+    /// walks its first seven parameters as the B-P law does (the hardening
+    /// coordinates, no floors) and the others above their floors: the map
+    /// inverts, ln(R0 + D1) and ln(c0 − floor) sit at their places, and
+    /// `log_jacobian` equals ln |det ∂ ln θ / ∂x| over the whole θ block.
+    /// Laws without the element keep ln(θ − floor) throughout.
+    #[test]
+    fn a_law_around_the_bp_element_walks_its_hardening_coordinates() {
+        use crate::laws::LawKind;
+        let runs = vec!["a".to_string()];
+        let noise = NoiseKind::Gaussian.model(&NoiseOptions::default());
+        for (law, si) in [
+            (LawKind::BpViscous, vec![2e5, 5e4, 1.3e5, 2.5e4, 1.2e-8, 2e-3, 0.33, 250.0, 300.0]),
+            (
+                LawKind::BpSpencer,
+                vec![2e5, 1.2e5, 0.9e5, 3e4, 4e-6, 2e-4, 1.2, 250.0, 4e4, 2e3, 300.0],
+            ),
+        ] {
+            let model = ParameterModel::Law { law };
+            assert!(model.has_bp_element(), "{law:?}");
+            let mut l = Layout::new(
+                &model,
+                &runs,
+                noise.as_ref(),
+                Coordinates::Hardening,
+                &ModelTerms::default(),
+            );
+            l.harden(&model, Some(4e6));
+            let x = l.from_si(&si);
+            let c0_floor = law.law().parameters()[7].range.0;
+            assert!((x[1] - (si[1] + si[3]).ln()).abs() < 1e-12);
+            assert!((x[7] - (si[7] - c0_floor).ln()).abs() < 1e-12);
+            assert!((x[6] - si[6].ln()).abs() < 1e-12, "n walks ln n, as in the B-P law");
+            for (a, b) in l.to_si(&x).iter().zip(&si) {
+                assert!((a / b - 1.0).abs() < 1e-9, "{law:?}: {a} vs {b}");
+            }
+            jacobian_by_differences(&l, &x, si.len() - 1);
+            assert_eq!(l.coordinate_names()[1], "ln (R0 + D1)");
+        }
+        for law in [LawKind::Spencer, LawKind::BoucWen, LawKind::Bingham] {
+            let model = ParameterModel::Law { law };
+            assert!(!model.has_bp_element() && model.saturation_pairs().is_empty(), "{law:?}");
+            assert_eq!(model.floors().len(), law.law().parameters().len());
+        }
     }
 
     /// Another law's parameters walk ln(θ − floor), the floor the lower

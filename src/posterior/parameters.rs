@@ -173,14 +173,39 @@ impl ParameterModel {
 
     /// Where θ's coordinates are walked above a floor (θ's position, the
     /// floor): every parameter of a law other than B-P, at the lower end
-    /// of its physical range ([`super::Layout`] walks ln(θ − floor)). The
-    /// B-P law's models walk ln θ.
+    /// of its physical range ([`super::Layout`] walks ln(θ − floor)), but
+    /// the B-P element's of a law built around it ([`Self::has_bp_element`]).
+    /// The B-P law's models walk ln θ.
     pub fn floors(&self) -> Vec<(usize, f64)> {
+        let skip = if self.has_bp_element() { crate::model::PARAM_NAMES.len() } else { 0 };
         match self {
             ParameterModel::Law { law } => {
-                law.law().parameters().iter().map(|p| p.range.0).enumerate().collect()
+                law.law().parameters().iter().map(|p| p.range.0).enumerate().skip(skip).collect()
             }
             _ => Vec::new(),
+        }
+    }
+
+    /// Whether θ holds the B-P law's own seven parameters, by their names
+    /// and in their order: the B-P law, or a law built around its element
+    /// (`bp-viscous`, `bp-spencer`), whose first seven parameters are the
+    /// element's. Such a θ walks the B-P law's coordinates (ln θ, the
+    /// stresses as the records fix them: [`super::Coordinates`]), not
+    /// ln(θ − floor) for its B-P part: on the measured records the
+    /// `bp-viscous` posterior's hardening lies along R0 + D1 ≈ const and
+    /// m1 (R1 − R0) ≈ const (R0 with D1 −0.97, with R1 0.97), ridges that
+    /// are straight in those coordinates and thin and curved in ln θ.
+    pub fn has_bp_element(&self) -> bool {
+        match self {
+            ParameterModel::PerCurrent => true,
+            ParameterModel::Law { law } => law
+                .law()
+                .parameters()
+                .iter()
+                .map(|p| p.name)
+                .take(crate::model::PARAM_NAMES.len())
+                .eq(crate::model::PARAM_NAMES),
+            _ => false,
         }
     }
 
@@ -221,7 +246,7 @@ impl ParameterModel {
     /// share, walked together in [`super::Coordinates::SaturationShare`].
     pub fn saturation_pairs(&self) -> Vec<(usize, usize)> {
         match self {
-            ParameterModel::Law { .. } => Vec::new(),
+            ParameterModel::Law { .. } if !self.has_bp_element() => Vec::new(),
             ParameterModel::CurrentCurves { .. } => vec![
                 (self.index("R1_low"), self.index("D1_low")),
                 (self.index("R1_high"), self.index("D1_high")),

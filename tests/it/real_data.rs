@@ -288,16 +288,18 @@ fn the_tempered_likelihood_widens_the_measured_intervals() {
 
 /// Where the adjusted likelihood would spread draws whose own paths miss
 /// the records, `memory = "auto"` takes the tempered one and says why. The
-/// B-P element in Spencer's frame on the 1 A records: along its spring k0
-/// the adjusted likelihood scores a draw by the fit at another point, and
-/// 25–37 % of its posterior's draws missed a record by more than 1.5× the
-/// median path's RMS (bands 120–420 % of the peak force wide); the start's
-/// check found 17 of 64 draws of the adjusted Laplace approximation far
-/// (2026-11-29). B-P on the same records stays adjusted
+/// B-P law with a parallel dashpot on the 0.25 A records with their model
+/// terms (`mrbp.toml`): the start's check finds 33 of 64 draws of the
+/// adjusted Laplace approximation far (2026-12-02). The case this test
+/// first held, the B-P element in Spencer's frame at 1 A without the
+/// terms (17 of 64 far, 2026-11-29, its spring k0 barely fixed), no longer
+/// meets it since that law walks its B-P element in the B-P law's
+/// coordinates, whose Laplace approximation lies closer to the posterior.
+/// B-P on the 1 A records stays adjusted
 /// ([`measured_records_calibrate_and_the_report_says_where_the_law_misses`]:
 /// none far). Ten steps: the choice is the start's.
 #[test]
-#[ignore = "slow tier: a calibration of the measured records (about 80 s)"]
+#[ignore = "slow tier: a calibration of the measured records (about 40 s)"]
 fn auto_leaves_the_adjusted_likelihood_where_its_draws_miss_the_records() {
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("cal");
@@ -305,10 +307,12 @@ fn auto_leaves_the_adjusted_likelihood_where_its_draws_miss_the_records() {
     let o = ok(&[
         "sample",
         manifest().to_str().unwrap(),
+        "--config",
+        manifest().with_file_name("mrbp.toml").to_str().unwrap(),
         "--current",
-        "1.0",
+        "0.25",
         "--law",
-        "bp-spencer",
+        "bp-viscous",
         "--steps",
         "10",
         "--out",
