@@ -32,7 +32,8 @@ pub enum Coordinates {
     /// ln θ carry over unchanged.
     SaturationShare,
     /// ln θ, but the three stresses as the records fix them (per-current
-    /// parameters only; other models walk [`Self::SaturationShare`]):
+    /// parameters, a law's B-P element, each anchor of the current curves;
+    /// the current law walks [`Self::SaturationShare`]):
     /// ln(R0 + D1), the flow stress once D has saturated, and ln(D1/R0),
     /// its share (Jacobian 1, as above); and instead of ln R1 the log of
     /// the drag stress R + D after the records' plastic work W*
@@ -140,7 +141,7 @@ pub struct Layout {
     /// The drag stress walked in [`Coordinates::Hardening`] (set by
     /// [`Self::harden`]); where set, `share` is not walked but kept for
     /// the MAP search ([`Self::searched`]).
-    hardening: Option<Hardening>,
+    hardening: Vec<Hardening>,
     /// The θ coordinates walked as ln(θ − floor) (θ's position, the
     /// floor: [`ParameterModel::floors`]), so that a posterior that presses
     /// the lower end of a parameter's range (on the measured records
@@ -217,7 +218,7 @@ impl Layout {
                 // until [`Self::harden`] knows the records' work
                 Coordinates::SaturationShare | Coordinates::Hardening => model.saturation_pairs(),
             },
-            hardening: None,
+            hardening: Vec::new(),
             floors: model.floors(),
         }
     }
@@ -225,26 +226,26 @@ impl Layout {
     /// The reference plastic work W* of the hardening coordinates, where
     /// the layout has them.
     pub fn reference_work(&self) -> Option<f64> {
-        self.hardening.as_ref().map(|h| h.work)
+        self.hardening.first().map(|h| h.work)
     }
 
     /// Walks the drag stress after plastic work `work` (Pa) in place of
     /// ln R1 ([`Coordinates::Hardening`]), for the per-current parameters
     /// of the B-P law or of a law built around its element
-    /// ([`ParameterModel::has_bp_element`]); other models, or no work, keep
-    /// the saturation-share coordinates.
+    /// ([`ParameterModel::has_bp_element`]), and for each anchor of the
+    /// current curves (`R0_low` … and `R0_high` …, the same W*); other
+    /// models, or no work, keep the saturation-share coordinates.
     pub fn harden(&mut self, model: &ParameterModel, work: Option<f64>) {
-        if let (true, Some(work)) = (model.has_bp_element(), work) {
-            let at = |n: &str| model.index(n);
-            self.hardening = Some(Hardening {
-                r0: at("R0"),
-                r1: at("R1"),
-                d1: at("D1"),
-                m1: at("m1"),
-                m2: at("m2"),
-                work,
-            });
-        }
+        let Some(work) = work else { return };
+        let at = |anchor: &str| {
+            let i = |n: &str| model.index(&format!("{n}{anchor}"));
+            Hardening { r0: i("R0"), r1: i("R1"), d1: i("D1"), m1: i("m1"), m2: i("m2"), work }
+        };
+        self.hardening = match model {
+            _ if model.has_bp_element() => vec![at("")],
+            ParameterModel::CurrentCurves { .. } => vec![at("_low"), at("_high")],
+            _ => Vec::new(),
+        };
     }
 
     /// The layout the MAP search walks: this one, but saturation-share
@@ -253,7 +254,7 @@ impl Layout {
     /// drag stress ill-conditioned: Levenberg-Marquardt crawled, 36 s
     /// against 3 s on the measured 1 A runs).
     pub fn searched(&self) -> Option<Layout> {
-        self.hardening.is_some().then(|| Layout { hardening: None, ..self.clone() })
+        (!self.hardening.is_empty()).then(|| Layout { hardening: Vec::new(), ..self.clone() })
     }
 
     /// ln |∂ ln θ / ∂ coordinates| at the sampler's coordinates `x`: what
@@ -262,7 +263,7 @@ impl Layout {
     /// parameters walked above their floors).
     pub fn log_jacobian(&self, x: &[f64], log_theta: &[f64]) -> f64 {
         let floors: f64 = self.floors.iter().map(|&(i, _)| x[i] - log_theta[i]).sum();
-        floors + self.hardening.map_or(0.0, |h| h.log_jacobian(x, log_theta))
+        floors + self.hardening.iter().map(|h| h.log_jacobian(x, log_theta)).sum::<f64>()
     }
 
     /// Residuals whose squares add −2 × the floors' part of
@@ -369,18 +370,19 @@ impl Layout {
         for &(i, floor) in &self.floors {
             names[i] = format!("ln ({} − {floor})", self.names[i]);
         }
-        match &self.hardening {
-            Some(h) => {
-                names[h.r0] = "ln (R0 + D1)".to_string();
-                names[h.d1] = "ln (D1 / R0)".to_string();
-                names[h.r1] = format!("ln (R + D after {:.3e} Pa of work)", h.work);
-            }
-            None => {
-                for &(r1, d1) in &self.share {
-                    let (a, b) = (&self.names[r1], &self.names[d1]);
-                    names[r1] = format!("ln ({a} + {b})");
-                    names[d1] = format!("ln ({b} / {a})");
-                }
+        for h in &self.hardening {
+            let (r0, d1) = (&self.names[h.r0], &self.names[h.d1]);
+            // "_low", "_high" for the curves' anchors; "" for one parameter set
+            let anchor = self.names[h.r1].strip_prefix("R1").unwrap_or_default();
+            names[h.r0] = format!("ln ({r0} + {d1})");
+            names[h.d1] = format!("ln ({d1} / {r0})");
+            names[h.r1] = format!("ln (R{anchor} + D{anchor} after {:.3e} Pa of work)", h.work);
+        }
+        if self.hardening.is_empty() {
+            for &(r1, d1) in &self.share {
+                let (a, b) = (&self.names[r1], &self.names[d1]);
+                names[r1] = format!("ln ({a} + {b})");
+                names[d1] = format!("ln ({b} / {a})");
             }
         }
         names
@@ -389,12 +391,12 @@ impl Layout {
     /// ln θ at the sampler's coordinates `x` (θ first).
     pub fn log_theta(&self, x: &[f64]) -> Vec<f64> {
         let mut log = x[self.theta.clone()].to_vec();
-        match &self.hardening {
-            Some(h) => h.log_theta(x, &mut log),
-            None => {
-                for &(r1, d1) in &self.share {
-                    (log[r1], log[d1]) = parts(x[r1], x[d1]);
-                }
+        for h in &self.hardening {
+            h.log_theta(x, &mut log);
+        }
+        if self.hardening.is_empty() {
+            for &(r1, d1) in &self.share {
+                (log[r1], log[d1]) = parts(x[r1], x[d1]);
             }
         }
         for &(i, floor) in &self.floors {
@@ -406,12 +408,12 @@ impl Layout {
     /// The sampler's θ coordinates of ln θ (inverse of [`Self::log_theta`]).
     pub fn theta_coordinates(&self, log_theta: &[f64]) -> Vec<f64> {
         let mut x = log_theta.to_vec();
-        match &self.hardening {
-            Some(h) => h.coordinates(log_theta, &mut x),
-            None => {
-                for &(r1, d1) in &self.share {
-                    (x[r1], x[d1]) = sum_and_share(log_theta[r1], log_theta[d1]);
-                }
+        for h in &self.hardening {
+            h.coordinates(log_theta, &mut x);
+        }
+        if self.hardening.is_empty() {
+            for &(r1, d1) in &self.share {
+                (x[r1], x[d1]) = sum_and_share(log_theta[r1], log_theta[d1]);
             }
         }
         for &(i, floor) in &self.floors {
@@ -653,6 +655,42 @@ mod tests {
         x[2] = (2.5e4f64).ln();
         assert_eq!(l.log_theta(&x)[2], f64::NEG_INFINITY);
         assert_eq!(l.coordinate_names()[2], "ln (R + D after 4.000e6 Pa of work)");
+    }
+
+    /// The current curves walk each anchor's stresses in the hardening
+    /// coordinates (the same W*): ln(R0_x + D1_x) and ln(D1_x / R0_x) at
+    /// their places, the map inverts, and `log_jacobian` (the two anchors'
+    /// terms) equals ln |det ∂ ln θ / ∂x| over all 21 curve coordinates.
+    #[test]
+    fn the_curves_walk_each_anchors_hardening_coordinates() {
+        let runs = vec!["a".to_string()];
+        let model = ParameterModel::CurrentCurves { low_a: 0.25, high_a: 1.0, lag: false };
+        let noise = NoiseKind::Gaussian.model(&NoiseOptions::default());
+        let mut l = Layout::new(
+            &model,
+            &runs,
+            noise.as_ref(),
+            Coordinates::Hardening,
+            &ModelTerms::default(),
+        );
+        l.harden(&model, Some(4e6));
+        let mut si = vec![2e5, 5e4, 1.3e5, 2.5e4, 1.2e-8, 2e-3, 0.33];
+        si.extend([3e5, 1.2e5, 0.9e5, 3e4, 4e-6, 2e-4, 1.2]);
+        si.extend([1.1, 0.8, 1.3, 0.9, 1.2, 0.7, 1.05]);
+        si.push(300.0);
+        let x = l.from_si(&si);
+        for (r0, d1) in [(1, 3), (8, 10)] {
+            assert!((x[r0] - (si[r0] + si[d1]).ln()).abs() < 1e-12, "{r0}");
+            assert!((x[d1] - (si[d1] / si[r0]).ln()).abs() < 1e-12, "{d1}");
+        }
+        for (a, b) in l.to_si(&x).iter().zip(&si) {
+            assert!((a / b - 1.0).abs() < 1e-9, "{a} vs {b}");
+        }
+        jacobian_by_differences(&l, &x, 21);
+        let names = l.coordinate_names();
+        assert_eq!(names[8], "ln (R0_high + D1_high)");
+        assert_eq!(names[2], "ln (R_low + D_low after 4.000e6 Pa of work)");
+        assert!(l.searched().is_some_and(|s| s.coordinate_names()[9] == "ln (R1_high + D1_high)"));
     }
 
     /// A law built around the B-P element (`bp-viscous`, `bp-spencer`)
