@@ -657,23 +657,29 @@ mod tests {
         assert_eq!(l.coordinate_names()[2], "ln (R + D after 4.000e6 Pa of work)");
     }
 
+    /// The layout of `model` for one run with Gaussian noise, in the
+    /// hardening coordinates after 4·10⁶ Pa of work.
+    fn hardened(model: &ParameterModel) -> Layout {
+        let noise = NoiseKind::Gaussian.model(&NoiseOptions::default());
+        let runs = vec!["a".to_string()];
+        let mut l = Layout::new(
+            model,
+            &runs,
+            noise.as_ref(),
+            Coordinates::Hardening,
+            &ModelTerms::default(),
+        );
+        l.harden(model, Some(4e6));
+        l
+    }
+
     /// The current curves walk each anchor's stresses in the hardening
     /// coordinates (the same W*): ln(R0_x + D1_x) and ln(D1_x / R0_x) at
     /// their places, the map inverts, and `log_jacobian` (the two anchors'
     /// terms) equals ln |det ∂ ln θ / ∂x| over all 21 curve coordinates.
     #[test]
     fn the_curves_walk_each_anchors_hardening_coordinates() {
-        let runs = vec!["a".to_string()];
-        let model = ParameterModel::CurrentCurves { low_a: 0.25, high_a: 1.0, lag: false };
-        let noise = NoiseKind::Gaussian.model(&NoiseOptions::default());
-        let mut l = Layout::new(
-            &model,
-            &runs,
-            noise.as_ref(),
-            Coordinates::Hardening,
-            &ModelTerms::default(),
-        );
-        l.harden(&model, Some(4e6));
+        let l = hardened(&ParameterModel::CurrentCurves { low_a: 0.25, high_a: 1.0, lag: false });
         let mut si = vec![2e5, 5e4, 1.3e5, 2.5e4, 1.2e-8, 2e-3, 0.33];
         si.extend([3e5, 1.2e5, 0.9e5, 3e4, 4e-6, 2e-4, 1.2]);
         si.extend([1.1, 0.8, 1.3, 0.9, 1.2, 0.7, 1.05]);
@@ -702,8 +708,6 @@ mod tests {
     #[test]
     fn a_law_around_the_bp_element_walks_its_hardening_coordinates() {
         use crate::laws::LawKind;
-        let runs = vec!["a".to_string()];
-        let noise = NoiseKind::Gaussian.model(&NoiseOptions::default());
         for (law, si) in [
             (LawKind::BpViscous, vec![2e5, 5e4, 1.3e5, 2.5e4, 1.2e-8, 2e-3, 0.33, 250.0, 300.0]),
             (
@@ -713,14 +717,7 @@ mod tests {
         ] {
             let model = ParameterModel::Law { law };
             assert!(model.has_bp_element(), "{law:?}");
-            let mut l = Layout::new(
-                &model,
-                &runs,
-                noise.as_ref(),
-                Coordinates::Hardening,
-                &ModelTerms::default(),
-            );
-            l.harden(&model, Some(4e6));
+            let l = hardened(&model);
             let x = l.from_si(&si);
             let c0_floor = law.law().parameters()[7].range.0;
             assert!((x[1] - (si[1] + si[3]).ln()).abs() < 1e-12);
