@@ -138,9 +138,10 @@ pub struct Layout {
     /// Where each pair of R1 and D1 sits in θ when they are walked as
     /// saturation and share (one pair, or one per anchor of the curves).
     share: Vec<(usize, usize)>,
-    /// The drag stress walked in [`Coordinates::Hardening`] (set by
-    /// [`Self::harden`]); where set, `share` is not walked but kept for
-    /// the MAP search ([`Self::searched`]).
+    /// The drag stress walked in [`Coordinates::Hardening`], one per B-P
+    /// parameter set (one, or one per anchor of the curves; set by
+    /// [`Self::harden`]); where any is set, `share` is not walked but kept
+    /// for the MAP search ([`Self::searched`]).
     hardening: Vec<Hardening>,
     /// The θ coordinates walked as ln(θ − floor) (θ's position, the
     /// floor: [`ParameterModel::floors`]), so that a posterior that presses
