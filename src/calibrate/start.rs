@@ -466,7 +466,8 @@ impl Stages<'_> {
         let independent = mode
             .as_ref()
             .map_or_else(|| laplace::surrogate(&plain, &independent_map), |m| m.laplace.clone());
-        self.independent = laplace::si_intervals(&plain, &independent, self.settings.sampler.seed);
+        self.independent =
+            laplace::si_intervals(&plain.layout, &independent, self.settings.sampler.seed);
         if self.settings.likelihood.adjustment().is_none() {
             let map = moved(&posterior, map);
             return (posterior, map, None);

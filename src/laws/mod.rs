@@ -125,6 +125,17 @@ pub trait DamperLaw: Send + Sync + std::fmt::Debug {
         false
     }
 
+    /// The parameters the sampler walks as u = ln(θ + c) instead of ln(θ −
+    /// floor) (`posterior::Layout`): (index, c). For a parameter whose
+    /// lower tail the records leave to the prior, trading it against
+    /// another (`bp-spencer`'s dashpot c0 against the B-P element's rate
+    /// exponent), a tail several units of ln θ long that the walkers fill
+    /// only by diffusion; below c it is a thin layer above the wall u =
+    /// ln c. None by default.
+    fn shifted(&self) -> &'static [(usize, f64)] {
+        &[]
+    }
+
     /// Parameter sets a MAP search may start from around the B-P
     /// parameters `bp` the paper's identification found on `runs`: for a
     /// law built on the B-P element; none for another.

@@ -50,6 +50,10 @@ pub trait StateLaw: Send + Sync + std::fmt::Debug + Default + 'static {
     /// two use a 2 × 2 solve, three the 3 × 3.
     const STATES: usize = 2;
 
+    /// Parameters walked as ln(θ + c) instead of ln(θ − floor): (index, c);
+    /// see [`super::DamperLaw::shifted`].
+    const SHIFTED: &'static [(usize, f64)] = &[];
+
     /// The lanes' constants, read off their parameter sets and the run's
     /// geometry (a law written in stress, as the B-P element, needs it).
     type Lanes<S: F64xN>: Copy;
@@ -158,6 +162,10 @@ impl<L: StateLaw> DamperLaw for Ode<L> {
 
     fn builds_on_bodner_partom(&self) -> bool {
         L::builds_on_bodner_partom()
+    }
+
+    fn shifted(&self) -> &'static [(usize, f64)] {
+        L::SHIFTED
     }
 
     fn starts_around(&self, bp: &Params, runs: &[RunData]) -> Vec<LawValues> {

@@ -148,6 +148,8 @@ pub struct Layout {
     /// the lower end of a parameter's range (on the measured records
     /// Bouc-Wen's n at 1 at 0.25 and 0.5 A, Spencer's k0 at 0.01 N/m) meets a
     /// tail that thins like e^u rather than a wall the walkers pile against.
+    /// A negative floor −c walks ln(θ + c) (`DamperLaw::shifted`): a lower
+    /// tail the records leave to the prior, short in that coordinate.
     floors: Vec<(usize, f64)>,
 }
 
@@ -162,8 +164,13 @@ fn sum_and_share(log_a: f64, log_b: f64) -> (f64, f64) {
     (log_a.max(log_b) + softplus(-(log_a - log_b).abs()), log_b - log_a)
 }
 
-/// ln θ of θ = floor + eᵘ, without overflow (u itself for a floor of 0).
+/// ln θ of θ = floor + eᵘ, without overflow (u itself for a floor of 0);
+/// for a negative floor −c, −∞ (outside the support) at u ≤ ln c.
 fn above_floor(u: f64, floor: f64) -> f64 {
+    if floor < 0.0 {
+        let d = (-floor).ln() - u;
+        return if d < 0.0 { u + (-d.exp_m1()).ln() } else { f64::NEG_INFINITY };
+    }
     match floor > 0.0 {
         true => floor.ln() + softplus(u - floor.ln()),
         false => u,
@@ -171,9 +178,12 @@ fn above_floor(u: f64, floor: f64) -> f64 {
 }
 
 /// u = ln(θ − floor) of ln θ = `log` (inverse of [`above_floor`]); a θ at
-/// its floor, where a start may be clamped to its range, is placed a
-/// relative 1e-9 above it.
+/// a positive floor, where a start may be clamped to its range, is placed
+/// a relative 1e-9 above it.
 fn below_floor(log: f64, floor: f64) -> f64 {
+    if floor < 0.0 {
+        return (-floor).ln() + softplus(log - (-floor).ln());
+    }
     match floor > 0.0 {
         true => floor.ln() + (log - floor.ln()).exp_m1().max(1e-9).ln(),
         false => log,
@@ -270,6 +280,10 @@ impl Layout {
     /// Residuals whose squares add −2 × the floors' part of
     /// [`Self::log_jacobian`] to a least-squares search's −2 ln p: √(2 (ln θ
     /// − u)) for each coordinate walked above its floor (ln θ ≥ u there).
+    /// A shifted coordinate's part (a negative floor: u ≥ ln θ) is a gain,
+    /// which no square adds: 0 here, and the search finds that coordinate's
+    /// mode in ln θ; Newton's method then climbs to the sampler's mode
+    /// (`laplace`).
     /// Without them the search would seek the mode of ln θ's density, at
     /// the floor where the posterior presses it, not the coordinates' mode
     /// the sampler and the Laplace approximation need.
@@ -369,7 +383,10 @@ impl Layout {
             })
             .collect();
         for &(i, floor) in &self.floors {
-            names[i] = format!("ln ({} − {floor})", self.names[i]);
+            names[i] = match floor < 0.0 {
+                true => format!("ln ({} + {})", self.names[i], -floor),
+                false => format!("ln ({} − {floor})", self.names[i]),
+            };
         }
         for h in &self.hardening {
             let (r0, d1) = (&self.names[h.r0], &self.names[h.d1]);
@@ -720,15 +737,32 @@ mod tests {
             assert!(model.has_bp_element(), "{law:?}");
             let l = hardened(&model);
             let x = l.from_si(&si);
-            let c0_floor = law.law().parameters()[7].range.0;
+            // bp-viscous's dashpot above its floor, bp-spencer's shifted
+            let c0 = match law {
+                LawKind::BpSpencer => si[7] + 1e3,
+                _ => si[7] - law.law().parameters()[7].range.0,
+            };
             assert!((x[1] - (si[1] + si[3]).ln()).abs() < 1e-12);
-            assert!((x[7] - (si[7] - c0_floor).ln()).abs() < 1e-12);
+            assert!((x[7] - c0.ln()).abs() < 1e-12, "{law:?}: {}", x[7]);
             assert!((x[6] - si[6].ln()).abs() < 1e-12, "n walks ln n, as in the B-P law");
             for (a, b) in l.to_si(&x).iter().zip(&si) {
                 assert!((a / b - 1.0).abs() < 1e-9, "{law:?}: {a} vs {b}");
             }
             jacobian_by_differences(&l, &x, si.len() - 1);
             assert_eq!(l.coordinate_names()[1], "ln (R0 + D1)");
+            if law == LawKind::BpSpencer {
+                assert_eq!(l.coordinate_names()[7], "ln (c0 + 1000)");
+                // a dashpot far below the shift: the map inverts, the
+                // Jacobian holds; at or below the wall u = ln c, no θ
+                let mut thin = si.clone();
+                thin[7] = 20.0;
+                let x = l.from_si(&thin);
+                assert!((l.to_si(&x)[7] / 20.0 - 1.0).abs() < 1e-9);
+                jacobian_by_differences(&l, &x, si.len() - 1);
+                let mut wall = x.clone();
+                wall[7] = 1e3f64.ln();
+                assert_eq!(l.log_theta(&wall)[7], f64::NEG_INFINITY);
+            }
         }
         for law in [LawKind::Spencer, LawKind::BoucWen, LawKind::Bingham] {
             let model = ParameterModel::Law { law };

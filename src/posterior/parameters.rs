@@ -174,13 +174,22 @@ impl ParameterModel {
     /// Where θ's coordinates are walked above a floor (θ's position, the
     /// floor): every parameter of a law other than B-P, at the lower end
     /// of its physical range ([`super::Layout`] walks ln(θ − floor)), but
-    /// the B-P element's of a law built around it ([`Self::has_bp_element`]).
-    /// The B-P law's models walk ln θ.
+    /// the B-P element's of a law built around it ([`Self::has_bp_element`]);
+    /// a parameter the law walks shifted (`DamperLaw::shifted`, c) has the
+    /// floor −c, walked as ln(θ + c). The B-P law's models walk ln θ.
     pub fn floors(&self) -> Vec<(usize, f64)> {
         let skip = if self.has_bp_element() { crate::model::PARAM_NAMES.len() } else { 0 };
         match self {
             ParameterModel::Law { law } => {
-                law.law().parameters().iter().map(|p| p.range.0).enumerate().skip(skip).collect()
+                let law = law.law();
+                let shift =
+                    |i: usize| law.shifted().iter().find(|&&(j, _)| j == i).map(|&(_, c)| -c);
+                law.parameters()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| (i, shift(i).unwrap_or(p.range.0)))
+                    .skip(skip)
+                    .collect()
             }
             _ => Vec::new(),
         }

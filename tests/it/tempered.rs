@@ -161,9 +161,9 @@ fn the_independent_intervals_beside_a_tempered_calibration_are_at_the_mode() {
     let found = map::refine(&plain, &s.searched.x[l.fitted.clone()]).expect("searched");
     let mode = laplace::mode(&plain, &found).expect("Newton's method");
     let g = l.names.iter().position(|n| n == "G").expect("a G coordinate");
-    let fresh = laplace::si_intervals(&plain, &mode.laplace, 7);
+    let fresh = laplace::si_intervals(&plain.layout, &mode.laplace, 7);
     let off = (shown.q50 - fresh[g].q50).abs() / fresh[g].sd;
-    let surrogate = laplace::si_intervals(&plain, &laplace::surrogate(&plain, &found), 7);
+    let surrogate = laplace::si_intervals(&plain.layout, &laplace::surrogate(&plain, &found), 7);
     let surrogate_off = (surrogate[g].q50 - fresh[g].q50).abs() / fresh[g].sd;
     println!("shown {off:.3} sd from the mode, the surrogate {surrogate_off:.3}");
     assert!(off < 0.15, "the table's G lies {off:.3} sd from the mode");
