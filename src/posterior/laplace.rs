@@ -212,10 +212,11 @@ pub fn si_intervals(layout: &Layout, q: &Elliptical, seed: u64) -> Vec<IntervalR
     while columns[0].len() < INTERVAL_DRAWS && tries < 100 * INTERVAL_DRAWS {
         tries += 1;
         q.draw(None, 1.0, &mut rng, &mut y);
-        if !layout.log_theta(&y).iter().all(|v| v.is_finite()) {
+        let si = layout.to_si(&y);
+        if !si[layout.theta.clone()].iter().all(|v| *v > 0.0 && v.is_finite()) {
             continue;
         }
-        for (c, v) in columns.iter_mut().zip(layout.to_si(&y)) {
+        for (c, v) in columns.iter_mut().zip(si) {
             c.push(v);
         }
     }

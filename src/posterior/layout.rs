@@ -280,13 +280,12 @@ impl Layout {
     /// Residuals whose squares add −2 × the floors' part of
     /// [`Self::log_jacobian`] to a least-squares search's −2 ln p: √(2 (ln θ
     /// − u)) for each coordinate walked above its floor (ln θ ≥ u there).
-    /// A shifted coordinate's part (a negative floor: u ≥ ln θ) is a gain,
-    /// which no square adds: 0 here, and the search finds that coordinate's
-    /// mode in ln θ; Newton's method then climbs to the sampler's mode
-    /// (`laplace`).
     /// Without them the search would seek the mode of ln θ's density, at
     /// the floor where the posterior presses it, not the coordinates' mode
-    /// the sampler and the Laplace approximation need.
+    /// the sampler and the Laplace approximation need. A shifted
+    /// coordinate's part (a negative floor: u ≥ ln θ) is a gain, which no
+    /// square adds: 0 here, and the search finds that coordinate's mode in
+    /// ln θ; Newton's method then climbs to the sampler's mode (`laplace`).
     pub fn floor_residuals(&self, x: &[f64], log_theta: &[f64]) -> Vec<f64> {
         self.floors.iter().map(|&(i, _)| (2.0 * (log_theta[i] - x[i]).max(0.0)).sqrt()).collect()
     }
