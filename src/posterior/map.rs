@@ -523,21 +523,36 @@ pub fn best_map(post: &Posterior, starts: &[Vec<f64>]) -> Option<MapEstimate> {
     best_map_within(post, starts, SCREEN_PATIENCE)
 }
 
-/// [`best_map`] from `starts`, with `fallback` (the prior medians, say)
-/// searched too where there is a single start, or where no start's search
-/// converges within its budget. A law whose starts are read off the
-/// records (three of them) finds its MAP from one of them: on the measured
-/// records the prior medians' search spent its whole budget and ended
-/// 0.7–56 nats below the best (Bouc-Wen and Spencer at 0.25 A), a third
-/// to two fifths of the screen's wall time on two cores. One start and
-/// the fallback run side by side, as before.
-pub fn best_map_or(post: &Posterior, starts: &[Vec<f64>], fallback: &[f64]) -> Option<MapEstimate> {
-    if starts.len() <= 1 {
-        let beside: Vec<Vec<f64>> = starts.iter().cloned().chain([fallback.to_vec()]).collect();
+/// [`best_map`] from tiers of starts, with `fallback` (the prior medians,
+/// say) searched too where there is a single start, or where no start's
+/// search converges within its budget. The tiers are searched in turn,
+/// each only where no search of the ones before converged. A law whose
+/// starts are read off the records (three of them) finds its MAP from one
+/// of them: on the measured records the prior medians' search spent its
+/// whole budget and ended 0.7–56 nats below the best (Bouc-Wen and
+/// Spencer at 0.25 A), a third to two fifths of the screen's wall time on
+/// two cores. One start and the fallback run side by side, as before.
+pub fn best_map_or(
+    post: &Posterior,
+    tiers: &[Vec<Vec<f64>>],
+    fallback: &[f64],
+) -> Option<MapEstimate> {
+    if tiers.iter().map(Vec::len).sum::<usize>() <= 1 {
+        let beside: Vec<Vec<f64>> =
+            tiers.iter().flatten().cloned().chain([fallback.to_vec()]).collect();
         return best_map(post, &beside);
     }
-    let mut found = screen(post, starts, SCREEN_PATIENCE);
-    if !found.iter().flatten().any(|m| m.log_density.is_finite() && !m.exhausted) {
+    let converged = |found: &[Option<MapEstimate>]| {
+        found.iter().flatten().any(|m| m.log_density.is_finite() && !m.exhausted)
+    };
+    let mut found = Vec::new();
+    for tier in tiers {
+        found.extend(screen(post, tier, SCREEN_PATIENCE));
+        if converged(&found) {
+            break;
+        }
+    }
+    if !converged(&found) {
         found.extend(screen(post, &[fallback.to_vec()], SCREEN_PATIENCE));
     }
     finish(post, found)

@@ -514,7 +514,10 @@ fn a_screened_map_search_finishes_its_best_start() {
 /// The prior medians' start (`map::best_map_or`'s fallback) is searched
 /// where the law's own starts give nothing that converged, and only there:
 /// from two starts that converge, the result is `best_map`'s from those
-/// two, bit for bit (with the fallback searched too it differs);
+/// two, bit for bit (with the fallback searched too it differs); a later
+/// tier of starts is searched only where no earlier one converged (a
+/// converging first tier gives `best_map`'s from it alone, a failing one
+/// the second tier's);
 /// from two starts whose integration fails (ln of the first θ coordinate
 /// 60 above the MAP), the fallback's search reaches the MAP that an
 /// unbudgeted search from it finds, to within 0.1 nat (the screened
@@ -532,14 +535,22 @@ fn the_prior_medians_are_searched_where_no_start_converges() {
     assert!(map::best_map(post, std::slice::from_ref(&broken)).is_none());
     let pair = [off(0.5), off(-3.0)];
     let alone = map::best_map(post, &pair).unwrap();
-    let with = map::best_map_or(post, &pair, &off(6.0)).unwrap();
+    let with = map::best_map_or(post, &[pair.to_vec()], &off(6.0)).unwrap();
     assert_eq!(with.log_density.to_bits(), alone.log_density.to_bits());
+    let first = map::best_map(post, &[off(-3.0)]).unwrap();
+    assert_ne!(first.log_density.to_bits(), alone.log_density.to_bits());
+    let tiers = [vec![off(-3.0)], vec![off(0.5)]];
+    let tiered = map::best_map_or(post, &tiers, &off(6.0)).unwrap();
+    assert_eq!(tiered.log_density.to_bits(), first.log_density.to_bits());
+    let tiers = [vec![broken.clone(), broken.clone()], pair.to_vec()];
+    let tiered = map::best_map_or(post, &tiers, &off(6.0)).unwrap();
+    assert_eq!(tiered.log_density.to_bits(), alone.log_density.to_bits());
     // searched, the fallback would have changed the result
     let all = map::best_map(post, &[off(0.5), off(-3.0), off(6.0)]).unwrap();
     assert_ne!(all.log_density.to_bits(), alone.log_density.to_bits());
     let fallback = off(4.0);
     let full = map::refine(post, &fallback).unwrap();
-    let rescued = map::best_map_or(post, &[broken.clone(), broken], &fallback).unwrap();
+    let rescued = map::best_map_or(post, &[vec![broken.clone(), broken]], &fallback).unwrap();
     assert!(
         (rescued.log_density - full.log_density).abs() < 0.1,
         "rescued {} against {}",
