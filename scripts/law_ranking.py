@@ -11,7 +11,11 @@ for each generating law, how often each law was ranked first, and how often
 decisively (more than 2 standard errors of held-out log predictive density
 ahead of the second).
 
-    python scripts/law_ranking.py MRBP OUT REPLICATES [JOBS]
+    python scripts/law_ranking.py MRBP OUT REPLICATES [JOBS] [LAWS] [GENERATING]
+
+LAWS: the candidate laws, comma-separated (default
+bingham,bouc-wen,spencer,bodner-partom); GENERATING: the laws whose
+records are made (default: LAWS).
 
 Every law is calibrated with independent residuals (`--memory
 independent`), as the study was first run (the default, `auto`, would
@@ -26,7 +30,9 @@ import concurrent.futures as cf, csv, os, re, subprocess, sys
 
 MRBP, OUT, N = sys.argv[1], sys.argv[2], int(sys.argv[3])
 JOBS = int(sys.argv[4]) if len(sys.argv) > 4 else 1
-LAWS = ["bingham", "bouc-wen", "spencer", "bodner-partom"]
+LAWS = (sys.argv[5].split(",") if len(sys.argv) > 5
+        else ["bingham", "bouc-wen", "spencer", "bodner-partom"])
+GENERATING = sys.argv[6].split(",") if len(sys.argv) > 6 else LAWS
 VERDICT = re.compile(r"at 1 A the (\S+) law predicts the held-out tests best.*?\b(not decisive|decisive)\b")
 
 
@@ -60,7 +66,7 @@ def replicate(generating, k):
 def main():
     os.makedirs(OUT, exist_ok=True)
     # replicate by replicate, so that a study cut short holds every law alike
-    jobs = [(g, k) for k in range(N) for g in LAWS]
+    jobs = [(g, k) for k in range(N) for g in GENERATING]
     rows = []
     with cf.ThreadPoolExecutor(JOBS) as pool:
         for generating, k, line in pool.map(lambda j: replicate(*j), jobs):
@@ -73,7 +79,7 @@ def main():
         w.writerows(rows)
     print("\n| records of | " + " | ".join(f"{l} first" for l in LAWS) + " | decisive |")
     print("|---" * (len(LAWS) + 2) + "|")
-    for g in LAWS:
+    for g in GENERATING:
         mine = [r for r in rows if r[0] == g]
         counts = [sum(r[2] == l for r in mine) for l in LAWS]
         decisive = sum(r[3] for r in mine if r[2] == g)
