@@ -143,7 +143,7 @@ fn start_with(
     // the identification first, and from the starts read off the records
     // only where none of those converges (bp-spencer at 1 A: the two
     // about the identification found the optimum in 6–8 s, the two from
-    // the plausible centre ran out of their budgets in 22–31 s and ended
+    // the records' scales ran out of their budgets in 22–31 s and ended
     // 29–168 nats lower)
     let tiers_ln: Vec<Vec<Vec<f64>>> = match &identification {
         Some(id) if law.is_bodner_partom() => {

@@ -542,18 +542,14 @@ pub fn best_map_or(
             tiers.iter().flatten().cloned().chain([fallback.to_vec()]).collect();
         return best_map(post, &beside);
     }
-    let converged = |found: &[Option<MapEstimate>]| {
-        found.iter().flatten().any(|m| m.log_density.is_finite() && !m.exhausted)
-    };
+    // the fallback is the last tier
+    let last = [fallback.to_vec()];
     let mut found = Vec::new();
-    for tier in tiers {
+    for tier in tiers.iter().map(Vec::as_slice).chain([&last[..]]) {
         found.extend(screen(post, tier, SCREEN_PATIENCE));
-        if converged(&found) {
+        if found.iter().flatten().any(|m| m.log_density.is_finite() && !m.exhausted) {
             break;
         }
-    }
-    if !converged(&found) {
-        found.extend(screen(post, &[fallback.to_vec()], SCREEN_PATIENCE));
     }
     finish(post, found)
 }
