@@ -473,6 +473,9 @@ fn validation_section(page: &mut Page, r: &CalibrationReport, loo_figs: &Figures
                 if let Some(why) = &r.failure {
                     page.para(&format!("{} could not be held out ({}): it has no held-out bands and no numbers above; the other runs were held out as usual.", r.coverage.run, why));
                 }
+                if let Some(why) = &r.tempered_instead {
+                    page.para(&format!("{} was held out under the tempered likelihood, as `memory = \"auto\"` takes it for a calibration of the runs kept: {}.", r.coverage.run, why));
+                }
             }
             if let Some(warning) = super::text::refits_unsettled(rows) {
                 page.para(&format!("Not converged: {warning}."));

@@ -382,6 +382,14 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
             r.rhat_shown()
         );
     }
+    for r in rows.iter().filter(|r| r.tempered_instead.is_some()) {
+        row!(
+            out,
+            "{}: held out under the tempered likelihood, as `memory = \"auto\"` takes it for the runs kept: {}",
+            r.coverage.run,
+            r.tempered_instead.as_deref().unwrap_or_default()
+        );
+    }
     if let Some(warning) = refits_unsettled(rows) {
         row!(out, "warning: {warning}");
     }
@@ -598,6 +606,7 @@ mod tests {
             by,
             max_rhat,
             failure: None,
+            tempered_instead: None,
         };
         let rows = [
             loo("a", HeldOutBy::Sampling, 1.005),

@@ -93,6 +93,10 @@ fn write_loo(path: &Path, rows: &[LooRow], id: &str, described: &str) -> Result<
         .str("held_out_by", rows.iter().map(|r| r.by.label().to_string()).collect())
         .f64("max_r_hat", rows.iter().map(|r| r.max_rhat).collect())
         .str("failure", rows.iter().map(|r| r.failure.clone().unwrap_or_default()).collect())
+        .str(
+            "tempered_instead",
+            rows.iter().map(|r| r.tempered_instead.clone().unwrap_or_default()).collect(),
+        )
         .meta(LOO_SETTINGS, described);
     write_parquet(path, t)
 }
@@ -104,8 +108,11 @@ fn read_loo(path: &Path) -> Result<Vec<LooRow>> {
     let k_laplace = f64_column(&df, "pareto_k_laplace", path)?;
     let by = str_column(&df, "held_out_by", path)?;
     let rhat = f64_column(&df, "max_r_hat", path)?;
-    // files written before a held-out run could fail have no column
+    // files written before a held-out run could fail (or take the tempered
+    // likelihood in the adjusted one's place) have no column
     let failure = str_column(&df, "failure", path).unwrap_or_else(|_| vec![String::new(); k.len()]);
+    let tempered =
+        str_column(&df, "tempered_instead", path).unwrap_or_else(|_| vec![String::new(); k.len()]);
     coverage
         .into_iter()
         .enumerate()
@@ -120,6 +127,7 @@ fn read_loo(path: &Path) -> Result<Vec<LooRow>> {
                 by,
                 max_rhat: rhat[i],
                 failure: Some(failure[i].clone()).filter(|f| !f.is_empty()),
+                tempered_instead: Some(tempered[i].clone()).filter(|f| !f.is_empty()),
             })
         })
         .collect()

@@ -155,6 +155,11 @@ pub struct LooRow {
     pub max_rhat: f64,
     /// Why the held-out posterior could not be reached ([`HeldOutBy::Failed`]).
     pub failure: Option<String>,
+    /// Why the held-out posterior takes the tempered likelihood where the
+    /// calibration's, chosen by `memory = "auto"`, is the adjusted one
+    /// (its draws reach past the records kept, as the start would have
+    /// found on those runs alone); `None` where it takes the calibration's.
+    pub tempered_instead: Option<String>,
 }
 
 /// Whether a held-out posterior sampled afresh whose refit stopped with
@@ -205,6 +210,7 @@ impl LooRow {
             by: HeldOutBy::Failed,
             max_rhat: f64::NAN,
             failure: Some(why),
+            tempered_instead: None,
         }
     }
 }
@@ -431,6 +437,7 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         by: HeldOutBy::Reweighting,
         max_rhat: f64::NAN,
         failure: None,
+        tempered_instead: None,
     };
     // an adjusted held-out posterior is centred on its own likelihood's peak
     // (below), which the full posterior's draws do not weigh: there these
@@ -457,32 +464,50 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         // B-P on Spencer's records without their 200 rpm run)
         let (posterior, laplace) = match adjusted {
             true => {
-                let (posterior, independent) =
+                let (posterior, independent, plain_map) =
                     recentred(&posterior, &start).ok_or_else(|| {
                         Error::Compute(format!(
                             "leave-one-out without {}: the mode of the independent likelihood was not found",
                             left_out.id()
                         ))
                     })?;
+                let at = independent.mean.as_slice().to_vec();
                 let laplace = match laplace::adjusted_mode(&posterior, &independent) {
                     Some(mode) => mode.laplace,
-                    None => {
-                        let at = independent.mean.as_slice().to_vec();
-                        at_mode_from(&posterior, &at, left_out.id())?
-                    }
+                    None => at_mode_from(&posterior, &at, left_out.id())?,
                 };
                 // the held-out posterior's draws judged against the runs
                 // kept's best fit, as the start judges the calibration's:
                 // an adjustment measured on every run can carry the
                 // posterior of fewer past their records
-                blind_spot(&posterior, &laplace, independent.mean.as_slice(), settings.sampler.seed)
-                    .map_err(|e| {
-                        Error::Compute(format!(
+                match blind_spot(&posterior, &laplace, &at, settings.sampler.seed) {
+                    Ok(()) => (posterior, laplace),
+                    // where `auto` chose the adjusted likelihood, the
+                    // held-out posterior is what `auto` would make of the
+                    // runs kept: the tempered likelihood, as the start
+                    // takes it for a calibration whose draws reach past
+                    // the records
+                    Err(e) if full.cal.record.memory_found.is_some() => {
+                        let tempered = tempered_without_adjustment(&posterior, &plain_map)
+                            .ok_or_else(|| {
+                                Error::Compute(format!(
+                                    "leave-one-out without {}: the residuals at the independent likelihood's mode could not be integrated",
+                                    left_out.id()
+                                ))
+                            })?;
+                        let laplace = at_mode_from(&tempered, &at, left_out.id())?;
+                        row.tempered_instead = Some(format!(
+                            "the adjusted likelihood's held-out posterior reaches past the records kept ({e})"
+                        ));
+                        (tempered, laplace)
+                    }
+                    Err(e) => {
+                        return Err(Error::Compute(format!(
                             "leave-one-out without {}: the adjusted likelihood's held-out posterior reaches past the records kept ({e})",
                             left_out.id()
-                        ))
-                    })?;
-                (posterior, laplace)
+                        )))
+                    }
+                }
             }
             false => {
                 let laplace = at_mode_from(&posterior, &start, left_out.id())?;
@@ -530,11 +555,30 @@ const HOPELESS_K: f64 = 1.5;
 /// peak lies C⁻¹ times as far from the centre as the likelihood's own, so
 /// a held-out posterior centred on the full calibration's mode would be
 /// pushed away by the run left out's pull.
-fn recentred(post: &Posterior, start: &[f64]) -> Option<(Posterior, Elliptical)> {
+fn recentred(post: &Posterior, start: &[f64]) -> Option<(Posterior, Elliptical, map::MapEstimate)> {
     let plain = post.without_adjustment();
     let map = map::basin(&plain, start)?;
     let mode = laplace::mode(&plain, &map)?;
-    Some((post.recentred(&mode.x), mode.laplace))
+    Some((post.recentred(&mode.x), mode.laplace, map))
+}
+
+/// The tempered posterior of the runs of the adjusted posterior `post`:
+/// each run's log-likelihood counting 1/k, k the integrated
+/// autocorrelation time of its whitened residuals at `plain_map`, the
+/// independent likelihood's MAP of those runs (as the start measures
+/// them for a calibration of those runs alone).
+fn tempered_without_adjustment(
+    post: &Posterior,
+    plain_map: &map::MapEstimate,
+) -> Option<Posterior> {
+    let plain = post.without_adjustment();
+    let times = map::memory_times(&plain, plain_map)?;
+    let mut tempered = plain;
+    tempered.likelihood.memory = crate::posterior::Memory::Tempered;
+    tempered.likelihood.memory_adjustment = None;
+    tempered.likelihood.memory_times =
+        tempered.runs.iter().map(|r| r.id.clone()).zip(times).collect();
+    Some(tempered)
 }
 
 /// The Laplace approximation at the mode of `posterior`, by Newton's method

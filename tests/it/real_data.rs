@@ -334,6 +334,70 @@ fn auto_leaves_the_adjusted_likelihood_where_its_draws_miss_the_records() {
     assert!(record["memory_found"].as_str().unwrap().contains("miss a record"), "{record:?}");
 }
 
+/// Leave-one-out under `memory = "auto"` holds out every run: where the
+/// adjusted likelihood's held-out posterior reaches past the records kept,
+/// it takes the tempered likelihood, as the start would for a calibration
+/// of those runs alone. Bouc-Wen on the 0.5 A records with their terms:
+/// without the 25 mm / 0.25 Hz test, 18 of 64 draws of the adjusted
+/// held-out posterior's Laplace approximation miss a record kept
+/// (2026-12-02), and the run was marked `failed`; now it is held out under
+/// the tempered likelihood, no draw far (a posterior past the records
+/// would have them far by construction), its band holding 88.8 % of the
+/// record (the other three runs, adjusted as before, 82.6–95.7 %). With
+/// the twenty steps here the held-out posteriors are searched from other
+/// draws, and the one that falls back is the 10 mm / 2 Hz test's (14 of
+/// 64 far; the slow test's passes, 87.1 % inside): which run's adjusted
+/// posterior is judged past the records depends on where its mode search
+/// starts, so the test asks that some run falls back, every run is held
+/// out, and none has far draws.
+#[test]
+#[ignore = "slow tier: a calibration of the measured records and its leave-one-out (about 60 s)"]
+fn leave_one_out_under_auto_takes_the_tempered_likelihood_where_the_adjusted_one_misleads() {
+    let out = tempfile::tempdir().unwrap();
+    let d = out.path().join("study");
+    ok(&[
+        "run",
+        manifest().to_str().unwrap(),
+        "--config",
+        manifest().with_file_name("mrbp.toml").to_str().unwrap(),
+        "--current",
+        "0.5",
+        "--law",
+        "bouc-wen",
+        "--steps",
+        "20",
+        "--leave-one-out",
+        "--no-per-run",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
+    let path = d.join("I0.5A/loo.parquet");
+    let loo = read_parquet(&path).unwrap();
+    let runs = str_column(&loo, "run", &path).unwrap();
+    let by = str_column(&loo, "held_out_by", &path).unwrap();
+    let tempered = str_column(&loo, "tempered_instead", &path).unwrap();
+    let inside = f64_column(&loo, "inside_p95", &path).unwrap();
+    let far = f64_column(&loo, "far_draws", &path).unwrap();
+    assert_eq!(runs.len(), 4);
+    for i in 0..4 {
+        assert_ne!(by[i], "failed", "{}", runs[i]);
+        assert!(
+            inside[i] > 0.5 && far[i] < 0.05,
+            "{}: {} inside, {} far",
+            runs[i],
+            inside[i],
+            far[i]
+        );
+        assert!(
+            tempered[i].is_empty() || tempered[i].contains("reaches past the records kept"),
+            "{}: {}",
+            runs[i],
+            tempered[i]
+        );
+    }
+    assert!(tempered.iter().any(|t| !t.is_empty()), "every held-out posterior adjusted");
+}
+
 /// Where the discrepancy model's smooth force takes over force the law
 /// alone carries, the calibration says so. At 0.25 A the law fitted alone
 /// (independent noise) leaves an RMS of 0.4–0.75 kPa a run; under the
