@@ -50,6 +50,13 @@ sbc-discrepancy:
     cargo run --release -- study plan target/studies/sbc-discrepancy --sbc 200 --config studies/sbc-prior.toml --rpm 200 --cycles 1 --rate 1000 --noise-displacement 2e-6 --noise discrepancy
     cargo run --release -- study run target/studies/sbc-discrepancy
 
+# simulation-based calibration of the bp-spencer law (the B-P element in
+# Spencer's frame): 200 campaigns of one revolution at 100, 200, 400 rpm,
+# 2 kHz, parameters and noise drawn from studies/sbc-prior-bp-spencer.toml
+sbc-bp-spencer:
+    cargo run --release -- study plan target/studies/sbc-bp-spencer --sbc 200 --config studies/sbc-prior-bp-spencer.toml --cycles 1 --rate 2000 --noise-displacement 0
+    cargo run --release -- study run target/studies/sbc-bp-spencer
+
 # coverage of the between-run layer's new-test intervals: 40 virtual
 # populations of five tests whose G and n vary from test to test, four
 # calibrated alone, the fifth the new test (docs/calibration.md; needs

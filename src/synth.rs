@@ -191,6 +191,22 @@ impl Damper {
         }
     }
 
+    /// The damper of law `law` whose parameters at `current_a` are
+    /// `values` (in the order of the law's parameters), with the stand's
+    /// saturation current `saturation_a`: the inverse of
+    /// [`Damper::values_at`].
+    pub fn through(law: LawKind, values: &[f64], current_a: f64, saturation_a: f64) -> Damper {
+        let scale = current_scale(current_a, saturation_a);
+        let at_1a = law
+            .law()
+            .parameters()
+            .iter()
+            .zip(values)
+            .map(|(p, v)| (p.name.to_string(), if follows_current(p) { v / scale } else { *v }))
+            .collect();
+        Damper { law, at_1a }
+    }
+
     /// The parameters at `current_a` with the stand's saturation current
     /// `saturation_a`; refuses a name the law does not have.
     pub fn values_at(&self, current_a: f64, saturation_a: f64) -> Result<LawValues> {
@@ -203,16 +219,28 @@ impl Damper {
                 names.join(", ")
             )));
         }
-        let scale = (current_a / saturation_a).tanh() / (1.0 / saturation_a).tanh();
+        let scale = current_scale(current_a, saturation_a);
         let mut values = law.typical();
         for (k, p) in law.parameters().iter().enumerate() {
             let at_1a = self.at_1a.get(p.name).copied().unwrap_or(values[k]);
-            values[k] = if p.unit == "N" || p.unit == "N s/m" { at_1a * scale } else { at_1a };
+            values[k] = if follows_current(p) { at_1a * scale } else { at_1a };
         }
         law.validate(&values)
             .map_err(|e| Error::Usage(format!("[damper] at {current_a} A: {e}")))?;
         Ok(values)
     }
+}
+
+/// s(I)/s(1 A) with s(I) = tanh(I/I_s): how a damper's forces and
+/// dashpots follow the coil current on the stand.
+fn current_scale(current_a: f64, saturation_a: f64) -> f64 {
+    (current_a / saturation_a).tanh() / (1.0 / saturation_a).tanh()
+}
+
+/// Whether a damper law's parameter follows the coil current on the stand
+/// (its forces and dashpots do; its shapes and stiffness ratios do not).
+fn follows_current(p: &crate::laws::LawParameter) -> bool {
+    p.unit == "N" || p.unit == "N s/m"
 }
 
 /// A record whose coil current steps through `levels_a`, round and round,

@@ -11,7 +11,7 @@ use crate::calibrate::CalibrationSettings;
 use crate::error::{Error, Result};
 use crate::model::{Params, PARAM_NAMES};
 use crate::noise::{discrepancy::Discrepancy, NoiseKind, NoiseOptions};
-use crate::synth::{run_id, ExtraForce, StandLaw, SynthSettings};
+use crate::synth::{run_id, Damper, ExtraForce, StandLaw, SynthSettings};
 
 /// Where a task's records come from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -112,9 +112,11 @@ impl PlanOptions {
         }
         let settings = self.sample.settings()?;
         let synth = || -> Result<SynthSettings> {
-            // the records are of the law the calibrations take
+            // the records are of the law the calibrations take (--law, or
+            // the settings file's `law`)
+            let law = self.sample.law.first().copied();
             let synth = crate::synth::Overrides {
-                law: self.sample.law.first().copied(),
+                law: law.or((!settings.law.is_bodner_partom()).then_some(settings.law)),
                 ..self.synth.clone()
             };
             let mut s = synth.settings(self.synth_config.as_deref(), self.noise_seed)?;
@@ -125,9 +127,6 @@ impl PlanOptions {
         };
         let design = match (self.replicates, self.sbc) {
             (Some(n), _) => Design::Replicates { n, synth: synth()? },
-            (_, Some(_)) if self.sample.law.first().is_some_and(|l| !l.is_bodner_partom()) => {
-                return Err(Error::Usage("study plan: --sbc draws the B-P law's parameters from its prior; another --law takes --replicates (its truth the law's typical parameters, or [damper.at_1a] of --synth-config)".into()));
-            }
             (_, Some(n)) => Design::Sbc { n, synth: synth()? },
             _ => Design::Campaigns {
                 manifests: self.campaigns.clone(),
@@ -254,21 +253,24 @@ fn tasks_of(name: &str, design: &Design, settings: &CalibrationSettings) -> Resu
                 .map(|k| {
                     // θ and σ from the prior the calibration uses, as SBC requires
                     let mut rng = crate::rng::stream(settings.sampler.seed, &[0x5bc, k as u64]);
-                    let theta: [f64; 7] = std::array::from_fn(|i| priors[i].draw(&mut rng));
+                    let theta: Vec<f64> = priors.iter().map(|p| p.draw(&mut rng)).collect();
                     let sigma = crate::posterior::Prior::LogUniform { lower: s_lo, upper: s_hi }
                         .draw(&mut rng);
                     let current = synth.currents_a.first().copied().unwrap_or(1.0);
-                    // the stand's law passes through θ at the task's current
-                    let law = StandLaw {
-                        at_1a: at_reference(&synth.law, Params::from_array(theta), current),
-                        ..synth.law
-                    };
                     let mut s = SynthSettings {
-                        law,
                         noise_force_n: sigma * synth.geometry.area_m2,
                         seed: synth.seed + k as u64,
                         ..synth.clone()
                     };
+                    // the stand's law passes through θ at the task's current
+                    if settings.law.is_bodner_partom() {
+                        let theta: [f64; 7] = std::array::from_fn(|i| theta[i]);
+                        s.law.at_1a = at_reference(&synth.law, Params::from_array(theta), current);
+                    } else {
+                        s.damper = Some(Damper::through(
+                            settings.law, &theta, current, synth.law.saturation_a,
+                        ));
+                    }
                     if let Some(model) = &discrepancy {
                         // each run's discrepancy from its prior: a path of the
                         // model's own process, its scale and time scale drawn

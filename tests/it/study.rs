@@ -121,10 +121,75 @@ fn a_replicate_study_of_another_law_holds_that_laws_truth() {
         assert_eq!(truth[i], at_1a[name].as_float().unwrap(), "{name}");
     }
     assert!(!params.iter().any(|p| p == "G"), "no B-P parameter in a Bingham study: {params:?}");
-    let sbc = root.path().join("sbc");
-    let o = mrbp(&["study", "plan", sbc.to_str().unwrap(), "--sbc", "2", "--law", "bingham"]);
-    assert_eq!(o.status.code(), Some(2), "{}", said(&o));
-    assert!(said(&o).contains("--replicates") && !sbc.join("study.toml").exists(), "{}", said(&o));
+}
+
+/// SBC of another law draws that law's parameters from its prior: at 0.5 A
+/// each task's truth is its own draw (every parameter different between
+/// tasks, inside the law's physical range), and the stand's damper gives
+/// that truth at 0.5 A: its forces and dashpots at 1 A are the truth over
+/// tanh(0.5/I_s)/tanh(1/I_s), its other parameters the truth itself. A
+/// replicate study of a law named only by the settings file makes that
+/// law's records.
+#[test]
+fn sbc_of_another_law_draws_that_laws_parameters() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("sbc");
+    let o = mrbp(&[
+        "study",
+        "plan",
+        dir.to_str().unwrap(),
+        "--sbc",
+        "3",
+        "--law",
+        "bp-spencer",
+        "--current",
+        "0.5",
+    ]);
+    assert!(o.status.success(), "{}", said(&o));
+    let law = mrbp::laws::LawKind::BpSpencer.law();
+    let mut seen: Vec<Vec<f64>> = Vec::new();
+    for k in 0..3 {
+        let spec = task_spec(&dir, &format!("t00{k}"));
+        let synth = &spec["source"]["synth"];
+        let is = synth["law"]["saturation_a"].as_float().unwrap();
+        let scale = (0.5 / is).tanh() / (1.0 / is).tanh();
+        assert_eq!(synth["damper"]["law"].as_str(), Some("bp-spencer"));
+        let at_1a = synth["damper"]["at_1a"].as_table().unwrap();
+        let mut truths = Vec::new();
+        for p in law.parameters() {
+            let truth = spec["truth"][p.name].as_float().unwrap();
+            let stand = at_1a[p.name].as_float().unwrap();
+            let follows = p.unit == "N" || p.unit == "N s/m";
+            let expected = if follows { stand * scale } else { stand };
+            assert!(
+                (truth / expected - 1.0).abs() < 1e-12,
+                "{}: truth {truth}, stand {expected}",
+                p.name
+            );
+            assert!(
+                p.range.0 <= truth && truth <= p.range.1,
+                "{}: {truth} outside {:?}",
+                p.name,
+                p.range
+            );
+            truths.push(truth);
+        }
+        for earlier in &seen {
+            for (i, (a, b)) in earlier.iter().zip(&truths).enumerate() {
+                assert_ne!(a, b, "{} drawn once for two tasks", law.parameters()[i].name);
+            }
+        }
+        seen.push(truths);
+    }
+    // the law named only by the settings file makes the records too
+    let rep = root.path().join("rep");
+    let config = format!("{}/studies/sbc-prior-bp-spencer.toml", env!("CARGO_MANIFEST_DIR"));
+    let o =
+        mrbp(&["study", "plan", rep.to_str().unwrap(), "--replicates", "1", "--config", &config]);
+    assert!(o.status.success(), "{}", said(&o));
+    let spec = task_spec(&rep, "t000");
+    assert_eq!(spec["source"]["synth"]["damper"]["law"].as_str(), Some("bp-spencer"));
+    assert!(spec["truth"].get("c0").is_some(), "{}", spec["truth"]);
 }
 
 #[test]
@@ -234,10 +299,7 @@ fn sbc_with_the_discrepancy_model_draws_each_runs_discrepancy() {
     assert!(o.status.success(), "{}", said(&o));
     let mut times = Vec::new();
     for k in 0..4 {
-        let spec: toml::Value = toml::from_str(
-            &std::fs::read_to_string(dir.join(format!("tasks/t00{k}/task.toml"))).unwrap(),
-        )
-        .unwrap();
+        let spec = task_spec(&dir, &format!("t00{k}"));
         let synth = &spec["source"]["synth"];
         let area = synth["geometry"]["area_m2"].as_float().unwrap();
         let extra = &synth["extra_force"];
@@ -269,4 +331,10 @@ fn sbc_with_the_discrepancy_model_draws_each_runs_discrepancy() {
     times.sort_by(f64::total_cmp);
     times.dedup();
     assert_eq!(times.len(), 8);
+}
+
+/// The task.toml of task `id` of the study in `dir`.
+fn task_spec(dir: &std::path::Path, id: &str) -> toml::Value {
+    toml::from_str(&std::fs::read_to_string(dir.join("tasks").join(id).join("task.toml")).unwrap())
+        .unwrap()
 }
