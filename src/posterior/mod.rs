@@ -173,6 +173,18 @@ impl Posterior {
         p
     }
 
+    /// This posterior with the tempered likelihood in place of its own:
+    /// each run's log-likelihood counting 1/k, `times` the runs' memory
+    /// times k in their order.
+    pub fn tempered(&self, times: &[f64]) -> Posterior {
+        let mut p = self.without_adjustment();
+        p.likelihood.memory = Memory::Tempered;
+        p.likelihood.memory_adjustment = None;
+        p.likelihood.memory_times =
+            p.runs.iter().map(|r| r.id.clone()).zip(times.iter().copied()).collect();
+        p
+    }
+
     /// This posterior with its adjustment centred on the point `x`.
     pub fn recentred(&self, x: &[f64]) -> Posterior {
         let mut p = self.clone();

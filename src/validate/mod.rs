@@ -482,30 +482,33 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
                 // posterior of fewer past their records
                 match blind_spot(&posterior, &laplace, &at, settings.sampler.seed) {
                     Ok(()) => (posterior, laplace),
-                    // where `auto` chose the adjusted likelihood, the
-                    // held-out posterior is what `auto` would make of the
-                    // runs kept: the tempered likelihood, as the start
-                    // takes it for a calibration whose draws reach past
-                    // the records
-                    Err(e) if full.cal.record.memory_found.is_some() => {
-                        let tempered = tempered_without_adjustment(&posterior, &plain_map)
+                    Err(e) => {
+                        let why = format!(
+                            "the adjusted likelihood's held-out posterior reaches past the records kept ({e})"
+                        );
+                        // asked for by name, the adjusted likelihood stays:
+                        // the run cannot be held out under it
+                        if full.cal.record.memory_found.is_none() {
+                            return Err(Error::Compute(format!(
+                                "leave-one-out without {}: {why}",
+                                left_out.id()
+                            )));
+                        }
+                        // where `auto` chose it, the held-out posterior is
+                        // what `auto` would make of the runs kept: the
+                        // tempered likelihood, as the start takes it for a
+                        // calibration whose draws reach past the records
+                        let times = map::memory_times(&posterior.without_adjustment(), &plain_map)
                             .ok_or_else(|| {
                                 Error::Compute(format!(
                                     "leave-one-out without {}: the residuals at the independent likelihood's mode could not be integrated",
                                     left_out.id()
                                 ))
                             })?;
+                        let tempered = posterior.tempered(&times);
                         let laplace = at_mode_from(&tempered, &at, left_out.id())?;
-                        row.tempered_instead = Some(format!(
-                            "the adjusted likelihood's held-out posterior reaches past the records kept ({e})"
-                        ));
+                        row.tempered_instead = Some(why);
                         (tempered, laplace)
-                    }
-                    Err(e) => {
-                        return Err(Error::Compute(format!(
-                            "leave-one-out without {}: the adjusted likelihood's held-out posterior reaches past the records kept ({e})",
-                            left_out.id()
-                        )))
                     }
                 }
             }
@@ -560,25 +563,6 @@ fn recentred(post: &Posterior, start: &[f64]) -> Option<(Posterior, Elliptical, 
     let map = map::basin(&plain, start)?;
     let mode = laplace::mode(&plain, &map)?;
     Some((post.recentred(&mode.x), mode.laplace, map))
-}
-
-/// The tempered posterior of the runs of the adjusted posterior `post`:
-/// each run's log-likelihood counting 1/k, k the integrated
-/// autocorrelation time of its whitened residuals at `plain_map`, the
-/// independent likelihood's MAP of those runs (as the start measures
-/// them for a calibration of those runs alone).
-fn tempered_without_adjustment(
-    post: &Posterior,
-    plain_map: &map::MapEstimate,
-) -> Option<Posterior> {
-    let plain = post.without_adjustment();
-    let times = map::memory_times(&plain, plain_map)?;
-    let mut tempered = plain;
-    tempered.likelihood.memory = crate::posterior::Memory::Tempered;
-    tempered.likelihood.memory_adjustment = None;
-    tempered.likelihood.memory_times =
-        tempered.runs.iter().map(|r| r.id.clone()).zip(times).collect();
-    Some(tempered)
 }
 
 /// The Laplace approximation at the mode of `posterior`, by Newton's method
