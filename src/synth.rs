@@ -637,6 +637,12 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     {
         return Err(Error::Usage("rate, cycles and rpm must be positive".into()));
     }
+    if let Some(bad) = settings.currents_a.iter().find(|c| !(c.is_finite() && **c >= 0.0)) {
+        return Err(Error::Usage(format!("coil currents must be 0 A or more; got {bad} A")));
+    }
+    if settings.currents_a.is_empty() {
+        return Err(Error::Usage("no coil current to make records at".into()));
+    }
     for i in 0..settings.rpms.len() {
         settings.extra_force.smooth(i, settings.rpms.len())?;
     }

@@ -36,6 +36,21 @@ impl Drop for Held {
     }
 }
 
+/// The folders a command holds, released newest first: a folder made
+/// inside one made before (a current's inside `--out`) goes before the
+/// folder that holds it, so a command refused before any work removes
+/// both, not only the inner one.
+#[derive(Debug, Default)]
+pub struct HeldAll(pub Vec<Held>);
+
+impl Drop for HeldAll {
+    fn drop(&mut self) {
+        while let Some(held) = self.0.pop() {
+            drop(held);
+        }
+    }
+}
+
 /// The files of a calibration folder derived from its chains: a new
 /// calibration removes them, since they would describe the old one.
 pub const DERIVED: [&str; 13] = [

@@ -259,14 +259,14 @@ pub struct Pipeline<'a> {
     pub progress: bool,
     /// The folders the stages have written, held until the pipeline ends:
     /// no other process writes them, nor reads them half-written.
-    held: Vec<folders::Held>,
+    held: folders::HeldAll,
     /// The listener's words for an event, where stages may run side by side.
     render: Option<Render>,
 }
 
 impl<'a> Pipeline<'a> {
     pub fn new(listener: &'a mut dyn FnMut(Event<'_>), progress: bool) -> Self {
-        Pipeline { listener, progress, held: Vec::new(), render: None }
+        Pipeline { listener, progress, held: folders::HeldAll::default(), render: None }
     }
 
     /// The pipeline, allowed to run independent stages side by side (the
@@ -337,7 +337,7 @@ impl<'a> Pipeline<'a> {
         let mut keep = |e: Event<'_>| said.push(render(e));
         let mut side = Pipeline::new(&mut keep, false);
         let result = work(&mut side);
-        let held = std::mem::take(&mut side.held);
+        let held = std::mem::take(&mut side.held.0);
         drop(side);
         Beside { result, said, held }
     }
@@ -351,7 +351,7 @@ impl<'a> Pipeline<'a> {
         for (to_stderr, text) in &done.said {
             self.emit(Event::Said { to_stderr: *to_stderr, text });
         }
-        self.held.extend(done.held);
+        self.held.0.extend(done.held);
         done.result
     }
 
@@ -366,7 +366,7 @@ impl<'a> Pipeline<'a> {
         force: bool,
     ) -> Result<()> {
         let held = folders::prepare(out, option, inputs, results, force)?;
-        self.held.push(held);
+        self.held.0.push(held);
         Ok(())
     }
 

@@ -606,6 +606,25 @@ fn cases() -> Vec<Case> {
             expect: &["--walkers"],
         },
         Case {
+            // a campaign of several currents: each current's folder is made
+            // inside --out, and a refusal removes both
+            name: "--walkers 1, several currents",
+            make: |r| {
+                let campaign = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/campaign.toml");
+                s(&["sample", &p(&campaign), "--out", &p(&r.join("out")), "--walkers", "1"])
+            },
+            code: 2,
+            expect: &["--walkers"],
+        },
+        Case {
+            name: "synth at a negative current",
+            make: |r| {
+                s(&["synth", "--out", &p(&r.join("out")), "--law", "spencer", "--currents=-1"])
+            },
+            code: 2,
+            expect: &["coil currents must be 0 A or more", "-1"],
+        },
+        Case {
             name: "--walkers odd",
             make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--walkers", "33"]),
             code: 2,
