@@ -272,7 +272,7 @@ pub fn sample(
                 &start.map,
                 start.laplace.clone(),
                 sampler_settings.clone(),
-                s.walkers * s.ensembles,
+                start.walkers_near,
                 &control,
                 if smc { &mut [] } else { &mut *observers },
             )?;
@@ -330,6 +330,7 @@ pub fn sample(
         sampler.settings.moves != s.moves,
     ));
     start.settings.sampler.moves = sampler.settings.moves.clone();
+    start.settings.sampler.walkers = sampler.settings.walkers;
     if let Some(map) = map {
         start.map = map;
     }

@@ -48,18 +48,24 @@ fn far(spread: f64) -> Option<f64> {
 /// the walkers start afresh about its mode (at most [`MAX_SEARCHES`]
 /// times). Where the posterior is far from the Laplace approximation there
 /// and `settings` has the default moves, the sampler walks with the curved
-/// move instead ([`super::settings::moves_far_from_laplace`]). The probe's steps are the run's first
-/// (at most `control`'s length), told to `observers`. A function of the
-/// start and the seed alone.
+/// move instead ([`super::settings::moves_far_from_laplace`]). Where
+/// `near` is given (walkers per ensemble, fewer than `settings`'), the
+/// spread is judged over the first `near` × ensembles walkers placed, and
+/// where it is near the sampler keeps just those (the same walkers as a
+/// start placing that many: each walker's draws are its own stream). The
+/// probe's steps are the run's first (at most `control`'s length), told
+/// to `observers`. A function of the start and the seed alone.
 pub(super) fn walkers_start<'t>(
     posterior: &'t Posterior,
     map: &map::MapEstimate,
     laplace: Option<Elliptical>,
     settings: SamplerSettings,
-    count: usize,
+    near: Option<usize>,
     control: &RunControl,
     observers: &mut [&mut dyn Observer],
 ) -> Result<Probed<'t>> {
+    let count = settings.walkers * settings.ensembles;
+    let mut near = near.filter(|&w| w < settings.walkers);
     let mut laplace = laplace.unwrap_or_else(|| laplace::at_mode(posterior, map));
     // the log-density at the mode the walkers start about
     let mut top = posterior.log_density(laplace.mean.as_slice());
@@ -67,10 +73,44 @@ pub(super) fn walkers_start<'t>(
     let mut new_map = None;
     loop {
         let init = map::initial_walkers(posterior, &laplace, count, settings.seed);
-        let mut sampler =
-            Sampler::from_state(posterior, settings.clone(), init.positions, init.log_prob)?
+        let (mut sampler, spread) = match near {
+            Some(walkers) => {
+                let fewer = SamplerSettings { walkers, ..settings.clone() };
+                let kept = walkers * settings.ensembles;
+                let sampler = Sampler::from_state(
+                    posterior,
+                    fewer,
+                    init.positions[..kept * posterior.dim()].to_vec(),
+                    init.log_prob[..kept].to_vec(),
+                )?
                 .with_reference(laplace.clone());
-        let spread = misfit(posterior, &sampler.chains, &laplace);
+                let spread = misfit(posterior, &sampler.chains, &laplace);
+                match far(spread) {
+                    None => (sampler, spread),
+                    Some(_) => (
+                        Sampler::from_state(
+                            posterior,
+                            settings.clone(),
+                            init.positions,
+                            init.log_prob,
+                        )?
+                        .with_reference(laplace.clone()),
+                        spread,
+                    ),
+                }
+            }
+            None => {
+                let sampler = Sampler::from_state(
+                    posterior,
+                    settings.clone(),
+                    init.positions,
+                    init.log_prob,
+                )?
+                .with_reference(laplace.clone());
+                let spread = misfit(posterior, &sampler.chains, &laplace);
+                (sampler, spread)
+            }
+        };
         if let Some(moves) =
             far(spread).and_then(|_| super::settings::moves_far_from_laplace(&settings.moves))
         {
@@ -88,6 +128,14 @@ pub(super) fn walkers_start<'t>(
             sampler.step_observed(control, observers)?;
         }
         let stepping = clock.elapsed().as_secs_f64();
+        // fewer walkers only where the anchored move fits the posterior
+        // from the start: else the run starts afresh with all of them
+        if sampler.settings.walkers < settings.walkers
+            && probe_acceptance(&sampler.chains) < NEAR_ACCEPTANCE
+        {
+            near = None;
+            continue;
+        }
         match higher_ground(posterior, &sampler, top) {
             Some((found, better, better_top)) => {
                 let gain = higher.as_ref().map_or(0.0, |h| h.gain) + better_top - top;
@@ -104,6 +152,29 @@ pub(super) fn walkers_start<'t>(
         }
     }
 }
+
+/// The share of the proposals accepted over the chains' steps after the
+/// initial walkers.
+fn probe_acceptance(chains: &Chains) -> f64 {
+    let nc = chains.chains();
+    let after = &chains.accepted[nc.min(chains.accepted.len())..];
+    after.iter().filter(|a| **a).count() as f64 / after.len().max(1) as f64
+}
+
+/// The share of proposals the probe's steps must accept for a start near
+/// its Laplace approximation to keep its fewer walkers
+/// ([`crate::calibrate::settings::SamplingSettings::walkers_near`]). The
+/// anchored move proposes from that approximation, shrunk toward the
+/// complementary half's moments by as much as their noise allows: where
+/// the approximation fits, few points serve, and it accepts about half
+/// its proposals (0.46–0.58 on the measured records' calibrations that
+/// converged at step 20–30 with the fewer walkers); where the posterior
+/// leaves it as the walkers move (Bouc-Wen at 0.5 A on the measured
+/// records, the start 1.4 sd from the posterior's mean in its shape:
+/// 0.35 over the probe, 0.05 over the run), the half's own moments carry
+/// the move, and with half the points the run took 1 280 steps instead of
+/// 140 (docs/performance.md, "Fewer walkers where the start is near").
+const NEAR_ACCEPTANCE: f64 = 0.45;
 
 /// What the start's judgement tells the user.
 pub(super) fn warnings(

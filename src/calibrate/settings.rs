@@ -161,6 +161,33 @@ impl SamplingSettings {
         (6 * dim).max(64).div_ceil(2) * 2
     }
 
+    /// The walkers per ensemble where the posterior is near its Laplace
+    /// approximation at the mode (the initial walkers' ln p/q spreads by at
+    /// most the probe's 8 nats): the smallest even number ≥
+    /// max(32, 3 dim). There the anchored move, shrunk toward that
+    /// approximation, is accepted as often with half the points, and the
+    /// ESS a log-density buys is the same (docs/performance.md, "Walkers
+    /// for a start near its Laplace approximation"), so a calibration
+    /// stopped at the rule's shortest length costs half as much.
+    pub fn walkers_near(dim: usize) -> usize {
+        (3 * dim).max(32).div_ceil(2) * 2
+    }
+
+    /// [`SamplingSettings::walkers_near`] where the default walkers are
+    /// [`SamplingSettings::walkers_for_posterior`]'s and fewer: not with
+    /// sequential Monte Carlo (whose evidence wants its particles), nor
+    /// where each run's noise is moved on its own (the discrepancy model,
+    /// whose walkers are already sized for the coordinates proposed).
+    pub fn walkers_near_posterior(&self, posterior: &crate::posterior::Posterior) -> Option<usize> {
+        let full = Self::walkers_for_posterior(posterior, self.ensembles);
+        let near = Self::walkers_near(posterior.layout.dim());
+        (self.walkers == 0
+            && self.method == SamplerMethod::Ensemble
+            && crate::sampler::LogDensity::blocks(posterior).is_empty()
+            && near < full)
+            .then_some(near)
+    }
+
     /// [`SamplingSettings::walkers_for`] the coordinates the ensemble moves
     /// propose on `posterior` with `ensembles` ensembles: where each run's
     /// noise is moved on its own (the discrepancy model), θ and the model

@@ -21,6 +21,10 @@ pub struct Start {
     pub current_a: f64,
     /// The settings with the walkers and sub-steps filled in.
     pub settings: CalibrationSettings,
+    /// Where the walkers were left to the default: the fewer walkers per
+    /// ensemble the sampler keeps if the start is near its Laplace
+    /// approximation ([`SamplingSettings::walkers_near`]).
+    pub walkers_near: Option<usize>,
     /// The paper's identification (the B-P law's start; none for another law).
     pub identification: Option<CurrentIdentification>,
     pub map: MapEstimate,
@@ -275,6 +279,7 @@ fn start_with(
     let mut settings = stages.settings;
     settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
     settings.integrator.substeps = posterior.integrator.substeps;
+    let walkers_near = settings.sampler.walkers_near_posterior(&posterior);
     if settings.sampler.walkers == 0 {
         settings.sampler.walkers =
             SamplingSettings::walkers_for_posterior(&posterior, settings.sampler.ensembles);
@@ -286,6 +291,7 @@ fn start_with(
     Ok(Start {
         current_a,
         settings,
+        walkers_near,
         identification,
         map,
         searched,

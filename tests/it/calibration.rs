@@ -70,6 +70,33 @@ fn same_seed_same_chains_whatever_the_thread_count() {
     assert_eq!(run(1), run(2));
 }
 
+/// A start near its Laplace approximation keeps max(32, 3 dim) walkers
+/// per ensemble where they were left to the default, and its chains are
+/// those of a calibration asked for that many (so the walkers its
+/// config.toml records give the same chains again); `walkers` asked by
+/// name are kept as they are.
+#[test]
+fn a_start_near_its_laplace_approximation_keeps_fewer_walkers() {
+    let (_dir, campaign) = small_campaign(5);
+    let mut s = quick_settings();
+    s.sampler.steps = 20;
+    s.integrator.substeps = 1;
+    let near = calibrate(&campaign, &s).unwrap();
+    let dim = near.chains.dim;
+    let fewer = (3 * dim).max(32).div_ceil(2) * 2;
+    assert!(fewer < (6 * dim).max(64), "dim {dim}");
+    assert_eq!(near.chains.walkers, fewer);
+    assert_eq!(
+        near.calibration.settings.sampler.walkers, fewer,
+        "the settings record the walkers kept"
+    );
+    let mut asked = s.clone();
+    asked.sampler.walkers = fewer;
+    assert_eq!(calibrate(&campaign, &asked).unwrap().chains, near.chains);
+    asked.sampler.walkers = 64;
+    assert_eq!(calibrate(&campaign, &asked).unwrap().chains.walkers, 64);
+}
+
 #[test]
 fn sample_command_writes_the_contract_tables() {
     let (dir, _) = small_campaign(5);
