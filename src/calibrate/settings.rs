@@ -133,7 +133,8 @@ pub struct SamplingSettings {
     /// The ensemble sampler, or sequential Monte Carlo before it.
     pub method: SamplerMethod,
     /// Walkers per ensemble (particles per population); 0:
-    /// [`SamplingSettings::walkers_for`] the dimension.
+    /// [`SamplingSettings::walkers_for`] the dimension, or
+    /// [`SamplingSettings::walkers_near`] where the start is near.
     pub walkers: usize,
     pub ensembles: usize,
     pub seed: u64,
@@ -259,7 +260,7 @@ pub struct Overrides {
     /// they predict (with --leave-one-out)
     #[arg(long, value_enum, value_delimiter = ',')]
     pub law: Vec<LawKind>,
-    /// Walkers per ensemble (default: the smallest even number ≥ max(64, 6 × the dimension the ensemble moves explore: with `--noise discrepancy` each run's noise, moved on its own, is not counted))
+    /// Walkers per ensemble (default: the smallest even number ≥ max(64, 6 × the dimension the ensemble moves explore: with `--noise discrepancy` each run's noise, moved on its own, is not counted); of which a start near its Laplace approximation keeps max(32, 3 × that dimension))
     #[arg(long)]
     pub walkers: Option<usize>,
     /// Independent ensembles (default 4)
