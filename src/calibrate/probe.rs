@@ -73,44 +73,24 @@ pub(super) fn walkers_start<'t>(
     let mut new_map = None;
     loop {
         let init = map::initial_walkers(posterior, &laplace, count, settings.seed);
-        let (mut sampler, spread) = match near {
-            Some(walkers) => {
-                let fewer = SamplerSettings { walkers, ..settings.clone() };
-                let kept = walkers * settings.ensembles;
-                let sampler = Sampler::from_state(
-                    posterior,
-                    fewer,
-                    init.positions[..kept * posterior.dim()].to_vec(),
-                    init.log_prob[..kept].to_vec(),
-                )?
-                .with_reference(laplace.clone());
-                let spread = misfit(posterior, &sampler.chains, &laplace);
-                match far(spread) {
-                    None => (sampler, spread),
-                    Some(_) => (
-                        Sampler::from_state(
-                            posterior,
-                            settings.clone(),
-                            init.positions,
-                            init.log_prob,
-                        )?
-                        .with_reference(laplace.clone()),
-                        spread,
-                    ),
-                }
-            }
-            None => {
-                let sampler = Sampler::from_state(
-                    posterior,
-                    settings.clone(),
-                    init.positions,
-                    init.log_prob,
-                )?
-                .with_reference(laplace.clone());
-                let spread = misfit(posterior, &sampler.chains, &laplace);
-                (sampler, spread)
-            }
+        // the first `s.walkers × ensembles` of the walkers placed (those a
+        // start placing that many places), or all of them
+        let placed = |s: SamplerSettings| -> Result<Sampler<'t, Posterior>> {
+            let kept = s.walkers * s.ensembles;
+            let positions = init.positions[..kept * posterior.dim()].to_vec();
+            let log_prob = init.log_prob[..kept].to_vec();
+            Ok(Sampler::from_state(posterior, s, positions, log_prob)?
+                .with_reference(laplace.clone()))
         };
+        let mut sampler =
+            placed(near.map_or(settings.clone(), |walkers| SamplerSettings {
+                walkers,
+                ..settings.clone()
+            }))?;
+        let spread = misfit(posterior, &sampler.chains, &laplace);
+        if far(spread).is_some() && sampler.settings.walkers < settings.walkers {
+            sampler = placed(settings.clone())?;
+        }
         if let Some(moves) =
             far(spread).and_then(|_| super::settings::moves_far_from_laplace(&settings.moves))
         {

@@ -167,8 +167,8 @@ impl SamplingSettings {
     /// most the probe's 8 nats): the smallest even number ≥
     /// max(32, 3 dim). There the anchored move, shrunk toward that
     /// approximation, is accepted as often with half the points, and the
-    /// ESS a log-density buys is the same (docs/performance.md, "Walkers
-    /// for a start near its Laplace approximation"), so a calibration
+    /// ESS a log-density buys is the same (docs/performance.md, "Fewer
+    /// walkers where the start is near"), so a calibration
     /// stopped at the rule's shortest length costs half as much.
     pub fn walkers_near(dim: usize) -> usize {
         (3 * dim).max(32).div_ceil(2) * 2
