@@ -1,4 +1,5 @@
-//! Virtual experiments: stand records produced by the B-P model.
+//! Virtual experiments: stand records produced by a damper law (the B-P
+//! model unless another is named).
 //!
 //! The stand drives the damper by a crank-slider from rest; the model is
 //! integrated along the exact displacement with a fine step, and sensor noise

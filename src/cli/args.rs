@@ -18,8 +18,12 @@ use crate::synth::Overrides;
     version,
     about = "Bayesian calibration of the Bodner-Partom model of MR fluid in MR dampers",
     long_about = "Bayesian calibration of the Bodner-Partom model of MR fluid in MR dampers.\n\n\
+                  Beside the B-P law it calibrates the damper models the field uses (Bouc-Wen, \
+                  Spencer et al.'s modified Bouc-Wen, Bingham) and the B-P law as a damper model \
+                  (--law), and ranks them by what they predict of tests they did not see (run --law A,B \
+                  --leave-one-out).\n\n\
                   Without a command, in the mrbp project folder, runs the whole job on the bundled \
-                  campaign in data/ and writes the results into reports/."
+                  campaigns in data/ (virtual and measured) and writes the results into reports/."
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -62,7 +66,7 @@ pub enum Command {
         /// A results folder (`reports/<name>`, a calibration, a comparison)
         dir: PathBuf,
     },
-    /// Virtual experiments: stand records from the B-P model, in the campaign format
+    /// Virtual experiments: stand records from a damper law (the B-P model unless --law names another), in the campaign format
     Synth {
         /// Output folder for the manifest and the records
         #[arg(long)]
@@ -95,7 +99,7 @@ pub enum Command {
         #[command(flatten)]
         identify: IdentifySettings,
     },
-    /// Posterior sampling from all runs, started from the identification
+    /// Posterior sampling from all runs, started from the identification (the B-P law) or a deterministic fit from a few starts (another law)
     Sample {
         /// The campaign manifest (TOML)
         manifest: PathBuf,
@@ -105,7 +109,7 @@ pub enum Command {
         #[command(flatten)]
         options: SampleOptions,
     },
-    /// Posterior propagation through the Euler integrator: credible bands
+    /// Posterior propagation through the calibration's integrator: credible bands
     Predict {
         /// A calibration folder (of `mrbp sample` or `mrbp run`)
         dir: PathBuf,
