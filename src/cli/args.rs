@@ -96,6 +96,10 @@ pub enum Command {
         /// Replace an earlier identification in OUT
         #[arg(long)]
         force: bool,
+        /// The damper law: the identification is the B-P law's (the
+        /// paper's); another law starts `sample` from a fit of its own
+        #[arg(long, value_enum)]
+        law: Option<crate::laws::LawKind>,
         #[command(flatten)]
         identify: IdentifySettings,
     },

@@ -71,7 +71,13 @@ fn dispatch(cli: Cli) -> Result<()> {
             };
             pipeline.run(&manifest, &out, &options).map(|reports| print::reports(&reports, clock))
         }
-        Some(Command::Identify { manifest, out, force, identify }) => {
+        Some(Command::Identify { manifest, out, force, law, identify }) => {
+            if let Some(law) = law.filter(|l| !l.is_bodner_partom()) {
+                return Err(Error::Usage(format!(
+                    "identify is the paper's identification of the B-P law; the {0} law has none: `mrbp sample --law {0}` starts from a deterministic fit of it from a few starts",
+                    law.name()
+                )));
+            }
             identify.check()?;
             let settings = identify;
             let campaign = pipeline.load(&manifest)?;

@@ -810,6 +810,14 @@ fn cases() -> Vec<Case> {
             expect: &["--out", "folder of the campaign"],
         },
         Case {
+            name: "identify of a law without the paper's identification",
+            make: |r| {
+                s(&["identify", &p(&good(r)), "--out", &p(&r.join("out")), "--law", "spencer"])
+            },
+            code: 2,
+            expect: &["identify", "B-P law", "spencer", "mrbp sample --law spencer"],
+        },
+        Case {
             name: "identify over an earlier identification",
             make: |r| {
                 std::fs::create_dir_all(r.join("out")).unwrap();
