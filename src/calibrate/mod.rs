@@ -79,6 +79,13 @@ impl Calibration {
         self.record.seconds_start + self.record.seconds_sampling
     }
 
+    /// Whether its walkers started near the posterior's Laplace
+    /// approximation (ln p/q over the initial walkers spread by at most
+    /// 8 nats; docs/calibration.md, "The start", step 4).
+    pub fn started_near_laplace(&self) -> bool {
+        self.record.laplace_spread_nats.is_some_and(|s| s <= probe::FAR_FROM_LAPLACE)
+    }
+
     /// What the posterior's intervals hold for, in a phrase (summary.parquet's
     /// `holds_for`, the report): these records — with their residuals'
     /// memory allowed for or modelled, or as if their residuals were

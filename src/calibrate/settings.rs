@@ -378,6 +378,14 @@ pub struct CalibrationSettings {
     pub sigma_bounds_pa: (f64, f64),
     /// Terms a real damper adds to the fluid's force, and their priors.
     pub terms: ModelTerms,
+    /// Where the MAP search starts, by parameter name (SI units; the law's
+    /// parameters and the model terms), in place of the identification or
+    /// the starts a law reads off the records; the prior medians are
+    /// searched beside it as always. A run calibrated alone (`--per-run`)
+    /// starts from its joint calibration's MAP (docs/calibration.md, "Each
+    /// run alone"). Empty: the usual starts.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub map_start: BTreeMap<String, f64>,
 }
 
 impl Default for CalibrationSettings {
@@ -399,6 +407,7 @@ impl Default for CalibrationSettings {
                 .collect(),
             sigma_bounds_pa: (1.0, 1.0e6),
             terms: ModelTerms::default(),
+            map_start: BTreeMap::new(),
         }
     }
 }

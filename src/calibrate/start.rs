@@ -2,6 +2,7 @@
 //! from the prior's centre), the integrator's step and scheme, and what the
 //! MAP's residuals say about the noise model.
 
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 use super::settings::{CalibrationSettings, SamplingSettings, SchemeChoice};
@@ -181,8 +182,17 @@ fn start_with(
         x
     };
     let medians = at(&medians);
+    // a start asked for by name (a run alone from its joint calibration's
+    // MAP) in place of the tiers; the medians beside it as beside any
+    // single start
     let starts: Vec<Vec<Vec<f64>>> =
-        tiers_ln.iter().map(|tier| tier.iter().map(|log| at(log)).collect()).collect();
+        match named_start(&posterior, &settings.map_start, &at(&tiers_ln[0][0])) {
+            Some(x) => {
+                log("  MAP search from the start given (map_start) and from the prior medians");
+                vec![vec![x]]
+            }
+            None => tiers_ln.iter().map(|tier| tier.iter().map(|log| at(log)).collect()).collect(),
+        };
     let map = match refused {
         Some((_, searched)) => searched.clone(),
         None => map::best_map_or(&posterior, &starts, &medians)
@@ -277,6 +287,9 @@ fn start_with(
     let (posterior, map, laplace) = stages.settle(posterior, map, log);
     let independent = std::mem::take(&mut stages.independent);
     let mut settings = stages.settings;
+    // the start given, as far as this posterior has the names
+    let fitted = &posterior.layout.names[posterior.layout.fitted.clone()];
+    settings.map_start.retain(|name, _| fitted.contains(name));
     settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
     settings.integrator.substeps = posterior.integrator.substeps;
     let walkers_near = settings.sampler.walkers_near_posterior(&posterior);
@@ -761,6 +774,29 @@ pub const MEMORY_REMEDY: &str = "about the runs' residual memory (the report's m
      `--noise discrepancy` models the memory as a force the law lacks, \
      and `--per-run` gives intervals that hold for a new test of this damper \
      (docs/calibration.md, \"Which likelihood for measured records\", \"Model discrepancy\", \"The between-run layer\")";
+
+/// The search's coordinates (θ and the model terms) of the SI values
+/// `named` by parameter name, each coordinate not named kept at
+/// `default`'s; `None` where nothing is named or a named value is not a
+/// finite point of the posterior's coordinates.
+fn named_start(
+    post: &Posterior,
+    named: &BTreeMap<String, f64>,
+    default: &[f64],
+) -> Option<Vec<f64>> {
+    let layout = &post.layout;
+    let fitted = layout.fitted.clone();
+    let mut si = layout.to_si(default);
+    let mut any = false;
+    for (i, name) in layout.names[fitted.clone()].iter().enumerate() {
+        if let Some(&v) = named.get(name) {
+            si[i] = v;
+            any = true;
+        }
+    }
+    let x = layout.from_si(&si);
+    (any && x.len() == fitted.len() && x.iter().all(|v| v.is_finite())).then_some(x)
+}
 
 #[cfg(test)]
 mod tests {
