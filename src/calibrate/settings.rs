@@ -382,8 +382,10 @@ pub struct CalibrationSettings {
     /// parameters and the model terms), in place of the identification or
     /// the starts a law reads off the records; the prior medians are
     /// searched beside it as always. A run calibrated alone (`--per-run`)
-    /// starts from its joint calibration's MAP (docs/calibration.md, "Each
-    /// run alone"). Empty: the usual starts.
+    /// starts from its joint calibration's MAP where that calibration
+    /// started near its Laplace approximation (docs/calibration.md,
+    /// "Consistency across runs"). A name the calibration does not have is
+    /// refused. Empty: the usual starts.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub map_start: BTreeMap<String, f64>,
 }

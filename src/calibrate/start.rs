@@ -182,6 +182,14 @@ fn start_with(
         x
     };
     let medians = at(&medians);
+    if let Some(unknown) =
+        settings.map_start.keys().find(|name| posterior.layout.index(name).is_none())
+    {
+        return Err(Error::Usage(format!(
+            "map_start names {unknown}, which this calibration does not have (its parameters: {})",
+            posterior.layout.names.join(", ")
+        )));
+    }
     // a start asked for by name (a run alone from its joint calibration's
     // MAP) in place of the tiers; the medians beside it as beside any
     // single start

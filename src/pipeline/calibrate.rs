@@ -193,6 +193,14 @@ impl Pipeline<'_> {
             let id = run.id().to_string();
             let one = campaign.filtered(|r| r.id() == id);
             let dir = joint.dir.join(folders::RUNS).join(&id);
+            // the law's parameters and this run's own terms and noise
+            let mut request = request.clone();
+            request.settings.map_start.retain(|name, _| {
+                !campaign
+                    .runs
+                    .iter()
+                    .any(|r| r.id() != id && name.ends_with(&format!("_{}", r.id())))
+            });
             alone.push((
                 id.clone(),
                 self.calibrate_into(&one, &dir, &request, &format!("run {id} alone"), true)?,

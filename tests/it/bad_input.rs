@@ -742,6 +742,22 @@ fn cases() -> Vec<Case> {
             expect: &["c.toml", "anchor_currents_a", "low < high"],
         },
         Case {
+            name: "--config map_start names a parameter the calibration lacks",
+            make: |r| {
+                std::fs::write(r.join("c.toml"), "[map_start]\nGx = 2e5\n").unwrap();
+                s(&[
+                    "sample",
+                    &p(&good(r)),
+                    "--out",
+                    &p(&r.join("out")),
+                    "--config",
+                    &p(&r.join("c.toml")),
+                ])
+            },
+            code: 2,
+            expect: &["map_start names Gx", "does not have"],
+        },
+        Case {
             name: "--noise unknown",
             make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--noise", "pink"]),
             code: 2,
