@@ -106,6 +106,20 @@ fn calibration() -> &'static (PathBuf, PathBuf) {
     })
 }
 
+/// `sample` of the good campaign into `out` with the settings file
+/// `c.toml` holding `text`.
+fn sample_with_config(root: &Path, text: &str) -> Vec<String> {
+    std::fs::write(root.join("c.toml"), text).unwrap();
+    s(&[
+        "sample",
+        &p(&good(root)),
+        "--out",
+        &p(&root.join("out")),
+        "--config",
+        &p(&root.join("c.toml")),
+    ])
+}
+
 fn s(args: &[&str]) -> Vec<String> {
     args.iter().map(|a| a.to_string()).collect()
 }
@@ -724,36 +738,17 @@ fn cases() -> Vec<Case> {
         Case {
             name: "--config curves' anchors reversed",
             make: |r| {
-                std::fs::write(
-                    r.join("c.toml"),
+                sample_with_config(
+                    r,
                     "model = \"current-curves\"\nanchor_currents_a = [1.0, 0.5]\n",
                 )
-                .unwrap();
-                s(&[
-                    "sample",
-                    &p(&good(r)),
-                    "--out",
-                    &p(&r.join("out")),
-                    "--config",
-                    &p(&r.join("c.toml")),
-                ])
             },
             code: 2,
             expect: &["c.toml", "anchor_currents_a", "low < high"],
         },
         Case {
             name: "--config map_start names a parameter the calibration lacks",
-            make: |r| {
-                std::fs::write(r.join("c.toml"), "[map_start]\nGx = 2e5\n").unwrap();
-                s(&[
-                    "sample",
-                    &p(&good(r)),
-                    "--out",
-                    &p(&r.join("out")),
-                    "--config",
-                    &p(&r.join("c.toml")),
-                ])
-            },
+            make: |r| sample_with_config(r, "[map_start]\nGx = 2e5\n"),
             code: 2,
             expect: &["map_start names Gx", "does not have"],
         },
@@ -780,17 +775,7 @@ fn cases() -> Vec<Case> {
         },
         Case {
             name: "--config unknown key",
-            make: |r| {
-                std::fs::write(r.join("c.toml"), "[sampler]\nwalkerz = 3\n").unwrap();
-                s(&[
-                    "sample",
-                    &p(&good(r)),
-                    "--out",
-                    &p(&r.join("out")),
-                    "--config",
-                    &p(&r.join("c.toml")),
-                ])
-            },
+            make: |r| sample_with_config(r, "[sampler]\nwalkerz = 3\n"),
             code: 2,
             expect: &["c.toml", "walkerz"],
         },
