@@ -182,12 +182,11 @@ fn start_with(
         x
     };
     let medians = at(&medians);
-    if let Some(unknown) =
-        settings.map_start.keys().find(|name| posterior.layout.index(name).is_none())
-    {
+    let fitted = &posterior.layout.names[posterior.layout.fitted.clone()];
+    if let Some(unknown) = settings.map_start.keys().find(|name| !fitted.contains(name)) {
         return Err(Error::Usage(format!(
-            "map_start names {unknown}, which this calibration does not have (its parameters: {})",
-            posterior.layout.names.join(", ")
+            "map_start names {unknown}, which this calibration does not have (its parameters and terms: {})",
+            fitted.join(", ")
         )));
     }
     // a start asked for by name (a run alone from its joint calibration's
@@ -295,9 +294,6 @@ fn start_with(
     let (posterior, map, laplace) = stages.settle(posterior, map, log);
     let independent = std::mem::take(&mut stages.independent);
     let mut settings = stages.settings;
-    // the start given, as far as this posterior has the names
-    let fitted = &posterior.layout.names[posterior.layout.fitted.clone()];
-    settings.map_start.retain(|name, _| fitted.contains(name));
     settings.integrator.scheme = SchemeChoice::of(posterior.integrator.scheme);
     settings.integrator.substeps = posterior.integrator.substeps;
     let walkers_near = settings.sampler.walkers_near_posterior(&posterior);
@@ -792,18 +788,18 @@ fn named_start(
     named: &BTreeMap<String, f64>,
     default: &[f64],
 ) -> Option<Vec<f64>> {
+    if named.is_empty() {
+        return None;
+    }
     let layout = &post.layout;
-    let fitted = layout.fitted.clone();
     let mut si = layout.to_si(default);
-    let mut any = false;
-    for (i, name) in layout.names[fitted.clone()].iter().enumerate() {
-        if let Some(&v) = named.get(name) {
-            si[i] = v;
-            any = true;
+    for (v, name) in si.iter_mut().zip(&layout.names[layout.fitted.clone()]) {
+        if let Some(&given) = named.get(name) {
+            *v = given;
         }
     }
     let x = layout.from_si(&si);
-    (any && x.len() == fitted.len() && x.iter().all(|v| v.is_finite())).then_some(x)
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 #[cfg(test)]

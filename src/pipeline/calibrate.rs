@@ -179,28 +179,25 @@ impl Pipeline<'_> {
         // at 1 A alone, started there, found a lower mode whose walkers
         // missed the shape's long tail (sd 0.34 where sequential Monte
         // Carlo gives 2.5; from its own starts 1.8)
-        let mut request = request.clone();
-        if joint.started_near_laplace()
+        let from_joint = joint.started_near_laplace()
             && joint.settings.model == ModelKind::PerCurrent
             && request.settings.model == ModelKind::PerCurrent
             && joint.settings.law == request.settings.law
-            && request.settings.map_start.is_empty()
-        {
-            request.settings.map_start = joint.record.map.clone();
-        }
+            && request.settings.map_start.is_empty();
+        let layout = &joint.sample.layout;
         let mut alone = Vec::new();
         for run in &campaign.runs {
             let id = run.id().to_string();
             let one = campaign.filtered(|r| r.id() == id);
             let dir = joint.dir.join(folders::RUNS).join(&id);
-            // the law's parameters and this run's own terms and noise
             let mut request = request.clone();
-            request.settings.map_start.retain(|name, _| {
-                !campaign
-                    .runs
-                    .iter()
-                    .any(|r| r.id() != id && name.ends_with(&format!("_{}", r.id())))
-            });
+            if let Some(j) = layout.run_index(&id).filter(|_| from_joint) {
+                // the law's parameters and this run's own terms
+                request.settings.map_start = layout
+                    .fitted_names_of_run(j)
+                    .filter_map(|n| joint.record.map.get(n).map(|v| (n.to_string(), *v)))
+                    .collect();
+            }
             alone.push((
                 id.clone(),
                 self.calibrate_into(&one, &dir, &request, &format!("run {id} alone"), true)?,

@@ -472,6 +472,17 @@ impl Layout {
         self.names.iter().position(|n| n == name)
     }
 
+    /// The names the MAP search fits for run `j` alone: θ, the gas spring
+    /// and that run's force offset (the terms that are on).
+    pub fn fitted_names_of_run(&self, j: usize) -> impl Iterator<Item = &str> {
+        let own = self.offset.start + j;
+        self.names[self.fitted.clone()]
+            .iter()
+            .enumerate()
+            .filter(move |&(i, _)| !self.offset.contains(&i) || i == own)
+            .map(|(_, n)| n.as_str())
+    }
+
     /// The position of run `id` among the runs.
     pub fn run_index(&self, id: &str) -> Option<usize> {
         self.runs.iter().position(|r| r == id)
