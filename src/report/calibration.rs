@@ -599,6 +599,9 @@ fn new_test_table(page: &mut Page, rows: &[NewTestRow], loo: Option<&LeaveOneOut
     if !pooled.is_empty() {
         page.para(&format!("Pooled: {}.", pooled.join("; ")));
     }
+    if let Some(warning) = super::text::new_tests_unsettled(rows) {
+        page.para(&format!("Not converged: {warning}."));
+    }
     if let Some(warning) = super::text::new_tests_unfit(rows) {
         page.para(&format!("Not a band: {warning}."));
     }

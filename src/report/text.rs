@@ -451,7 +451,11 @@ pub fn new_test_left_out(rows: &[NewTestRow], seconds: f64) -> String {
     if !pooled.is_empty() {
         row!(out, "pooled: {}; a right band holds about 95 % pooled over many tests, while one test is inside nearly everywhere or, where unlike the others, outside over much of its record (docs/calibration.md)", pooled.join(", "));
     }
-    for warning in new_tests_unfit(rows).into_iter().chain(new_tests_too_wide(rows)) {
+    for warning in new_tests_unsettled(rows)
+        .into_iter()
+        .chain(new_tests_unfit(rows))
+        .chain(new_tests_too_wide(rows))
+    {
         row!(out, "warning: {warning}");
     }
     out
@@ -474,6 +478,26 @@ pub fn new_tests_unfit(rows: &[NewTestRow]) -> Option<String> {
         format!(
             "most of the between-run layer's new tests could not be integrated for {} (outside the physical range, or failing): the runs alone lie too far apart for one between-test spread (the consistency table), and these bands are not a new test's",
             unfit.join(", ")
+        )
+    })
+}
+
+/// Where the layer fitted without a held-out run (or its current) did not
+/// converge (its Gibbs chains' largest R̂ at or above 1.01, the target the
+/// layer's own line is held to): which, in a sentence. B-P's runs alone on
+/// records of Spencer's model (`mrbp synth --law spencer`, 0.5 A) left a
+/// layer without the 320 rpm run at R̂ 1.08, whose band the table showed
+/// beside the others with nothing said.
+pub fn new_tests_unsettled(rows: &[NewTestRow]) -> Option<String> {
+    let unsettled: Vec<String> = rows
+        .iter()
+        .filter(|r| crate::validate::unsettled(r.max_rhat))
+        .map(|r| format!("{} (R̂ {:.2})", r.coverage.run, r.max_rhat))
+        .collect();
+    (!unsettled.is_empty()).then(|| {
+        format!(
+            "the between-run layer fitted without {} did not converge: its Gibbs chains still disagreed, so the band for that new test is not to be trusted (the runs alone disagree by more than one between-test spread describes: the consistency table)",
+            unsettled.join(", ")
         )
     })
 }
@@ -632,6 +656,22 @@ mod tests {
         assert!(said.contains("for b (380 of 400)"), "{said}");
         assert!(!said.contains("a ("), "{said}");
         assert!(new_test_left_out(&[row("b", 20, 380)], 1.0).contains("\nwarning: most of the"));
+    }
+
+    /// A layer fitted without a run that did not converge is named; one at
+    /// R̂ below 1.01 is not.
+    #[test]
+    fn new_tests_of_unconverged_layers_are_named() {
+        let with_rhat = |run: &str, max_rhat: f64| NewTestRow { max_rhat, ..row(run, 400, 0) };
+        assert_eq!(new_tests_unsettled(&[with_rhat("a", 1.009), with_rhat("b", 1.001)]), None);
+        let rows = [with_rhat("a", 1.009), with_rhat("c", 1.0823)];
+        let said = new_tests_unsettled(&rows).unwrap();
+        assert!(
+            said.starts_with("the between-run layer fitted without c (R̂ 1.08) did not converge"),
+            "{said}"
+        );
+        assert!(!said.contains("a ("), "{said}");
+        assert!(new_test_left_out(&rows, 1.0).contains("\nwarning: the between-run layer fitted"));
     }
 
     /// Bands wider than the peak force on average are called what they are
