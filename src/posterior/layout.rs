@@ -476,11 +476,10 @@ impl Layout {
     /// and that run's force offset (the terms that are on).
     pub fn fitted_names_of_run(&self, j: usize) -> impl Iterator<Item = &str> {
         let own = self.offset.start + j;
-        self.names[self.fitted.clone()]
-            .iter()
-            .enumerate()
-            .filter(move |&(i, _)| !self.offset.contains(&i) || i == own)
-            .map(|(_, n)| n.as_str())
+        self.fitted
+            .clone()
+            .filter(move |i| !self.offset.contains(i) || *i == own)
+            .map(|i| self.names[i].as_str())
     }
 
     /// The position of run `id` among the runs.

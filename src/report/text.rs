@@ -400,17 +400,22 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
 /// ensembles still disagreeing when the refit stopped): which, with their
 /// R̂, and what their rows are, in a sentence.
 pub fn refits_unsettled(rows: &[LooRow]) -> Option<String> {
-    let unsettled: Vec<String> = rows
-        .iter()
-        .filter(|r| r.unsettled())
-        .map(|r| format!("{} (R̂ {:.2})", r.coverage.run, r.max_rhat))
-        .collect();
-    (!unsettled.is_empty()).then(|| {
+    unsettled_runs(rows.iter().map(|r| (r.coverage.run.as_str(), r.max_rhat))).map(|runs| {
         format!(
-            "the held-out posteriors without {} did not converge: their ensembles still disagreed when the refit stopped (separate basins, or too few steps: `--loo-steps`; `--sampler smc` weighs basins by their mass), so those rows are of draws, not of a posterior",
-            unsettled.join(", ")
+            "the held-out posteriors without {runs} did not converge: their ensembles still disagreed when the refit stopped (separate basins, or too few steps: `--loo-steps`; `--sampler smc` weighs basins by their mass), so those rows are of draws, not of a posterior"
         )
     })
+}
+
+/// The held-out runs (run, largest R̂ of what was fitted without it) whose
+/// fit did not converge ([`crate::validate::unsettled`]), listed with
+/// their R̂ ("c (R̂ 1.08), d (R̂ 1.60)"); `None` where every one did.
+fn unsettled_runs<'a>(rows: impl Iterator<Item = (&'a str, f64)>) -> Option<String> {
+    let unsettled: Vec<String> = rows
+        .filter(|&(_, rhat)| crate::validate::unsettled(rhat))
+        .map(|(run, rhat)| format!("{run} (R̂ {rhat:.2})"))
+        .collect();
+    (!unsettled.is_empty()).then(|| unsettled.join(", "))
 }
 
 /// Each run predicted as a new test by the between-run layer fitted
@@ -489,15 +494,9 @@ pub fn new_tests_unfit(rows: &[NewTestRow]) -> Option<String> {
 /// layer without the 320 rpm run at R̂ 1.08, whose band the table showed
 /// beside the others with nothing said.
 pub fn new_tests_unsettled(rows: &[NewTestRow]) -> Option<String> {
-    let unsettled: Vec<String> = rows
-        .iter()
-        .filter(|r| crate::validate::unsettled(r.max_rhat))
-        .map(|r| format!("{} (R̂ {:.2})", r.coverage.run, r.max_rhat))
-        .collect();
-    (!unsettled.is_empty()).then(|| {
+    unsettled_runs(rows.iter().map(|r| (r.coverage.run.as_str(), r.max_rhat))).map(|runs| {
         format!(
-            "the between-run layer fitted without {} did not converge: its Gibbs chains still disagreed, so the band for that new test is not to be trusted (the runs alone disagree by more than one between-test spread describes: the consistency table)",
-            unsettled.join(", ")
+            "the between-run layer fitted without {runs} did not converge: its Gibbs chains still disagreed, so the band for that new test is not to be trusted (the runs alone disagree by more than one between-test spread describes: the consistency table)"
         )
     })
 }

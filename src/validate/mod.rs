@@ -162,20 +162,15 @@ pub struct LooRow {
     pub tempered_instead: Option<String>,
 }
 
-/// Whether a held-out posterior sampled afresh whose refit stopped with
-/// largest R̂ `max_rhat` did not converge (the sampler's own target, 1.01;
-/// NaN, no sampling, is not).
+/// Whether a fit made without a held-out run (a posterior sampled afresh,
+/// or the between-run layer's Gibbs chains) that stopped with largest R̂
+/// `max_rhat` did not converge (the sampler's own target, 1.01; NaN, no
+/// sampling, is not).
 pub fn unsettled(max_rhat: f64) -> bool {
     max_rhat >= 1.01
 }
 
 impl LooRow {
-    /// Whether its held-out posterior was sampled afresh and its ensembles
-    /// still disagreed when the refit stopped ([`unsettled`]).
-    pub fn unsettled(&self) -> bool {
-        unsettled(self.max_rhat)
-    }
-
     /// The held-out sampling's largest R̂ as a table shows it: "–" where
     /// there was none, "no spread" where a coordinate's draws did not move.
     pub fn rhat_shown(&self) -> String {
