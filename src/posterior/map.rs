@@ -10,6 +10,8 @@
 //! four per SIMD batch and runs in parallel, so a Jacobian costs about two
 //! integrations of the records rather than one per coordinate.
 
+use std::borrow::Cow;
+use std::collections::HashMap;
 use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector};
@@ -89,20 +91,16 @@ impl MapEstimate {
 /// width.
 const JACOBIAN_STEP: f64 = 1e-6;
 
-/// Residuals τ_obs − τ_model of run `r` for up to [`LANES`] parameter sets
-/// with their model terms (gas-spring stiffness, force offset).
-fn run_residuals(
-    post: &Posterior,
-    r: &RunData,
-    xs: &[&[f64]],
-    terms: &[(f64, f64)],
-) -> Vec<Option<Vec<f64>>> {
+/// The law's path (stress at every sample after the first) along run `r`
+/// for up to [`LANES`] likelihood points (`None` where an integration
+/// fails).
+fn run_paths(post: &Posterior, r: &RunData, xs: &[&[f64]]) -> Vec<Option<Vec<f64>>> {
     let params = post.lane_params(xs, r);
     let mut out = vec![Vec::with_capacity(r.compared()); xs.len()];
     let outcome = params.integrate(&post.integrator, r, |k, s| {
         if k > 0 {
             for (lane, o) in out.iter_mut().enumerate() {
-                o.push(r.tau[k] - s[lane] - r.terms_stress(k, terms[lane].0, terms[lane].1));
+                o.push(s[lane]);
             }
         }
     });
@@ -110,37 +108,73 @@ fn run_residuals(
 }
 
 /// Residuals of every run at each of the θ points `xs` (`None` where an
-/// integration fails), `[point][run]`.
+/// integration fails), `[point][run]`. The model terms (gas spring, force
+/// offset) are added to the law's path, not integrated: points that
+/// differ only in them share one integration (a Jacobian's columns of
+/// the terms cost none; the lanes are independent, so each path has the
+/// same bits as when integrated on its own).
 fn residuals_many(post: &Posterior, xs: &[Vec<f64>]) -> Vec<Option<Vec<Vec<f64>>>> {
+    let l = &post.layout;
+    // the likelihood's points (the adjusted likelihood's ln θ*), and which
+    // of them the law's path depends on: all but the terms
+    let moved: Vec<Cow<[f64]>> = xs.iter().map(|x| post.likelihood_point(x)).collect();
+    let key = |x: &[f64]| -> Vec<u64> {
+        let mut k: Vec<u64> = x.iter().map(|v| v.to_bits()).collect();
+        for i in l.spring.clone().chain(l.offset.clone()) {
+            k[i] = 0;
+        }
+        k
+    };
+    let mut distinct: Vec<usize> = Vec::new();
+    let mut seen: HashMap<Vec<u64>, usize> = HashMap::new();
+    let path_of: Vec<usize> = moved
+        .iter()
+        .enumerate()
+        .map(|(i, x)| {
+            *seen.entry(key(x)).or_insert_with(|| {
+                distinct.push(i);
+                distinct.len() - 1
+            })
+        })
+        .collect();
     let groups: Vec<(usize, usize)> = (0..post.runs.len())
-        .flat_map(|r| (0..xs.len()).step_by(LANES).map(move |g| (r, g)))
+        .flat_map(|r| (0..distinct.len()).step_by(LANES).map(move |g| (r, g)))
         .collect();
     let pieces: Vec<Vec<Option<Vec<f64>>>> = groups
         .par_iter()
         .map(|&(r, g)| {
-            let run = &post.runs[r];
-            let group = &xs[g..(g + LANES).min(xs.len())];
-            // the likelihood's points (the adjusted likelihood's ln θ*)
-            let moved: Vec<std::borrow::Cow<[f64]>> =
-                group.iter().map(|x| post.likelihood_point(x)).collect();
-            let points: Vec<&[f64]> = moved.iter().map(|x| x.as_ref()).collect();
-            let terms: Vec<(f64, f64)> = group.iter().map(|x| post.layout.terms(x, r)).collect();
-            run_residuals(post, run, &points, &terms)
+            let group = &distinct[g..(g + LANES).min(distinct.len())];
+            let points: Vec<&[f64]> = group.iter().map(|&i| moved[i].as_ref()).collect();
+            run_paths(post, &post.runs[r], &points)
         })
         .collect();
-    let mut out: Vec<Option<Vec<Vec<f64>>>> = vec![Some(Vec::new()); xs.len()];
-    for (&(_, g), piece) in groups.iter().zip(pieces) {
-        for (k, res) in piece.into_iter().enumerate() {
-            out[g + k] = match (out[g + k].take(), res) {
-                (Some(mut runs), Some(r)) => {
-                    runs.push(r);
-                    Some(runs)
-                }
-                _ => None,
-            };
-        }
+    // paths[run][distinct point]
+    let mut paths: Vec<Vec<Option<Vec<f64>>>> = vec![Vec::new(); post.runs.len()];
+    for (&(r, _), piece) in groups.iter().zip(pieces) {
+        paths[r].extend(piece);
     }
-    out
+    xs.iter()
+        .zip(&path_of)
+        .map(|(x, &p)| {
+            paths
+                .iter()
+                .zip(&post.runs)
+                .enumerate()
+                .map(|(j, (of_run, run))| {
+                    let path = of_run[p].as_ref()?;
+                    let (spring, offset) = l.terms(x, j);
+                    Some(
+                        path.iter()
+                            .enumerate()
+                            .map(|(k, s)| {
+                                run.tau[k + 1] - s - run.terms_stress(k + 1, spring, offset)
+                            })
+                            .collect(),
+                    )
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// Each run's root-mean-square residual (the law's path against the record,
