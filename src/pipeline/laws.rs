@@ -30,12 +30,27 @@ impl Pipeline<'_> {
         options: &RunOptions,
     ) -> Result<Vec<PathBuf>> {
         let campaign = self.check(manifest)?;
-        let study = out.join(FOLDER);
-        self.prepare(&study, "--out", &[&campaign], &[], true)?;
         let currents = match options.sample.current {
             Some(c) => vec![c],
             None => campaign.currents(),
         };
+        // the ranking is by tests held out at each current: refused before
+        // any calibration where a current has nothing to hold out
+        if options.leave_one_out.is_some() {
+            if let Some((c, only)) =
+                currents.iter().find_map(|&c| match &campaign.at_current(c).runs[..] {
+                    [only] => Some((c, only.spec.id.clone())),
+                    _ => None,
+                })
+            {
+                return Err(Error::Usage(format!(
+                    "--law {} --leave-one-out ranks the laws by the tests held out at each current, and at {c} A there is a single run ({only}): nothing to hold out. Pick currents with two runs or more (--current), or drop --leave-one-out to compare the laws in sample and by their log evidence",
+                    options.sample.laws.iter().map(|l| l.name()).collect::<Vec<_>>().join(",")
+                )));
+            }
+        }
+        let study = out.join(FOLDER);
+        self.prepare(&study, "--out", &[&campaign], &[], true)?;
         let mut reports = Vec::new();
         let mut job_seconds = Vec::new();
         for &law in &options.sample.laws {

@@ -811,6 +811,22 @@ fn cases() -> Vec<Case> {
             expect: &["--out", "folder of the campaign"],
         },
         Case {
+            name: "laws ranked by held-out tests where a current has one run",
+            make: |r| {
+                s(&[
+                    "run",
+                    &p(&good(r)),
+                    "--out",
+                    &p(&r.join("out")),
+                    "--law",
+                    "bodner-partom,bingham",
+                    "--leave-one-out",
+                ])
+            },
+            code: 2,
+            expect: &["--leave-one-out", "single run (r1)", "--current"],
+        },
+        Case {
             name: "identify of a law without the paper's identification",
             make: |r| {
                 s(&["identify", &p(&good(r)), "--out", &p(&r.join("out")), "--law", "spencer"])
