@@ -316,6 +316,8 @@ impl Pipeline<'_> {
                         rows: &rows,
                         seconds: clock.elapsed().as_secs_f64(),
                     });
+                } else {
+                    self.note(&format!("  --per-run --leave-one-out: no run at {} A can be predicted as a new test without itself: the between-run layer fitted without it needs another run at its current, and two runs at one current at least", joint.record.current_a));
                 }
             }
         }

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use crate::common::{arg, mrbp, ok, one_revolution, synth_runs};
+use crate::common::{arg, mrbp, ok, one_revolution, said, synth_runs};
 
 use mrbp::calibrate::CalibrationSettings;
 
@@ -461,4 +461,55 @@ fn a_run_alone_starts_from_the_joint_map_and_finds_the_same_optimum() {
             usual.map_log_density
         );
     }
+}
+
+/// Two runs at one current, `run --per-run --leave-one-out`: each run
+/// alone and the between-run layer fitted to both, but neither run can be
+/// predicted as a new test (the layer without it would have one run at
+/// one current, and needs two). The job completes (exit 0), says so, and
+/// writes no `loo_new_test.parquet`; the joint leave-one-out holds each
+/// run out as before. Bingham's law on its own virtual records: seconds.
+#[test]
+fn two_runs_give_the_layer_but_no_new_test_held_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    ok(&[
+        "synth",
+        "--law",
+        "bingham",
+        "--out",
+        arg(&data),
+        "--currents",
+        "1.0",
+        "--rpm",
+        "100,200",
+        "--cycles",
+        "1",
+        "--rate",
+        "400",
+    ]);
+    let out = dir.path().join("out");
+    let o = ok(&[
+        "run",
+        arg(&data.join("campaign.toml")),
+        "--out",
+        arg(&out),
+        "--law",
+        "bingham",
+        "--per-run",
+        "--leave-one-out",
+    ]);
+    let printed = said(&o);
+    assert!(
+        printed.contains("no run at 1 A can be predicted as a new test without itself"),
+        "{printed}"
+    );
+    let folder = out.join("I1.0A");
+    assert!(folder.join("between_runs.parquet").exists());
+    assert!(!folder.join("loo_new_test.parquet").exists());
+    let joint = mrbp::store::record::read(&folder.join("calibration.toml")).unwrap();
+    let loo = mrbp::store::coverage::read_leave_one_out(&folder, &joint.calibration_id)
+        .unwrap()
+        .expect("the joint leave-one-out");
+    assert_eq!(loo.rows.len(), 2);
 }

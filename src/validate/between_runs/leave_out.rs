@@ -46,8 +46,9 @@ pub struct NewTestRow {
 /// them (`alone`). `left_out` says without what: the run alone (needs
 /// another run at its current: the layer knows no centre there otherwise),
 /// or every run at its current (needs runs at two other currents: the
-/// centre there comes from the curve in the current). Runs that cannot be
-/// so predicted are left out of the answer.
+/// centre there comes from the curve in the current); either way the runs
+/// left need two at one current at least, as the layer does. Runs that
+/// cannot be so predicted are left out of the answer.
 pub fn leave_out(
     joint: &Calibration,
     campaign: &Campaign,
@@ -78,10 +79,12 @@ pub fn leave_out(
                 .map(|r| r.current_a)
                 .collect();
             elsewhere.dedup_by(|a, b| same_current(*a, *b));
-            let possible = match left_out {
-                LeftOut::Run => here >= 1,
-                LeftOut::Current => elsewhere.len() >= 2,
-            };
+            let currents: Vec<f64> = others.iter().map(|r| r.current_a).collect();
+            let possible = super::can_fit(&currents)
+                && match left_out {
+                    LeftOut::Run => here >= 1,
+                    LeftOut::Current => elsewhere.len() >= 2,
+                };
             possible.then_some((j, run, own))
         })
         .collect();

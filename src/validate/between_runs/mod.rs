@@ -203,7 +203,7 @@ impl BetweenRuns {
             .iter()
             .map(|r| currents.iter().position(|c| same_current(*c, r.current_a)).expect("listed"))
             .collect();
-        if !(0..currents.len()).any(|g| group.iter().filter(|&&h| h == g).count() >= 2) {
+        if !can_fit(&runs.iter().map(|r| r.current_a).collect::<Vec<_>>()) {
             return Err(Error::Usage(
                 "the between-run layer needs two runs or more at one current at least".into(),
             ));
@@ -676,4 +676,11 @@ fn run_likelihood(
     }
     let steps: Vec<f64> = coordinates.iter().map(|c| 1e-3 * c.spread_prior).collect();
     RunLikelihood::from_draws(&points, &log_prior, &steps)
+}
+
+/// Whether the layer can be fitted to runs at `currents` (one entry a
+/// run): two runs or more at one current at least, where the spread
+/// between tests is measured.
+pub(super) fn can_fit(currents: &[f64]) -> bool {
+    currents.iter().any(|c| currents.iter().filter(|k| same_current(**k, *c)).count() >= 2)
 }
