@@ -195,6 +195,17 @@ impl Pipeline<'_> {
                 }
             }
         }
+        // how far the excitation goes beyond what the records showed the law
+        let records = records_reach(cal);
+        let own = Reach::of(&data);
+        let beyond = records.map_or_else(Vec::new, |r| own.beyond(&r));
+        if let (Some(r), false) = (records, beyond.is_empty()) {
+            self.note(&format!(
+                "warning: {} goes beyond the calibration's records: {}; the band extrapolates the law where no record checks it (simulation.toml: beyond_records)",
+                input.display(),
+                own.said(&r, &beyond)
+            ));
+        }
         let settings = cal.predict_settings(options.replicates, options.seed);
         let bar = self.bar(draws.len() as u64);
         let b = bands(&data, 0, &draws, &settings, &|| bar.inc(1))?;
@@ -215,6 +226,11 @@ impl Pipeline<'_> {
             extrapolated,
             layer_runs: layer.map(|(_, runs)| runs).unwrap_or_default(),
             coil_lag: coil_lag.name().to_string(),
+            peak_velocity_m_s: own.velocity,
+            stroke_m: own.stroke,
+            records_peak_velocity_m_s: records.map_or(f64::NAN, |r| r.velocity),
+            records_stroke_m: records.map_or(f64::NAN, |r| r.stroke),
+            beyond_records: beyond.iter().map(|b| b.to_string()).collect(),
         };
         if b.failed > 0 {
             self.note(&format!(
@@ -444,3 +460,81 @@ impl CoilLag {
 /// The random stream of the coil lags drawn from their prior (with the
 /// simulation's seed and the draw's index).
 const LAG_STREAM: u64 = 0x0c01_11a9;
+
+/// How far an excitation beyond the calibration's records is flagged:
+/// its peak velocity or stroke more than this many times theirs.
+const BEYOND_RECORDS: f64 = 1.25;
+
+/// The reach of a record as the law sees it (the strain smoothed as in
+/// calibration, times the gap): its peak speed (m/s, central differences)
+/// and its stroke (m, half the range of the displacement).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Reach {
+    velocity: f64,
+    stroke: f64,
+}
+
+impl Reach {
+    fn of(data: &RunData) -> Reach {
+        let x: Vec<f64> = data.gamma.iter().map(|g| g * data.gap_m).collect();
+        let velocity = (1..x.len().saturating_sub(1))
+            .map(|i| ((x[i + 1] - x[i - 1]) / (data.time[i + 1] - data.time[i - 1])).abs())
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max);
+        let (lo, hi) =
+            x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+        Reach { velocity, stroke: 0.5 * (hi - lo) }
+    }
+
+    /// The larger of two reaches, quantity by quantity.
+    fn max(self, other: Reach) -> Reach {
+        Reach { velocity: self.velocity.max(other.velocity), stroke: self.stroke.max(other.stroke) }
+    }
+
+    /// What of this reach lies beyond `records`' by more than
+    /// [`BEYOND_RECORDS`]: `velocity`, `stroke`.
+    fn beyond(&self, records: &Reach) -> Vec<&'static str> {
+        let mut out = Vec::new();
+        if self.velocity > BEYOND_RECORDS * records.velocity {
+            out.push("velocity");
+        }
+        if self.stroke > BEYOND_RECORDS * records.stroke {
+            out.push("stroke");
+        }
+        out
+    }
+
+    /// The quantities `beyond` in words, against `records`'.
+    fn said(&self, records: &Reach, beyond: &[&str]) -> String {
+        beyond
+            .iter()
+            .map(|b| match *b {
+                "velocity" => format!(
+                    "its peak velocity {:.3} m/s is {:.1}× the fastest record's ({:.3} m/s)",
+                    self.velocity,
+                    self.velocity / records.velocity,
+                    records.velocity
+                ),
+                _ => format!(
+                    "its stroke ±{:.1} mm is {:.1}× the longest record's (±{:.1} mm)",
+                    1e3 * self.stroke,
+                    self.stroke / records.stroke,
+                    1e3 * records.stroke
+                ),
+            })
+            .collect::<Vec<_>>()
+            .join("; ")
+    }
+}
+
+/// The reach of the records `cal` was calibrated on, quantity by quantity
+/// the largest; `None` where they cannot be read (the manifest moved).
+fn records_reach(cal: &Calibration) -> Option<Reach> {
+    let campaign = cal.used_runs(&cal.full_campaign().ok()?);
+    let smooth = cal.settings.likelihood.smooth_strain_ms;
+    campaign
+        .runs
+        .iter()
+        .map(|run| Reach::of(&RunData::from_run(run, RecordPart::WholeRecord, smooth)))
+        .reduce(Reach::max)
+}

@@ -48,7 +48,15 @@ pub fn write(dir: &Path, s: &Simulation, calibration: &str) -> Result<()> {
     };
     // the posterior named over time, the current over displacement: each
     // title fits its panel
-    let extrapolated = if r.extrapolated { ", extrapolated" } else { "" };
+    let extrapolated = match (r.extrapolated, r.beyond_records.is_empty()) {
+        (false, true) => String::new(),
+        (true, true) => ", extrapolated".to_string(),
+        (extrapolated, false) => format!(
+            "{}, beyond the records' {}",
+            if extrapolated { ", extrapolated" } else { "" },
+            r.beyond_records.join(" and ")
+        ),
+    };
     let current = if r.current_varies {
         let (lo, hi) = s
             .current

@@ -64,6 +64,26 @@ pub struct SimulationRecord {
     /// lag's prior); empty where the current does not change.
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub coil_lag: String,
+    /// The excitation's peak velocity (m/s) and stroke (m, half its
+    /// range), as the law sees it (the strain smoothed as in calibration).
+    #[serde(default = "nan")]
+    pub peak_velocity_m_s: f64,
+    #[serde(default = "nan")]
+    pub stroke_m: f64,
+    /// The largest of the calibration's records (NaN where they could not
+    /// be read).
+    #[serde(default = "nan")]
+    pub records_peak_velocity_m_s: f64,
+    #[serde(default = "nan")]
+    pub records_stroke_m: f64,
+    /// What of the excitation lies beyond the records by more than a
+    /// quarter: `velocity`, `stroke`; the band extrapolates the law there.
+    #[serde(default)]
+    pub beyond_records: Vec<String>,
+}
+
+fn nan() -> f64 {
+    f64::NAN
 }
 
 /// The columns of `simulation.parquet`, in order: what the file and the

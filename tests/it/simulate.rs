@@ -156,6 +156,43 @@ fn median_at_one_draw_is_the_law_solution() {
     assert!(out.join("simulation.png").exists());
     let status = mrbp::store::status::status(&out).unwrap();
     assert!(status[0].complete(), "{:?}", status[0].problems);
+
+    // the excitation's reach against the records': 5 mm at 3 Hz peaks at
+    // 2π · 3 · 5 mm = 94.2 mm/s (central differences at 1 kHz and the
+    // calibration's smoothing take < 1 % off it), inside the crank
+    // records' at 200 rpm, so nothing is flagged
+    let r = &s.record;
+    let v = 2.0 * std::f64::consts::PI * 3.0 * 0.005;
+    assert!((r.peak_velocity_m_s / v - 1.0).abs() < 0.02, "{} m/s", r.peak_velocity_m_s);
+    assert!((r.stroke_m / 0.005 - 1.0).abs() < 0.01, "{} m", r.stroke_m);
+    assert!(r.records_peak_velocity_m_s > v && r.records_stroke_m > 0.0, "{r:?}");
+    assert!(r.beyond_records.is_empty(), "{r:?}");
+    // ten times as fast (30 Hz, the same stroke): beyond the records'
+    // velocity, said on the terminal and in simulation.toml
+    let fast = t.path().join("fast.csv");
+    let mut text = String::from("time_s,displacement_m\n");
+    for k in 0..=700 {
+        let t = k as f64 / 10_000.0;
+        let x = 0.005 * (2.0 * std::f64::consts::PI * 30.0 * t).sin();
+        text.push_str(&format!("{t},{x}\n"));
+    }
+    std::fs::write(&fast, text).unwrap();
+    let out = t.path().join("sim-fast");
+    let o = ok(&[
+        "simulate",
+        cal_dir.to_str().unwrap(),
+        "--input",
+        fast.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--draws",
+        "1",
+        "--replicates",
+        "1",
+    ]);
+    assert!(said(&o).contains("goes beyond the calibration's records: its peak velocity"));
+    let r = simulation::read(&out).unwrap().record;
+    assert_eq!(r.beyond_records, ["velocity"], "{r:?}");
 }
 
 #[test]
