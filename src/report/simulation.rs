@@ -52,9 +52,9 @@ pub fn write(dir: &Path, s: &Simulation, calibration: &str) -> Result<()> {
         (false, true) => String::new(),
         (true, true) => ", extrapolated".to_string(),
         (extrapolated, false) => format!(
-            "{}, beyond the records' {}",
+            "{}, beyond records: {}",
             if extrapolated { ", extrapolated" } else { "" },
-            r.beyond_records.join(" and ")
+            r.beyond_records.join(", ")
         ),
     };
     let current = if r.current_varies {
