@@ -338,6 +338,17 @@ impl Pipeline<'_> {
     ) -> Result<Calibration> {
         let settings = &request.settings;
         let checkpoint = dir.join(store::folder::CHECKPOINT);
+        let smc_checkpoint = dir.join(store::folder::SMC_CHECKPOINT);
+        // an interrupted calibration's steps are not thrown away unasked
+        if !request.force && !request.resume {
+            if let Some(found) = [&checkpoint, &smc_checkpoint].into_iter().find(|p| p.exists()) {
+                return Err(Error::Usage(format!(
+                    "{} holds {}, the chains of an interrupted calibration: the same command with --resume continues them, --force starts afresh",
+                    dir.display(),
+                    found.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+                )));
+            }
+        }
         self.prepare(
             dir,
             "--out",
@@ -352,7 +363,6 @@ impl Pipeline<'_> {
                 return Ok(cal);
             }
         }
-        let smc_checkpoint = dir.join(store::folder::SMC_CHECKPOINT);
         let resume = request.resume && {
             let found = checkpoint.exists() || smc_checkpoint.exists();
             // a complete calibration of other settings was said above

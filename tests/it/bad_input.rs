@@ -835,6 +835,16 @@ fn cases() -> Vec<Case> {
             expect: &["identify", "B-P law", "spencer", "mrbp sample --law spencer"],
         },
         Case {
+            name: "sample over an interrupted calibration without --resume",
+            make: |r| {
+                std::fs::create_dir_all(r.join("out")).unwrap();
+                std::fs::write(r.join("out/sampler.checkpoint"), "steps").unwrap();
+                s(&["sample", &p(&good(r)), "--out", &p(&r.join("out"))])
+            },
+            code: 2,
+            expect: &["sampler.checkpoint", "interrupted", "--resume", "--force"],
+        },
+        Case {
             name: "identify over an earlier identification",
             make: |r| {
                 std::fs::create_dir_all(r.join("out")).unwrap();
