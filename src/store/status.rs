@@ -108,7 +108,17 @@ fn walk(dir: &Path, found: &mut Vec<FolderStatus>, depth: usize) {
 
 fn kind_of(dir: &Path) -> Option<Kind> {
     let has = |f: &str| dir.join(f).exists();
-    if [folder::RECORD, folder::CHAINS, folder::SUMMARY, folder::CONFIG].iter().any(|f| has(f)) {
+    if [
+        folder::RECORD,
+        folder::CHAINS,
+        folder::SUMMARY,
+        folder::CONFIG,
+        folder::CHECKPOINT,
+        folder::SMC_CHECKPOINT,
+    ]
+    .iter()
+    .any(|f| has(f))
+    {
         Some(Kind::Calibration)
     } else if [comparison::RECORD, comparison::SUMMARIES, comparison::DIFFERENCES]
         .iter()
@@ -217,6 +227,13 @@ fn name(path: &Path) -> String {
 
 fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
     let record_path = dir.join(folder::RECORD);
+    // a calibration stopped while sampling: its chains so far, kept
+    if let Some(found) =
+        [folder::CHECKPOINT, folder::SMC_CHECKPOINT].into_iter().find(|f| dir.join(f).exists())
+    {
+        problems.push(format!("{found}: the chains of an interrupted calibration; the same command with --resume continues them (--force starts afresh)"));
+        return;
+    }
     if !record_path.exists() {
         problems.push(format!("{}: missing, the calibration is incomplete (stopped while written); rebuild it with `{}`", folder::RECORD, folder::REBUILD));
         return;

@@ -46,6 +46,14 @@ fn interrupted_sampling_saves_a_checkpoint_and_resumes_to_the_same_chains() {
     assert!(said(&out).contains("--resume"), "{}", said(&out));
     assert!(dir.join("cal/sampler.checkpoint").exists());
     assert!(!dir.join("cal/chains.parquet").exists(), "no results from a half run");
+    // `status` names the checkpoint and how to go on; the same command
+    // without --resume or --force does not drop it
+    let o = mrbp_in(dir, &["status", "cal"]);
+    assert_eq!(o.status.code(), Some(2), "{}", said(&o));
+    assert!(said(&o).contains("sampler.checkpoint: the chains of an interrupted"), "{}", said(&o));
+    let o = mrbp_in(dir, &["sample", "data/campaign.toml", "--out", "cal", "--substeps", "1"]);
+    assert_eq!(o.status.code(), Some(2), "{}", said(&o));
+    assert!(dir.join("cal/sampler.checkpoint").exists());
 
     // options that do not match the checkpoint are refused at once
     let o = mrbp_in(
