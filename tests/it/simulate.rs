@@ -37,14 +37,20 @@ fn calibrate(dir: &Path, currents: &str, law: bool) -> PathBuf {
 /// A sine excitation of 5 mm at 3 Hz, 0.7 s at 1 kHz, no force; with a
 /// current column when given.
 fn excitation(path: &Path, current: Option<&dyn Fn(f64) -> f64>) {
+    sine(path, 3.0, 1000.0, current)
+}
+
+/// 701 samples at `rate` Hz of a 5 mm sine at `hz`, no force; with a
+/// current column when given.
+fn sine(path: &Path, hz: f64, rate: f64, current: Option<&dyn Fn(f64) -> f64>) {
     let mut text = String::from(if current.is_some() {
         "time_s,displacement_m,current_a\n"
     } else {
         "time_s,displacement_m\n"
     });
     for k in 0..=700 {
-        let t = k as f64 / 1000.0;
-        let x = 0.005 * (2.0 * std::f64::consts::PI * 3.0 * t).sin();
+        let t = k as f64 / rate;
+        let x = 0.005 * (2.0 * std::f64::consts::PI * hz * t).sin();
         match current {
             Some(i) => text.push_str(&format!("{t},{x},{}\n", i(t))),
             None => text.push_str(&format!("{t},{x}\n")),
@@ -170,13 +176,7 @@ fn median_at_one_draw_is_the_law_solution() {
     // ten times as fast (30 Hz, the same stroke): beyond the records'
     // velocity, said on the terminal and in simulation.toml
     let fast = t.path().join("fast.csv");
-    let mut text = String::from("time_s,displacement_m\n");
-    for k in 0..=700 {
-        let t = k as f64 / 10_000.0;
-        let x = 0.005 * (2.0 * std::f64::consts::PI * 30.0 * t).sin();
-        text.push_str(&format!("{t},{x}\n"));
-    }
-    std::fs::write(&fast, text).unwrap();
+    sine(&fast, 30.0, 10_000.0, None);
     let out = t.path().join("sim-fast");
     let o = ok(&[
         "simulate",
