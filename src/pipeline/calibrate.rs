@@ -340,14 +340,14 @@ impl Pipeline<'_> {
         let checkpoint = dir.join(store::folder::CHECKPOINT);
         let smc_checkpoint = dir.join(store::folder::SMC_CHECKPOINT);
         // an interrupted calibration's steps are not thrown away unasked
-        if !request.force && !request.resume {
-            if let Some(found) = [&checkpoint, &smc_checkpoint].into_iter().find(|p| p.exists()) {
-                return Err(Error::Usage(format!(
-                    "{} holds {}, the chains of an interrupted calibration: the same command with --resume continues them, --force starts afresh",
-                    dir.display(),
-                    found.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned())
-                )));
-            }
+        if let (false, false, Some(found)) =
+            (request.force, request.resume, store::folder::checkpoint_in(dir))
+        {
+            return Err(Error::Usage(format!(
+                "{} holds {found}, {}",
+                dir.display(),
+                store::folder::INTERRUPTED
+            )));
         }
         self.prepare(
             dir,
@@ -364,7 +364,7 @@ impl Pipeline<'_> {
             }
         }
         let resume = request.resume && {
-            let found = checkpoint.exists() || smc_checkpoint.exists();
+            let found = store::folder::checkpoint_in(dir).is_some();
             // a complete calibration of other settings was said above
             if !found && !dir.join(store::folder::RECORD).exists() {
                 self.note(&format!(

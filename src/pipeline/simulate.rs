@@ -199,11 +199,12 @@ impl Pipeline<'_> {
         let records = records_reach(cal);
         let own = Reach::of(&data);
         let beyond = records.map_or_else(Vec::new, |r| own.beyond(&r));
-        if let (Some(r), false) = (records, beyond.is_empty()) {
+        if !beyond.is_empty() {
+            let said: Vec<&str> = beyond.iter().map(|(_, said)| said.as_str()).collect();
             self.note(&format!(
                 "warning: {} goes beyond the calibration's records: {}; the band extrapolates the law where no record checks it (simulation.toml: beyond_records)",
                 input.display(),
-                own.said(&r, &beyond)
+                said.join("; ")
             ));
         }
         let settings = cal.predict_settings(options.replicates, options.seed);
@@ -230,7 +231,7 @@ impl Pipeline<'_> {
             stroke_m: own.stroke,
             records_peak_velocity_m_s: records.map_or(f64::NAN, |r| r.velocity),
             records_stroke_m: records.map_or(f64::NAN, |r| r.stroke),
-            beyond_records: beyond.iter().map(|b| b.to_string()).collect(),
+            beyond_records: beyond.iter().map(|(name, _)| name.to_string()).collect(),
         };
         if b.failed > 0 {
             self.note(&format!(
@@ -492,38 +493,33 @@ impl Reach {
     }
 
     /// What of this reach lies beyond `records`' by more than
-    /// [`BEYOND_RECORDS`]: `velocity`, `stroke`.
-    fn beyond(&self, records: &Reach) -> Vec<&'static str> {
+    /// [`BEYOND_RECORDS`]: its name (`velocity`, `stroke`) and the numbers
+    /// in words.
+    fn beyond(&self, records: &Reach) -> Vec<(&'static str, String)> {
         let mut out = Vec::new();
         if self.velocity > BEYOND_RECORDS * records.velocity {
-            out.push("velocity");
-        }
-        if self.stroke > BEYOND_RECORDS * records.stroke {
-            out.push("stroke");
-        }
-        out
-    }
-
-    /// The quantities `beyond` in words, against `records`'.
-    fn said(&self, records: &Reach, beyond: &[&str]) -> String {
-        beyond
-            .iter()
-            .map(|b| match *b {
-                "velocity" => format!(
+            out.push((
+                "velocity",
+                format!(
                     "its peak velocity {:.3} m/s is {:.1}× the fastest record's ({:.3} m/s)",
                     self.velocity,
                     self.velocity / records.velocity,
                     records.velocity
                 ),
-                _ => format!(
+            ));
+        }
+        if self.stroke > BEYOND_RECORDS * records.stroke {
+            out.push((
+                "stroke",
+                format!(
                     "its stroke ±{:.1} mm is {:.1}× the longest record's (±{:.1} mm)",
                     1e3 * self.stroke,
                     self.stroke / records.stroke,
                     1e3 * records.stroke
                 ),
-            })
-            .collect::<Vec<_>>()
-            .join("; ")
+            ));
+        }
+        out
     }
 }
 

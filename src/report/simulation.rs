@@ -48,15 +48,10 @@ pub fn write(dir: &Path, s: &Simulation, calibration: &str) -> Result<()> {
     };
     // the posterior named over time, the current over displacement: each
     // title fits its panel
-    let extrapolated = match (r.extrapolated, r.beyond_records.is_empty()) {
-        (false, true) => String::new(),
-        (true, true) => ", extrapolated".to_string(),
-        (extrapolated, false) => format!(
-            "{}, beyond records: {}",
-            if extrapolated { ", extrapolated" } else { "" },
-            r.beyond_records.join(", ")
-        ),
-    };
+    let mut extrapolated = if r.extrapolated { ", extrapolated" } else { "" }.to_string();
+    if !r.beyond_records.is_empty() {
+        extrapolated += &format!(", beyond records: {}", r.beyond_records.join(", "));
+    }
     let current = if r.current_varies {
         let (lo, hi) = s
             .current

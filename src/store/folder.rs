@@ -21,6 +21,15 @@ pub const CHECKPOINT: &str = "sampler.checkpoint";
 /// run or after they were stopped (`--sampler smc`).
 pub const SMC_CHECKPOINT: &str = crate::sampler::checkpoint::SMC_FILE;
 
+/// The checkpoint a calibration stopped while sampling left in `dir` (the
+/// sampler's first), if any.
+pub fn checkpoint_in(dir: &Path) -> Option<&'static str> {
+    [CHECKPOINT, SMC_CHECKPOINT].into_iter().find(|f| dir.join(f).exists())
+}
+
+/// What such a checkpoint holds and how to go on, for messages.
+pub const INTERRUPTED: &str = "the chains of an interrupted calibration: the same command with --resume continues them, --force starts afresh";
+
 /// Posterior draws behind a law's `against_current.parquet`.
 pub const CURRENT_DRAWS: usize = 4000;
 

@@ -108,17 +108,8 @@ fn walk(dir: &Path, found: &mut Vec<FolderStatus>, depth: usize) {
 
 fn kind_of(dir: &Path) -> Option<Kind> {
     let has = |f: &str| dir.join(f).exists();
-    if [
-        folder::RECORD,
-        folder::CHAINS,
-        folder::SUMMARY,
-        folder::CONFIG,
-        folder::CHECKPOINT,
-        folder::SMC_CHECKPOINT,
-    ]
-    .iter()
-    .any(|f| has(f))
-    {
+    let calibration = [folder::RECORD, folder::CHAINS, folder::SUMMARY, folder::CONFIG];
+    if calibration.iter().any(|f| has(f)) || folder::checkpoint_in(dir).is_some() {
         Some(Kind::Calibration)
     } else if [comparison::RECORD, comparison::SUMMARIES, comparison::DIFFERENCES]
         .iter()
@@ -228,10 +219,8 @@ fn name(path: &Path) -> String {
 fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
     let record_path = dir.join(folder::RECORD);
     // a calibration stopped while sampling: its chains so far, kept
-    if let Some(found) =
-        [folder::CHECKPOINT, folder::SMC_CHECKPOINT].into_iter().find(|f| dir.join(f).exists())
-    {
-        problems.push(format!("{found}: the chains of an interrupted calibration; the same command with --resume continues them (--force starts afresh)"));
+    if let Some(found) = folder::checkpoint_in(dir) {
+        problems.push(format!("{found}: {}", folder::INTERRUPTED));
         return;
     }
     if !record_path.exists() {

@@ -121,9 +121,7 @@ fn calibrate(pipeline: &mut Pipeline, spec: &TaskSpec, folder: &Path) -> Result<
         Source::Campaign { manifest } => pipeline.load(manifest)?,
     };
     let out = folder.join("calibration");
-    let resume = [crate::store::folder::CHECKPOINT, crate::store::folder::SMC_CHECKPOINT]
-        .iter()
-        .any(|f| out.join(f).exists());
+    let resume = crate::store::folder::checkpoint_in(&out).is_some();
     let request = SampleRequest {
         settings: spec.settings.clone(),
         laws: vec![],
