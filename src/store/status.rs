@@ -220,7 +220,10 @@ fn check_calibration(dir: &Path, problems: &mut Vec<String>) {
     let record_path = dir.join(folder::RECORD);
     // a calibration stopped while sampling: its chains so far, kept
     if let Some(found) = folder::checkpoint_in(dir) {
-        problems.push(format!("{found}: {}", folder::INTERRUPTED));
+        problems.push(format!(
+            "{found}: the chains of an interrupted calibration, kept; rebuild it with `{}`",
+            folder::REBUILD
+        ));
         return;
     }
     if !record_path.exists() {
