@@ -66,7 +66,8 @@ pub(super) fn walkers_start<'t>(
 ) -> Result<Probed<'t>> {
     let count = settings.walkers * settings.ensembles;
     let mut near = near.filter(|&w| w < settings.walkers);
-    let mut laplace = laplace.unwrap_or_else(|| laplace::at_mode(posterior, map));
+    let laplace = laplace.unwrap_or_else(|| laplace::at_mode(posterior, map));
+    let mut laplace = laplace::too_narrow_widened(posterior, laplace);
     // the log-density at the mode the walkers start about
     let mut top = posterior.log_density(laplace.mean.as_slice());
     let mut higher: Option<HigherGround> = None;
@@ -222,7 +223,7 @@ fn higher_ground(
         return None;
     }
     let map = map::refine(posterior, &chains.positions[best * d..(best + 1) * d])?;
-    let laplace = laplace::at_mode(posterior, &map);
+    let laplace = laplace::too_narrow_widened(posterior, laplace::at_mode(posterior, &map));
     let new_top = posterior.log_density(laplace.mean.as_slice());
     (new_top > top + HIGHER_GROUND).then_some((map, laplace, new_top))
 }

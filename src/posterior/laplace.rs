@@ -29,6 +29,89 @@ use super::{Layout, Posterior};
 use crate::newton::{newton, Mode};
 use crate::sampler::{Elliptical, LogDensity};
 
+/// The second difference of the log-density over ±1 sd of a Laplace
+/// approximation above which [`too_narrow_widened`] takes the posterior
+/// for more than twice as wide along that axis (a Gaussian r times wider
+/// gives −1/r²).
+const NARROW_DROP: f64 = 0.25;
+
+/// The farthest [`too_narrow_widened`] looks along an axis, in the
+/// approximation's sds.
+const NARROW_LOOK: f64 = 64.0;
+
+/// `q` (a Laplace approximation of `post` at its mode, where the walkers
+/// start) with every principal axis along which the posterior is more
+/// than twice as wide as `q` widened to the posterior's own spread there.
+/// A Gaussian r times wider than `q` has the log-density's second
+/// difference over ±s sd at −s²/r²; where it lies above −[`NARROW_DROP`]
+/// at s = 1, s doubles (at most to [`NARROW_LOOK`]) until the fall is a
+/// nat or more, well above the integrator's ruggedness, and the axis
+/// takes r = s/√(fall). A Hessian of finite differences can sit on a kink
+/// of the explicit scheme's likelihood (its step cuts switch): on
+/// Spencer's model at 0.25 A of the measured records one Newton mode gave
+/// ln c1 a Laplace sd of 0.0014 where the posterior's is about 0.08, and
+/// walkers started there stopped after 20 steps with c1's sd 40× too
+/// small, R̂ and ESS content (docs/performance.md, "A Laplace
+/// approximation too narrow"). Every other axis, and every `q` that fits,
+/// is kept bit for bit. Costs 2d log-densities, and two per widened axis
+/// and doubling.
+pub fn too_narrow_widened<T: LogDensity>(post: &T, q: Elliptical) -> Elliptical {
+    let d = q.dim();
+    let top = LogDensity::log_density(post, q.mean.as_slice());
+    if !top.is_finite() {
+        return q;
+    }
+    let eigen = nalgebra::SymmetricEigen::new(q.covariance());
+    let axis = |k: usize| eigen.eigenvectors.column(k) * eigen.eigenvalues[k].max(0.0).sqrt();
+    // the second difference of the log-density over ±s sd along each axis k
+    let second = |look: &[(usize, f64)]| -> Vec<f64> {
+        let mut points = Vec::with_capacity(2 * look.len() * d);
+        for &(k, s) in look {
+            for sign in [1.0, -1.0] {
+                points.extend((&q.mean + axis(k) * (sign * s)).iter());
+            }
+        }
+        let f = crate::sampler::density::log_densities(post, &points);
+        (0..look.len()).map(|i| f[2 * i] + f[2 * i + 1] - 2.0 * top).collect()
+    };
+    let first: Vec<(usize, f64)> = (0..d).map(|k| (k, 1.0)).collect();
+    let mut look: Vec<(usize, f64)> = first
+        .iter()
+        .zip(second(&first))
+        .filter(|(_, v)| v.is_finite() && *v > -NARROW_DROP)
+        .map(|(&(k, _), _)| (k, 2.0))
+        .collect();
+    let mut widened: Vec<(usize, f64)> = Vec::new();
+    while !look.is_empty() {
+        let drops = second(&look);
+        let mut next = Vec::new();
+        for (&(k, s), v) in look.iter().zip(drops) {
+            if !v.is_finite() {
+                // past the support: as wide as the last look, at least
+                widened.push((k, s / 2.0));
+            } else if v <= -1.0 || s >= NARROW_LOOK {
+                widened.push((k, (s / (-v).max(f64::MIN_POSITIVE).sqrt()).clamp(2.0, s)));
+            } else {
+                next.push((k, 2.0 * s));
+            }
+        }
+        look = next;
+    }
+    if widened.is_empty() {
+        return q;
+    }
+    let mut variances = eigen.eigenvalues.clone();
+    for (k, r) in widened {
+        variances[k] *= r * r;
+    }
+    let cov =
+        &eigen.eigenvectors * DMatrix::from_diagonal(&variances) * eigen.eigenvectors.transpose();
+    match ((&cov + cov.transpose()) * 0.5).cholesky() {
+        Some(c) => Elliptical::from_factor(q.mean.clone(), c.l()),
+        None => q,
+    }
+}
+
 /// The Laplace approximation of `post` at its mode, reached by Newton's
 /// method from the MAP's surrogate; the surrogate's own where the
 /// differences cannot be taken.
@@ -251,6 +334,48 @@ pub struct IntervalRow {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A centred Gaussian with the given sds, as a log-density.
+    struct Gaussian(Vec<f64>);
+
+    impl LogDensity for Gaussian {
+        fn dim(&self) -> usize {
+            self.0.len()
+        }
+
+        fn log_density(&self, x: &[f64]) -> f64 {
+            -0.5 * x.iter().zip(&self.0).map(|(v, s)| (v / s).powi(2)).sum::<f64>()
+        }
+    }
+
+    fn sds(q: &Elliptical) -> Vec<f64> {
+        let c = q.covariance();
+        (0..q.dim()).map(|i| c[(i, i)].sqrt()).collect()
+    }
+
+    /// Against a Gaussian whose sds are known: an approximation 50× too
+    /// narrow along one axis and 300× along another (past the farthest
+    /// look, 64 sd) takes the posterior's sd 50 in the first, exactly
+    /// (a Gaussian's second difference over ±64 sd is −(64/50)², whose
+    /// root gives 50 back), and 64 in the second (the most it may take);
+    /// an axis 1.5× too narrow, and one that fits, keep their widths; an
+    /// approximation that fits everywhere comes back bit for bit.
+    #[test]
+    fn an_axis_too_narrow_takes_the_posterior_s_spread() {
+        let target = Gaussian(vec![1.0, 50.0, 1.5, 300.0]);
+        let q = Elliptical::from_factor(DVector::zeros(4), DMatrix::identity(4, 4));
+        let widened = sds(&too_narrow_widened(&target, q));
+        let want = [1.0, 50.0, 1.0, 64.0];
+        for (got, want) in widened.iter().zip(want) {
+            assert!((got - want).abs() < 1e-9 * want, "{widened:?}");
+        }
+        let fits = Elliptical::from_factor(
+            DVector::zeros(4),
+            DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 50.0, 1.5, 300.0])),
+        );
+        let back = too_narrow_widened(&target, fits.clone());
+        assert_eq!(back.factor(), fits.factor());
+    }
     use crate::laws::LawKind;
     use crate::noise::{NoiseKind, NoiseOptions};
     use crate::posterior::{Coordinates, ParameterModel};
