@@ -328,11 +328,12 @@ pub fn sample(
     let probe_seconds = probed.stepping_seconds + smc_seconds;
     let misfit = probed.far();
     control.confirm = misfit.is_some();
-    let probe::Probed { mut sampler, map, higher, spread, .. } = probed;
+    let probe::Probed { mut sampler, map, higher, spread, widened, .. } = probed;
     let mut sampled = sampling::run(posterior, &mut sampler, &control, s.burn_in, observers)?;
     sampled.seconds += probe_seconds;
     sampled.diagnostics.warnings.extend(probe::warnings(
         &higher,
+        &widened,
         misfit,
         sampler.settings.moves != s.moves,
     ));

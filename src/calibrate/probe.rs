@@ -24,6 +24,10 @@ pub(super) struct Probed<'t> {
     pub higher: Option<HigherGround>,
     /// ln p/q's spread over the initial walkers (nats).
     pub spread: f64,
+    /// How many times wider the walkers' start is than the Laplace
+    /// approximation at the mode along each axis found too narrow
+    /// ([`laplace::too_narrow_widened`]), largest first.
+    pub widened: Vec<f64>,
     /// The wall time of the sampler's steps so far: the chains' first
     /// steps, which count as sampling, not as the start.
     pub stepping_seconds: f64,
@@ -67,7 +71,7 @@ pub(super) fn walkers_start<'t>(
     let count = settings.walkers * settings.ensembles;
     let mut near = near.filter(|&w| w < settings.walkers);
     let laplace = laplace.unwrap_or_else(|| laplace::at_mode(posterior, map));
-    let mut laplace = laplace::too_narrow_widened(posterior, laplace);
+    let (mut laplace, mut widened) = laplace::too_narrow_widened(posterior, laplace);
     // the log-density at the mode the walkers start about
     let mut top = posterior.log_density(laplace.mean.as_slice());
     let mut higher: Option<HigherGround> = None;
@@ -97,11 +101,11 @@ pub(super) fn walkers_start<'t>(
         {
             sampler.settings.moves = moves;
         }
-        let done = |sampler, laplace, new_map, higher, stepping_seconds| {
-            Ok(Probed { sampler, laplace, map: new_map, higher, spread, stepping_seconds })
+        let done = |sampler, laplace, new_map, higher, widened, stepping_seconds| {
+            Ok(Probed { sampler, laplace, map: new_map, higher, spread, widened, stepping_seconds })
         };
         if higher.as_ref().is_some_and(|h| h.searches == MAX_SEARCHES) {
-            return done(sampler, laplace, new_map, higher, 0.0);
+            return done(sampler, laplace, new_map, higher, widened, 0.0);
         }
         // the probe's steps are the chains' first: their time is sampling's
         let clock = std::time::Instant::now();
@@ -118,7 +122,7 @@ pub(super) fn walkers_start<'t>(
             continue;
         }
         match higher_ground(posterior, &sampler, top) {
-            Some((found, better, better_top)) => {
+            Some((found, (better, better_widened), better_top)) => {
                 let gain = higher.as_ref().map_or(0.0, |h| h.gain) + better_top - top;
                 let searches = higher.as_ref().map_or(0, |h| h.searches) + 1;
                 higher = Some(HigherGround {
@@ -127,9 +131,9 @@ pub(super) fn walkers_start<'t>(
                     first_map: higher.map_or(map.log_density, |h| h.first_map),
                 });
                 new_map = Some(found);
-                (laplace, top) = (better, better_top);
+                (laplace, widened, top) = (better, better_widened, better_top);
             }
-            None => return done(sampler, laplace, new_map, higher, stepping),
+            None => return done(sampler, laplace, new_map, higher, widened, stepping),
         }
     }
 }
@@ -160,10 +164,17 @@ const NEAR_ACCEPTANCE: f64 = 0.45;
 /// What the start's judgement tells the user.
 pub(super) fn warnings(
     higher: &Option<HigherGround>,
+    widened: &[f64],
     misfit: Option<f64>,
     moves_changed: bool,
 ) -> Vec<String> {
     let mut out: Vec<String> = higher.iter().map(HigherGround::message).collect();
+    if let Some(most) = widened.first() {
+        out.push(format!(
+            "the Laplace approximation at the mode was too narrow along {} of its axes (the log-density falls there as for a posterior up to {most:.0}× wider: the mode's Hessian of finite differences is not its curvature over the bulk), so the walkers started from it widened to the spread measured (docs/calibration.md, \"The start\", step 3)",
+            widened.len()
+        ));
+    }
     out.extend(misfit.map(|m| far_message(m, moves_changed)));
     out
 }
@@ -211,7 +222,7 @@ fn higher_ground(
     posterior: &Posterior,
     sampler: &Sampler<Posterior>,
     top: f64,
-) -> Option<(map::MapEstimate, Elliptical, f64)> {
+) -> Option<(map::MapEstimate, (Elliptical, Vec<f64>), f64)> {
     let d = posterior.dim();
     let chains = &sampler.chains;
     let (best, lp) = chains
@@ -224,7 +235,7 @@ fn higher_ground(
     }
     let map = map::refine(posterior, &chains.positions[best * d..(best + 1) * d])?;
     let laplace = laplace::too_narrow_widened(posterior, laplace::at_mode(posterior, &map));
-    let new_top = posterior.log_density(laplace.mean.as_slice());
+    let new_top = posterior.log_density(laplace.0.mean.as_slice());
     (new_top > top + HIGHER_GROUND).then_some((map, laplace, new_top))
 }
 

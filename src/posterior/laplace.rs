@@ -54,12 +54,13 @@ const NARROW_LOOK: f64 = 64.0;
 /// small, R̂ and ESS content (docs/performance.md, "A Laplace
 /// approximation too narrow"). Every other axis, and every `q` that fits,
 /// is kept bit for bit. Costs 2d log-densities, and two per widened axis
-/// and doubling.
-pub fn too_narrow_widened<T: LogDensity>(post: &T, q: Elliptical) -> Elliptical {
+/// and doubling. With it, how many times wider each widened axis became,
+/// largest first (none: `q` as it was).
+pub fn too_narrow_widened<T: LogDensity>(post: &T, q: Elliptical) -> (Elliptical, Vec<f64>) {
     let d = q.dim();
     let top = LogDensity::log_density(post, q.mean.as_slice());
     if !top.is_finite() {
-        return q;
+        return (q, Vec::new());
     }
     let eigen = nalgebra::SymmetricEigen::new(q.covariance());
     let axis = |k: usize| eigen.eigenvectors.column(k) * eigen.eigenvalues[k].max(0.0).sqrt();
@@ -98,17 +99,19 @@ pub fn too_narrow_widened<T: LogDensity>(post: &T, q: Elliptical) -> Elliptical 
         look = next;
     }
     if widened.is_empty() {
-        return q;
+        return (q, Vec::new());
     }
     let mut variances = eigen.eigenvalues.clone();
-    for (k, r) in widened {
+    for &(k, r) in &widened {
         variances[k] *= r * r;
     }
+    let mut factors: Vec<f64> = widened.iter().map(|&(_, r)| r).collect();
+    factors.sort_by(|a, b| b.total_cmp(a));
     let cov =
         &eigen.eigenvectors * DMatrix::from_diagonal(&variances) * eigen.eigenvectors.transpose();
     match ((&cov + cov.transpose()) * 0.5).cholesky() {
-        Some(c) => Elliptical::from_factor(q.mean.clone(), c.l()),
-        None => q,
+        Some(c) => (Elliptical::from_factor(q.mean.clone(), c.l()), factors),
+        None => (q, Vec::new()),
     }
 }
 
@@ -364,7 +367,9 @@ mod tests {
     fn an_axis_too_narrow_takes_the_posterior_s_spread() {
         let target = Gaussian(vec![1.0, 50.0, 1.5, 300.0]);
         let q = Elliptical::from_factor(DVector::zeros(4), DMatrix::identity(4, 4));
-        let widened = sds(&too_narrow_widened(&target, q));
+        let (q, factors) = too_narrow_widened(&target, q);
+        assert_eq!(factors.len(), 2, "{factors:?}");
+        let widened = sds(&q);
         let want = [1.0, 50.0, 1.0, 64.0];
         for (got, want) in widened.iter().zip(want) {
             assert!((got - want).abs() < 1e-9 * want, "{widened:?}");
@@ -373,7 +378,8 @@ mod tests {
             DVector::zeros(4),
             DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 50.0, 1.5, 300.0])),
         );
-        let back = too_narrow_widened(&target, fits.clone());
+        let (back, factors) = too_narrow_widened(&target, fits.clone());
+        assert!(factors.is_empty(), "{factors:?}");
         assert_eq!(back.factor(), fits.factor());
     }
     use crate::laws::LawKind;
