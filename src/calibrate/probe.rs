@@ -71,9 +71,9 @@ pub(super) fn walkers_start<'t>(
     let count = settings.walkers * settings.ensembles;
     let mut near = near.filter(|&w| w < settings.walkers);
     let laplace = laplace.unwrap_or_else(|| laplace::at_mode(posterior, map));
-    let (mut laplace, mut widened) = laplace::too_narrow_widened(posterior, laplace);
     // the log-density at the mode the walkers start about
     let mut top = posterior.log_density(laplace.mean.as_slice());
+    let (mut laplace, mut widened) = laplace::too_narrow_widened(posterior, laplace, top);
     let mut higher: Option<HigherGround> = None;
     let mut new_map = None;
     loop {
@@ -234,9 +234,10 @@ fn higher_ground(
         return None;
     }
     let map = map::refine(posterior, &chains.positions[best * d..(best + 1) * d])?;
-    let laplace = laplace::too_narrow_widened(posterior, laplace::at_mode(posterior, &map));
-    let new_top = posterior.log_density(laplace.0.mean.as_slice());
-    (new_top > top + HIGHER_GROUND).then_some((map, laplace, new_top))
+    let laplace = laplace::at_mode(posterior, &map);
+    let new_top = posterior.log_density(laplace.mean.as_slice());
+    (new_top > top + HIGHER_GROUND)
+        .then(|| (map, laplace::too_narrow_widened(posterior, laplace, new_top), new_top))
 }
 
 /// The spread (sd, nats) of ln p/q over the initial walkers above which

@@ -40,8 +40,9 @@ const NARROW_DROP: f64 = 0.25;
 const NARROW_LOOK: f64 = 64.0;
 
 /// `q` (a Laplace approximation of `post` at its mode, where the walkers
-/// start) with every principal axis along which the posterior is more
-/// than twice as wide as `q` widened to the posterior's own spread there.
+/// start; `top` the log-density at its mean) with every principal axis
+/// along which the posterior is more than twice as wide as `q` widened to
+/// the posterior's own spread there.
 /// A Gaussian r times wider than `q` has the log-density's second
 /// difference over ±s sd at −s²/r²; where it lies above −[`NARROW_DROP`]
 /// at s = 1, s doubles (at most to [`NARROW_LOOK`]) until the fall is a
@@ -56,26 +57,21 @@ const NARROW_LOOK: f64 = 64.0;
 /// is kept bit for bit. Costs 2d log-densities, and two per widened axis
 /// and doubling. With it, how many times wider each widened axis became,
 /// largest first (none: `q` as it was).
-pub fn too_narrow_widened<T: LogDensity>(post: &T, q: Elliptical) -> (Elliptical, Vec<f64>) {
-    let d = q.dim();
-    let top = LogDensity::log_density(post, q.mean.as_slice());
+pub fn too_narrow_widened<T: LogDensity>(
+    post: &T,
+    q: Elliptical,
+    top: f64,
+) -> (Elliptical, Vec<f64>) {
     if !top.is_finite() {
         return (q, Vec::new());
     }
-    let eigen = nalgebra::SymmetricEigen::new(q.covariance());
-    let axis = |k: usize| eigen.eigenvectors.column(k) * eigen.eigenvalues[k].max(0.0).sqrt();
+    let axes = Axes::of(&q);
     // the second difference of the log-density over ±s sd along each axis k
     let second = |look: &[(usize, f64)]| -> Vec<f64> {
-        let mut points = Vec::with_capacity(2 * look.len() * d);
-        for &(k, s) in look {
-            for sign in [1.0, -1.0] {
-                points.extend((&q.mean + axis(k) * (sign * s)).iter());
-            }
-        }
-        let f = crate::sampler::density::log_densities(post, &points);
+        let f = crate::sampler::density::log_densities(post, &axes.points(look));
         (0..look.len()).map(|i| f[2 * i] + f[2 * i + 1] - 2.0 * top).collect()
     };
-    let first: Vec<(usize, f64)> = (0..d).map(|k| (k, 1.0)).collect();
+    let first: Vec<(usize, f64)> = (0..q.dim()).map(|k| (k, 1.0)).collect();
     let mut look: Vec<(usize, f64)> = first
         .iter()
         .zip(second(&first))
@@ -101,17 +97,51 @@ pub fn too_narrow_widened<T: LogDensity>(post: &T, q: Elliptical) -> (Elliptical
     if widened.is_empty() {
         return (q, Vec::new());
     }
-    let mut variances = eigen.eigenvalues.clone();
+    let mut variances = axes.eigen.eigenvalues.clone();
     for &(k, r) in &widened {
         variances[k] *= r * r;
     }
     let mut factors: Vec<f64> = widened.iter().map(|&(_, r)| r).collect();
     factors.sort_by(|a, b| b.total_cmp(a));
-    let cov =
-        &eigen.eigenvectors * DMatrix::from_diagonal(&variances) * eigen.eigenvectors.transpose();
-    match ((&cov + cov.transpose()) * 0.5).cholesky() {
-        Some(c) => (Elliptical::from_factor(q.mean.clone(), c.l()), factors),
+    match axes.with_variances(&variances) {
+        Some(widened) => (widened, factors),
         None => (q, Vec::new()),
+    }
+}
+
+/// The principal axes of an approximation, where [`bulk_spread`] and
+/// [`too_narrow_widened`] measure the log-density's fall.
+struct Axes {
+    eigen: nalgebra::SymmetricEigen<f64, nalgebra::Dyn>,
+    mean: DVector<f64>,
+}
+
+impl Axes {
+    fn of(q: &Elliptical) -> Axes {
+        Axes { eigen: nalgebra::SymmetricEigen::new(q.covariance()), mean: q.mean.clone() }
+    }
+
+    /// For each (axis k, s): the points s sd either side of the mean along
+    /// k (+ then −), one after another.
+    fn points(&self, look: &[(usize, f64)]) -> Vec<f64> {
+        let mut points = Vec::with_capacity(2 * look.len() * self.mean.len());
+        for &(k, s) in look {
+            let axis =
+                self.eigen.eigenvectors.column(k) * self.eigen.eigenvalues[k].max(0.0).sqrt();
+            for sign in [1.0, -1.0] {
+                points.extend((&self.mean + &axis * (sign * s)).iter());
+            }
+        }
+        points
+    }
+
+    /// The Gaussian about the mean with these axes and `variances` along
+    /// them; `None` where it is not positive definite.
+    fn with_variances(&self, variances: &DVector<f64>) -> Option<Elliptical> {
+        let v = &self.eigen.eigenvectors;
+        let cov = v * DMatrix::from_diagonal(variances) * v.transpose();
+        let factor = ((&cov + cov.transpose()) * 0.5).cholesky()?.l();
+        Some(Elliptical::from_factor(self.mean.clone(), factor))
     }
 }
 
@@ -159,22 +189,15 @@ const BULK_SCALE: (f64, f64) = (0.5, 2.0);
 /// the drop is not a fall either side keeps its spread. `None` where the
 /// log-density at the mean is not finite.
 fn bulk_spread(post: &Posterior, q: &Elliptical) -> Option<(Elliptical, f64)> {
-    let d = q.dim();
-    let eigen = nalgebra::SymmetricEigen::new(q.covariance());
-    let mean = &q.mean;
-    let mut points: Vec<f64> = mean.iter().copied().collect();
-    for k in 0..d {
-        let axis = eigen.eigenvectors.column(k) * eigen.eigenvalues[k].max(0.0).sqrt();
-        for sign in [1.0, -1.0] {
-            points.extend((mean + &axis * sign).iter());
-        }
-    }
+    let axes = Axes::of(q);
+    let mut points: Vec<f64> = q.mean.iter().copied().collect();
+    points.extend(axes.points(&(0..q.dim()).map(|k| (k, 1.0)).collect::<Vec<_>>()));
     let f = crate::sampler::density::log_densities(post, &points);
     let top = f[0];
     if !top.is_finite() {
         return None;
     }
-    let mut variances = eigen.eigenvalues.clone();
+    let mut variances = axes.eigen.eigenvalues.clone();
     for (k, v) in variances.iter_mut().enumerate() {
         // a Gaussian's second difference over ±1 sd is −1
         let second = f[1 + 2 * k] + f[2 + 2 * k] - 2.0 * top;
@@ -183,10 +206,7 @@ fn bulk_spread(post: &Posterior, q: &Elliptical) -> Option<(Elliptical, f64)> {
             *v *= scale * scale;
         }
     }
-    let cov =
-        &eigen.eigenvectors * DMatrix::from_diagonal(&variances) * eigen.eigenvectors.transpose();
-    let factor = ((&cov + cov.transpose()) * 0.5).cholesky()?.l();
-    Some((Elliptical::from_factor(mean.clone(), factor), top))
+    Some((axes.with_variances(&variances)?, top))
 }
 
 /// The Laplace approximation of the adjusted posterior `post` (its
@@ -337,6 +357,9 @@ pub struct IntervalRow {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::laws::LawKind;
+    use crate::noise::{NoiseKind, NoiseOptions};
+    use crate::posterior::{Coordinates, ParameterModel};
 
     /// A centred Gaussian with the given sds, as a log-density.
     struct Gaussian(Vec<f64>);
@@ -367,7 +390,7 @@ mod tests {
     fn an_axis_too_narrow_takes_the_posterior_s_spread() {
         let target = Gaussian(vec![1.0, 50.0, 1.5, 300.0]);
         let q = Elliptical::from_factor(DVector::zeros(4), DMatrix::identity(4, 4));
-        let (q, factors) = too_narrow_widened(&target, q);
+        let (q, factors) = too_narrow_widened(&target, q, 0.0);
         assert_eq!(factors.len(), 2, "{factors:?}");
         let widened = sds(&q);
         let want = [1.0, 50.0, 1.0, 64.0];
@@ -378,13 +401,10 @@ mod tests {
             DVector::zeros(4),
             DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 50.0, 1.5, 300.0])),
         );
-        let (back, factors) = too_narrow_widened(&target, fits.clone());
+        let (back, factors) = too_narrow_widened(&target, fits.clone(), 0.0);
         assert!(factors.is_empty(), "{factors:?}");
         assert_eq!(back.factor(), fits.factor());
     }
-    use crate::laws::LawKind;
-    use crate::noise::{NoiseKind, NoiseOptions};
-    use crate::posterior::{Coordinates, ParameterModel};
 
     /// A Laplace approximation a third of whose mass lies past `bp-spencer`'s
     /// wall for c0 (u = ln(c0 + 1 kN s/m) ≤ ln 1 kN s/m: no dashpot) gives
