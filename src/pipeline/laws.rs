@@ -105,6 +105,7 @@ impl Pipeline<'_> {
                         let lppd = held.map_or(f64::NAN, |r| r.coverage.lppd);
                         let mut held_out = row(law, c, b, Kind::HeldOut, lppd, seconds, area);
                         held_out.held_out_rhat = held.map_or(f64::NAN, |r| r.max_rhat);
+                        held_out.held_out_unconverged = held.and_then(|r| r.unconverged.clone());
                         rows.push(held_out);
                     }
                     shown.extend(loo.bands);
@@ -178,5 +179,6 @@ fn row(
         seconds,
         evidence: None,
         held_out_rhat: f64::NAN,
+        held_out_unconverged: None,
     }
 }

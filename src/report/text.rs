@@ -396,13 +396,21 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
     out
 }
 
-/// Where held-out posteriors sampled afresh did not converge (their
-/// ensembles still disagreeing when the refit stopped): which, with their
-/// R̂, and what their rows are, in a sentence.
+/// Where held-out posteriors sampled afresh did not converge by the
+/// sampler's own rule when their refits stopped: which, with what each
+/// still waited for, and what their rows are, in a sentence.
 pub fn refits_unsettled(rows: &[LooRow]) -> Option<String> {
-    unsettled_runs(rows.iter().map(|r| (r.coverage.run.as_str(), r.max_rhat))).map(|runs| {
+    let unsettled: Vec<(&str, &str)> = rows
+        .iter()
+        .filter_map(|r| r.unconverged.as_deref().map(|u| (r.coverage.run.as_str(), u)))
+        .collect();
+    (!unsettled.is_empty()).then(|| {
+        let runs: Vec<&str> = unsettled.iter().map(|(run, _)| *run).collect();
+        let why: Vec<String> = unsettled.iter().map(|(run, u)| format!("{run}: {u}")).collect();
         format!(
-            "the held-out posteriors without {runs} did not converge: their ensembles still disagreed when the refit stopped (separate basins, or too few steps: `--loo-steps`; `--sampler smc` weighs basins by their mass), so those rows are of draws, not of a posterior"
+            "the held-out posteriors without {} did not converge when their refits stopped ({}): separate basins, or too few steps (`--loo-steps`; `--sampler smc` weighs basins by their mass), so those rows are of draws, not of a posterior",
+            runs.join(", "),
+            why.join("; ")
         )
     })
 }
@@ -617,29 +625,37 @@ mod tests {
         }
     }
 
-    /// A held-out posterior sampled afresh that stopped at R̂ 1.60 is
-    /// named with its R̂; one at 1.005, or one reached without sampling
-    /// (NaN), is not.
+    /// A held-out posterior sampled afresh that stopped at R̂ 1.60, or at
+    /// R̂ 1.008 with an ESS short of its target, is named with what it
+    /// waited for; one that converged, or one reached without sampling,
+    /// is not.
     #[test]
     fn unconverged_refits_are_named() {
-        let loo = |run: &str, by: HeldOutBy, max_rhat: f64| LooRow {
+        let loo = |run: &str, by: HeldOutBy, max_rhat: f64, unconverged: Option<&str>| LooRow {
             coverage: CoverageRow { run: run.into(), samples: 100, ..CoverageRow::default() },
             pareto_k: 2.0,
             pareto_k_laplace: f64::NAN,
             by,
             max_rhat,
+            unconverged: unconverged.map(String::from),
             failure: None,
             tempered_instead: None,
         };
         let rows = [
-            loo("a", HeldOutBy::Sampling, 1.005),
-            loo("b", HeldOutBy::LaplaceImportance, f64::NAN),
+            loo("a", HeldOutBy::Sampling, 1.005, None),
+            loo("b", HeldOutBy::LaplaceImportance, f64::NAN, None),
         ];
         assert_eq!(refits_unsettled(&rows), None);
-        let rows = [rows[0].clone(), rows[1].clone(), loo("c", HeldOutBy::Sampling, 1.6)];
+        let rows = [
+            rows[0].clone(),
+            rows[1].clone(),
+            loo("c", HeldOutBy::Sampling, 1.6, Some("R̂ of G is 1.6000 (target < 1.01)")),
+            // every R̂ below 1.01, the ESS short when the refit stopped
+            loo("d", HeldOutBy::Sampling, 1.008, Some("ESS of m1 is 363 (target ≥ 400)")),
+        ];
         let said = refits_unsettled(&rows).unwrap();
         assert!(
-            said.starts_with("the held-out posteriors without c (R̂ 1.60) did not converge"),
+            said.starts_with("the held-out posteriors without c, d did not converge when their refits stopped (c: R̂ of G is 1.6000 (target < 1.01); d: ESS of m1 is 363 (target ≥ 400))"),
             "{said}"
         );
         assert!(leave_one_out(&rows, 1.0).contains("\nwarning: the held-out posteriors without c"));

@@ -92,6 +92,10 @@ fn write_loo(path: &Path, rows: &[LooRow], id: &str, described: &str) -> Result<
         .f64("pareto_k_laplace", rows.iter().map(|r| r.pareto_k_laplace).collect())
         .str("held_out_by", rows.iter().map(|r| r.by.label().to_string()).collect())
         .f64("max_r_hat", rows.iter().map(|r| r.max_rhat).collect())
+        .str(
+            "unconverged",
+            rows.iter().map(|r| r.unconverged.clone().unwrap_or_default()).collect(),
+        )
         .str("failure", rows.iter().map(|r| r.failure.clone().unwrap_or_default()).collect())
         .str(
             "tempered_instead",
@@ -113,6 +117,10 @@ fn read_loo(path: &Path) -> Result<Vec<LooRow>> {
     let failure = str_column(&df, "failure", path).unwrap_or_else(|_| vec![String::new(); k.len()]);
     let tempered =
         str_column(&df, "tempered_instead", path).unwrap_or_else(|_| vec![String::new(); k.len()]);
+    // files written before it judged a refit by its R̂ alone
+    let unconverged = str_column(&df, "unconverged", path).unwrap_or_else(|_| {
+        rhat.iter().map(|&r| crate::validate::waited_for_rhat(r).unwrap_or_default()).collect()
+    });
     coverage
         .into_iter()
         .enumerate()
@@ -126,6 +134,7 @@ fn read_loo(path: &Path) -> Result<Vec<LooRow>> {
                 pareto_k_laplace: k_laplace[i],
                 by,
                 max_rhat: rhat[i],
+                unconverged: Some(unconverged[i].clone()).filter(|u| !u.is_empty()),
                 failure: Some(failure[i].clone()).filter(|f| !f.is_empty()),
                 tempered_instead: Some(tempered[i].clone()).filter(|f| !f.is_empty()),
             })
@@ -174,7 +183,8 @@ mod tests {
 
     /// A held-out run that failed reads back as written: its route, its
     /// reason and its missing numbers; a run held out beside it keeps its
-    /// own (an empty `failure`).
+    /// own (an empty `failure`); a refit that stopped unconverged keeps
+    /// what it waited for.
     #[test]
     fn a_failed_held_out_run_reads_back_with_its_reason() {
         let dir = std::env::temp_dir().join(format!("mrbp-loo-failed-{}", std::process::id()));
@@ -184,9 +194,15 @@ mod tests {
         (ok.by, ok.failure, ok.pareto_k) = (HeldOutBy::Reweighting, None, 0.4);
         (ok.coverage.samples, ok.coverage.inside_p95, ok.coverage.lppd) = (99, 0.96, -120.5);
         let failed = LooRow::failed("t2", 1.0, "the MAP search failed".into());
-        write_loo(&path, &[ok.clone(), failed.clone()], "cal-id", "steps=1").unwrap();
+        // a refit stopped short of its ESS with every R̂ below 1.01
+        let mut short = ok.clone();
+        (short.coverage.run, short.by, short.max_rhat) = ("t3".into(), HeldOutBy::Sampling, 1.008);
+        short.unconverged = Some("ESS of m1 is 363 (target ≥ 400)".into());
+        write_loo(&path, &[ok.clone(), failed.clone(), short], "cal-id", "steps=1").unwrap();
         let back = read_loo(&path).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!((back[0].unconverged.as_deref(), back[1].unconverged.as_deref()), (None, None));
+        assert_eq!(back[2].unconverged.as_deref(), Some("ESS of m1 is 363 (target ≥ 400)"));
         assert_eq!(back[0].by, HeldOutBy::Reweighting);
         assert_eq!((back[0].failure.as_deref(), back[0].coverage.lppd), (None, -120.5));
         assert_eq!(back[1].by, HeldOutBy::Failed);

@@ -41,6 +41,10 @@ pub fn table(rows: &[LawRow], ids: &[(String, String)]) -> Table {
             rows.iter().map(|r| r.evidence.is_some_and(|e| e.pseudo)).collect(),
         )
         .f64("held_out_rhat", rows.iter().map(|r| r.held_out_rhat).collect())
+        .str(
+            "held_out_unconverged",
+            rows.iter().map(|r| r.held_out_unconverged.clone().unwrap_or_default()).collect(),
+        )
         .meta(CALIBRATIONS, &named.join(","))
 }
 
@@ -95,6 +99,16 @@ pub fn read(path: &Path) -> Result<Vec<LawRow>> {
     // the held-out refits' R̂ (absent in files written before 2026-11-30)
     let held_out_rhat =
         if has("held_out_rhat") { col("held_out_rhat")? } else { vec![f64::NAN; law.len()] };
+    // what an unconverged refit waited for (absent before 2026-12-04,
+    // when a refit was judged by its R̂ alone)
+    let unconverged: Vec<String> = if has("held_out_unconverged") {
+        str_column(&df, "held_out_unconverged", path)?
+    } else {
+        held_out_rhat
+            .iter()
+            .map(|&r| crate::validate::waited_for_rhat(r).unwrap_or_default())
+            .collect()
+    };
     (0..law.len())
         .map(|i| {
             let bad = |what: &str| Error::input(path, format!("row {}: {what}", i + 1));
@@ -121,6 +135,7 @@ pub fn read(path: &Path) -> Result<Vec<LawRow>> {
                 seconds: seconds[i],
                 evidence: evidence[i],
                 held_out_rhat: held_out_rhat[i],
+                held_out_unconverged: Some(unconverged[i].clone()).filter(|u| !u.is_empty()),
             })
         })
         .collect()

@@ -67,6 +67,9 @@ pub struct LawRow {
     /// of that sampling (NaN in sample, and where the held-out posterior
     /// was reached by reweighting or Laplace importance).
     pub held_out_rhat: f64,
+    /// Such a row whose refit stopped before the sampler's rule held: what
+    /// it still waited for ([`super::LooRow::unconverged`]).
+    pub held_out_unconverged: Option<String>,
 }
 
 /// The error measures of `bands` (one record, its median path and bands in
@@ -167,10 +170,10 @@ pub struct Standing {
     /// numbers here, so that the laws are compared on the same tests.
     pub set_aside: Vec<String>,
     /// The tests whose held-out posterior, sampled afresh, did not
-    /// converge (R̂ ≥ 1.01 when the refit stopped), with that R̂: this
-    /// law's held-out numbers there are of draws from ensembles that did
-    /// not agree, not of a posterior.
-    pub unsettled: Vec<(String, f64)>,
+    /// converge when the refit stopped, with what it still waited for (an
+    /// R̂, a drift, an ESS, the chains' length): this law's held-out
+    /// numbers there are of draws, not of a posterior.
+    pub unsettled: Vec<(String, String)>,
 }
 
 /// A law's log evidence at one current.
@@ -275,8 +278,7 @@ pub fn standings(rows: &[LawRow]) -> Result<Vec<Standing>> {
                     set_aside: set_aside.clone(),
                     unsettled: h
                         .iter()
-                        .filter(|r| super::unsettled(r.held_out_rhat))
-                        .map(|r| (r.run.clone(), r.held_out_rhat))
+                        .filter_map(|r| r.held_out_unconverged.clone().map(|u| (r.run.clone(), u)))
                         .collect(),
                 }
             })
@@ -334,12 +336,14 @@ pub fn verdict(standings: &[Standing]) -> Vec<String> {
                 ),
             };
             let line = at.iter().filter(|s| !s.unsettled.is_empty()).fold(line, |line, s| {
-                let tests: Vec<String> =
-                    s.unsettled.iter().map(|(run, rhat)| format!("{run} (R̂ {rhat:.2})")).collect();
+                let tests: Vec<&str> = s.unsettled.iter().map(|(run, _)| run.as_str()).collect();
+                let why: Vec<String> =
+                    s.unsettled.iter().map(|(run, u)| format!("{run}: {u}")).collect();
                 format!(
-                    "{line}. The {} law's held-out posteriors without {} did not converge: its ensembles did not agree when the refit stopped (separate basins, or too few steps: `--loo-steps`), so its held-out numbers there are of draws, not of a posterior, and its rank here is not to be trusted",
+                    "{line}. The {} law's held-out posteriors without {} did not converge when their refits stopped ({}: separate basins, or too few steps, `--loo-steps`), so its held-out numbers there are of draws, not of a posterior, and its rank here is not to be trusted",
                     s.law.name(),
-                    tests.join(", ")
+                    tests.join(", "),
+                    why.join("; ")
                 )
             });
             match evidence_sentence(&at) {
@@ -459,6 +463,7 @@ mod tests {
             lppd,
             evidence: None,
             held_out_rhat: f64::NAN,
+            held_out_unconverged: None,
             seconds: 1.0,
         }
     }
@@ -513,9 +518,9 @@ mod tests {
     }
 
     /// A held-out refit that stopped unconverged (R̂ 1.60 for Spencer
-    /// without t2) is named in the verdict with its R̂, the law's rank
-    /// called untrustworthy; a converged refit (R̂ 1.005) or a row reached
-    /// without sampling (NaN) is not.
+    /// without t2) is named in the verdict with what it waited for, the
+    /// law's rank called untrustworthy; a converged refit (R̂ 1.005) or a
+    /// row reached without sampling (NaN) is not.
     #[test]
     fn the_verdict_names_a_held_out_posterior_that_did_not_converge() {
         let mut rows = vec![
@@ -528,13 +533,15 @@ mod tests {
         let v = verdict(&standings(&rows).unwrap());
         assert!(!v[0].contains("did not converge"), "{v:?}");
         rows[3].held_out_rhat = 1.6;
+        let waited = "R̂ of fz is 1.6000 (target < 1.01)";
+        rows[3].held_out_unconverged = Some(waited.into());
         let s = standings(&rows).unwrap();
-        assert_eq!(s[0].unsettled, [("t2".to_string(), 1.6)]);
+        assert_eq!(s[0].unsettled, [("t2".to_string(), waited.to_string())]);
         assert!(s[1].unsettled.is_empty());
         let v = verdict(&s);
         assert!(
             v[0].contains(
-                "The spencer law's held-out posteriors without t2 (R̂ 1.60) did not converge"
+                "The spencer law's held-out posteriors without t2 did not converge when their refits stopped (t2: R̂ of fz is 1.6000 (target < 1.01): separate basins"
             ),
             "{v:?}"
         );

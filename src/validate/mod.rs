@@ -153,6 +153,11 @@ pub struct LooRow {
     pub by: HeldOutBy,
     /// Largest R̂ of the held-out sampling (NaN if not needed).
     pub max_rhat: f64,
+    /// What the held-out posterior sampled afresh still waited for when
+    /// its refit stopped (the stopping rule's first unmet condition: an
+    /// R̂, a drift, an ESS or the chains' length, as the calibration's
+    /// progress says it); `None` where it converged or was not sampled.
+    pub unconverged: Option<String>,
     /// Why the held-out posterior could not be reached ([`HeldOutBy::Failed`]).
     pub failure: Option<String>,
     /// Why the held-out posterior takes the tempered likelihood where the
@@ -168,6 +173,13 @@ pub struct LooRow {
 /// sampling, is not).
 pub fn unsettled(max_rhat: f64) -> bool {
     max_rhat >= 1.01
+}
+
+/// What a held-out refit judged by its largest R̂ alone waited for (files
+/// written before [`LooRow::unconverged`] was kept): its R̂ where
+/// [`unsettled`], else nothing.
+pub fn waited_for_rhat(max_rhat: f64) -> Option<String> {
+    unsettled(max_rhat).then(|| format!("R̂ is {max_rhat:.4} (target < 1.01)"))
 }
 
 impl LooRow {
@@ -204,6 +216,7 @@ impl LooRow {
             pareto_k_laplace: f64::NAN,
             by: HeldOutBy::Failed,
             max_rhat: f64::NAN,
+            unconverged: None,
             failure: Some(why),
             tempered_instead: None,
         }
@@ -381,9 +394,10 @@ impl Pending<'_> {
         loo: &LooSettings,
         observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>,
     ) -> Result<HeldOut> {
-        let (prediction, max_rhat) =
+        let (prediction, max_rhat, unconverged) =
             sample_afresh(&self.target, &self.posterior, &self.laplace, settings, loo, observe)?;
         (self.row.by, self.row.max_rhat) = (HeldOutBy::Sampling, max_rhat);
+        self.row.unconverged = unconverged;
         self.row.coverage = prediction.coverage.clone();
         Ok(HeldOut { prediction: Some(prediction), row: self.row })
     }
@@ -431,6 +445,7 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         pareto_k_laplace: f64::NAN,
         by: HeldOutBy::Reweighting,
         max_rhat: f64::NAN,
+        unconverged: None,
         failure: None,
         tempered_instead: None,
     };
@@ -658,7 +673,11 @@ fn weighted_moments(points: &[Vec<f64>], weights: &[f64]) -> Option<Elliptical> 
 /// The held-out posterior sampled afresh, from walkers around its mode (by
 /// sequential Monte Carlo from its Laplace approximation first, where the
 /// calibration was sampled so), on a random stream of its own: the
-/// prediction and the largest R̂.
+/// prediction, the largest R̂, and what the stopping rule still waited for
+/// where the refit stopped at `loo.steps` before it held (a refit stopped
+/// with every R̂ below 1.01 and an ESS short of its target is not a
+/// converged one: Bouc-Wen's virtual records held out by `bp-viscous`,
+/// ESS 363 of 400 at step 600).
 fn sample_afresh(
     target: &Target,
     posterior: &Posterior,
@@ -666,7 +685,7 @@ fn sample_afresh(
     settings: &CalibrationSettings,
     loo: &LooSettings,
     observe: &mut dyn FnMut(&str) -> Vec<Box<dyn Observer>>,
-) -> Result<(RunPrediction, f64)> {
+) -> Result<(RunPrediction, f64, Option<String>)> {
     let s = &settings.sampler;
     let seed = s.seed ^ (0x100 + target.j as u64);
     let mut observers = observe(target.run.id());
@@ -705,7 +724,13 @@ fn sample_afresh(
     let draws = held.sample.draws(&positions, target.run.id(), target.run.spec.current_a);
     let prediction =
         predict_run(target.run, &target.data, target.j, &draws, &target.predict, false, &|| {})?;
-    Ok((prediction, held.diagnostics.max_rhat()))
+    let unmet = crate::sampler::stopping::unmet(
+        &held.diagnostics,
+        s.min_ess,
+        crate::sampler::diagnostics::MIN_TAU_MULTIPLE,
+        &posterior.layout.names,
+    );
+    Ok((prediction, held.diagnostics.max_rhat(), unmet.map(|w| w.to_string())))
 }
 
 /// The weighted mean of the full posterior's draws at `positions`, in the
