@@ -779,9 +779,14 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     } else {
         " + a force the law lacks ([extra_force])"
     };
+    // the law the records were made with ([damper], else the B-P fluid)
+    let law = match &settings.damper {
+        Some(d) if !d.law.is_bodner_partom() => format!("the {} law", d.law.name()),
+        _ => "B-P model".to_string(),
+    };
     let header = format!(
         "# Virtual test campaign made by `mrbp synth` (see synth.toml beside it).\n\
-         # Synthetic data: B-P model{extra} + sensor noise, not measurements.\n"
+         # Synthetic data: {law}{extra} + sensor noise, not measurements.\n"
     );
     settings.write(dir)?;
     manifest.write(&dir.join("campaign.toml"), &header)?;

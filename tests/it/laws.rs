@@ -62,6 +62,9 @@ fn each_law_recovers_its_own_truth_and_its_band_follows_its_equations() {
         let r_hat = f64_column(&summary, "r_hat", &path).unwrap();
         let truth = truth(&manifest);
         assert_eq!(truth.len(), law.law().parameters().len(), "{name}");
+        // the manifest's header names the law the records were made with
+        let header = std::fs::read_to_string(&manifest).unwrap();
+        assert!(header.contains(&format!("# Synthetic data: the {name} law + ")), "{header}");
         for (parameter, value) in truth {
             let i = names.iter().position(|n| *n == parameter).unwrap();
             let z = (mean[i] - value) / sd[i];
