@@ -15,5 +15,5 @@ pub use campaign::{
 };
 pub use run_data::{RecordPart, RunData};
 pub use shear::{Geometry, Inelastic, Shear};
-pub use smooth::{local_polynomial, noise_variance, smoothed_strain};
+pub use smooth::{local_polynomial, noise_variance, smoothed_strain, MIN_SMOOTH_SAMPLES};
 pub use table::{Columns, Limits, Record};

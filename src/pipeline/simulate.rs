@@ -10,7 +10,7 @@ use crate::calibrate::{command_line, Calibration};
 use crate::data::table::ColumnMap;
 use crate::data::{
     check_coil_current, loading_branches, same_current, Columns, Limits, Record, RecordPart, Run,
-    RunData, RunSpec, Shear, REVERSAL_SHARE,
+    RunData, RunSpec, Shear, MIN_SMOOTH_SAMPLES, REVERSAL_SHARE,
 };
 use crate::error::{Error, Result};
 use crate::predict::bands;
@@ -153,13 +153,29 @@ impl Pipeline<'_> {
             self.prepare(out, "--out", &[], &[], true)?;
         }
         let clock = Instant::now();
+        // how far the excitation goes beyond what the records showed the law
+        let records = records_reach(cal);
+        let smooth_ms = cal.settings.likelihood.smooth_strain_ms;
+        let input_interval = longest_interval(&run.shear.time);
+        let smooth_ms = match records.map(|r| records_smoothing_s(smooth_ms, r.interval)) {
+            // the smoother's least samples would span more of this
+            // excitation than the records' smoothing did, and bend its own
+            // turns (a 1 Hz stroke sampled at 20 Hz lost 3.5 % of its
+            // amplitude): the excitation is taken as it is
+            Some(span) if MIN_SMOOTH_SAMPLES as f64 * input_interval > 1.01 * span => {
+                self.note(&format!(
+                    "{} is sampled every {:.3} ms: the strain smoothing of the records ({:.3} ms either side) holds fewer than {MIN_SMOOTH_SAMPLES} of its samples, so the excitation drives the law as it is, unsmoothed (and the predictive band carries no displacement noise)",
+                    input.display(),
+                    1e3 * input_interval,
+                    span * 1e3
+                ));
+                0.0
+            }
+            _ => smooth_ms,
+        };
         // the excitation is the damper's own displacement: a stand's
         // channel lag (`displacement_lag_ms`) does not apply
-        let data = RunData::from_run(
-            &run,
-            RecordPart::WholeRecord,
-            cal.settings.likelihood.smooth_strain_ms,
-        );
+        let data = RunData::from_run(&run, RecordPart::WholeRecord, smooth_ms);
         let mut draws: Vec<_> = match (&refit, &layer) {
             // new tests at the current asked for, from the layer fitted again
             (Some((fitted, _)), _) => {
@@ -195,8 +211,6 @@ impl Pipeline<'_> {
                 }
             }
         }
-        // how far the excitation goes beyond what the records showed the law
-        let records = records_reach(cal);
         let own = Reach::of(&data);
         let beyond = records.map_or_else(Vec::new, |r| own.beyond(&r));
         if !beyond.is_empty() {
@@ -207,7 +221,24 @@ impl Pipeline<'_> {
                 said.join("; ")
             ));
         }
-        let settings = cal.predict_settings(options.replicates, options.seed);
+        let mut settings = cal.predict_settings(options.replicates, options.seed);
+        // an excitation sampled more coarsely than the records: sub-steps
+        // as short as the calibration's (its step rule checked no longer)
+        let finer = records.and_then(|r| sub_step_factor(own.interval, r.interval).map(|f| (r, f)));
+        if let Some((records, finer)) = finer {
+            let integrator = &mut settings.integrator;
+            self.note(&format!(
+                "{} is sampled every {:.3} ms, {:.1}× the records' {:.3} ms: the integrator takes {} sub-steps per sample instead of the calibration's {}, so that no sub-step is longer than those its step rule checked",
+                input.display(),
+                1e3 * own.interval,
+                own.interval / records.interval,
+                1e3 * records.interval,
+                integrator.substeps * finer,
+                integrator.substeps
+            ));
+            integrator.substeps *= finer;
+            integrator.max_substeps = integrator.max_substeps.saturating_mul(finer);
+        }
         let bar = self.bar(draws.len() as u64);
         let b = bands(&data, 0, &draws, &settings, &|| bar.inc(1))?;
         bar.finish_and_clear();
@@ -232,6 +263,7 @@ impl Pipeline<'_> {
             records_peak_velocity_m_s: records.map_or(f64::NAN, |r| r.velocity),
             records_stroke_m: records.map_or(f64::NAN, |r| r.stroke),
             beyond_records: beyond.iter().map(|(name, _)| name.to_string()).collect(),
+            substeps: settings.integrator.substeps,
         };
         if b.failed > 0 {
             self.note(&format!(
@@ -473,6 +505,8 @@ const BEYOND_RECORDS: f64 = 1.25;
 struct Reach {
     velocity: f64,
     stroke: f64,
+    /// The longest sample interval (s).
+    interval: f64,
 }
 
 impl Reach {
@@ -484,12 +518,16 @@ impl Reach {
             .fold(0.0, f64::max);
         let (lo, hi) =
             x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
-        Reach { velocity, stroke: 0.5 * (hi - lo) }
+        Reach { velocity, stroke: 0.5 * (hi - lo), interval: longest_interval(&data.time) }
     }
 
     /// The larger of two reaches, quantity by quantity.
     fn max(self, other: Reach) -> Reach {
-        Reach { velocity: self.velocity.max(other.velocity), stroke: self.stroke.max(other.stroke) }
+        Reach {
+            velocity: self.velocity.max(other.velocity),
+            stroke: self.stroke.max(other.stroke),
+            interval: self.interval.max(other.interval),
+        }
     }
 
     /// What of this reach lies beyond `records`' by more than
@@ -525,6 +563,30 @@ impl Reach {
 
 /// The reach of the records `cal` was calibrated on, quantity by quantity
 /// the largest; `None` where they cannot be read (the manifest moved).
+/// How many times the calibration's sub-steps an excitation whose longest
+/// sample interval is `own` needs so that none is longer than on records
+/// whose longest is `records` (s): `None` where it needs no more (a
+/// hundredth's slack, for the clocks' rounding).
+fn sub_step_factor(own: f64, records: f64) -> Option<u32> {
+    let ratio = own / records;
+    (ratio.is_finite() && ratio > 1.01).then(|| (ratio - 0.01).ceil().min(u32::MAX as f64) as u32)
+}
+
+/// The longest interval between samples at `time` (s).
+fn longest_interval(time: &[f64]) -> f64 {
+    time.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max)
+}
+
+/// The half-width (s) over which the strain of records sampled every
+/// `interval` s was smoothed with `smooth_ms` ([`crate::data::smoothed_strain`]:
+/// at least [`MIN_SMOOTH_SAMPLES`] samples either side; 0 unsmoothed).
+fn records_smoothing_s(smooth_ms: f64, interval: f64) -> f64 {
+    match smooth_ms > 0.0 {
+        true => (1e-3 * smooth_ms).max(MIN_SMOOTH_SAMPLES as f64 * interval),
+        false => 0.0,
+    }
+}
+
 fn records_reach(cal: &Calibration) -> Option<Reach> {
     let campaign = cal.used_runs(&cal.full_campaign().ok()?);
     let smooth = cal.settings.likelihood.smooth_strain_ms;

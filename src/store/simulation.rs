@@ -80,6 +80,13 @@ pub struct SimulationRecord {
     /// quarter: `velocity`, `stroke`; the band extrapolates the law there.
     #[serde(default)]
     pub beyond_records: Vec<String>,
+    /// Sub-steps of the integrator per sample of the excitation: the
+    /// calibration's, times how many of the records' longest sample
+    /// interval the excitation's longest spans (rounded up), so that no
+    /// sub-step is longer than those the calibration's step rule checked
+    /// (0 in files written before 2026-12-04).
+    #[serde(default)]
+    pub substeps: u32,
 }
 
 fn nan() -> f64 {

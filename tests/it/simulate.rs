@@ -193,6 +193,45 @@ fn median_at_one_draw_is_the_law_solution() {
     assert!(said(&o).contains("goes beyond the calibration's records: its peak velocity"));
     let r = simulation::read(&out).unwrap().record;
     assert_eq!(r.beyond_records, ["velocity"], "{r:?}");
+
+    // sampled at 100 Hz, four times as coarsely as the 400 Hz records: the
+    // smoother's least five samples either side would span 50 ms where the
+    // records' smoothing spanned 12.5 ms, so the excitation drives the law
+    // unsmoothed, and the integrator takes four times the calibration's
+    // sub-steps; the median still follows the 1 µs reference along the
+    // same samples to 1 % of the peak
+    let coarse = t.path().join("coarse.csv");
+    sine(&coarse, 3.0, 100.0, None);
+    let out = t.path().join("sim-coarse");
+    let o = ok(&[
+        "simulate",
+        cal_dir.to_str().unwrap(),
+        "--input",
+        coarse.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--draws",
+        "1",
+        "--replicates",
+        "1",
+    ]);
+    assert!(said(&o).contains("drives the law as it is, unsmoothed"), "{}", said(&o));
+    let s = simulation::read(&out).unwrap();
+    assert_eq!(s.record.substeps, 4 * cal.record.substeps, "{:?}", s.record);
+    assert!(said(&o).contains(&format!("the integrator takes {} sub-steps", s.record.substeps)));
+    for (g, x) in s.gamma_model.iter().zip(&s.displacement) {
+        assert!((g * gap - x).abs() <= 1e-12, "{g} against {x}");
+    }
+    let truth = reference(&draw.params(), &s.time, &s.displacement, gap);
+    let peak = truth.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let worst = s.model[2].iter().zip(&truth).map(|(a, b)| (a - b).abs()).fold(0.0f64, f64::max);
+    assert!(worst < 0.01 * peak, "coarse: worst {worst:.1} Pa of a {peak:.1} Pa peak");
+    // at the records' own rate nothing changes: the calibration's smoothing
+    // and sub-steps
+    assert_eq!(
+        simulation::read(&t.path().join("sim")).unwrap().record.substeps,
+        cal.record.substeps
+    );
 }
 
 #[test]
