@@ -178,6 +178,9 @@ fn study(pipeline: &mut Pipeline, command: StudyCommand) -> Result<()> {
         StudyCommand::Plan { dir, options } => {
             let (name, tasks) = options.plan(&dir)?;
             println!("planned study {name}: {} task(s) in {}", tasks.len(), dir.display());
+            for note in options.notes() {
+                eprintln!("{note}");
+            }
             println!(
                 "run them here with `mrbp study run {}`, or on a cluster (docs/studies.md)",
                 dir.display()

@@ -105,6 +105,17 @@ pub struct PlanOptions {
 }
 
 impl PlanOptions {
+    /// What the user should know of the study planned, before running it:
+    /// an SBC drawn from the default priors (no `--config`).
+    pub fn notes(&self) -> Vec<String> {
+        match (self.sbc, &self.sample.config) {
+            (Some(_), None) => vec![
+                "note: --sbc draws from the calibration's own priors, here the defaults (no --config): they span decades, down to noise levels far below any force sensor's, and where the noise drawn is below the virtual stand's own discretisation (its velocity read off the samples, about 1e-5 of the force) the ranks of σ fail for that reason, not the sampler's; a settings file with priors narrowed to a realistic box (studies/sbc-prior.toml, studies/sbc-prior-bp-spencer.toml) makes the study docs/calibration.md reports".to_string(),
+            ],
+            _ => Vec::new(),
+        }
+    }
+
     /// Writes the study these options describe into `dir`: its name and tasks.
     pub fn plan(&self, dir: &Path) -> Result<(String, Vec<TaskSpec>)> {
         if self.sample.model.is_some() {

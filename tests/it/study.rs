@@ -146,6 +146,8 @@ fn sbc_of_another_law_draws_that_laws_parameters() {
         "0.5",
     ]);
     assert!(o.status.success(), "{}", said(&o));
+    // drawn from the default priors: said, with the way to a realistic box
+    assert!(said(&o).contains("here the defaults (no --config)"), "{}", said(&o));
     let law = mrbp::laws::LawKind::BpSpencer.law();
     let mut seen: Vec<Vec<f64>> = Vec::new();
     for k in 0..3 {
@@ -187,6 +189,7 @@ fn sbc_of_another_law_draws_that_laws_parameters() {
     let o =
         mrbp(&["study", "plan", rep.to_str().unwrap(), "--replicates", "1", "--config", &config]);
     assert!(o.status.success(), "{}", said(&o));
+    assert!(!said(&o).contains("here the defaults"), "{}", said(&o));
     let spec = task_spec(&rep, "t000");
     assert_eq!(spec["source"]["synth"]["damper"]["law"].as_str(), Some("bp-spencer"));
     assert!(spec["truth"].get("c0").is_some(), "{}", spec["truth"]);
