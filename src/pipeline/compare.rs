@@ -94,10 +94,10 @@ impl Pipeline<'_> {
         rpm: Option<f64>,
     ) -> Result<PathBuf> {
         // folders of one name in different places: tell them apart by path
-        for i in 1..entries.len() {
-            if entries[..i].iter().any(|e| e.label == entries[i].label) {
-                entries[i].label = entries[i].cal.dir.display().to_string();
-            }
+        let dirs: Vec<&Path> = entries.iter().map(|e| e.cal.dir.as_path()).collect();
+        let labels = distinct_labels(&dirs);
+        for (e, label) in entries.iter_mut().zip(labels) {
+            e.label = label;
         }
         self.prepare(out, "--out", &[], &[], true)?;
         self.estimate_evidences(&mut entries);
@@ -140,5 +140,57 @@ impl Pipeline<'_> {
         store::comparison::write_record(out, &record)?;
         self.emit(Event::Wrote(&path));
         Ok(path)
+    }
+}
+
+/// A label for each folder: its name, or where names repeat, as many of
+/// its path's last components as tell it from the others ("bouc-wen/I0.7A"
+/// beside "bp-viscous/I0.7A"), its whole path at most.
+fn distinct_labels(dirs: &[&Path]) -> Vec<String> {
+    let tail = |dir: &Path, k: usize| -> String {
+        let parts: Vec<_> = dir.components().collect();
+        match parts.len() > k {
+            true => parts[parts.len() - k..].iter().collect::<PathBuf>().display().to_string(),
+            false => dir.display().to_string(),
+        }
+    };
+    let mut depth = vec![1; dirs.len()];
+    loop {
+        let labels: Vec<String> = dirs.iter().zip(&depth).map(|(d, &k)| tail(d, k)).collect();
+        let repeated: Vec<usize> = (0..labels.len())
+            .filter(|&i| labels.iter().filter(|l| **l == labels[i]).count() > 1)
+            .filter(|&i| depth[i] < dirs[i].components().count())
+            .collect();
+        if repeated.is_empty() {
+            return labels;
+        }
+        for i in repeated {
+            depth[i] += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Names that repeat take as much of their paths as tells them apart;
+    /// a name alone stays as it is.
+    #[test]
+    fn repeated_folder_names_are_told_apart_by_their_paths() {
+        let dirs = [
+            Path::new("runs/bouc-wen/I0.7A"),
+            Path::new("runs/bp-viscous/I0.7A"),
+            Path::new("runs/bouc-wen/I1.0A"),
+            Path::new("a/x/I0.5A"),
+            Path::new("b/x/I0.5A"),
+        ];
+        assert_eq!(
+            distinct_labels(&dirs),
+            ["bouc-wen/I0.7A", "bp-viscous/I0.7A", "I1.0A", "a/x/I0.5A", "b/x/I0.5A"]
+        );
+        // the same folder twice: its whole path, no endless search
+        let same = [Path::new("r/I1.0A"), Path::new("r/I1.0A")];
+        assert_eq!(distinct_labels(&same), ["r/I1.0A", "r/I1.0A"]);
     }
 }

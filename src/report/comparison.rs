@@ -194,7 +194,7 @@ fn bayes_factors(entries: &[Entry]) -> Vec<String> {
 
 fn parameters_section(page: &mut Page, entries: &[Entry]) {
     page.section("parameters", "Parameters");
-    page.para("Posterior median and 90 % credible interval of each B-P parameter (SI units). In a current law, R0, R1 and D1 are the values at its reference current.");
+    page.para("Posterior median and 90 % credible interval of each law parameter (SI units; – where a calibration's law has no such parameter). In a current law, R0, R1 and D1 are the values at its reference current.");
     let mut header = vec!["parameter".to_string()];
     header.extend(entries.iter().map(|e| e.label.clone()));
     let mut names: Vec<String> = Vec::new();
