@@ -276,15 +276,35 @@ fn finite(path: &Path, row: usize, column: &str, value: f64) -> Result<f64> {
     }
 }
 
+/// The separator of a CSV file, read off its header line: a comma, or
+/// where the header has none a semicolon (a spreadsheet's export where the
+/// decimal mark is a comma) or a tab.
+fn separator(path: &Path) -> u8 {
+    use std::io::BufRead;
+    let mut header = String::new();
+    if let Ok(file) = std::fs::File::open(path) {
+        let _ = std::io::BufReader::new(file).read_line(&mut header);
+    }
+    match (header.contains(','), header.contains(';'), header.contains('\t')) {
+        (false, true, _) => b';',
+        (false, false, true) => b'\t',
+        _ => b',',
+    }
+}
+
 fn read_csv(path: &Path, columns: &ColumnMap) -> Result<Record> {
+    let separator = separator(path);
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
+        .delimiter(separator)
         .from_path(path)
         .map_err(|e| Error::input(path, format!("cannot open: {}", io_reason(&e))))?;
     let headers = reader
         .headers()
         .map_err(|e| Error::input(path, format!("cannot read the header: {e}")))?
         .clone();
+    let names: Vec<&str> = headers.iter().collect();
+    let missing_column = |path: &Path, name: &str| missing_column(path, name, &names);
     let find = |name: &str| headers.iter().position(|h| h == name);
     for (i, h) in headers.iter().enumerate() {
         if let Some(j) = headers.iter().skip(i + 1).position(|o| o == h) {
@@ -319,7 +339,11 @@ fn read_csv(path: &Path, columns: &ColumnMap) -> Result<Record> {
             let text = row
                 .get(col)
                 .ok_or_else(|| Error::input_at(path, Some(row_no), Some(name), "missing value"))?;
-            parse_cell(path, row_no, name, text)
+            match separator {
+                // a semicolon's file writes the decimal mark as a comma
+                b';' => parse_cell(path, row_no, name, &text.replace(',', ".")),
+                _ => parse_cell(path, row_no, name, text),
+            }
         };
         rec.time.push(cell(index[0], columns.time.0)? * columns.time.1);
         rec.displacement.push(cell(index[1], columns.displacement.0)? * columns.displacement.1);
@@ -345,6 +369,9 @@ fn read_parquet(path: &Path, columns: &ColumnMap) -> Result<Record> {
         .map_err(|e| {
             Error::input(path, format!("not a readable Parquet file: {}", one_line(&e.to_string())))
         })?;
+    let names: Vec<String> = df.get_column_names().iter().map(|n| n.to_string()).collect();
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    let missing_column = |path: &Path, name: &str| missing_column(path, name, &names);
     let column = |name: &str, scale: f64| -> Result<Vec<f64>> {
         let raw = df.column(name).map_err(|_| missing_column(path, name))?.as_materialized_series();
         if let Ok(text) = raw.str() {
@@ -385,8 +412,20 @@ fn read_parquet(path: &Path, columns: &ColumnMap) -> Result<Record> {
     })
 }
 
-fn missing_column(path: &Path, name: &str) -> Error {
-    Error::input_at(path, None, Some(name), "no such column in the file")
+/// A column named by the manifest's `[columns]` (or the defaults) that the
+/// file lacks: which columns it has.
+fn missing_column(path: &Path, name: &str, has: &[&str]) -> Error {
+    let shown: Vec<String> = has.iter().take(12).map(|h| format!("'{}'", shown(h))).collect();
+    let more = if has.len() > 12 { ", …" } else { "" };
+    Error::input_at(
+        path,
+        None,
+        Some(name),
+        format!(
+            "no such column in the file (its columns: {}{more}); the manifest's [columns] names the file's columns (docs/contract.md)",
+            shown.join(", ")
+        ),
+    )
 }
 
 fn io_reason(e: &csv::Error) -> String {
@@ -396,5 +435,44 @@ fn io_reason(e: &csv::Error) -> String {
         }
         csv::ErrorKind::Io(io) => io.to_string(),
         _ => e.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `rows` (time, displacement, force) written with `separator` and
+    /// the decimal mark `decimal` under `header`, read back.
+    fn read_written(header: &str, separator: char, decimal: char) -> Result<Record> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("run.csv");
+        let mut text = format!("{header}\n");
+        for k in 0..12 {
+            let row = [0.001 * k as f64, 1e-4 * (k as f64).sin(), 100.0 + k as f64];
+            let cells: Vec<String> =
+                row.iter().map(|v| v.to_string().replace('.', &decimal.to_string())).collect();
+            text.push_str(&cells.join(&separator.to_string()));
+            text.push('\n');
+        }
+        std::fs::write(&path, text).unwrap();
+        Record::read(&path, &ColumnMap::of(&Columns::default(), true))
+    }
+
+    /// A spreadsheet's export with semicolons and decimal commas, or tabs,
+    /// reads as the comma file does; a header without the manifest's
+    /// columns is refused naming the columns it has.
+    #[test]
+    fn semicolon_and_tab_files_read_as_commas_do() {
+        let header = |sep: &str| ["time_s", "displacement_m", "force_n"].join(sep);
+        let comma = read_written(&header(","), ',', '.').unwrap();
+        for (sep, decimal) in [(';', ','), (';', '.'), ('\t', '.')] {
+            let other = read_written(&header(&sep.to_string()), sep, decimal).unwrap();
+            assert_eq!(other.time, comma.time, "{sep:?}");
+            assert_eq!(other.displacement, comma.displacement, "{sep:?}");
+            assert_eq!(other.force, comma.force, "{sep:?}");
+        }
+        let e = read_written("Time (s),Disp (mm),Force (N)", ',', '.').unwrap_err().to_string();
+        assert!(e.contains("its columns: 'Time (s)', 'Disp (mm)', 'Force (N)'"), "{e}");
     }
 }

@@ -576,7 +576,11 @@ fn cases() -> Vec<Case> {
                 ])
             },
             code: 2,
-            expect: &["column 'force_n'", "no such column"],
+            expect: &[
+                "column 'force_n'",
+                "no such column",
+                "its columns: 'time_s', 'displacement_m'",
+            ],
         },
         Case {
             name: "not a parquet file",
