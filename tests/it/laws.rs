@@ -326,7 +326,7 @@ fn the_validation_study_ranks_the_generating_law_first() {
         [
             "law", "current_a", "run", "kind", "samples", "nrmse", "e_t", "e_x", "e_v",
             "inside_p95", "band_width", "lppd", "seconds", "log_evidence", "log_evidence_se",
-            "evidence_by", "pseudo_evidence", "held_out_rhat"
+            "evidence_by", "pseudo_evidence", "held_out_rhat", "held_out_unconverged"
         ]
     );
     // two laws × three records × in sample and held out
