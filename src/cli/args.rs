@@ -52,6 +52,7 @@ pub enum Command {
         /// With several currents: also calibrate the current law (or, with
         /// `--model current-curves`, the current curves), holding out the
         /// middle current when there are three or more, and predict it
+        /// (`--model current-law` or `current-curves` asks for it too)
         #[arg(long)]
         current_law: bool,
     },

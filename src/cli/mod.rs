@@ -63,12 +63,12 @@ fn dispatch(cli: Cli) -> Result<()> {
             Ok(())
         }
         Some(Command::Run { manifest, out, options, predict, validation, current_law }) => {
-            let options = RunOptions {
-                sample: options.request()?,
-                predict,
-                leave_one_out: validation.request(),
-                current_law,
-            };
+            let sample = options.request()?;
+            // `--model current-law` or `current-curves` (or the settings'
+            // `model`) names the law stage's model, and so asks for it
+            let current_law = current_law || sample.settings.model.is_law();
+            let options =
+                RunOptions { sample, predict, leave_one_out: validation.request(), current_law };
             pipeline.run(&manifest, &out, &options).map(|reports| print::reports(&reports, clock))
         }
         Some(Command::Identify { manifest, out, force, law, identify }) => {

@@ -41,6 +41,9 @@ impl Pipeline<'_> {
             ..self.loo_settings(r, &options.predict)
         });
         let several = options.sample.current.is_none() && all.len() >= 2;
+        if options.current_law && !several {
+            self.note("the current law spans the currents of a campaign, and this one has runs at one current only: each current is calibrated on its own, and no law");
+        }
         let held: Vec<f64> =
             if several && all.len() >= 3 { vec![all[all.len() / 2]] } else { vec![] };
         // the law stage fits the law the settings name (`--model

@@ -361,3 +361,39 @@ fn current_curves_and_coil_lag_recover_their_truth() {
         "the anchors are written with the settings:\n{config}"
     );
 }
+
+/// `run --model current-law` asks for the law stage (before, `run` took
+/// `--model` as that stage's model only and, without `--current-law`,
+/// calibrated each current alone and said nothing): the law calibrated
+/// without the middle current beside the per-current folders; a campaign
+/// of one current says it has no law to calibrate.
+#[test]
+fn run_with_the_current_law_as_its_model_calibrates_the_law() {
+    let data = tempfile::tempdir().unwrap();
+    let manifest = crate::common::synth_small(data.path(), "0.5,1.0,1.5");
+    let out = tempfile::tempdir().unwrap();
+    let o = ok(&[
+        "run",
+        arg(&manifest),
+        "--out",
+        arg(out.path()),
+        "--model",
+        "current-law",
+        "--steps",
+        "20",
+        "--draws",
+        "50",
+    ]);
+    let law = out.path().join("current-law-without-I1.0A");
+    assert!(law.join("calibration.toml").exists(), "{}", said(&o));
+    for current in ["I0.5A", "I1.0A", "I1.5A", "comparison"] {
+        assert!(out.path().join(current).is_dir(), "{current}");
+    }
+    let one = tempfile::tempdir().unwrap();
+    let manifest = crate::common::synth_small(one.path(), "1.0");
+    let out = one.path().join("out");
+    let o =
+        ok(&["run", arg(&manifest), "--out", arg(&out), "--model", "current-law", "--steps", "20"]);
+    assert!(said(&o).contains("this one has runs at one current only"), "{}", said(&o));
+    assert!(!out.join("current-law").exists());
+}
