@@ -426,8 +426,13 @@ impl Pipeline<'_> {
             finite_current(current_a)?;
             let own = cal.record.current_a;
             if !same_current(current_a, own) {
+                // only the B-P law has a law in the current
+                let other = match cal.settings.law.is_bodner_partom() {
+                    true => "a current law (mrbp sample --model current-law) simulates other currents".to_string(),
+                    false => format!("the {} law is calibrated per current: calibrate it on records at {current_a} A", cal.settings.law.name()),
+                };
                 return Err(Error::Usage(format!(
-                    "the calibration in {} is at {own} A and cannot simulate {current_a} A; a current law (mrbp sample --model current-law) simulates other currents",
+                    "the calibration in {} is at {own} A and cannot simulate {current_a} A; {other}",
                     cal.dir.display()
                 )));
             }

@@ -78,6 +78,18 @@ fn each_law_recovers_its_own_truth_and_its_band_follows_its_equations() {
         }
         let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
         assert!(config.contains(&format!("law = \"{name}\"")), "{config}");
+        // another current is refused with what this law can do about it
+        let input = dir.path().join("at-half.csv");
+        let rows: String =
+            (0..40).map(|k| format!("{},{},0.5\n", 1e-3 * k as f64, 1e-4 * k as f64)).collect();
+        std::fs::write(&input, format!("time_s,displacement_m,current_a\n{rows}")).unwrap();
+        let o = mrbp(&["simulate", arg(&out), "--input", arg(&input)]);
+        assert_eq!(o.status.code(), Some(2), "{}", said(&o));
+        assert!(
+            said(&o).contains(&format!("the {name} law is calibrated per current")),
+            "{}",
+            said(&o)
+        );
         if let Some(force) = independent_force(&name) {
             let q50 = f64_column(&summary, "q50", &path).unwrap();
             band_median_follows(&out, &names, &q50, force);
