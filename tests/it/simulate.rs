@@ -90,14 +90,15 @@ fn reference(p: &mrbp::model::Params, time: &[f64], displacement: &[f64], gap: f
     out
 }
 
-#[test]
-fn median_at_one_draw_is_the_law_solution() {
-    let t = tempfile::tempdir().unwrap();
-    let cal_dir = calibrate(t.path(), "1.0", false);
-    let input = t.path().join("sine.csv");
-    excitation(&input, None);
-    let out = t.path().join("sim");
-    ok(&[
+/// `mrbp simulate` of `cal_dir` along `input` into `out`, one draw and
+/// `replicates` noise replicates: the folder and what was said.
+fn simulate_one_draw(
+    cal_dir: &Path,
+    input: &Path,
+    out: &Path,
+    replicates: &str,
+) -> (PathBuf, std::process::Output) {
+    let o = ok(&[
         "simulate",
         cal_dir.to_str().unwrap(),
         "--input",
@@ -107,8 +108,18 @@ fn median_at_one_draw_is_the_law_solution() {
         "--draws",
         "1",
         "--replicates",
-        "400",
+        replicates,
     ]);
+    (out.to_path_buf(), o)
+}
+
+#[test]
+fn median_at_one_draw_is_the_law_solution() {
+    let t = tempfile::tempdir().unwrap();
+    let cal_dir = calibrate(t.path(), "1.0", false);
+    let input = t.path().join("sine.csv");
+    excitation(&input, None);
+    let (out, _) = simulate_one_draw(&cal_dir, &input, &t.path().join("sim"), "400");
     let s = simulation::read(&out).unwrap();
     assert_eq!(s.record.current_a, 1.0);
     assert_eq!(s.record.draws, 1);
@@ -177,19 +188,7 @@ fn median_at_one_draw_is_the_law_solution() {
     // velocity, said on the terminal and in simulation.toml
     let fast = t.path().join("fast.csv");
     sine(&fast, 30.0, 10_000.0, None);
-    let out = t.path().join("sim-fast");
-    let o = ok(&[
-        "simulate",
-        cal_dir.to_str().unwrap(),
-        "--input",
-        fast.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--draws",
-        "1",
-        "--replicates",
-        "1",
-    ]);
+    let (out, o) = simulate_one_draw(&cal_dir, &fast, &t.path().join("sim-fast"), "1");
     assert!(said(&o).contains("goes beyond the calibration's records: its peak velocity"));
     let r = simulation::read(&out).unwrap().record;
     assert_eq!(r.beyond_records, ["velocity"], "{r:?}");
@@ -202,19 +201,7 @@ fn median_at_one_draw_is_the_law_solution() {
     // same samples to 1 % of the peak
     let coarse = t.path().join("coarse.csv");
     sine(&coarse, 3.0, 100.0, None);
-    let out = t.path().join("sim-coarse");
-    let o = ok(&[
-        "simulate",
-        cal_dir.to_str().unwrap(),
-        "--input",
-        coarse.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--draws",
-        "1",
-        "--replicates",
-        "1",
-    ]);
+    let (out, o) = simulate_one_draw(&cal_dir, &coarse, &t.path().join("sim-coarse"), "1");
     assert!(said(&o).contains("drives the law as it is, unsmoothed"), "{}", said(&o));
     let s = simulation::read(&out).unwrap();
     assert_eq!(s.record.substeps, 4 * cal.record.substeps, "{:?}", s.record);
