@@ -566,8 +566,6 @@ impl Reach {
     }
 }
 
-/// The reach of the records `cal` was calibrated on, quantity by quantity
-/// the largest; `None` where they cannot be read (the manifest moved).
 /// How many times the calibration's sub-steps an excitation whose longest
 /// sample interval is `own` needs so that none is longer than on records
 /// whose longest is `records` (s): `None` where it needs no more (a
@@ -592,6 +590,8 @@ fn records_smoothing_s(smooth_ms: f64, interval: f64) -> f64 {
     }
 }
 
+/// The reach of the records `cal` was calibrated on, quantity by quantity
+/// the largest; `None` where they cannot be read (the manifest moved).
 fn records_reach(cal: &Calibration) -> Option<Reach> {
     let campaign = cal.used_runs(&cal.full_campaign().ok()?);
     let smooth = cal.settings.likelihood.smooth_strain_ms;
