@@ -280,11 +280,13 @@ def test_simulate_median_at_one_draw_is_the_law_solution(calibration):
     # one posterior draw: every model quantile is that draw's solution,
     # which an independent 1 µs Euler integration reproduces to 2.5 % of
     # the peak. The library integrates at the sub-steps its step rule
-    # chooses (explicit Euler, coarser than 1 µs) along a strain smoothed
-    # over 2 ms: for this stiff 1 A posterior that is 1.6 % of the peak,
-    # at the reversal (measured; the reference at a 0.25 ms step is 1.0 %
-    # off the library's, at 1 ms it diverges). A wrong draw, parameter or
-    # unit is off by far more.
+    # chooses (explicit Euler, coarser than 1 µs); this 1 kHz excitation is
+    # five times as coarse as the 5 kHz records, so it drives the law
+    # unsmoothed with five times the calibration's sub-steps, none longer
+    # than its step rule checked (docs/prediction.md; until 2026-12-04 it
+    # was smoothed over five samples either side, and the median was 1.6 %
+    # of the peak off at the reversal). A wrong draw, parameter or unit is
+    # off by far more.
     t = np.arange(0, 701) / 1000.0
     x = 0.005 * np.sin(2 * np.pi * 3.0 * t)
     sim = calibration.simulate(t, x, draws=1, replicates=4, seed=2)
