@@ -257,7 +257,7 @@ impl Pipeline<'_> {
             GibbsSettings::default(),
             first.joint.settings.sampler.seed,
         )?;
-        let settled = layer.max_rhat < 1.01 && layer.min_ess >= 400.0;
+        let settled = between_runs::settled(layer.max_rhat, layer.min_ess);
         self.note(&format!(
             "\nbetween-run layer: {} runs alone at {:?} A, {} Gibbs chains: largest R̂ {:.4}, smallest ESS {:.0} ({:.1} s){}",
             layer_runs.len(),

@@ -414,7 +414,7 @@ impl Pipeline<'_> {
             clock.elapsed().as_secs_f64(),
             layer.max_rhat,
             layer.min_ess,
-            if layer.max_rhat < 1.01 && layer.min_ess >= 400.0 { "" } else { " — not converged: the band is not to be trusted" }
+            if crate::validate::between_runs::settled(layer.max_rhat, layer.min_ess) { "" } else { " — not converged: the band is not to be trusted" }
         ));
         Ok((layer, outside))
     }

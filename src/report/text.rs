@@ -415,17 +415,6 @@ pub fn refits_unsettled(rows: &[LooRow]) -> Option<String> {
     })
 }
 
-/// The held-out runs (run, largest R̂ of what was fitted without it) whose
-/// fit did not converge ([`crate::validate::unsettled`]), listed with
-/// their R̂ ("c (R̂ 1.08), d (R̂ 1.60)"); `None` where every one did.
-fn unsettled_runs<'a>(rows: impl Iterator<Item = (&'a str, f64)>) -> Option<String> {
-    let unsettled: Vec<String> = rows
-        .filter(|&(_, rhat)| crate::validate::unsettled(rhat))
-        .map(|(run, rhat)| format!("{run} (R̂ {rhat:.2})"))
-        .collect();
-    (!unsettled.is_empty()).then(|| unsettled.join(", "))
-}
-
 /// Each run predicted as a new test by the between-run layer fitted
 /// without it (or without its current).
 pub fn new_test_left_out(rows: &[NewTestRow], seconds: f64) -> String {
@@ -496,15 +485,25 @@ pub fn new_tests_unfit(rows: &[NewTestRow]) -> Option<String> {
 }
 
 /// Where the layer fitted without a held-out run (or its current) did not
-/// converge (its Gibbs chains' largest R̂ at or above 1.01, the target the
-/// layer's own line is held to): which, in a sentence. B-P's runs alone on
-/// records of Spencer's model (`mrbp synth --law spencer`, 0.5 A) left a
-/// layer without the 320 rpm run at R̂ 1.08, whose band the table showed
-/// beside the others with nothing said.
+/// converge (its Gibbs chains' largest R̂ at or above 1.01, or their
+/// smallest ESS below 400: the target the layer's own line is held to):
+/// which, with R̂ and ESS, in a sentence. B-P's runs alone on records of
+/// Spencer's model (`mrbp synth --law spencer`, 0.5 A) left a layer
+/// without the 320 rpm run at R̂ 1.08, whose band the table showed beside
+/// the others with nothing said.
 pub fn new_tests_unsettled(rows: &[NewTestRow]) -> Option<String> {
-    unsettled_runs(rows.iter().map(|r| (r.coverage.run.as_str(), r.max_rhat))).map(|runs| {
+    let unsettled: Vec<String> = rows
+        .iter()
+        .filter(|r| r.unsettled())
+        .map(|r| match r.min_ess.is_nan() {
+            true => format!("{} (R̂ {:.2})", r.coverage.run, r.max_rhat),
+            false => format!("{} (R̂ {:.3}, ESS {:.0})", r.coverage.run, r.max_rhat, r.min_ess),
+        })
+        .collect();
+    (!unsettled.is_empty()).then(|| {
         format!(
-            "the between-run layer fitted without {runs} did not converge: its Gibbs chains still disagreed, so the band for that new test is not to be trusted (the runs alone disagree by more than one between-test spread describes: the consistency table)"
+            "the between-run layer fitted without {} did not converge (target R̂ < 1.01 and ESS ≥ 400): its Gibbs chains still disagreed or were too few, so the band for that new test is not to be trusted (the runs alone disagree by more than one between-test spread describes: the consistency table)",
+            unsettled.join(", ")
         )
     })
 }
@@ -622,6 +621,7 @@ mod tests {
             },
             left_out: LeftOut::Run,
             max_rhat: 1.001,
+            min_ess: 800.0,
         }
     }
 
@@ -673,19 +673,27 @@ mod tests {
         assert!(new_test_left_out(&[row("b", 20, 380)], 1.0).contains("\nwarning: most of the"));
     }
 
-    /// A layer fitted without a run that did not converge is named; one at
-    /// R̂ below 1.01 is not.
+    /// A layer fitted without a run that did not converge is named, by
+    /// its R̂ or by an ESS short of 400 with every R̂ below 1.01; one that
+    /// met both is not; a file without the ESS is judged by its R̂.
     #[test]
     fn new_tests_of_unconverged_layers_are_named() {
-        let with_rhat = |run: &str, max_rhat: f64| NewTestRow { max_rhat, ..row(run, 400, 0) };
-        assert_eq!(new_tests_unsettled(&[with_rhat("a", 1.009), with_rhat("b", 1.001)]), None);
-        let rows = [with_rhat("a", 1.009), with_rhat("c", 1.0823)];
+        let with = |run: &str, max_rhat: f64, min_ess: f64| NewTestRow {
+            max_rhat,
+            min_ess,
+            ..row(run, 400, 0)
+        };
+        let fine = [with("a", 1.009, 420.0), with("b", 1.001, 900.0), with("d", 1.005, f64::NAN)];
+        assert_eq!(new_tests_unsettled(&fine), None);
+        let rows = [with("a", 1.009, 420.0), with("c", 1.0823, 300.0), with("e", 1.004, 350.0)];
         let said = new_tests_unsettled(&rows).unwrap();
         assert!(
-            said.starts_with("the between-run layer fitted without c (R̂ 1.08) did not converge"),
+            said.starts_with("the between-run layer fitted without c (R̂ 1.082, ESS 300), e (R̂ 1.004, ESS 350) did not converge"),
             "{said}"
         );
         assert!(!said.contains("a ("), "{said}");
+        let old = [with("f", 1.02, f64::NAN)];
+        assert!(new_tests_unsettled(&old).unwrap().contains("without f (R̂ 1.02)"));
         assert!(new_test_left_out(&rows, 1.0).contains("\nwarning: the between-run layer fitted"));
     }
 

@@ -262,7 +262,8 @@ pub fn write_leave_one_out(dir: &Path, rows: &[NewTestRow], id: &str, runs: &str
     let coverage: Vec<CoverageRow> = rows.iter().map(|r| r.coverage.clone()).collect();
     let table = super::coverage::table(&coverage)
         .str("left_out", rows.iter().map(|r| r.left_out.label().to_string()).collect())
-        .f64("max_r_hat", rows.iter().map(|r| r.max_rhat).collect());
+        .f64("max_r_hat", rows.iter().map(|r| r.max_rhat).collect())
+        .f64("min_ess", rows.iter().map(|r| r.min_ess).collect());
     write_parquet(&dir.join(LOO), table.derived_from(id).meta(LAYER_RUNS, runs))
 }
 
@@ -278,13 +279,15 @@ pub fn read_leave_one_out(dir: &Path, id: &str) -> Result<Option<Vec<NewTestRow>
     let df = read_parquet(&path)?;
     let left_out = str_column(&df, "left_out", &path)?;
     let rhat = f64_column(&df, "max_r_hat", &path)?;
+    // files written before 2026-12-04 kept the R̂ alone
+    let ess = f64_column(&df, "min_ess", &path).unwrap_or_else(|_| vec![f64::NAN; rhat.len()]);
     coverage
         .into_iter()
         .zip(left_out)
-        .zip(rhat)
+        .zip(rhat.into_iter().zip(ess))
         .enumerate()
-        .map(|(i, ((coverage, l), max_rhat))| match LeftOut::parse(&l) {
-            Some(left_out) => Ok(NewTestRow { coverage, left_out, max_rhat }),
+        .map(|(i, ((coverage, l), (max_rhat, min_ess)))| match LeftOut::parse(&l) {
+            Some(left_out) => Ok(NewTestRow { coverage, left_out, max_rhat, min_ess }),
             None => Err(Error::input(&path, format!("row {}: unknown left_out '{l}'", i + 1))),
         })
         .collect::<Result<Vec<_>>>()

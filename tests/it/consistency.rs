@@ -189,7 +189,7 @@ fn leave_one_out_predicts_each_run_as_a_new_test() {
         [
             "run", "current_a", "samples", "inside_p95", "inside_q95", "rmse_q50_pa", "draws",
             "failed_draws", "calibrated", "lppd", "far_draws", "band_width", "left_out",
-            "max_r_hat"
+            "max_r_hat", "min_ess"
         ]
     );
     let joint = mrbp::store::record::read(&folder.join("calibration.toml")).unwrap();

@@ -37,6 +37,19 @@ pub struct NewTestRow {
     pub left_out: LeftOut,
     /// The largest R̂ of the layer's Gibbs chains fitted without it.
     pub max_rhat: f64,
+    /// Their smallest ESS (NaN in files written before 2026-12-04).
+    pub min_ess: f64,
+}
+
+impl NewTestRow {
+    /// Whether the layer fitted without the run did not converge
+    /// ([`super::settled`]); a file without the ESS is judged by its R̂.
+    pub fn unsettled(&self) -> bool {
+        match self.min_ess.is_nan() {
+            true => crate::validate::unsettled(self.max_rhat),
+            false => !super::settled(self.max_rhat, self.min_ess),
+        }
+    }
 }
 
 /// Each run of `campaign` (the runs at one current, calibrated together in
@@ -119,7 +132,12 @@ pub fn leave_out(
                 layer.new_tests(group, own.cal, &data, draws, seed ^ (0x2_0000 + j as u64));
             let mut prediction = predict_run(run, &data, j, &new, &settings, false, &|| {})?;
             prediction.coverage.failed_draws += outside;
-            Ok(NewTestRow { coverage: prediction.coverage, left_out, max_rhat: layer.max_rhat })
+            Ok(NewTestRow {
+                coverage: prediction.coverage,
+                left_out,
+                max_rhat: layer.max_rhat,
+                min_ess: layer.min_ess,
+            })
         })
         .collect()
 }

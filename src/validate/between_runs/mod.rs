@@ -170,6 +170,13 @@ pub struct BetweenRuns {
     pub min_ess: f64,
 }
 
+/// Whether Gibbs chains with largest R̂ `max_rhat` and smallest ESS
+/// `min_ess` converged: every R̂ below 1.01 and every ESS 400 or more, the
+/// target the layer's blocks run to (NaN: not).
+pub fn settled(max_rhat: f64, min_ess: f64) -> bool {
+    max_rhat < 1.01 && min_ess >= 400.0
+}
+
 impl BetweenRuns {
     /// The layer fitted to `runs`, each calibrated alone with the same
     /// settings, on random streams of `seed`, predicting also the currents
@@ -280,7 +287,7 @@ impl BetweenRuns {
             });
             let kept: Vec<Vec<LayerDraw>> = chains.iter().map(|c| c.2.clone()).collect();
             (max_rhat, min_ess) = convergence(&kept, currents.len());
-            if max_rhat < 1.01 && min_ess >= 400.0 {
+            if settled(max_rhat, min_ess) {
                 break;
             }
         }
