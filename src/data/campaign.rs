@@ -67,6 +67,10 @@ impl RunSpec {
     }
 }
 
+/// How many times the median sampling interval an interval may be before
+/// loading says samples seem missing ([`Run::gap`]).
+pub const GAP_FACTOR: f64 = 5.0;
+
 /// One loaded run: its manifest entry, its record and what follows from it.
 #[derive(Clone, Debug)]
 pub struct Run {
@@ -111,6 +115,31 @@ impl Run {
         let shear = Shear::from_record(&record, &manifest.geometry, spec.initial_stress_pa);
         let branches = loading_branches(&record.displacement, REVERSAL_SHARE);
         Ok(Run { spec: spec.clone(), path, record, shear, branches, geometry: manifest.geometry })
+    }
+
+    /// Where the record's samples seem missing: its longest sampling
+    /// interval if that is more than [`GAP_FACTOR`] times the median one (a
+    /// logger that dropped a block). Not refused — a record may change its
+    /// rate on purpose — but said, because the law is driven across such a
+    /// gap by a straight line between the samples either side of it.
+    pub fn gap(&self) -> Option<String> {
+        let t = &self.record.time;
+        let mut dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        let (at, longest) = dt.iter().copied().enumerate().max_by(|a, b| a.1.total_cmp(&b.1))?;
+        dt.sort_by(f64::total_cmp);
+        let median = dt[dt.len() / 2];
+        let wider = dt.iter().filter(|d| **d > GAP_FACTOR * median).count();
+        (longest > GAP_FACTOR * median).then(|| {
+            format!(
+                "run '{}': {} of its sampling intervals {} more than {GAP_FACTOR} times the median one ({:.3e} s), the longest {:.4} s from t = {:.4} s: samples missing? The law is driven across such a gap by a straight line between the samples either side; cut the record there (two runs) if the damper moved meanwhile",
+                self.id(),
+                wider,
+                if wider == 1 { "is" } else { "are" },
+                median,
+                longest,
+                t[at],
+            )
+        })
     }
 
     /// Why the run cannot be identified or calibrated, if it cannot: no
@@ -294,6 +323,7 @@ impl Campaign {
             runs.push(Arc::new(Run::checked(spec, path, record, &manifest, &map)?));
         }
         for run in &runs {
+            notes.extend(run.gap());
             notes.extend(run.unusable());
         }
         Ok(Campaign {
@@ -359,7 +389,7 @@ impl Campaign {
             record.check(&path, &map)?;
             runs.push(Arc::new(Run::checked(spec, path, record, &manifest, &map)?));
         }
-        let notes = runs.iter().filter_map(|r| r.unusable()).collect();
+        let notes = runs.iter().flat_map(|r| r.gap().into_iter().chain(r.unusable())).collect();
         Ok(Campaign {
             name: manifest.name.clone(),
             manifest_path: here,
@@ -450,5 +480,37 @@ mod tests {
         assert_eq!(super::current_tag(1.0), "I1.0A");
         assert_eq!(super::current_tag(0.25), "I0.25A");
         assert_eq!(super::current_tag(1.5), "I1.5A");
+    }
+
+    /// A record whose logger dropped 0.2 s of a 1 kHz stroke is loaded with
+    /// a note naming the gap; the same record whole has none.
+    #[test]
+    fn missing_samples_are_noted() {
+        use super::*;
+        let record = |drop: std::ops::Range<usize>| {
+            let t: Vec<f64> =
+                (0..4000).filter(|k| !drop.contains(k)).map(|k| k as f64 * 1e-3).collect();
+            let x: Vec<f64> = t.iter().map(|t| 0.01 * (std::f64::consts::TAU * t).sin()).collect();
+            let f: Vec<f64> = t.iter().map(|t| 1e3 * (std::f64::consts::TAU * t).cos()).collect();
+            Record { time: t, displacement: x, force: f, current: None }
+        };
+        let manifest = || Manifest {
+            name: "gaps".into(),
+            geometry: Geometry { area_m2: 0.05, gap_m: 1e-3 },
+            columns: Columns::default(),
+            limits: Default::default(),
+            runs: vec![RunSpec::new("r".into(), "r.csv".into(), 1.0)],
+        };
+        let whole = Campaign::from_records(manifest(), vec![record(0..0)]).unwrap();
+        assert!(whole.notes.is_empty(), "{:?}", whole.notes);
+        let cut = Campaign::from_records(manifest(), vec![record(1800..2000)]).unwrap();
+        assert_eq!(cut.notes.len(), 1, "{:?}", cut.notes);
+        let note = &cut.notes[0];
+        // the interval from the 1 799th sample (t = 1.799 s) to the 2 000th
+        assert!(
+            note.contains("1 of its sampling intervals is")
+                && note.contains("0.2010 s from t = 1.7990 s"),
+            "{note}"
+        );
     }
 }
