@@ -124,12 +124,12 @@ impl Run {
     /// gap by a straight line between the samples either side of it.
     pub fn gap(&self) -> Option<String> {
         let t = &self.record.time;
-        let mut dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        let (at, longest) = dt.iter().copied().enumerate().max_by(|a, b| a.1.total_cmp(&b.1))?;
-        dt.sort_by(f64::total_cmp);
-        let median = dt[dt.len() / 2];
-        let wider = dt.iter().filter(|d| **d > GAP_FACTOR * median).count();
-        (longest > GAP_FACTOR * median).then(|| {
+        let (median, _) = super::run_data::sampling_step(t);
+        let limit = GAP_FACTOR * median;
+        let dt = t.windows(2).map(|w| w[1] - w[0]);
+        let wider = dt.clone().filter(|d| *d > limit).count();
+        let (at, longest) = dt.enumerate().max_by(|a, b| a.1.total_cmp(&b.1))?;
+        (wider > 0).then(|| {
             format!(
                 "run '{}': {} of its sampling intervals {} more than {GAP_FACTOR} times the median one ({:.3e} s), the longest {:.4} s from t = {:.4} s: samples missing? The law is driven across such a gap by a straight line between the samples either side; cut the record there (two runs) if the damper moved meanwhile",
                 self.id(),
@@ -140,6 +140,12 @@ impl Run {
                 t[at],
             )
         })
+    }
+
+    /// What loading says of the run without refusing it: samples that seem
+    /// missing, and why it cannot be identified or calibrated.
+    pub fn notes(&self) -> impl Iterator<Item = String> {
+        self.gap().into_iter().chain(self.unusable())
     }
 
     /// Why the run cannot be identified or calibrated, if it cannot: no
@@ -322,10 +328,7 @@ impl Campaign {
             let record = Record::read(&path, &map)?;
             runs.push(Arc::new(Run::checked(spec, path, record, &manifest, &map)?));
         }
-        for run in &runs {
-            notes.extend(run.gap());
-            notes.extend(run.unusable());
-        }
+        notes.extend(runs.iter().flat_map(|r| r.notes()));
         Ok(Campaign {
             name: manifest.name,
             manifest_path: manifest_path.to_path_buf(),
@@ -389,7 +392,7 @@ impl Campaign {
             record.check(&path, &map)?;
             runs.push(Arc::new(Run::checked(spec, path, record, &manifest, &map)?));
         }
-        let notes = runs.iter().flat_map(|r| r.gap().into_iter().chain(r.unusable())).collect();
+        let notes = runs.iter().flat_map(|r| r.notes()).collect();
         Ok(Campaign {
             name: manifest.name.clone(),
             manifest_path: here,

@@ -183,7 +183,7 @@ impl RunData {
 
 /// The median sampling interval of `time`, and whether every interval is
 /// that one to a millionth.
-fn sampling_step(time: &[f64]) -> (f64, bool) {
+pub(super) fn sampling_step(time: &[f64]) -> (f64, bool) {
     let mut dt: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
     if dt.is_empty() {
         return (f64::NAN, false);
