@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::branches::{loading_branches, REVERSAL_SHARE};
 use super::shear::{Geometry, Shear};
-use super::table::{ColumnMap, Columns, Limits, Record};
+use super::table::{sampling_step, ColumnMap, Columns, Limits, Record};
 use crate::error::{one_line, Error, Result};
 
 /// The manifest file as written by the user (contract.md).
@@ -124,7 +124,7 @@ impl Run {
     /// gap by a straight line between the samples either side of it.
     pub fn gap(&self) -> Option<String> {
         let t = &self.record.time;
-        let (median, _) = super::run_data::sampling_step(t);
+        let (median, _) = sampling_step(t);
         let limit = GAP_FACTOR * median;
         let dt = t.windows(2).map(|w| w[1] - w[0]);
         let wider = dt.clone().filter(|d| *d > limit).count();

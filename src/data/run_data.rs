@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use super::campaign::Run;
 use super::smooth::{centre_weight, noise_variance, smoothed_strain};
+use super::table::sampling_step;
 
 /// Which samples of each record enter the likelihood.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -179,19 +180,6 @@ impl RunData {
     pub fn terms_stress(&self, k: usize, spring_n_per_m: f64, offset_n: f64) -> f64 {
         (offset_n + spring_n_per_m * self.gamma[k] * self.gap_m) / self.area_m2
     }
-}
-
-/// The median sampling interval of `time`, and whether every interval is
-/// that one to a millionth.
-pub(super) fn sampling_step(time: &[f64]) -> (f64, bool) {
-    let mut dt: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
-    if dt.is_empty() {
-        return (f64::NAN, false);
-    }
-    dt.sort_by(f64::total_cmp);
-    let median = dt[dt.len() / 2];
-    let uniform = dt[0] >= median * (1.0 - 1e-6) && dt[dt.len() - 1] <= median * (1.0 + 1e-6);
-    (median, uniform)
 }
 
 /// The quantum of a quantised record `v`: the tenth percentile of the gaps

@@ -71,6 +71,19 @@ pub struct Record {
     pub current: Option<Vec<f64>>,
 }
 
+/// The median sampling interval of `time`, and whether every interval is
+/// that one to a millionth.
+pub(super) fn sampling_step(time: &[f64]) -> (f64, bool) {
+    let mut dt: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
+    if dt.is_empty() {
+        return (f64::NAN, false);
+    }
+    dt.sort_by(f64::total_cmp);
+    let median = dt[dt.len() / 2];
+    let uniform = dt[0] >= median * (1.0 - 1e-6) && dt[dt.len() - 1] <= median * (1.0 + 1e-6);
+    (median, uniform)
+}
+
 /// Which columns to read and the factors that turn them into SI units.
 #[derive(Clone, Debug)]
 pub struct ColumnMap<'a> {
