@@ -625,6 +625,58 @@ fn sensed(
     Ok(Record { current: Some(current), time, displacement, force })
 }
 
+/// Fewest samples a revolution of the crank: each of its four quarter
+/// strokes (a loading and an unloading each way) gets two, or the record
+/// does not trace a loop (at fewer than two a revolution it aliases to
+/// another motion altogether).
+const SAMPLES_PER_REVOLUTION: f64 = 8.0;
+
+/// Most samples a record: a 1 kHz record of 2 h 47 min, 400 MB of the
+/// truth's integration and the CSV; beyond it `--rate` or `--cycles` is
+/// surely a slip.
+const MAX_SAMPLES: f64 = 1e7;
+
+/// Whether every record of `settings` (each crank speed, each switched
+/// run) is sampled as [`sampled_enough`] asks: what `synth` and a virtual
+/// study's plan check before anything is written.
+pub fn check_sampling(settings: &SynthSettings) -> Result<()> {
+    let switched = settings.switched.iter().map(|r| &r.rpm);
+    settings.rpms.iter().chain(switched).try_for_each(|rpm| sampled_enough(settings, *rpm))
+}
+
+/// Whether a record at `rpm` with the settings' rate and revolutions is one
+/// loading can read and the law can be calibrated on: at least
+/// [`crate::data::table::MIN_ROWS`] samples (what loading refuses below),
+/// [`SAMPLES_PER_REVOLUTION`] a revolution, and at most [`MAX_SAMPLES`].
+fn sampled_enough(settings: &SynthSettings, rpm: f64) -> Result<()> {
+    let (rate, cycles) = (settings.rate_hz, settings.cycles);
+    let per_revolution = rate * 60.0 / rpm;
+    let samples = (cycles * per_revolution).round() + 1.0;
+    let at = format!("at {rpm} rpm, {cycles} revolution(s) sampled at {rate} Hz");
+    let min_rows = crate::data::table::MIN_ROWS as f64;
+    if !(per_revolution >= SAMPLES_PER_REVOLUTION) {
+        let shown = match per_revolution >= 0.01 {
+            true => format!("{per_revolution:.3}"),
+            false => format!("{per_revolution:.1e}"),
+        };
+        return Err(Error::Usage(format!(
+            "{at} give {shown} samples a revolution; a record needs at least {SAMPLES_PER_REVOLUTION} to trace the loop: raise --rate to {} Hz or more",
+            (SAMPLES_PER_REVOLUTION * rpm / 60.0).ceil()
+        )));
+    }
+    if !(samples >= min_rows) {
+        return Err(Error::Usage(format!(
+            "{at} give {samples} samples; a record needs at least {min_rows}: raise --cycles or --rate"
+        )));
+    }
+    if !(samples <= MAX_SAMPLES) {
+        return Err(Error::Usage(format!(
+            "{at} give {samples:.3e} samples, more than the {MAX_SAMPLES:.0e} a virtual record may have: lower --cycles or --rate"
+        )));
+    }
+    Ok(())
+}
+
 /// Run id used in the manifest, e.g. `I1.0_100rpm`.
 pub fn run_id(current_a: f64, rpm: f64) -> String {
     format!("I{current_a:.1}_{rpm:.0}rpm")
@@ -641,6 +693,7 @@ pub fn write_campaign(settings: &SynthSettings, dir: &Path) -> Result<Manifest> 
     if let Some(bad) = settings.currents_a.iter().find(|c| !(c.is_finite() && **c >= 0.0)) {
         return Err(Error::Usage(format!("coil currents must be 0 A or more; got {bad} A")));
     }
+    check_sampling(settings)?;
     if settings.currents_a.is_empty() {
         return Err(Error::Usage("no coil current to make records at".into()));
     }
@@ -885,6 +938,30 @@ mod tests {
         s.extra_force.smooth_time_s = vec![];
         let e = write_campaign(&s, &dir).unwrap_err().to_string();
         assert!(e.contains("needs its time scale"), "{e}");
+        assert!(!dir.exists());
+    }
+
+    /// Records loading would refuse, or that do not trace a loop, or that
+    /// no machine holds, are refused before anything is written: 400 rpm
+    /// sampled at 50 Hz (7.5 samples a revolution), one revolution at 100
+    /// rpm and 20 Hz (12 samples a revolution, 13 in all: allowed) and
+    /// at 150 rpm and 60 Hz with a tenth of a revolution (3 samples), and
+    /// 10⁴ revolutions at 1 kHz of a 1 rpm crank (6·10⁸ samples).
+    #[test]
+    fn records_too_coarse_too_short_or_too_long_are_refused() {
+        let dir = std::env::temp_dir().join(format!("mrbp-synth-sampling-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let s = SynthSettings { rate_hz: 50.0, ..small_stand() };
+        let e = write_campaign(&s, &dir).unwrap_err().to_string();
+        assert!(e.contains("7.500 samples a revolution") && e.contains("54 Hz"), "{e}");
+        let s = SynthSettings { rate_hz: 20.0, rpms: vec![100.0], ..small_stand() };
+        assert!(sampled_enough(&s, 100.0).is_ok());
+        let s = SynthSettings { rate_hz: 60.0, rpms: vec![150.0], cycles: 0.1, ..small_stand() };
+        let e = write_campaign(&s, &dir).unwrap_err().to_string();
+        assert!(e.contains("give 3 samples") && e.contains("at least 10"), "{e}");
+        let s = SynthSettings { rate_hz: 1000.0, rpms: vec![1.0], cycles: 1e4, ..small_stand() };
+        let e = write_campaign(&s, &dir).unwrap_err().to_string();
+        assert!(e.contains("6.000e8 samples"), "{e}");
         assert!(!dir.exists());
     }
 }

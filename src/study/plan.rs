@@ -230,6 +230,7 @@ fn tasks_of(name: &str, design: &Design, settings: &CalibrationSettings) -> Resu
                 synth.currents_a
             )));
         }
+        crate::synth::check_sampling(&synth)?;
         Ok(TaskSpec {
             id: id(k, n),
             study: name.into(),

@@ -643,6 +643,24 @@ fn cases() -> Vec<Case> {
             expect: &["coil currents must be 0 A or more", "-1"],
         },
         Case {
+            // 1 Hz at 100 rpm: 0.6 samples a revolution, 3 in a record
+            name: "synth sampled too coarsely",
+            make: |r| s(&["synth", "--out", &p(&r.join("out")), "--rate", "1"]),
+            code: 2,
+            expect: &["0.600 samples a revolution", "at least 8", "raise --rate to 14 Hz"],
+        },
+        Case {
+            name: "a virtual study sampled too coarsely",
+            make: |r| {
+                let args = ["--replicates", "2", "--cycles", "1", "--rate", "10", "--rpm", "200"];
+                let mut a = s(&["study", "plan", &p(&r.join("out"))]);
+                a.extend(s(&args));
+                a
+            },
+            code: 2,
+            expect: &["3.000 samples a revolution", "raise --rate to 27 Hz"],
+        },
+        Case {
             name: "--walkers odd",
             make: |r| s(&["sample", &p(&good(r)), "--out", &p(&r.join("out")), "--walkers", "33"]),
             code: 2,
