@@ -505,8 +505,7 @@ pub fn virtual_record(
     smooth: Option<(f64, f64)>,
     stream: u64,
 ) -> Result<Record> {
-    let duration = settings.cycles * 60.0 / rpm;
-    let n = (duration * settings.rate_hz).round() as usize;
+    let n = intervals(settings, rpm) as usize;
     let time: Vec<f64> = (0..=n).map(|k| k as f64 / settings.rate_hz).collect();
     let x: Vec<f64> = time.iter().map(|&t| settings.crank.displacement(rpm, t)).collect();
     let gamma: Vec<f64> = x.iter().map(|x| x / settings.geometry.gap_m).collect();
@@ -548,8 +547,7 @@ const SWITCHED_OVERSAMPLING: usize = 8;
 /// discretisation; sensor noise from the stream `(seed, stream)`.
 pub fn switched_record(settings: &SynthSettings, run: &SwitchedRun, stream: u64) -> Result<Record> {
     let rpm = run.rpm;
-    let duration = settings.cycles * 60.0 / rpm;
-    let n = (duration * settings.rate_hz).round() as usize;
+    let n = intervals(settings, rpm) as usize;
     let time: Vec<f64> = (0..=n).map(|k| k as f64 / settings.rate_hz).collect();
     let x: Vec<f64> = time.iter().map(|&t| settings.crank.displacement(rpm, t)).collect();
     let current: Vec<f64> = time.iter().map(|&t| run.current_at(t)).collect();
@@ -636,6 +634,13 @@ const SAMPLES_PER_REVOLUTION: f64 = 8.0;
 /// surely a slip.
 const MAX_SAMPLES: f64 = 1e7;
 
+/// How many sampling intervals a record at `rpm` spans: its `cycles`
+/// revolutions at the settings' rate (the record has one sample more).
+fn intervals(settings: &SynthSettings, rpm: f64) -> f64 {
+    let duration = settings.cycles * 60.0 / rpm;
+    (duration * settings.rate_hz).round()
+}
+
 /// Whether every record of `settings` (each crank speed, each switched
 /// run) is sampled as [`sampled_enough`] asks: what `synth` and a virtual
 /// study's plan check before anything is written.
@@ -651,7 +656,7 @@ pub fn check_sampling(settings: &SynthSettings) -> Result<()> {
 fn sampled_enough(settings: &SynthSettings, rpm: f64) -> Result<()> {
     let (rate, cycles) = (settings.rate_hz, settings.cycles);
     let per_revolution = rate * 60.0 / rpm;
-    let samples = (cycles * per_revolution).round() + 1.0;
+    let samples = intervals(settings, rpm) + 1.0;
     let at = format!("at {rpm} rpm, {cycles} revolution(s) sampled at {rate} Hz");
     let min_rows = crate::data::table::MIN_ROWS as f64;
     if !(per_revolution >= SAMPLES_PER_REVOLUTION) {
