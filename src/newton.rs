@@ -589,9 +589,23 @@ mod tests {
         }
     }
 
+    /// f = a x₀ − e^(x₀) − 2 (x₁ − x₀)² − x₂²/2: a log-gamma margin in x₀,
+    /// x₁ tied to it, x₂ apart; its mode x₀ = x₁ = ln a, x₂ = 0.
+    struct Skewed;
+    const A: f64 = 3.0;
+
+    impl LogDensity for Skewed {
+        fn dim(&self) -> usize {
+            3
+        }
+        fn log_density(&self, x: &[f64]) -> f64 {
+            A * x[0] - x[0].exp() - 2.0 * (x[1] - x[0]).powi(2) - 0.5 * x[2] * x[2]
+        }
+    }
+
     #[test]
     fn reaches_a_mode_far_from_a_start_whose_curvature_misleads() {
-        // f = a x₀ − e^(x₀) − 2 (x₁ − x₀)², started at x₀ = x₁ = s, 4–11
+        // `Skewed`, started at x₀ = x₁ = s, x₂ = 0, 4–11
         // whitened units to the right of the mode ln a: there the
         // curvature e^s is 50–55 000 times the mode's, so Newton's steps
         // by the start's Hessian are whole yet crawl (each about e^(x −
@@ -601,25 +615,15 @@ mod tests {
         // tolerance 0.1 sd as `finds_the_mode_of_a_skewed_density`'s).
         // With the Hessian measured only where a step fell short, and 12
         // steps, it stopped 0.5, 3.2 and 7.1 short from 5, 8 and 12.
-        struct Skewed;
-        const A: f64 = 3.0;
-        impl LogDensity for Skewed {
-            fn dim(&self) -> usize {
-                2
-            }
-            fn log_density(&self, x: &[f64]) -> f64 {
-                A * x[0] - x[0].exp() - 2.0 * (x[1] - x[0]).powi(2)
-            }
-        }
         for s in [5.0, 8.0, 12.0] {
             let start = Elliptical::from_factor(
-                DVector::from_column_slice(&[s, s]),
-                DMatrix::identity(2, 2),
+                DVector::from_column_slice(&[s, s, 0.0]),
+                DMatrix::identity(3, 3),
             );
             let mode = newton(&Skewed, &start).unwrap();
             assert!(mode.converged, "from {s}: {:?}", mode.x);
-            for v in &mode.x {
-                assert!((v - A.ln()).abs() < 0.06, "from {s}: mode {:?}", mode.x);
+            for (v, m) in mode.x.iter().zip([A.ln(), A.ln(), 0.0]) {
+                assert!((v - m).abs() < 0.06, "from {s}: mode {:?}", mode.x);
             }
         }
     }
@@ -634,16 +638,6 @@ mod tests {
         // √(4/12) = 0.58 (the inverse Hessian), so the tolerance is 0.06 in
         // x₀ and x₁ (the central differences' bias, ln(1 + h²/6) ≈ 4e-4 at
         // h = GRADIENT_STEP, is far below it). The start is 3.6 sd away.
-        struct Skewed;
-        const A: f64 = 3.0;
-        impl LogDensity for Skewed {
-            fn dim(&self) -> usize {
-                3
-            }
-            fn log_density(&self, x: &[f64]) -> f64 {
-                A * x[0] - x[0].exp() - 2.0 * (x[1] - x[0]).powi(2) - 0.5 * x[2] * x[2]
-            }
-        }
         let start = Elliptical::from_factor(
             DVector::from_column_slice(&[-1.0, 0.5, 2.0]),
             DMatrix::identity(3, 3),
