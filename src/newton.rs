@@ -182,9 +182,9 @@ impl<'a, T: LogDensity> Whitened<'a, T> {
         }
     }
 
-    /// Gradient by central differences of step `h`: 2 points per axis not held. An
-    /// axis whose points leave the support (a mode on a prior's bound) is
-    /// held from then on, its component 0.
+    /// Gradient by central differences of step `h`: 2 points per axis not
+    /// held. An axis whose points leave the support (a mode on a prior's
+    /// bound) is held from then on, its component 0.
     fn gradient(&self, z: &DVector<f64>, held: &mut [bool], h: f64) -> DVector<f64> {
         let axes: Vec<usize> = (0..z.len()).filter(|&i| !held[i]).collect();
         let (mut points, base) = self.with_base(z, &axes);
