@@ -123,7 +123,14 @@ fn start_with(
         chosen => chosen.scheme(),
     };
     let base = Integrator { scheme: search_scheme, ..integ.integrator(integ.substeps) };
-    let mut stages = Stages { campaign, settings, base, independent: Vec::new(), unsettled: None };
+    let mut stages = Stages {
+        campaign,
+        settings,
+        base,
+        independent: Vec::new(),
+        unsettled: None,
+        warnings: Vec::new(),
+    };
     let posterior = stages.posterior();
     let settings = &stages.settings;
     if let Some(a) = posterior.likelihood.adjustment() {
@@ -301,10 +308,11 @@ fn start_with(
         settings.sampler.walkers =
             SamplingSettings::walkers_for_posterior(&posterior, settings.sampler.ensembles);
     }
-    let warnings = memory_warnings(&posterior, &map);
+    let mut warnings = memory_warnings(&posterior, &map);
     for w in &warnings {
         log(&format!("  warning: {w}"));
     }
+    warnings.append(&mut stages.warnings);
     Ok(Start {
         current_a,
         settings,
@@ -339,6 +347,8 @@ struct Stages<'a> {
     /// Laplace approximation with the integrator chosen from it (and an
     /// adjustment again).
     unsettled: Option<MapEstimate>,
+    /// What a stage found that the user should know ([`Start::warnings`]).
+    warnings: Vec<String>,
 }
 
 impl Stages<'_> {
@@ -495,6 +505,15 @@ impl Stages<'_> {
         // of its sds from that mode in G where the noise depends on θ)
         let plain = posterior.without_adjustment();
         let mode = laplace::mode(&plain, &independent_map);
+        if let Some(short) = mode.as_ref().and_then(|m| m.shortfall()) {
+            let centred = match self.settings.likelihood.adjustment() {
+                Some(_) => "the adjustment for the residuals' memory and the intervals of independent residuals are centred",
+                None => "the intervals of independent residuals are centred",
+            };
+            let w = format!("the independent likelihood's mode was not reached (Newton's method {short}): {centred} where it stopped");
+            log(&format!("  warning: {w}"));
+            self.warnings.push(w);
+        }
         let independent = mode
             .as_ref()
             .map_or_else(|| laplace::surrogate(&plain, &independent_map), |m| m.laplace.clone());

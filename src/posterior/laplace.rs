@@ -173,7 +173,7 @@ pub fn adjusted_mode(post: &Posterior, independent: &Elliptical) -> Option<Mode>
     let derived = adjusted(post, independent)?;
     let (laplace, log_density) = bulk_spread(post, &derived)?;
     let x = laplace.mean.as_slice().to_vec();
-    Some(Mode { x, log_density, converged: true, laplace })
+    Some(Mode { x, log_density, converged: true, steps: 0, short_by: 0.0, laplace })
 }
 
 /// Bounds of [`bulk_spread`]'s change of an axis's spread.

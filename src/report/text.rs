@@ -11,7 +11,7 @@ use crate::posterior::ParameterModel;
 use crate::predict::{CoverageRow, PredictionRecord};
 use crate::validate::between_runs::{LeftOut, NewTestRow};
 use crate::validate::consistency::ParameterConsistency;
-use crate::validate::LooRow;
+use crate::validate::{HeldOutBy, LooRow};
 
 /// Appends a formatted line to a String.
 macro_rules! row {
@@ -396,23 +396,39 @@ pub fn leave_one_out(rows: &[LooRow], seconds: f64) -> String {
     out
 }
 
-/// Where held-out posteriors sampled afresh did not converge by the
-/// sampler's own rule when their refits stopped: which, with what each
-/// still waited for, and what their rows are, in a sentence.
+/// Where held-out posteriors were not reached: those sampled afresh that
+/// did not converge by the sampler's own rule when their refits stopped,
+/// and those whose adjusted likelihood was centred short of the
+/// independent likelihood's mode (Newton's method stopped short): which,
+/// with what each still waited for, and what their rows are, in a
+/// sentence each.
 pub fn refits_unsettled(rows: &[LooRow]) -> Option<String> {
-    let unsettled: Vec<(&str, &str)> = rows
-        .iter()
-        .filter_map(|r| r.unconverged.as_deref().map(|u| (r.coverage.run.as_str(), u)))
-        .collect();
-    (!unsettled.is_empty()).then(|| {
-        let runs: Vec<&str> = unsettled.iter().map(|(run, _)| *run).collect();
-        let why: Vec<String> = unsettled.iter().map(|(run, u)| format!("{run}: {u}")).collect();
+    let named = |sampled: bool| -> Option<(String, String)> {
+        let unsettled: Vec<(&str, &str)> = rows
+            .iter()
+            .filter(|r| (r.by == HeldOutBy::Sampling) == sampled)
+            .filter_map(|r| r.unconverged.as_deref().map(|u| (r.coverage.run.as_str(), u)))
+            .collect();
+        (!unsettled.is_empty()).then(|| {
+            let runs: Vec<&str> = unsettled.iter().map(|(run, _)| *run).collect();
+            let why: Vec<String> = unsettled.iter().map(|(run, u)| format!("{run}: {u}")).collect();
+            (runs.join(", "), why.join("; "))
+        })
+    };
+    let refits = named(true).map(|(runs, why)| {
         format!(
-            "the held-out posteriors without {} did not converge when their refits stopped ({}): separate basins, or too few steps (`--loo-steps`; `--sampler smc` weighs basins by their mass), so those rows are of draws, not of a posterior",
-            runs.join(", "),
-            why.join("; ")
+            "the held-out posteriors without {runs} did not converge when their refits stopped ({why}): separate basins, or too few steps (`--loo-steps`; `--sampler smc` weighs basins by their mass), so those rows are of draws, not of a posterior"
         )
-    })
+    });
+    let centres = named(false).map(|(runs, why)| {
+        format!(
+            "the held-out posteriors without {runs} were centred short of their independent likelihood's mode ({why}): their adjusted likelihood is not quite the one asked for, so those rows' scores are approximate"
+        )
+    });
+    match (refits, centres) {
+        (Some(a), Some(b)) => Some(format!("{a}; {b}")),
+        (a, b) => a.or(b),
+    }
 }
 
 /// Each run predicted as a new test by the between-run layer fitted
@@ -628,7 +644,8 @@ mod tests {
     /// A held-out posterior sampled afresh that stopped at R̂ 1.60, or at
     /// R̂ 1.008 with an ESS short of its target, is named with what it
     /// waited for; one that converged, or one reached without sampling,
-    /// is not.
+    /// is not; one weighed about an adjustment centred short of its mode
+    /// is named for that.
     #[test]
     fn unconverged_refits_are_named() {
         let loo = |run: &str, by: HeldOutBy, max_rhat: f64, unconverged: Option<&str>| LooRow {
@@ -659,6 +676,15 @@ mod tests {
             "{said}"
         );
         assert!(leave_one_out(&rows, 1.0).contains("\nwarning: the held-out posteriors without c"));
+        // weighed by importance about an adjustment centred short of its mode
+        let short = "the independent likelihood's mode, the adjustment's centre, was not reached (Newton's method stopped after 40 step(s), 3.20 nats below its mode by the curvature there)";
+        let rows = [rows[0].clone(), loo("e", HeldOutBy::LaplaceImportance, f64::NAN, Some(short))];
+        let said = refits_unsettled(&rows).unwrap();
+        assert!(
+            said.starts_with(&format!("the held-out posteriors without e were centred short of their independent likelihood's mode (e: {short}): their adjusted likelihood")),
+            "{said}"
+        );
+        assert!(!said.contains("refits stopped"), "{said}");
     }
 
     /// The layer's new tests for a held-out run mostly outside the

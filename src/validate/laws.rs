@@ -340,7 +340,7 @@ pub fn verdict(standings: &[Standing]) -> Vec<String> {
                 let why: Vec<String> =
                     s.unsettled.iter().map(|(run, u)| format!("{run}: {u}")).collect();
                 format!(
-                    "{line}. The {} law's held-out posteriors without {} did not converge when their refits stopped ({}: separate basins, or too few steps, `--loo-steps`), so its held-out numbers there are of draws, not of a posterior, and its rank here is not to be trusted",
+                    "{line}. The {} law's held-out posteriors without {} were not reached ({}; loo.parquet's `unconverged`), so its held-out numbers there are approximate and its rank here is not to be trusted",
                     s.law.name(),
                     tests.join(", "),
                     why.join("; ")
@@ -531,7 +531,7 @@ mod tests {
         ];
         rows[0].held_out_rhat = 1.005;
         let v = verdict(&standings(&rows).unwrap());
-        assert!(!v[0].contains("did not converge"), "{v:?}");
+        assert!(!v[0].contains("were not reached"), "{v:?}");
         rows[3].held_out_rhat = 1.6;
         let waited = "R̂ of fz is 1.6000 (target < 1.01)";
         rows[3].held_out_unconverged = Some(waited.into());
@@ -541,7 +541,7 @@ mod tests {
         let v = verdict(&s);
         assert!(
             v[0].contains(
-                "The spencer law's held-out posteriors without t2 did not converge when their refits stopped (t2: R̂ of fz is 1.6000 (target < 1.01): separate basins"
+                "The spencer law's held-out posteriors without t2 were not reached (t2: R̂ of fz is 1.6000 (target < 1.01); loo.parquet's `unconverged`)"
             ),
             "{v:?}"
         );

@@ -153,10 +153,13 @@ pub struct LooRow {
     pub by: HeldOutBy,
     /// Largest R̂ of the held-out sampling (NaN if not needed).
     pub max_rhat: f64,
-    /// What the held-out posterior sampled afresh still waited for when
-    /// its refit stopped (the stopping rule's first unmet condition: an
-    /// R̂, a drift, an ESS or the chains' length, as the calibration's
-    /// progress says it); `None` where it converged or was not sampled.
+    /// Why the held-out posterior is not the one asked for: what it,
+    /// sampled afresh, still waited for when its refit stopped (the
+    /// stopping rule's first unmet condition: an R̂, a drift, an ESS or the
+    /// chains' length, as the calibration's progress says it), and/or,
+    /// under the adjusted likelihood, how far short of the independent
+    /// likelihood's mode (the adjustment's centre) Newton's method stopped.
+    /// `None` where neither.
     pub unconverged: Option<String>,
     /// Why the held-out posterior could not be reached ([`HeldOutBy::Failed`]).
     pub failure: Option<String>,
@@ -397,7 +400,11 @@ impl Pending<'_> {
         let (prediction, max_rhat, unconverged) =
             sample_afresh(&self.target, &self.posterior, &self.laplace, settings, loo, observe)?;
         (self.row.by, self.row.max_rhat) = (HeldOutBy::Sampling, max_rhat);
-        self.row.unconverged = unconverged;
+        // the centre's shortfall (weigh) stays beside the refit's own
+        self.row.unconverged = match (self.row.unconverged.take(), unconverged) {
+            (Some(centre), Some(refit)) => Some(format!("{refit}; {centre}")),
+            (centre, refit) => refit.or(centre),
+        };
         self.row.coverage = prediction.coverage.clone();
         Ok(HeldOut { prediction: Some(prediction), row: self.row })
     }
@@ -474,13 +481,18 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
         // B-P on Spencer's records without their 200 rpm run)
         let (posterior, laplace) = match adjusted {
             true => {
-                let (posterior, independent, plain_map) =
+                let (posterior, independent, plain_map, short) =
                     recentred(&posterior, &start).ok_or_else(|| {
                         Error::Compute(format!(
                             "leave-one-out without {}: the mode of the independent likelihood was not found",
                             left_out.id()
                         ))
                     })?;
+                // an adjustment centred short of the independent mode is
+                // not the adjusted posterior asked for: said in the row
+                row.unconverged = short.map(|s| {
+                    format!("the independent likelihood's mode, the adjustment's centre, was not reached (Newton's method {s})")
+                });
                 let at = independent.mean.as_slice().to_vec();
                 let laplace = match laplace::adjusted_mode(&posterior, &independent) {
                     Some(mode) => mode.laplace,
@@ -518,6 +530,8 @@ fn weigh<'a>(full: &Full, j: usize, left_out: &'a Run, loo: &LooSettings) -> Res
                         let tempered = posterior.tempered(&times);
                         let laplace = at_mode_from(&tempered, &at, left_out.id())?;
                         row.tempered_instead = Some(why);
+                        // the tempered likelihood has no centre
+                        row.unconverged = None;
                         (tempered, laplace)
                     }
                 }
@@ -567,12 +581,16 @@ const HOPELESS_K: f64 = 1.5;
 /// that posterior's Laplace approximation there: the adjusted likelihood's
 /// peak lies C⁻¹ times as far from the centre as the likelihood's own, so
 /// a held-out posterior centred on the full calibration's mode would be
-/// pushed away by the run left out's pull.
-fn recentred(post: &Posterior, start: &[f64]) -> Option<(Posterior, Elliptical, map::MapEstimate)> {
+/// pushed away by the run left out's pull. Last, where Newton's method
+/// stopped short of that mode, how far ([`crate::newton::Mode::shortfall`]).
+fn recentred(
+    post: &Posterior,
+    start: &[f64],
+) -> Option<(Posterior, Elliptical, map::MapEstimate, Option<String>)> {
     let plain = post.without_adjustment();
     let map = map::basin(&plain, start)?;
     let mode = laplace::mode(&plain, &map)?;
-    Some((post.recentred(&mode.x), mode.laplace, map))
+    Some((post.recentred(&mode.x), mode.laplace.clone(), map, mode.shortfall()))
 }
 
 /// The Laplace approximation at the mode of `posterior`, by Newton's method
