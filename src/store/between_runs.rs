@@ -183,7 +183,7 @@ fn layer_file(dir: &Path, id: &str) -> Result<PathBuf> {
     let path = dir.join(FILE);
     if !path.exists() {
         return Err(Error::Usage(format!(
-            "{} has no between-run layer ({FILE}): calibrate each run alone too, `mrbp run MANIFEST --out DIR --per-run` (docs/calibration.md)",
+            "{} has no between-run layer ({FILE}): calibrate each run alone too, `mrbp run MANIFEST --out DIR --per-run`, which fits it where a current has two runs or more (docs/calibration.md)",
             dir.display()
         )));
     }
