@@ -667,14 +667,20 @@ mod tests {
         // tolerance 0.1 sd as `finds_the_mode_of_a_skewed_density`'s).
         // With the Hessian measured only where a step fell short, and 12
         // steps, it stopped 0.5, 3.2 and 7.1 short from 5, 8 and 12.
-        for s in [5.0, 8.0, 12.0] {
+        reaches_the_skewed_mode_from(&[5.0, 8.0, 12.0]);
+    }
+
+    /// `Skewed` searched from x₀ = x₁ = s, x₂ = 0 for each s: the search
+    /// converges (its model expects under GAIN_TOL / 2 more) within 0.1
+    /// sd of the mode (0.06 in x₀ and x₁).
+    fn reaches_the_skewed_mode_from(starts: &[f64]) {
+        for &s in starts {
             let start = Elliptical::from_factor(
                 DVector::from_column_slice(&[s, s, 0.0]),
                 DMatrix::identity(3, 3),
             );
             let mode = newton(&Skewed, &start).unwrap();
             assert!(mode.converged, "from {s}: {:?}", mode.x);
-            // converged: the model expects under GAIN_TOL / 2 more
             assert!(mode.short_by < 0.5 * GAIN_TOL && mode.shortfall().is_none(), "from {s}");
             for (v, m) in mode.x.iter().zip([A.ln(), A.ln(), 0.0]) {
                 assert!((v - m).abs() < 0.06, "from {s}: mode {:?}", mode.x);
@@ -690,20 +696,9 @@ mod tests {
         // spends its MAX_HESSIANS long before the mode; after them, steps
         // by the last Hessian crawl (each about e^(x − x_last) long), and
         // the search stopped 4.0 and 9.0 units short at MAX_STEPS
-        // (measured with the update off). With the curvature updated from the gradients
-        // at each step's ends (BFGS) it reaches the mode (tolerance as in
-        // `reaches_a_mode_far_from_a_start_whose_curvature_misleads`).
-        for s in [18.0, 23.0] {
-            let start = Elliptical::from_factor(
-                DVector::from_column_slice(&[s, s, 0.0]),
-                DMatrix::identity(3, 3),
-            );
-            let mode = newton(&Skewed, &start).unwrap();
-            assert!(mode.converged, "from {s}: {:?}", mode.x);
-            for (v, m) in mode.x.iter().zip([A.ln(), A.ln(), 0.0]) {
-                assert!((v - m).abs() < 0.06, "from {s}: mode {:?}", mode.x);
-            }
-        }
+        // (measured with the update off). With the curvature updated from
+        // the gradients at each step's ends (BFGS) it reaches the mode.
+        reaches_the_skewed_mode_from(&[18.0, 23.0]);
     }
 
     #[test]
