@@ -64,6 +64,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         }
         Some(Command::Run { manifest, out, options, predict, validation, current_law }) => {
             let sample = options.request()?;
+            note_unread_settings(&manifest, options.settings.config.as_deref());
             // `--model current-law` or `current-curves` (or the settings'
             // `model`) names the law stage's model, and so asks for it
             let current_law = current_law || sample.settings.model.is_law();
@@ -91,6 +92,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                 ));
             }
             let campaign = pipeline.load(&manifest)?;
+            note_unread_settings(&manifest, options.settings.config.as_deref());
             pipeline.sample(&campaign, &out, &request).map(drop)
         }
         Some(Command::Predict { dir, campaign, out, options }) => {
@@ -124,6 +126,34 @@ fn dispatch(cli: Cli) -> Result<()> {
             .compare(&dirs, out.as_deref().unwrap_or(Path::new("comparison")), rpm)
             .map(drop),
     }
+}
+
+/// The settings file a campaign folder keeps beside its manifest.
+const SETTINGS_BESIDE: &str = "mrbp.toml";
+
+/// Says so where the campaign's folder holds a settings file that this call
+/// does not read (settings are read only from `--config`, never found by
+/// name): the measured records' `mrbp.toml` switches on the model terms
+/// their damper needs, and a calibration without it is another model.
+fn note_unread_settings(manifest: &Path, config: Option<&Path>) {
+    if let Some(note) = unread_settings(manifest, config) {
+        eprintln!("{note}");
+    }
+}
+
+fn unread_settings(manifest: &Path, config: Option<&Path>) -> Option<String> {
+    let beside = manifest.parent().unwrap_or(Path::new("")).join(SETTINGS_BESIDE);
+    let named = config.is_some_and(|c| {
+        c == beside || matches!((c.canonicalize(), beside.canonicalize()), (Ok(a), Ok(b)) if a == b)
+    });
+    (beside.is_file() && !named).then(|| {
+        let other = if config.is_some() { "another settings file" } else { "the default settings" };
+        format!(
+            "mrbp: note: {} beside the campaign is not read unless named: this calibration takes {other}; `--config {}` takes its settings",
+            beside.display(),
+            beside.display()
+        )
+    })
 }
 
 /// `mrbp evidence DIR…`: each calibration's log evidence, one line each.
@@ -211,5 +241,34 @@ fn study(pipeline: &mut Pipeline, command: StudyCommand) -> Result<()> {
             print::study(&study::collect(&dir)?, &dir);
             Ok(())
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_settings_file_beside_the_campaign_not_named_is_noted() {
+        let dir = std::env::temp_dir().join(format!("mrbp-unread-settings-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let manifest = dir.join("campaign.toml");
+        // no settings file beside: nothing to say
+        assert_eq!(unread_settings(&manifest, None), None);
+        let beside = dir.join(SETTINGS_BESIDE);
+        std::fs::write(&beside, "[terms]\nforce_offset = true\n").unwrap();
+        let note = unread_settings(&manifest, None).expect("a note");
+        assert!(note.contains("the default settings"), "{note}");
+        assert!(note.contains(&format!("--config {}", beside.display())), "{note}");
+        // named, by the same path or another spelling of it: read, no note
+        assert_eq!(unread_settings(&manifest, Some(&beside)), None);
+        let spelt = dir.join(".").join(SETTINGS_BESIDE);
+        assert_eq!(unread_settings(&manifest, Some(&spelt)), None);
+        // another file named: the one beside is still not read
+        let other = dir.join("other.toml");
+        std::fs::write(&other, "").unwrap();
+        let note = unread_settings(&manifest, Some(&other)).expect("a note");
+        assert!(note.contains("another settings file"), "{note}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
